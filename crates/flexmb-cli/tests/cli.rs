@@ -1,0 +1,152 @@
+//! The `flexmb` command-line contract (README.md): `flexmb run MODEL --out DIR [--set ...]`
+//! writes `sensors.csv` (header `time,<sensor names>`, rows as the run goes) and
+//! `summary.json`; a failed run keeps its rows, says why and exits non-zero; a bad model
+//! file is reported with file, line and field.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn flexmb() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_flexmb"))
+}
+
+fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .join(path)
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("flexmb-cli-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary.json"))
+        .expect("json")
+}
+
+#[test]
+fn run_writes_sensors_and_summary() {
+    let out = out_dir("ok");
+    let status = flexmb()
+        .args([
+            "run",
+            repo("examples/pendulum.toml").to_str().unwrap(),
+            "--out",
+        ])
+        .arg(&out)
+        .args([
+            "--set",
+            "solver.t_end=0.1",
+            "--set",
+            "solver.output_interval=0.01",
+        ])
+        .status()
+        .expect("runs");
+    assert!(status.success());
+    let csv = std::fs::read_to_string(out.join("sensors.csv")).expect("csv");
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("time,x,y,angle,energy"));
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len(), 11, "t = 0, 0.01, ..., 0.1");
+    assert!(rows[10].starts_with("1.000000000000e-1,"));
+    let s = summary(&out);
+    assert_eq!(s["status"], "ok");
+    assert_eq!(s["steps"], 100);
+    assert!(s["newton_iterations"].as_u64().unwrap() >= 100);
+    assert_eq!(s["rejected_steps"], 0);
+    assert!(s["wall_seconds"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn failed_run_keeps_its_rows_and_says_why() {
+    let out = out_dir("fail");
+    let result = flexmb()
+        .args([
+            "run",
+            repo("crates/flexmb-cli/tests/data/blows_up.toml")
+                .to_str()
+                .unwrap(),
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(!result.status.success());
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains("Newton failed at step"), "{stderr}");
+    let s = summary(&out);
+    assert_eq!(s["status"], "failed");
+    let error = s["error"].as_str().unwrap();
+    let t: f64 = error
+        .split("t = ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .expect("time in the diagnosis");
+    assert!((0.054..=0.055).contains(&t), "{error}");
+    assert!(error.contains("worst equation"), "{error}");
+    assert!(
+        error.contains("node 'bob'") || error.contains("joint 'pivot'"),
+        "{error}"
+    );
+    assert!(
+        s["rejected_steps"].as_u64().unwrap() > 0,
+        "step-size reduction was tried"
+    );
+    let csv = std::fs::read_to_string(out.join("sensors.csv")).expect("csv");
+    // t = 0, 0.01, ..., 0.05 were completed before the blow-up.
+    assert_eq!(csv.lines().count(), 1 + 6, "{csv}");
+}
+
+#[test]
+fn bad_model_file_names_file_line_and_field() {
+    let dir = out_dir("bad");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("bad.toml");
+    std::fs::write(
+        &file,
+        "flexmb = 1\n[model]\ngroup = \"SE3\"\n[solver]\nanalysis = \"dynamic\"\nt_end = 1.0\nh = 1e-3\n[[body]]\nname = \"b\"\nmass = -2.0\ninertia = [1.0, 1.0, 1.0]\n",
+    )
+    .unwrap();
+    let result = flexmb()
+        .args(["run", file.to_str().unwrap(), "--out"])
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert_eq!(result.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains("bad.toml:10:"), "{stderr}");
+    assert!(stderr.contains("mass"), "{stderr}");
+}
+
+#[test]
+fn inconsistent_initial_conditions_are_reported() {
+    let out = out_dir("inconsistent");
+    let model = repo("crates/flexmb-cli/tests/data/inconsistent.toml");
+    // Consistent as written; a velocity of the pinned node violates the joint.
+    let ok = flexmb()
+        .args(["check", model.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let result = flexmb()
+        .args(["run", model.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .args(["--set", "body.bob.velocity=[0.0, 1.0, 0.0]"])
+        .output()
+        .unwrap();
+    assert!(!result.status.success());
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(
+        stderr.contains("inconsistent initial conditions") && stderr.contains("'pivot'"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("velocit"), "{stderr}");
+}

@@ -1,0 +1,210 @@
+//! Derived quantities and scratch memory, built once per model with [`Data::new`].
+//!
+//! [`Layout`] numbers the unknowns of the Newton iteration:
+//!
+//! ```text
+//! [ node 0 (6) | node 1 (6) | ... | node n-1 (6) | active constraint rows (n_active) ]
+//! ```
+//!
+//! Each node's 6 entries are a vector in the Lie algebra (translation, then rotation).
+//! Constraint rows that are redundant (linearly dependent on others, e.g. in an
+//! over-constrained closed loop) are detected at start and left out of the unknowns; their
+//! multipliers stay zero and the others carry the load (a valid, least-constrained set).
+
+use crate::elements::{ElementKernel, ElementRef, NodeState};
+use crate::joints::{self, Row};
+use crate::model::{Model, NodeId};
+use crate::solve::linear::{LinearError, LinearSolver};
+use flexmb_lie::{Mat6, Vec6};
+
+/// Numbering of unknowns and constraint rows.
+#[derive(Clone, Debug)]
+pub struct Layout {
+    pub n_nodes: usize,
+    /// `6 n_nodes`.
+    pub n_dofs: usize,
+    /// Rows of each joint.
+    pub joint_rows: Vec<Vec<Row>>,
+    /// Index of each joint's first row in `State::lambda`.
+    pub joint_row_start: Vec<usize>,
+    /// Total constraint rows (including redundant ones).
+    pub n_rows: usize,
+    /// For each row, its unknown index among the multipliers, `None` if redundant.
+    pub row_unknown: Vec<Option<usize>>,
+    /// Number of independent rows (multiplier unknowns).
+    pub n_active: usize,
+    /// Force elements.
+    pub elements: Vec<ElementRef>,
+}
+
+impl Layout {
+    /// The layout with all constraint rows active.
+    pub fn new(model: &Model) -> Self {
+        let joint_rows: Vec<Vec<Row>> = model.joints.iter().map(joints::rows).collect();
+        let mut joint_row_start = Vec::with_capacity(joint_rows.len());
+        let mut n_rows = 0;
+        for r in &joint_rows {
+            joint_row_start.push(n_rows);
+            n_rows += r.len();
+        }
+        Self {
+            n_nodes: model.nodes.len(),
+            n_dofs: 6 * model.nodes.len(),
+            joint_rows,
+            joint_row_start,
+            n_rows,
+            row_unknown: (0..n_rows).map(Some).collect(),
+            n_active: n_rows,
+            elements: ElementRef::all(model),
+        }
+    }
+
+    /// Total Newton unknowns.
+    pub fn n_unknowns(&self) -> usize {
+        self.n_dofs + self.n_active
+    }
+
+    /// Marks the given rows as redundant.
+    pub fn deactivate_rows(&mut self, redundant: &[usize]) {
+        let mut k = 0;
+        for r in 0..self.n_rows {
+            if redundant.contains(&r) {
+                self.row_unknown[r] = None;
+            } else {
+                self.row_unknown[r] = Some(k);
+                k += 1;
+            }
+        }
+        self.n_active = k;
+    }
+
+    /// Global dof offset of a node slot.
+    pub fn dof(&self, node: Option<NodeId>) -> Option<usize> {
+        node.map(|n| 6 * n.0)
+    }
+
+    /// Human-readable name of unknown `i`, for diagnostics.
+    pub fn describe_unknown(&self, model: &Model, i: usize) -> String {
+        const COMP: [&str; 6] = ["x", "y", "z", "rx", "ry", "rz"];
+        if i < self.n_dofs {
+            let node = &model.nodes[i / 6];
+            return format!(
+                "equilibrium of node '{}', component {}",
+                node.name,
+                COMP[i % 6]
+            );
+        }
+        let k = i - self.n_dofs;
+        for (j, start) in self.joint_row_start.iter().enumerate() {
+            for (r, row) in self.joint_rows[j].iter().enumerate() {
+                if self.row_unknown[start + r] == Some(k) {
+                    return format!(
+                        "constraint row {} ({:?}) of joint '{}' ({})",
+                        r + 1,
+                        row,
+                        model.joints[j].name,
+                        model.joints[j].kind.name()
+                    );
+                }
+            }
+        }
+        format!("unknown {i}")
+    }
+}
+
+/// Everything derived from a model plus the solver workspaces.
+pub struct Data {
+    pub layout: Layout,
+    /// Triplet positions of the iteration matrix (fixed for the run).
+    pub pattern: Vec<(usize, usize)>,
+    /// Values aligned with `pattern`.
+    pub values: Vec<f64>,
+    /// Residual of the Newton system (`n_unknowns`).
+    pub residual: Vec<f64>,
+    /// Newton correction (`n_unknowns`).
+    pub correction: Vec<f64>,
+    /// Node kinematics at the current iterate (`n_nodes`).
+    pub nodes: Vec<NodeState>,
+    /// Constraint values `Phi` (`n_rows`).
+    pub phi: Vec<f64>,
+    pub solver: LinearSolver,
+}
+
+impl Data {
+    /// Builds the layout, the sparsity pattern and the linear solver.
+    pub fn new(model: &Model, layout: Layout) -> Result<Self, LinearError> {
+        let pattern = build_pattern(model, &layout);
+        let n = layout.n_unknowns();
+        let solver = LinearSolver::new(n, &pattern)?;
+        Ok(Self {
+            values: vec![0.0; pattern.len()],
+            residual: vec![0.0; n],
+            correction: vec![0.0; n],
+            nodes: model
+                .nodes
+                .iter()
+                .map(|nd| NodeState {
+                    q: nd.frame,
+                    v: Vec6::zeros(),
+                    vdot: Vec6::zeros(),
+                    t: Mat6::identity(),
+                })
+                .collect(),
+            phi: vec![0.0; layout.n_rows],
+            pattern,
+            solver,
+            layout,
+        })
+    }
+}
+
+/// Triplets in the order [`crate::assembly`] writes values: for each element its node-node
+/// blocks; for each joint its node-node blocks, then for each active row the row
+/// `B T` (row x node dofs) and the column `B^T` (node dofs x row).
+fn build_pattern(model: &Model, layout: &Layout) -> Vec<(usize, usize)> {
+    let mut p = Vec::new();
+    let node_blocks = |p: &mut Vec<(usize, usize)>, slots: [Option<usize>; 2]| {
+        for (_, b) in active_slots(slots) {
+            for (_, a) in active_slots(slots) {
+                for j in 0..6 {
+                    for i in 0..6 {
+                        p.push((a + i, b + j));
+                    }
+                }
+            }
+        }
+    };
+    for e in &layout.elements {
+        let nodes = e.kernel(model).nodes();
+        node_blocks(&mut p, [layout.dof(nodes[0]), layout.dof(nodes[1])]);
+    }
+    for (j, joint) in model.joints.iter().enumerate() {
+        let slots = [layout.dof(joint.node_a), layout.dof(joint.node_b)];
+        node_blocks(&mut p, slots);
+        for r in 0..layout.joint_rows[j].len() {
+            let Some(c) = layout.row_unknown[layout.joint_row_start[j] + r] else {
+                continue;
+            };
+            let c = layout.n_dofs + c;
+            for (_, a) in active_slots(slots) {
+                for i in 0..6 {
+                    p.push((c, a + i));
+                    p.push((a + i, c));
+                }
+            }
+        }
+    }
+    // Keep every diagonal entry in the pattern (nodes without elements, zero blocks).
+    for i in 0..layout.n_unknowns() {
+        p.push((i, i));
+    }
+    p
+}
+
+/// `(slot, dof offset)` of the slots that are nodes (not the ground).
+pub fn active_slots(slots: [Option<usize>; 2]) -> impl Iterator<Item = (usize, usize)> {
+    slots
+        .into_iter()
+        .enumerate()
+        .filter_map(|(k, d)| d.map(|d| (k, d)))
+}

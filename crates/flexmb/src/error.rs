@@ -1,0 +1,39 @@
+//! Typed errors with the context a user needs to fix the cause.
+
+use crate::model::ItemRef;
+
+/// An inconsistent or unphysical model.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    #[error("{item_table} '{name}' (#{index}), field '{field}': {message}", item_table = item.table, name = item.name, index = item.index + 1, field = item.field)]
+    Invalid { item: ItemRef, message: String },
+}
+
+impl ModelError {
+    /// The item and field the error is about.
+    pub fn item(&self) -> &ItemRef {
+        match self {
+            ModelError::Invalid { item, .. } => item,
+        }
+    }
+}
+
+/// A failure during an analysis, with its diagnosis.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum SolveError {
+    #[error("{0}")]
+    Model(String),
+    #[error("inconsistent initial conditions: {0}")]
+    InconsistentInitialConditions(String),
+    #[error("Newton failed at step {step}, t = {t:.6e} s (last step tried h = {h:.3e} s, {reductions} step-size reductions): {reason}; worst equation: {worst_equation}")]
+    NewtonFailed {
+        step: usize,
+        t: f64,
+        h: f64,
+        reductions: usize,
+        reason: String,
+        worst_equation: String,
+    },
+    #[error("output error: {0}")]
+    Output(String),
+}

@@ -1,0 +1,866 @@
+//! Interprets the (overridden) TOML tree: builds the [`Model`] with its public API, reads the
+//! analysis settings, and maps [`Model::validate`] errors back to the file.
+
+use super::error::{InputError, ItemLabel};
+use super::reader::{name_list, suggestion, Field, Result, Source, Span, Table, Value};
+use super::{Analysis, ModelFile};
+use crate::error::ModelError;
+use crate::model::{
+    box_inertia, frame_from_axis, rotation_from_vector, JointKind, Load, LoadFrame, Model, NodeId,
+    Sensor, SensorFrame, SensorKind, SpringDamper, TimeFunction,
+};
+use crate::solve::DynamicSettings;
+use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
+use std::collections::HashMap;
+
+const TOP_KEYS: &[&str] = &[
+    "flexmb",
+    "title",
+    "description",
+    "model",
+    "solver",
+    "node",
+    "body",
+    "joint",
+    "load",
+    "spring",
+    "sensor",
+];
+const NODE_STATE_KEYS: &[&str] = &[
+    "position",
+    "orientation",
+    "velocity",
+    "angular_velocity",
+    "angular_velocity_body",
+];
+const GROUND: &str = "ground";
+
+/// Where a model item came from in the file, to place errors found by `Model::validate`.
+struct Origin {
+    path: String,
+    item: Option<ItemLabel>,
+    span: Span,
+    fields: Vec<(String, Span)>,
+}
+
+impl Origin {
+    fn of(t: &Table<'_>) -> Self {
+        Self {
+            path: t.path.clone(),
+            item: t.item.clone(),
+            span: t.span.clone(),
+            fields: t.spans(),
+        }
+    }
+}
+
+#[derive(Default)]
+struct Origins {
+    nodes: Vec<Origin>,
+    bodies: Vec<Origin>,
+    joints: Vec<Origin>,
+    loads: Vec<Origin>,
+    springs: Vec<Origin>,
+    sensors: Vec<Origin>,
+}
+
+pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
+    let top = Field {
+        src,
+        value: root,
+        path: String::new(),
+        item: None,
+    }
+    .table()?;
+    // The version first: a file of another version may well have other keys.
+    let version = top.req("flexmb")?;
+    match version.int()? {
+        1 => {}
+        v => {
+            return Err(version.err(format!(
+                "unsupported format version {v}; this flexmb reads version 1"
+            )))
+        }
+    }
+    top.check_keys(TOP_KEYS)?;
+    let title = top.opt_str("title")?.unwrap_or_default().to_string();
+    let description = top.opt_str("description")?.unwrap_or_default().to_string();
+
+    let mt = top.req("model")?.table()?;
+    mt.check_keys(&["group", "gravity"])?;
+    let group = match mt.req("group")?.choice(&["SE3", "R3xSO3"])? {
+        "SE3" => Group::SE3,
+        _ => Group::R3xSO3,
+    };
+    let mut model = Model::new(group);
+    model.title = title;
+    model.gravity = mt.opt_vec3("gravity")?.unwrap_or_else(Vec3::zeros);
+
+    let settings = read_solver(&top.req("solver")?.table()?)?;
+
+    let mut origins = Origins::default();
+    read_nodes_and_bodies(&top, &mut model, &mut origins)?;
+    read_joints(&top, &mut model, &mut origins)?;
+    read_loads(&top, &mut model, &mut origins)?;
+    read_springs(&top, &mut model, &mut origins)?;
+    read_sensors(&top, &mut model, &mut origins)?;
+
+    model
+        .validate()
+        .map_err(|e| map_model_error(src, e, &origins))?;
+    Ok(ModelFile {
+        model,
+        analysis: Analysis::Dynamic(settings),
+        description,
+    })
+}
+
+fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputError {
+    let item = e.item().clone();
+    let message = match e {
+        ModelError::Invalid { message, .. } => message,
+    };
+    let list = match item.table {
+        "node" => &origins.nodes,
+        "body" => &origins.bodies,
+        "joint" => &origins.joints,
+        "load" => &origins.loads,
+        "spring" => &origins.springs,
+        _ => &origins.sensors,
+    };
+    match list.get(item.index) {
+        Some(o) => {
+            let span = o
+                .fields
+                .iter()
+                .find(|(k, _)| k == item.field)
+                .map_or(o.span.clone(), |(_, s)| s.clone());
+            src.field_error(
+                &span,
+                &format!("{}.{}", o.path, item.field),
+                o.item.as_ref(),
+                message,
+            )
+        }
+        None => src.field_error(
+            &(0..0),
+            &format!("{}[{}].{}", item.table, item.index, item.field),
+            None,
+            message,
+        ),
+    }
+}
+
+fn positive(f: &Field<'_>) -> Result<f64> {
+    let v = f.f64()?;
+    if v > 0.0 {
+        Ok(v)
+    } else {
+        Err(f.err(format!("must be positive, got {v}")))
+    }
+}
+
+fn non_negative(f: &Field<'_>) -> Result<f64> {
+    let v = f.f64()?;
+    if v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(f.err(format!("must be >= 0, got {v}")))
+    }
+}
+
+fn nonzero_vec3(f: &Field<'_>) -> Result<Vec3> {
+    let v = f.vec3()?;
+    if v.norm() > 1e-12 && v.norm().is_finite() {
+        Ok(v)
+    } else {
+        Err(f.err("must be a non-zero vector"))
+    }
+}
+
+fn read_solver(t: &Table<'_>) -> Result<DynamicSettings> {
+    t.check_keys(&[
+        "analysis",
+        "t_end",
+        "h",
+        "rho_inf",
+        "output_interval",
+        "h_min",
+        "rtol",
+        "atol",
+        "max_iterations",
+    ])?;
+    t.req("analysis")?.choice(&["dynamic"])?;
+    let t_end = positive(&t.req("t_end")?)?;
+    let h = positive(&t.req("h")?)?;
+    let mut s = DynamicSettings::new(t_end, h);
+    if let Some(f) = t.field("rho_inf") {
+        s.rho_inf = f.f64()?;
+        if !(0.0..=1.0).contains(&s.rho_inf) {
+            return Err(f.err(format!("must be in [0, 1], got {}", s.rho_inf)));
+        }
+    }
+    if let Some(f) = t.field("output_interval") {
+        s.output_interval = non_negative(&f)?;
+    }
+    if let Some(f) = t.field("h_min") {
+        s.h_min = positive(&f)?;
+        if s.h_min > h {
+            return Err(f.err(format!("must not exceed h = {h}, got {}", s.h_min)));
+        }
+    }
+    if let Some(f) = t.field("rtol") {
+        s.newton.rtol = positive(&f)?;
+    }
+    if let Some(f) = t.field("atol") {
+        s.newton.atol = positive(&f)?;
+    }
+    if let Some(f) = t.field("max_iterations") {
+        let n = f.int()?;
+        if !(1..=10_000).contains(&n) {
+            return Err(f.err(format!("must be between 1 and 10000, got {n}")));
+        }
+        s.newton.max_iterations = n as usize;
+    }
+    Ok(s)
+}
+
+/// Reads `name`: a non-empty string, unique within `seen` (name -> path of its first use).
+fn read_name(t: &Table<'_>, seen: &mut HashMap<String, String>, what: &str) -> Result<String> {
+    let f = t.req("name")?;
+    let name = f.str()?;
+    if name.trim().is_empty() {
+        return Err(f.err("must not be empty"));
+    }
+    if let Some(first) = seen.get(name) {
+        return Err(f.err(format!(
+            "duplicate {what} name '{name}' (already used by {first})"
+        )));
+    }
+    seen.insert(name.to_string(), t.path.clone());
+    Ok(name.to_string())
+}
+
+/// Initial state of a node read from the node keys of a [[node]] or a [[body]].
+struct NodeInit {
+    frame: Frame,
+    velocity: Vec3,
+    angular_velocity: Vec3,
+}
+
+fn read_orientation(f: &Field<'_>) -> Result<Mat3> {
+    let t = f.table()?;
+    let forms = ["rotation_vector", "quaternion", "axis", "matrix"];
+    t.check_keys(&[
+        "rotation_vector",
+        "quaternion",
+        "axis",
+        "angle_deg",
+        "matrix",
+    ])?;
+    let given: Vec<&str> = forms.iter().copied().filter(|k| t.has(k)).collect();
+    if given.len() > 1 {
+        return Err(t.key_err(
+            given[1],
+            format!(
+                "give only one of rotation_vector, quaternion, axis (with angle_deg), matrix; found both '{}' and '{}'",
+                given[0], given[1]
+            ),
+        ));
+    }
+    match given.first().copied() {
+        None if t.has("angle_deg") => Err(t.key_err("axis", "is required with angle_deg")),
+        None => Err(f.err(
+            "give one of rotation_vector = [3], quaternion = [w, x, y, z], axis = [3] with angle_deg, matrix = [[3], [3], [3]]",
+        )),
+        Some("rotation_vector") => Ok(rotation_from_vector(&t.req("rotation_vector")?.vec3()?)),
+        Some("quaternion") => {
+            let q = t.req("quaternion")?;
+            let v = q.numbers(4, "a quaternion [w, x, y, z] of 4 numbers")?;
+            let n = v.iter().map(|c| c * c).sum::<f64>().sqrt();
+            if (n - 1.0).abs() > 1e-6 {
+                return Err(q.err(format!("must be a unit quaternion, got |q| = {n}")));
+            }
+            Ok(so3::from_quaternion([v[0], v[1], v[2], v[3]]))
+        }
+        Some("axis") => {
+            let axis = nonzero_vec3(&t.req("axis")?)?;
+            let angle = t.req("angle_deg")?.f64()?;
+            Ok(rotation_from_vector(&(axis.normalize() * angle.to_radians())))
+        }
+        _ => {
+            let m = t.req("matrix")?;
+            let r = m.mat3_rows()?;
+            let ortho = (r.transpose() * r - Mat3::identity()).norm();
+            let det = r.determinant();
+            if !(ortho <= 1e-6 && det > 0.0) {
+                return Err(m.err(format!(
+                    "is not a rotation matrix (|R^T R - I| = {ortho:.3e}, det R = {det:.6})"
+                )));
+            }
+            Ok(so3::orthonormalize(&r))
+        }
+    }
+}
+
+fn read_node_init(t: &Table<'_>) -> Result<NodeInit> {
+    let position = t.opt_vec3("position")?.unwrap_or_else(Vec3::zeros);
+    let r = match t.field("orientation") {
+        Some(f) => read_orientation(&f)?,
+        None => Mat3::identity(),
+    };
+    let velocity = t.opt_vec3("velocity")?.unwrap_or_else(Vec3::zeros);
+    let inertial = t.opt_vec3("angular_velocity")?;
+    let body = t.opt_vec3("angular_velocity_body")?;
+    let angular_velocity =
+        match (inertial, body) {
+            (Some(_), Some(_)) => return Err(t.key_err(
+                "angular_velocity_body",
+                "give either angular_velocity (inertial frame) or angular_velocity_body, not both",
+            )),
+            (Some(w), None) => r.transpose() * w,
+            (None, Some(w)) => w,
+            (None, None) => Vec3::zeros(),
+        };
+    Ok(NodeInit {
+        frame: Frame::new(position, r),
+        velocity,
+        angular_velocity,
+    })
+}
+
+fn add_node(model: &mut Model, name: &str, init: NodeInit) -> NodeId {
+    let id = model.add_node(name, init.frame);
+    model.nodes[id.0].velocity = init.velocity;
+    model.nodes[id.0].angular_velocity = init.angular_velocity;
+    id
+}
+
+fn read_inertia(f: &Field<'_>, mass: f64) -> Result<Mat3> {
+    let what = "[Ixx, Iyy, Izz], a full matrix [[3], [3], [3]] or { box = [a, b, c] }";
+    let inertia = match f.value.get_ref() {
+        toml::de::DeValue::Table(_) => {
+            let t = f.table()?;
+            t.check_keys(&["box"])?;
+            let b = t.req("box")?;
+            let sides = b.vec3()?;
+            if sides.iter().any(|&s| s < 0.0) {
+                return Err(b.err("side lengths must be >= 0"));
+            }
+            box_inertia(mass, &sides)
+        }
+        toml::de::DeValue::Array(a) if a.len() == 3 && a.iter().all(|v| v.get_ref().is_array()) => {
+            let m = f.mat3_rows()?;
+            for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+                if (m[(i, j)] - m[(j, i)]).abs() > 1e-9 * m.abs().max() {
+                    return Err(f.err(format!(
+                        "must be symmetric, but row {} column {} is {} and row {} column {} is {}",
+                        i + 1,
+                        j + 1,
+                        m[(i, j)],
+                        j + 1,
+                        i + 1,
+                        m[(j, i)]
+                    )));
+                }
+            }
+            m
+        }
+        toml::de::DeValue::Array(a) if a.len() == 3 => Mat3::from_diagonal(&f.vec3()?),
+        _ => {
+            return Err(f.err(format!(
+                "expected {what}, got {}",
+                super::reader::describe(f.value.get_ref())
+            )))
+        }
+    };
+    // Bounded so that the eigenvalue checks of `Model::validate` stay in floating-point range.
+    if !inertia.iter().all(|c| c.abs() < 1e100) {
+        return Err(f.err("has values that are not finite or exceed 1e100"));
+    }
+    Ok(inertia)
+}
+
+fn read_nodes_and_bodies(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+    let mut node_names = HashMap::new();
+    for t in top.items("node")? {
+        let mut keys = vec!["name"];
+        keys.extend_from_slice(NODE_STATE_KEYS);
+        t.check_keys(&keys)?;
+        let name = read_name(&t, &mut node_names, "node")?;
+        if name == GROUND {
+            return Err(t.key_err("name", "'ground' is reserved for the fixed inertial frame"));
+        }
+        let init = read_node_init(&t)?;
+        add_node(model, &name, init);
+        origins.nodes.push(Origin::of(&t));
+    }
+
+    let bodies = top.items("body")?;
+    let mut body_names = HashMap::new();
+    let mut body_keys = vec!["name", "node", "mass", "com", "inertia"];
+    body_keys.extend_from_slice(NODE_STATE_KEYS);
+    // Pass 1: names, and the nodes of the bodies that bring their own.
+    let mut own_nodes = Vec::with_capacity(bodies.len());
+    for t in &bodies {
+        t.check_keys(&body_keys)?;
+        let name = read_name(t, &mut body_names, "body")?;
+        match t.field("node") {
+            Some(f) => {
+                f.str()?;
+                for k in NODE_STATE_KEYS {
+                    t.forbid(k, "when 'node' is given (set it on the [[node]])")?;
+                }
+            }
+            None => {
+                if name == GROUND {
+                    return Err(t.key_err(
+                        "name",
+                        "'ground' is reserved for the fixed inertial frame (the body would create a node of that name)",
+                    ));
+                }
+                if let Some(first) = node_names.get(&name) {
+                    return Err(t.key_err(
+                        "name",
+                        format!(
+                            "the body creates a node named '{name}', which is already used by {first}; attach the body with node = \"{name}\" or rename it"
+                        ),
+                    ));
+                }
+                node_names.insert(name.clone(), t.path.clone());
+                let init = read_node_init(t)?;
+                own_nodes.push(Some(add_node(model, &name, init)));
+                origins.nodes.push(Origin::of(t));
+                continue;
+            }
+        }
+        own_nodes.push(None);
+    }
+    // Pass 2: the bodies, on any node.
+    for (t, own) in bodies.iter().zip(own_nodes) {
+        let name = t.req("name")?.str()?;
+        let node = match own {
+            Some(id) => id,
+            None => require_node(model, &t.req("node")?)?,
+        };
+        let mass = t.req("mass")?.f64()?;
+        let com = t.opt_vec3("com")?.unwrap_or_else(Vec3::zeros);
+        let inertia = read_inertia(&t.req("inertia")?, mass)?;
+        model.add_body(name, node, mass, com, inertia);
+        origins.bodies.push(Origin::of(t));
+    }
+    Ok(())
+}
+
+/// A node name (not the ground).
+fn require_node(model: &Model, f: &Field<'_>) -> Result<NodeId> {
+    match resolve_node(model, f, false)? {
+        Some(id) => Ok(id),
+        None => Err(f.err("must be a node, not the ground")),
+    }
+}
+
+/// A node name, or "ground" (`None`) when `ground_ok`.
+fn resolve_node(model: &Model, f: &Field<'_>, ground_ok: bool) -> Result<Option<NodeId>> {
+    let name = f.str()?;
+    if name == GROUND {
+        return if ground_ok {
+            Ok(None)
+        } else {
+            Err(f.err("must be a node, not the ground"))
+        };
+    }
+    model.node_id(name).map(Some).ok_or_else(|| {
+        let names = || model.nodes.iter().map(|n| n.name.as_str());
+        f.err(format!(
+            "unknown node '{name}'{} (nodes: {}{})",
+            suggestion(name, names()),
+            name_list(names(), 12),
+            if ground_ok { ", or 'ground'" } else { "" }
+        ))
+    })
+}
+
+fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
+    let t = f.table()?;
+    let kind = t.req("type")?.choice(&[
+        "constant", "linear", "ramp", "step", "sine", "table", "spin_up",
+    ])?;
+    let keys: &[&str] = match kind {
+        "constant" => &["type", "value"],
+        "linear" => &["type", "slope", "start", "offset"],
+        "ramp" => &["type", "t0", "t1", "value"],
+        "step" => &["type", "t0", "value"],
+        "sine" => &["type", "amplitude", "frequency", "phase", "offset"],
+        "table" => &["type", "points"],
+        _ => &["type", "omega", "duration"],
+    };
+    t.check_keys(keys)?;
+    let num = |k: &str| t.req(k)?.f64();
+    let num_or = |k: &str, d: f64| t.opt_f64(k).map(|v| v.unwrap_or(d));
+    Ok(match kind {
+        "constant" => TimeFunction::Constant {
+            value: num("value")?,
+        },
+        "linear" => TimeFunction::Linear {
+            slope: num("slope")?,
+            start: num_or("start", 0.0)?,
+            offset: num_or("offset", 0.0)?,
+        },
+        "ramp" => {
+            let (t0, t1) = (num("t0")?, num("t1")?);
+            if t1 <= t0 {
+                return Err(t.key_err("t1", format!("must be greater than t0 = {t0}, got {t1}")));
+            }
+            TimeFunction::Ramp {
+                t0,
+                t1,
+                value: num("value")?,
+            }
+        }
+        "step" => TimeFunction::Step {
+            t0: num("t0")?,
+            value: num("value")?,
+        },
+        "sine" => TimeFunction::Sine {
+            amplitude: num("amplitude")?,
+            frequency: num("frequency")?,
+            phase: num_or("phase", 0.0)?,
+            offset: num_or("offset", 0.0)?,
+        },
+        "table" => {
+            let pf = t.req("points")?;
+            let arr = pf.array()?;
+            if arr.is_empty() {
+                return Err(pf.err("needs at least one [t, value] point"));
+            }
+            let mut points = Vec::with_capacity(arr.len());
+            for (i, v) in arr.iter().enumerate() {
+                let e = pf.elem(i, v);
+                let p = e.numbers(2, "a point [t, value]")?;
+                if let Some(&(prev, _)) = points.last() {
+                    if p[0] <= prev {
+                        return Err(e.err(format!(
+                            "times must be strictly increasing, got t = {} after t = {prev}",
+                            p[0]
+                        )));
+                    }
+                }
+                points.push((p[0], p[1]));
+            }
+            TimeFunction::Table { points }
+        }
+        _ => TimeFunction::SpinUp {
+            omega: num("omega")?,
+            duration: positive(&t.req("duration")?)?,
+        },
+    })
+}
+
+fn read_joints(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+    let mut names = HashMap::new();
+    for t in top.items("joint")? {
+        t.check_keys(&[
+            "name",
+            "type",
+            "node_a",
+            "node_b",
+            "position",
+            "axis",
+            "axis_b",
+            "reference",
+            "drive",
+        ])?;
+        let name = read_name(&t, &mut names, "joint")?;
+        let kind = match t.req("type")?.choice(&[
+            "fixed",
+            "spherical",
+            "revolute",
+            "prismatic",
+            "cylindrical",
+            "universal",
+            "planar",
+        ])? {
+            "fixed" => JointKind::Fixed,
+            "spherical" => JointKind::Spherical,
+            "revolute" => JointKind::Revolute,
+            "prismatic" => JointKind::Prismatic,
+            "cylindrical" => JointKind::Cylindrical,
+            "universal" => JointKind::Universal,
+            _ => JointKind::Planar,
+        };
+        let node_a = match t.field("node_a") {
+            Some(f) => resolve_node(model, &f, true)?,
+            None => None,
+        };
+        let node_b = resolve_node(model, &t.req("node_b")?, true)?;
+        let position = t.req("position")?.vec3()?;
+        let (orientation, orientation_b) =
+            if matches!(kind, JointKind::Fixed | JointKind::Spherical) {
+                let why = format!("for a {} joint", kind.name());
+                for k in ["axis", "axis_b", "reference"] {
+                    t.forbid(k, &why)?;
+                }
+                (Mat3::identity(), None)
+            } else {
+                let af = t.req("axis")?;
+                let axis = nonzero_vec3(&af)?;
+                let reference = match t.field("reference") {
+                    Some(f) => {
+                        let r = nonzero_vec3(&f)?;
+                        if r.normalize().cross(&axis.normalize()).norm() < 1e-6 {
+                            return Err(f.err("must not be parallel to axis"));
+                        }
+                        Some(r)
+                    }
+                    None => None,
+                };
+                let orientation = frame_from_axis(&axis, reference.as_ref());
+                let orientation_b = if kind == JointKind::Universal {
+                    let bf = t.req("axis_b")?;
+                    let axis_b = nonzero_vec3(&bf)?;
+                    let cos = axis.normalize().dot(&axis_b.normalize());
+                    if cos.abs() > 1e-6 {
+                        return Err(bf.err(format!(
+                            "must be perpendicular to axis (angle between them {:.4} deg)",
+                            cos.clamp(-1.0, 1.0).acos().to_degrees()
+                        )));
+                    }
+                    Some(frame_from_axis(&axis_b, Some(&axis)))
+                } else {
+                    t.forbid("axis_b", "except for a universal joint")?;
+                    None
+                };
+                (orientation, orientation_b)
+            };
+        let drive = t.field("drive").map(|f| read_function(&f)).transpose()?;
+        let id = model.add_joint(
+            &name,
+            kind,
+            node_a,
+            node_b,
+            position,
+            orientation,
+            orientation_b,
+        );
+        model.joints[id.0].drive = drive;
+        origins.joints.push(Origin::of(&t));
+    }
+    Ok(())
+}
+
+fn read_loads(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+    let mut names = HashMap::new();
+    for t in top.items("load")? {
+        t.check_keys(&["name", "node", "force", "torque", "frame", "function"])?;
+        let name = read_name(&t, &mut names, "load")?;
+        let node = require_node(model, &t.req("node")?)?;
+        let force = t.opt_vec3("force")?.unwrap_or_else(Vec3::zeros);
+        let torque = t.opt_vec3("torque")?.unwrap_or_else(Vec3::zeros);
+        let frame = match t.opt_choice("frame", &["inertial", "body"])? {
+            Some("body") => LoadFrame::Body,
+            _ => LoadFrame::Inertial,
+        };
+        let function = match t.field("function") {
+            Some(f) => read_function(&f)?,
+            None => TimeFunction::Constant { value: 1.0 },
+        };
+        model.loads.push(Load {
+            name,
+            node,
+            force,
+            torque,
+            frame,
+            function,
+        });
+        origins.loads.push(Origin::of(&t));
+    }
+    Ok(())
+}
+
+/// A point given in inertial coordinates at t = 0, in the frame of `node` (inertial for ground).
+fn to_node_frame(model: &Model, node: Option<NodeId>, p: &Vec3) -> Vec3 {
+    match node {
+        Some(id) => model.nodes[id.0].frame.inverse().point(p),
+        None => *p,
+    }
+}
+
+fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+    let mut names = HashMap::new();
+    for t in top.items("spring")? {
+        t.check_keys(&[
+            "name",
+            "node_a",
+            "node_b",
+            "point_a",
+            "point_b",
+            "stiffness",
+            "damping",
+            "rest_length",
+        ])?;
+        let name = read_name(&t, &mut names, "spring")?;
+        let node_a = match t.field("node_a") {
+            Some(f) => resolve_node(model, &f, true)?,
+            None => None,
+        };
+        let node_b = resolve_node(model, &t.req("node_b")?, true)?;
+        let pa = t.req("point_a")?.vec3()?;
+        let pb = t.req("point_b")?.vec3()?;
+        let stiffness = non_negative(&t.req("stiffness")?)?;
+        let damping = match t.field("damping") {
+            Some(f) => non_negative(&f)?,
+            None => 0.0,
+        };
+        let rest_length = match t.field("rest_length") {
+            Some(f) => non_negative(&f)?,
+            None => (pa - pb).norm(),
+        };
+        model.springs.push(SpringDamper {
+            name,
+            node_a,
+            node_b,
+            point_a: to_node_frame(model, node_a, &pa),
+            point_b: to_node_frame(model, node_b, &pb),
+            stiffness,
+            damping,
+            rest_length,
+        });
+        origins.springs.push(Origin::of(&t));
+    }
+    Ok(())
+}
+
+fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+    const XYZ: &[&str] = &["x", "y", "z"];
+    const WXYZ: &[&str] = &["w", "x", "y", "z"];
+    let mut names = HashMap::new();
+    for t in top.items("sensor")? {
+        t.check_keys(&[
+            "name",
+            "type",
+            "node",
+            "point",
+            "component",
+            "frame",
+            "joint",
+        ])?;
+        let name = read_name(&t, &mut names, "sensor")?;
+        if name.contains([',', '"', '\n', '\r']) {
+            return Err(t.key_err(
+                "name",
+                "must not contain commas, double quotes or line breaks (it names a CSV column)",
+            ));
+        }
+        let ty = t.req("type")?.choice(&[
+            "position",
+            "velocity",
+            "quaternion",
+            "angular_velocity",
+            "joint_coordinate",
+            "joint_force",
+            "joint_torque",
+            "kinetic_energy",
+            "potential_energy",
+            "total_energy",
+            "constraint_violation",
+        ])?;
+        let why = format!("for a {ty} sensor");
+        let uses: &[&str] = match ty {
+            "position" | "velocity" => &["node", "point", "component"],
+            "quaternion" => &["node", "component"],
+            "angular_velocity" => &["node", "component", "frame"],
+            "joint_coordinate" => &["joint"],
+            "joint_force" | "joint_torque" => &["joint", "component"],
+            _ => &[],
+        };
+        for k in ["node", "point", "component", "frame", "joint"] {
+            if !uses.contains(&k) {
+                t.forbid(k, &why)?;
+            }
+        }
+        let node = || -> Result<NodeId> { require_node(model, &t.req("node")?) };
+        let component = |allowed: &[&'static str]| -> Result<usize> {
+            let c = t.req("component")?.choice(allowed)?;
+            Ok(allowed.iter().position(|a| *a == c).unwrap_or(0))
+        };
+        let joint = || -> Result<crate::model::JointId> {
+            let f = t.req("joint")?;
+            let jname = f.str()?;
+            model.joint_id(jname).ok_or_else(|| {
+                let names = || model.joints.iter().map(|j| j.name.as_str());
+                f.err(format!(
+                    "unknown joint '{jname}'{} (joints: {})",
+                    suggestion(jname, names()),
+                    name_list(names(), 12)
+                ))
+            })
+        };
+        let kind = match ty {
+            "position" | "velocity" => {
+                let node = node()?;
+                let p = t.opt_vec3("point")?.unwrap_or(model.nodes[node.0].frame.x);
+                let point = to_node_frame(model, Some(node), &p);
+                let component = component(XYZ)?;
+                if ty == "position" {
+                    SensorKind::Position {
+                        node,
+                        point,
+                        component,
+                    }
+                } else {
+                    SensorKind::Velocity {
+                        node,
+                        point,
+                        component,
+                    }
+                }
+            }
+            "quaternion" => SensorKind::Quaternion {
+                node: node()?,
+                component: component(WXYZ)?,
+            },
+            "angular_velocity" => SensorKind::AngularVelocity {
+                node: node()?,
+                frame: match t.opt_choice("frame", &["inertial", "body"])? {
+                    Some("body") => SensorFrame::Body,
+                    _ => SensorFrame::Inertial,
+                },
+                component: component(XYZ)?,
+            },
+            "joint_coordinate" => {
+                let j = joint()?;
+                let k = model.joints[j.0].kind;
+                if !matches!(
+                    k,
+                    JointKind::Revolute | JointKind::Prismatic | JointKind::Cylindrical
+                ) {
+                    return Err(t.key_err(
+                        "joint",
+                        format!(
+                            "joint '{}' is {}; a joint coordinate exists for revolute, prismatic and cylindrical joints",
+                            model.joints[j.0].name,
+                            k.name()
+                        ),
+                    ));
+                }
+                SensorKind::JointCoordinate { joint: j }
+            }
+            "joint_force" => SensorKind::JointForce {
+                joint: joint()?,
+                component: component(XYZ)?,
+            },
+            "joint_torque" => SensorKind::JointTorque {
+                joint: joint()?,
+                component: component(XYZ)?,
+            },
+            "kinetic_energy" => SensorKind::KineticEnergy,
+            "potential_energy" => SensorKind::PotentialEnergy,
+            "total_energy" => SensorKind::TotalEnergy,
+            _ => SensorKind::ConstraintViolation,
+        };
+        model.sensors.push(Sensor { name, kind });
+        origins.sensors.push(Origin::of(&t));
+    }
+    Ok(())
+}

@@ -1,0 +1,87 @@
+//! The TOML model file: a front end that builds the same [`Model`] a Rust user builds by hand
+//! (with [`Model::new`], [`Model::add_node`], [`Model::add_body`], [`Model::add_joint`], ...)
+//! plus the settings of the analysis to run on it.
+//!
+//! The format is documented in `docs/model-format.md`. Every error names the file, the line
+//! and the path of the field (`body[2].mass`), including the errors of [`Model::validate`],
+//! which are mapped back to the line of the offending field.
+//!
+//! ```no_run
+//! use flexmb::input::{read_model_file, Analysis};
+//! let file = read_model_file("top.toml".as_ref(), &["solver.h=5e-4".to_string()])?;
+//! let Analysis::Dynamic(settings) = file.analysis;
+//! let mut sim = flexmb::Simulation::new(&file.model, settings).unwrap();
+//! # Ok::<(), flexmb::input::InputError>(())
+//! ```
+//!
+//! Overrides (`--set` on the command line) are `key.path=value` strings applied to the parsed
+//! document before it is interpreted:
+//! - `solver.h=0.0005`, `model.gravity.2=-1.62` (array element by index),
+//! - `body.top.mass=2` (item of an array of tables selected by its `name`) or `body.0.mass=2`
+//!   (by 0-based index; a number is always taken as an index),
+//! - a key that does not exist is inserted when its parent table exists (`solver.rtol=1e-8`);
+//!   an unknown parent is an error.
+//!
+//! The value is parsed as TOML (number, boolean, string, array, inline table); a bare word
+//! that is not a TOML value is taken as a string (`model.group=R3xSO3`). A replaced value keeps
+//! the position of the value it replaces, so errors about it point at that line and name the
+//! override.
+
+mod build;
+mod error;
+mod overrides;
+mod reader;
+
+pub use error::{InputError, ItemLabel, Location};
+
+use crate::model::Model;
+use crate::solve::DynamicSettings;
+use reader::{Source, Value};
+use std::path::Path;
+use toml::de::{DeTable, DeValue};
+use toml::Spanned;
+
+/// A model file read and checked: the model, the analysis to run, and the free-text
+/// description (the title is in [`Model::title`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelFile {
+    pub model: Model,
+    pub analysis: Analysis,
+    pub description: String,
+}
+
+/// The analysis requested by the `[solver]` table.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Analysis {
+    /// `analysis = "dynamic"`: time integration with the Lie group generalized-alpha method.
+    Dynamic(DynamicSettings),
+}
+
+/// Reads, overrides and checks a model file. Errors are reported with `path` as file name.
+pub fn read_model_file(path: &Path, overrides: &[String]) -> Result<ModelFile, InputError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| InputError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    parse_model_str(&text, &file, overrides)
+}
+
+/// Parses, overrides and checks the text of a model file; `file_name` is used in errors.
+pub fn parse_model_str(
+    source: &str,
+    file_name: &str,
+    overrides: &[String],
+) -> Result<ModelFile, InputError> {
+    let mut src = Source::new(file_name, source);
+    let table = DeTable::parse(source).map_err(|e| {
+        let at = e.span().map_or(0, |s| s.start);
+        InputError::Syntax {
+            location: src.location(at),
+            message: e.message().trim().to_string(),
+        }
+    })?;
+    let mut root: Value<'_> = Spanned::new(0..0, DeValue::Table(table.into_inner()));
+    overrides::apply(&mut root, overrides, &mut src)?;
+    build::build(&src, &root)
+}

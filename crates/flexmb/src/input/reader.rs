@@ -1,0 +1,462 @@
+//! Typed access to the spanned TOML tree, with errors that carry file, line and field path.
+
+use super::error::{InputError, ItemLabel, Location};
+use flexmb_lie::{Mat3, Vec3};
+use std::ops::Range;
+use toml::de::{DeTable, DeValue};
+use toml::Spanned;
+
+pub(crate) type Value<'i> = Spanned<DeValue<'i>>;
+pub(crate) type Span = Range<usize>;
+pub(crate) type Result<T> = std::result::Result<T, InputError>;
+
+/// The text of the model file, for turning byte offsets into lines and columns.
+pub(crate) struct Source<'a> {
+    file: &'a str,
+    text: &'a str,
+    line_starts: Vec<usize>,
+    /// `(field path, override text)` of every applied `--set`, in order.
+    set_by: Vec<(String, String)>,
+}
+
+impl<'a> Source<'a> {
+    pub fn new(file: &'a str, text: &'a str) -> Self {
+        let mut line_starts = vec![0];
+        line_starts.extend(text.match_indices('\n').map(|(i, _)| i + 1));
+        Self {
+            file,
+            text,
+            line_starts,
+            set_by: Vec::new(),
+        }
+    }
+
+    /// Line and column (1-based) of a byte offset.
+    pub fn location(&self, offset: usize) -> Location {
+        let offset = offset.min(self.text.len());
+        let line = self.line_starts.partition_point(|&s| s <= offset).max(1);
+        let start = self.line_starts[line - 1];
+        let column = match self.text.get(start..offset) {
+            Some(s) => s.chars().count() + 1,
+            None => offset - start + 1,
+        };
+        Location {
+            file: self.file.to_string(),
+            line: u32::try_from(line).unwrap_or(u32::MAX),
+            column: u32::try_from(column).unwrap_or(u32::MAX),
+        }
+    }
+
+    /// Records that an override set the value at `path` (`solver.h`, `body[0].mass`).
+    pub fn note_override(&mut self, path: String, text: String) {
+        self.set_by.push((path, text));
+    }
+
+    /// The override that set the value of `field` or of one of its parents, if any.
+    fn set_by(&self, field: &str) -> Option<String> {
+        self.set_by.iter().rev().find_map(|(path, text)| {
+            let hit = field == path
+                || (field.starts_with(path.as_str())
+                    && matches!(field.as_bytes().get(path.len()), Some(b'.' | b'[')));
+            hit.then(|| text.clone())
+        })
+    }
+
+    pub fn field_error(
+        &self,
+        span: &Span,
+        field: &str,
+        item: Option<&ItemLabel>,
+        message: impl Into<String>,
+    ) -> InputError {
+        let mut message = message.into();
+        if let Some(text) = self.set_by(field) {
+            message.push_str(&format!(" (value set by --set '{text}')"));
+        }
+        InputError::Field {
+            location: self.location(span.start),
+            field: field.to_string(),
+            item: item.cloned(),
+            message,
+        }
+    }
+}
+
+/// Short description of a value for "expected X, got Y" messages.
+pub(crate) fn describe(v: &DeValue<'_>) -> String {
+    match v {
+        DeValue::String(s) => {
+            let shown: String = s.chars().take(40).collect();
+            if shown.len() < s.len() {
+                format!("string \"{shown}...\"")
+            } else {
+                format!("string \"{shown}\"")
+            }
+        }
+        DeValue::Integer(i) => format!("integer {i}"),
+        DeValue::Float(f) => format!("float {f}"),
+        DeValue::Boolean(b) => format!("boolean {b}"),
+        DeValue::Datetime(d) => format!("datetime {d}"),
+        DeValue::Array(a) => format!("an array of {} element{}", a.len(), plural(a.len())),
+        DeValue::Table(_) => "a table".to_string(),
+    }
+}
+
+fn plural(n: usize) -> &'static str {
+    if n == 1 {
+        ""
+    } else {
+        "s"
+    }
+}
+
+/// Edit distance, for "did you mean" hints.
+fn distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut prev = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let cur = row[j + 1];
+            row[j + 1] = (prev + usize::from(ca != cb)).min(row[j] + 1).min(cur + 1);
+            prev = cur;
+        }
+    }
+    row[b.len()]
+}
+
+/// " (did you mean 'x'?)" when one of `candidates` is close to `word`.
+pub(crate) fn suggestion<'c>(word: &str, candidates: impl IntoIterator<Item = &'c str>) -> String {
+    let score = |c: &str| {
+        let d = distance(word, c);
+        let prefix =
+            word.len() >= 3 && c.len() >= 3 && (c.starts_with(word) || word.starts_with(c));
+        if d <= 2.min(c.len().saturating_sub(1)).max(1) {
+            Some(d)
+        } else {
+            prefix.then_some(3)
+        }
+    };
+    candidates
+        .into_iter()
+        .filter_map(|c| score(c).map(|d| (d, c)))
+        .min_by_key(|&(d, _)| d)
+        .map(|(_, c)| format!(" (did you mean '{c}'?)"))
+        .unwrap_or_default()
+}
+
+/// `a, b, c` of at most `max` names, then `...`.
+pub(crate) fn name_list<'n>(names: impl IntoIterator<Item = &'n str>, max: usize) -> String {
+    let names: Vec<&str> = names.into_iter().collect();
+    if names.is_empty() {
+        return "none".to_string();
+    }
+    let mut s = names
+        .iter()
+        .take(max)
+        .map(|n| format!("'{n}'"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    if names.len() > max {
+        s.push_str(", ...");
+    }
+    s
+}
+
+/// One value of the file with its path, for typed conversions.
+#[derive(Clone)]
+pub(crate) struct Field<'a> {
+    pub src: &'a Source<'a>,
+    pub value: &'a Value<'a>,
+    pub path: String,
+    pub item: Option<ItemLabel>,
+}
+
+impl<'a> Field<'a> {
+    pub fn err(&self, message: impl Into<String>) -> InputError {
+        self.src
+            .field_error(&self.value.span(), &self.path, self.item.as_ref(), message)
+    }
+
+    fn expected(&self, what: &str) -> InputError {
+        self.err(format!(
+            "expected {what}, got {}",
+            describe(self.value.get_ref())
+        ))
+    }
+
+    /// A finite number (integer or float).
+    pub fn f64(&self) -> Result<f64> {
+        let v = match self.value.get_ref() {
+            DeValue::Integer(i) => match i64::from_str_radix(i.as_str(), i.radix()) {
+                Ok(v) => v as f64,
+                Err(_) => return Err(self.err(format!("integer {i} is out of range"))),
+            },
+            DeValue::Float(f) => match f.as_str().parse::<f64>() {
+                Ok(v) => v,
+                Err(_) => return Err(self.err(format!("cannot read the number {f}"))),
+            },
+            _ => return Err(self.expected("a number")),
+        };
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.err(format!("must be a finite number, got {v}")))
+        }
+    }
+
+    pub fn int(&self) -> Result<i64> {
+        match self.value.get_ref() {
+            DeValue::Integer(i) => i64::from_str_radix(i.as_str(), i.radix())
+                .map_err(|_| self.err(format!("integer {i} is out of range"))),
+            _ => Err(self.expected("an integer")),
+        }
+    }
+
+    pub fn str(&self) -> Result<&'a str> {
+        match self.value.get_ref() {
+            DeValue::String(s) => Ok(s.as_ref()),
+            _ => Err(self.expected("a string")),
+        }
+    }
+
+    /// A string among `allowed`.
+    pub fn choice(&self, allowed: &[&'static str]) -> Result<&'static str> {
+        let list = allowed
+            .iter()
+            .map(|a| format!("\"{a}\""))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let s = match self.value.get_ref() {
+            DeValue::String(s) => s.as_ref(),
+            _ => return Err(self.expected(&format!("one of {list}"))),
+        };
+        allowed.iter().find(|a| **a == s).copied().ok_or_else(|| {
+            self.err(format!(
+                "must be one of {list}, got \"{s}\"{}",
+                suggestion(s, allowed.iter().copied())
+            ))
+        })
+    }
+
+    pub fn array(&self) -> Result<&'a [Value<'a>]> {
+        match self.value.get_ref() {
+            DeValue::Array(a) => Ok(a),
+            _ => Err(self.expected("an array")),
+        }
+    }
+
+    pub fn elem(&self, i: usize, value: &'a Value<'a>) -> Field<'a> {
+        Field {
+            src: self.src,
+            value,
+            path: format!("{}[{i}]", self.path),
+            item: self.item.clone(),
+        }
+    }
+
+    /// An array of exactly `n` numbers.
+    pub fn numbers(&self, n: usize, what: &str) -> Result<Vec<f64>> {
+        let a = match self.value.get_ref() {
+            DeValue::Array(a) if a.len() == n => a,
+            _ => return Err(self.expected(what)),
+        };
+        a.iter()
+            .enumerate()
+            .map(|(i, v)| self.elem(i, v).f64())
+            .collect()
+    }
+
+    pub fn vec3(&self) -> Result<Vec3> {
+        let v = self.numbers(3, "an array of 3 numbers [x, y, z]")?;
+        Ok(Vec3::new(v[0], v[1], v[2]))
+    }
+
+    /// A 3x3 matrix given by rows `[[a, b, c], [d, e, f], [g, h, i]]`.
+    pub fn mat3_rows(&self) -> Result<Mat3> {
+        let what = "a 3x3 matrix given by rows [[., ., .], [., ., .], [., ., .]]";
+        let rows = match self.value.get_ref() {
+            DeValue::Array(a) if a.len() == 3 => a,
+            _ => return Err(self.expected(what)),
+        };
+        let mut m = Mat3::zeros();
+        for (i, row) in rows.iter().enumerate() {
+            let r = self.elem(i, row).numbers(3, "a row of 3 numbers")?;
+            for j in 0..3 {
+                m[(i, j)] = r[j];
+            }
+        }
+        Ok(m)
+    }
+
+    pub fn table(&self) -> Result<Table<'a>> {
+        match self.value.get_ref() {
+            DeValue::Table(map) => Ok(Table {
+                src: self.src,
+                map,
+                span: self.value.span(),
+                path: self.path.clone(),
+                item: self.item.clone(),
+            }),
+            _ => Err(self.expected("a table")),
+        }
+    }
+}
+
+/// One TOML table of the file with its path.
+#[derive(Clone)]
+pub(crate) struct Table<'a> {
+    pub src: &'a Source<'a>,
+    pub map: &'a DeTable<'a>,
+    pub span: Span,
+    pub path: String,
+    pub item: Option<ItemLabel>,
+}
+
+impl<'a> Table<'a> {
+    pub fn child_path(&self, key: &str) -> String {
+        if self.path.is_empty() {
+            key.to_string()
+        } else {
+            format!("{}.{key}", self.path)
+        }
+    }
+
+    pub fn has(&self, key: &str) -> bool {
+        self.map.contains_key(key)
+    }
+
+    pub fn field(&self, key: &str) -> Option<Field<'a>> {
+        self.map.get(key).map(|value| Field {
+            src: self.src,
+            value,
+            path: self.child_path(key),
+            item: self.item.clone(),
+        })
+    }
+
+    /// Error about `key`, at its value (or at the table when the key is absent).
+    pub fn key_err(&self, key: &str, message: impl Into<String>) -> InputError {
+        let span = self.map.get(key).map_or(self.span.clone(), |v| v.span());
+        self.src
+            .field_error(&span, &self.child_path(key), self.item.as_ref(), message)
+    }
+
+    pub fn req(&self, key: &str) -> Result<Field<'a>> {
+        self.field(key)
+            .ok_or_else(|| self.key_err(key, "is required but missing"))
+    }
+
+    /// Span of the key itself (not its value).
+    fn key_span(&self, key: &str) -> Span {
+        self.map
+            .get_key_value(key)
+            .map_or(self.span.clone(), |(k, _)| k.span())
+    }
+
+    /// Fails on the first key (in file order) that is not in `allowed`.
+    pub fn check_keys(&self, allowed: &[&str]) -> Result<()> {
+        let unknown = self
+            .map
+            .iter()
+            .filter(|(k, _)| !allowed.contains(&k.get_ref().as_ref()))
+            .min_by_key(|(k, _)| k.span().start);
+        match unknown {
+            None => Ok(()),
+            Some((k, _)) => {
+                let key: &str = k.get_ref();
+                Err(self.src.field_error(
+                    &k.span(),
+                    &self.child_path(key),
+                    self.item.as_ref(),
+                    format!(
+                        "unknown key '{key}'{}; allowed keys here: {}",
+                        suggestion(key, allowed.iter().copied()),
+                        allowed.join(", ")
+                    ),
+                ))
+            }
+        }
+    }
+
+    /// Fails if `key` is present: it is not meaningful in this context.
+    pub fn forbid(&self, key: &str, why: &str) -> Result<()> {
+        if self.has(key) {
+            Err(self.src.field_error(
+                &self.key_span(key),
+                &self.child_path(key),
+                self.item.as_ref(),
+                format!("is not allowed {why}"),
+            ))
+        } else {
+            Ok(())
+        }
+    }
+
+    pub fn opt_f64(&self, key: &str) -> Result<Option<f64>> {
+        self.field(key).map(|f| f.f64()).transpose()
+    }
+
+    pub fn opt_vec3(&self, key: &str) -> Result<Option<Vec3>> {
+        self.field(key).map(|f| f.vec3()).transpose()
+    }
+
+    pub fn opt_str(&self, key: &str) -> Result<Option<&'a str>> {
+        self.field(key).map(|f| f.str()).transpose()
+    }
+
+    pub fn opt_choice(&self, key: &str, allowed: &[&'static str]) -> Result<Option<&'static str>> {
+        self.field(key).map(|f| f.choice(allowed)).transpose()
+    }
+
+    /// The items of an array of tables (`[[body]]`), each with path `key[i]` and labelled
+    /// with its `name` when that is a string. Absent means none.
+    pub fn items(&self, key: &'static str) -> Result<Vec<Table<'a>>> {
+        let Some(f) = self.field(key) else {
+            return Ok(Vec::new());
+        };
+        let what = format!("an array of tables ([[{key}]])");
+        let arr = match f.value.get_ref() {
+            DeValue::Array(a) => a,
+            _ => {
+                return Err(f.err(format!(
+                    "expected {what}, got {}",
+                    describe(f.value.get_ref())
+                )))
+            }
+        };
+        let mut out = Vec::with_capacity(arr.len());
+        for (i, v) in arr.iter().enumerate() {
+            let DeValue::Table(map) = v.get_ref() else {
+                return Err(f.elem(i, v).err(format!(
+                    "expected a table ([[{key}]]), got {}",
+                    describe(v.get_ref())
+                )));
+            };
+            let item = match map.get("name").map(|n| n.get_ref()) {
+                Some(DeValue::String(name)) => Some(ItemLabel {
+                    table: key,
+                    name: name.to_string(),
+                }),
+                _ => None,
+            };
+            out.push(Table {
+                src: self.src,
+                map,
+                span: v.span(),
+                path: format!("{key}[{i}]"),
+                item,
+            });
+        }
+        Ok(out)
+    }
+
+    /// Value spans of every key, for mapping later errors back to the file.
+    pub fn spans(&self) -> Vec<(String, Span)> {
+        self.map
+            .iter()
+            .map(|(k, v)| (k.get_ref().to_string(), v.span()))
+            .collect()
+    }
+}

@@ -1,0 +1,498 @@
+//! The model: the immutable description of a multibody system.
+//!
+//! A [`Model`] holds what a user writes in a model file (nodes, bodies, joints, loads, springs,
+//! sensors) and never changes during a run. Everything that changes lives in
+//! [`crate::State`]; everything derived, and all scratch memory, in [`crate::Data`].
+//! Items refer to each other through typed ids ([`NodeId`], [`JointId`]); joints, loads and
+//! sensors attach to frames fixed on nodes, never to degree-of-freedom numbers.
+//!
+//! Units are SI throughout (m, kg, s, N, rad) unless a model chooses consistent others.
+
+mod time_function;
+
+pub use time_function::TimeFunction;
+
+use crate::error::ModelError;
+use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
+
+/// Index of a node in [`Model::nodes`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct NodeId(pub usize);
+
+/// Index of a joint in [`Model::joints`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct JointId(pub usize);
+
+/// A node: a frame whose configuration is an unknown on the model's Lie group.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Node {
+    pub name: String,
+    /// Initial configuration (position in m, rotation body-to-inertial).
+    pub frame: Frame,
+    /// Initial velocity of the node origin, inertial frame [m/s].
+    pub velocity: Vec3,
+    /// Initial angular velocity, body frame [rad/s].
+    pub angular_velocity: Vec3,
+}
+
+/// A rigid body attached to a node (the node is the body's reference frame).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RigidBody {
+    pub name: String,
+    pub node: NodeId,
+    /// Mass m [kg], > 0.
+    pub mass: f64,
+    /// Centre of mass X in the node frame [m].
+    pub com: Vec3,
+    /// Inertia tensor J_c about the centre of mass, node axes [kg m^2], symmetric positive definite.
+    pub inertia: Mat3,
+}
+
+/// Kinds of kinematic joints. All but `Fixed` and `Spherical` use the joint frame's z axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JointKind {
+    /// All six relative motions blocked (clamp).
+    Fixed,
+    /// Relative translation blocked, rotation free.
+    Spherical,
+    /// Rotation about z free (the joint coordinate), all else blocked.
+    Revolute,
+    /// Translation along z free (the joint coordinate), all else blocked.
+    Prismatic,
+    /// Rotation about and translation along z free.
+    Cylindrical,
+    /// Cardan joint: translation blocked, z of frame A stays perpendicular to z of frame B.
+    Universal,
+    /// Motion in the plane normal to z: translation along z and rotation about x, y blocked.
+    Planar,
+}
+
+impl JointKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            JointKind::Fixed => "fixed",
+            JointKind::Spherical => "spherical",
+            JointKind::Revolute => "revolute",
+            JointKind::Prismatic => "prismatic",
+            JointKind::Cylindrical => "cylindrical",
+            JointKind::Universal => "universal",
+            JointKind::Planar => "planar",
+        }
+    }
+}
+
+/// A holonomic joint between frame A (on `node_a`, or fixed in space when `None`) and frame B
+/// (on `node_b`). The joint frames coincide in the initial configuration, except for a
+/// universal joint, whose two z axes are perpendicular.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Joint {
+    pub name: String,
+    pub kind: JointKind,
+    /// `None` is the ground.
+    pub node_a: Option<NodeId>,
+    pub node_b: Option<NodeId>,
+    /// Joint frame A in the frame of node A (in the inertial frame if A is the ground).
+    pub frame_a: Frame,
+    /// Joint frame B in the frame of node B (in the inertial frame if B is the ground).
+    pub frame_b: Frame,
+    /// Prescribed joint coordinate (rad for revolute, m for prismatic) as a function of time,
+    /// measured from the initial configuration.
+    pub drive: Option<TimeFunction>,
+}
+
+/// Frame in which an applied load is given.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LoadFrame {
+    /// Fixed direction in space (dead load).
+    Inertial,
+    /// Direction fixed in the node frame (follower load).
+    Body,
+}
+
+/// A force and torque applied at a node, scaled by a time function.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Load {
+    pub name: String,
+    pub node: NodeId,
+    /// Force at the node origin [N].
+    pub force: Vec3,
+    /// Torque [N m].
+    pub torque: Vec3,
+    pub frame: LoadFrame,
+    pub function: TimeFunction,
+}
+
+/// A linear spring-damper between two points, acting along the line joining them.
+/// `f = k (l - l0) + c l'` (tension positive).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpringDamper {
+    pub name: String,
+    pub node_a: Option<NodeId>,
+    pub node_b: Option<NodeId>,
+    /// Attachment point on A, in the frame of node A (inertial if A is the ground) [m].
+    pub point_a: Vec3,
+    /// Attachment point on B, in the frame of node B (inertial if B is the ground) [m].
+    pub point_b: Vec3,
+    /// Stiffness k [N/m], >= 0.
+    pub stiffness: f64,
+    /// Damping c [N s/m], >= 0.
+    pub damping: f64,
+    /// Rest length l0 [m], >= 0.
+    pub rest_length: f64,
+}
+
+/// Frame in which a vector sensor reports its components.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SensorFrame {
+    Inertial,
+    Body,
+}
+
+/// What a sensor measures; each sensor gives one column of `sensors.csv`.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SensorKind {
+    /// Position component of a point fixed on a node (point in the node frame) [m].
+    Position {
+        node: NodeId,
+        point: Vec3,
+        component: usize,
+    },
+    /// Velocity component of a point fixed on a node, inertial frame [m/s].
+    Velocity {
+        node: NodeId,
+        point: Vec3,
+        component: usize,
+    },
+    /// Component of the node's unit quaternion, scalar first (0 = w, 1..3 = x, y, z).
+    Quaternion {
+        node: NodeId,
+        component: usize,
+    },
+    /// Angular velocity component [rad/s].
+    AngularVelocity {
+        node: NodeId,
+        frame: SensorFrame,
+        component: usize,
+    },
+    /// Revolute/prismatic/cylindrical joint coordinate (unwrapped angle [rad] or slide [m]).
+    JointCoordinate {
+        joint: JointId,
+    },
+    /// Force exerted by the joint on its node B, inertial frame [N].
+    JointForce {
+        joint: JointId,
+        component: usize,
+    },
+    /// Torque exerted by the joint on its node B about the joint point, inertial frame [N m].
+    JointTorque {
+        joint: JointId,
+        component: usize,
+    },
+    KineticEnergy,
+    PotentialEnergy,
+    TotalEnergy,
+    /// Largest |Phi| over all constraint equations.
+    ConstraintViolation,
+}
+
+/// A named output channel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sensor {
+    pub name: String,
+    pub kind: SensorKind,
+}
+
+/// The immutable description of a multibody system.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Model {
+    pub title: String,
+    /// Lie group of every node configuration.
+    pub group: Group,
+    /// Gravitational acceleration, inertial frame [m/s^2].
+    pub gravity: Vec3,
+    pub nodes: Vec<Node>,
+    pub bodies: Vec<RigidBody>,
+    pub joints: Vec<Joint>,
+    pub loads: Vec<Load>,
+    pub springs: Vec<SpringDamper>,
+    pub sensors: Vec<Sensor>,
+}
+
+/// Reference to one item of a model and one of its fields, for error messages.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ItemRef {
+    /// Table name in the model file: "node", "body", "joint", "load", "spring", "sensor".
+    pub table: &'static str,
+    pub index: usize,
+    pub name: String,
+    pub field: &'static str,
+}
+
+impl Model {
+    /// An empty model on the given group, without gravity.
+    pub fn new(group: Group) -> Self {
+        Self {
+            title: String::new(),
+            group,
+            gravity: Vec3::zeros(),
+            nodes: Vec::new(),
+            bodies: Vec::new(),
+            joints: Vec::new(),
+            loads: Vec::new(),
+            springs: Vec::new(),
+            sensors: Vec::new(),
+        }
+    }
+
+    /// Adds a node at rest; returns its id.
+    pub fn add_node(&mut self, name: &str, frame: Frame) -> NodeId {
+        self.nodes.push(Node {
+            name: name.to_string(),
+            frame,
+            velocity: Vec3::zeros(),
+            angular_velocity: Vec3::zeros(),
+        });
+        NodeId(self.nodes.len() - 1)
+    }
+
+    /// Adds a rigid body on a node.
+    pub fn add_body(&mut self, name: &str, node: NodeId, mass: f64, com: Vec3, inertia: Mat3) {
+        self.bodies.push(RigidBody {
+            name: name.to_string(),
+            node,
+            mass,
+            com,
+            inertia,
+        });
+    }
+
+    /// Adds a joint whose frame is given in the inertial frame at the initial configuration
+    /// (`position`, rotation `orientation`), and returns its id. For a universal joint,
+    /// `orientation_b` gives frame B (its z axis is the second cross axis).
+    pub fn add_joint(
+        &mut self,
+        name: &str,
+        kind: JointKind,
+        node_a: Option<NodeId>,
+        node_b: Option<NodeId>,
+        position: Vec3,
+        orientation: Mat3,
+        orientation_b: Option<Mat3>,
+    ) -> JointId {
+        let global = Frame::new(position, orientation);
+        let global_b = Frame::new(position, orientation_b.unwrap_or(orientation));
+        let local = |n: Option<NodeId>, g: &Frame| match n {
+            Some(id) => self.nodes[id.0].frame.inverse().compose(g),
+            None => *g,
+        };
+        let joint = Joint {
+            name: name.to_string(),
+            kind,
+            node_a,
+            node_b,
+            frame_a: local(node_a, &global),
+            frame_b: local(node_b, &global_b),
+            drive: None,
+        };
+        self.joints.push(joint);
+        JointId(self.joints.len() - 1)
+    }
+
+    /// Finds a node by name.
+    pub fn node_id(&self, name: &str) -> Option<NodeId> {
+        self.nodes.iter().position(|n| n.name == name).map(NodeId)
+    }
+
+    /// Finds a joint by name.
+    pub fn joint_id(&self, name: &str) -> Option<JointId> {
+        self.joints.iter().position(|j| j.name == name).map(JointId)
+    }
+
+    /// Checks the physical and referential consistency of the model.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let bad = |table, index: usize, name: &str, field, message: String| ModelError::Invalid {
+            item: ItemRef {
+                table,
+                index,
+                name: name.to_string(),
+                field,
+            },
+            message,
+        };
+        let n = self.nodes.len();
+        let check_node = |table, i: usize, name: &str, field, id: Option<NodeId>| match id {
+            Some(NodeId(k)) if k >= n => Err(bad(
+                table,
+                i,
+                name,
+                field,
+                format!("node index {k} does not exist"),
+            )),
+            _ => Ok(()),
+        };
+        let finite3 = |v: &Vec3| v.iter().all(|c| c.is_finite());
+        for (i, node) in self.nodes.iter().enumerate() {
+            let ortho = (node.frame.r.transpose() * node.frame.r - Mat3::identity()).norm();
+            if ortho > 1e-9 || node.frame.r.determinant() < 0.0 {
+                return Err(bad(
+                    "node",
+                    i,
+                    &node.name,
+                    "orientation",
+                    "is not a rotation".into(),
+                ));
+            }
+            if !finite3(&node.frame.x)
+                || !finite3(&node.velocity)
+                || !finite3(&node.angular_velocity)
+            {
+                return Err(bad(
+                    "node",
+                    i,
+                    &node.name,
+                    "position",
+                    "has non-finite values".into(),
+                ));
+            }
+        }
+        for (i, b) in self.bodies.iter().enumerate() {
+            check_node("body", i, &b.name, "node", Some(b.node))?;
+            if !(b.mass > 0.0 && b.mass.is_finite()) {
+                return Err(bad(
+                    "body",
+                    i,
+                    &b.name,
+                    "mass",
+                    format!("must be positive, got {}", b.mass),
+                ));
+            }
+            let sym = (b.inertia - b.inertia.transpose()).norm();
+            let eig = b.inertia.symmetric_eigenvalues();
+            if sym > 1e-9 * b.inertia.norm() || eig.iter().any(|&e| e.is_nan() || e <= 0.0) {
+                return Err(bad(
+                    "body",
+                    i,
+                    &b.name,
+                    "inertia",
+                    format!(
+                        "must be symmetric positive definite (eigenvalues {:.4e}, {:.4e}, {:.4e})",
+                        eig[0], eig[1], eig[2]
+                    ),
+                ));
+            }
+            // Triangle inequality of principal moments (a physical body's inertia).
+            let mut e = [eig[0], eig[1], eig[2]];
+            e.sort_by(f64::total_cmp);
+            if e[0] + e[1] < e[2] * (1.0 - 1e-9) {
+                return Err(bad(
+                    "body",
+                    i,
+                    &b.name,
+                    "inertia",
+                    format!(
+                        "principal moments {:.4e}, {:.4e}, {:.4e} violate the triangle inequality",
+                        e[0], e[1], e[2]
+                    ),
+                ));
+            }
+        }
+        for (i, j) in self.joints.iter().enumerate() {
+            check_node("joint", i, &j.name, "node_a", j.node_a)?;
+            check_node("joint", i, &j.name, "node_b", j.node_b)?;
+            if j.node_a.is_none() && j.node_b.is_none() {
+                return Err(bad(
+                    "joint",
+                    i,
+                    &j.name,
+                    "node_b",
+                    "a joint needs at least one node".into(),
+                ));
+            }
+            if j.node_a.is_some() && j.node_a == j.node_b {
+                return Err(bad(
+                    "joint",
+                    i,
+                    &j.name,
+                    "node_b",
+                    "joins a node to itself".into(),
+                ));
+            }
+            if j.drive.is_some() && !matches!(j.kind, JointKind::Revolute | JointKind::Prismatic) {
+                return Err(bad(
+                    "joint",
+                    i,
+                    &j.name,
+                    "drive",
+                    format!(
+                        "only revolute and prismatic joints can be driven, not {}",
+                        j.kind.name()
+                    ),
+                ));
+            }
+        }
+        for (i, l) in self.loads.iter().enumerate() {
+            check_node("load", i, &l.name, "node", Some(l.node))?;
+        }
+        for (i, s) in self.springs.iter().enumerate() {
+            check_node("spring", i, &s.name, "node_a", s.node_a)?;
+            check_node("spring", i, &s.name, "node_b", s.node_b)?;
+            for (field, v) in [
+                ("stiffness", s.stiffness),
+                ("damping", s.damping),
+                ("rest_length", s.rest_length),
+            ] {
+                if !(v >= 0.0 && v.is_finite()) {
+                    return Err(bad(
+                        "spring",
+                        i,
+                        &s.name,
+                        field,
+                        format!("must be >= 0, got {v}"),
+                    ));
+                }
+            }
+        }
+        for (i, s) in self.sensors.iter().enumerate() {
+            let node = match &s.kind {
+                SensorKind::Position { node, .. }
+                | SensorKind::Velocity { node, .. }
+                | SensorKind::Quaternion { node, .. }
+                | SensorKind::AngularVelocity { node, .. } => Some(*node),
+                _ => None,
+            };
+            check_node("sensor", i, &s.name, "node", node)?;
+        }
+        Ok(())
+    }
+}
+
+/// Rotation matrix whose z axis is `axis` (normalized), with x chosen perpendicular to it
+/// (`reference` projected, or a global axis when `reference` is `None` or parallel).
+pub fn frame_from_axis(axis: &Vec3, reference: Option<&Vec3>) -> Mat3 {
+    let z = axis.normalize();
+    let pick = |r: &Vec3| {
+        let x = r - z * z.dot(r);
+        (x.norm() > 1e-6).then(|| x.normalize())
+    };
+    let x = reference
+        .and_then(pick)
+        .or_else(|| pick(&Vec3::x()))
+        .or_else(|| pick(&Vec3::y()))
+        .expect("x or y is not parallel to z");
+    let y = z.cross(&x);
+    Mat3::from_columns(&[x, y, z])
+}
+
+/// Inertia of a homogeneous box of mass `m` and side lengths `a`, about its centre, box axes.
+pub fn box_inertia(m: f64, a: &Vec3) -> Mat3 {
+    Mat3::from_diagonal(&Vec3::new(
+        m * (a.y * a.y + a.z * a.z) / 12.0,
+        m * (a.x * a.x + a.z * a.z) / 12.0,
+        m * (a.x * a.x + a.y * a.y) / 12.0,
+    ))
+}
+
+/// Rotation from a rotation vector (axis times angle [rad]).
+pub fn rotation_from_vector(v: &Vec3) -> Mat3 {
+    so3::exp(v)
+}

@@ -1,0 +1,179 @@
+//! Sensors: the output channels declared by a model, evaluated from the state.
+
+use crate::data::Data;
+use crate::elements::{Context, ElementKernel, ElementRef, NodeState};
+use crate::joints;
+use crate::model::{Model, SensorFrame, SensorKind};
+use crate::state::State;
+use flexmb_lie::{Group, Mat6, Vec6};
+
+/// Node kinematics of a state (tangent operators identity).
+pub fn node_states(state: &State) -> Vec<NodeState> {
+    (0..state.q.len())
+        .map(|i| NodeState {
+            q: state.q[i],
+            v: state.v[i],
+            vdot: state.vdot[i],
+            t: Mat6::identity(),
+        })
+        .collect()
+}
+
+fn pair(nodes: &[NodeState], slots: [Option<crate::model::NodeId>; 2]) -> [NodeState; 2] {
+    let g = NodeState::ground(Default::default());
+    [
+        slots[0].map_or(g, |n| nodes[n.0]),
+        slots[1].map_or(g, |n| nodes[n.0]),
+    ]
+}
+
+/// Kinetic and potential energy of the whole model [J].
+pub fn energies(model: &Model, state: &State) -> (f64, f64) {
+    let nodes = node_states(state);
+    let ctx = Context {
+        model,
+        group: model.group,
+        t: state.t,
+        gravity_scale: 1.0,
+        load_scale: 1.0,
+    };
+    let mut ke = 0.0;
+    let mut pe = 0.0;
+    for e in ElementRef::all(model) {
+        let k = e.kernel(model);
+        let p = pair(&nodes, k.nodes());
+        ke += k.kinetic_energy(&ctx, &p);
+        pe += k.potential_energy(&ctx, &p);
+    }
+    (ke, pe)
+}
+
+/// Evaluates sensors, keeping what unwrapping angles needs between calls.
+#[derive(Clone, Debug, Default)]
+pub struct SensorEvaluator {
+    /// Last unwrapped joint angle per sensor.
+    last_angle: Vec<Option<f64>>,
+}
+
+impl SensorEvaluator {
+    pub fn new(model: &Model) -> Self {
+        Self {
+            last_angle: vec![None; model.sensors.len()],
+        }
+    }
+
+    /// Column names, in order.
+    pub fn names(model: &Model) -> Vec<String> {
+        model.sensors.iter().map(|s| s.name.clone()).collect()
+    }
+
+    /// Values of all sensors at `state`, multipliers and constraint values from `data`.
+    pub fn evaluate(&mut self, model: &Model, data: &Data, state: &State) -> Vec<f64> {
+        let nodes = node_states(state);
+        let mut energy = None;
+        let mut out = Vec::with_capacity(model.sensors.len());
+        for (k, s) in model.sensors.iter().enumerate() {
+            let value = match &s.kind {
+                SensorKind::Position {
+                    node,
+                    point,
+                    component,
+                } => nodes[node.0].q.point(point)[*component],
+                SensorKind::Velocity {
+                    node,
+                    point,
+                    component,
+                } => {
+                    crate::elements::point_velocity(model.group, &nodes[node.0], point)[*component]
+                }
+                SensorKind::Quaternion { node, component } => {
+                    nodes[node.0].q.quaternion()[*component]
+                }
+                SensorKind::AngularVelocity {
+                    node,
+                    frame,
+                    component,
+                } => {
+                    let om = nodes[node.0].v.fixed_rows::<3>(3).into_owned();
+                    match frame {
+                        SensorFrame::Body => om[*component],
+                        SensorFrame::Inertial => (nodes[node.0].q.r * om)[*component],
+                    }
+                }
+                SensorKind::JointCoordinate { joint } => {
+                    let j = &model.joints[joint.0];
+                    let raw = joints::coordinate(j, &pair(&nodes, [j.node_a, j.node_b]));
+                    if joints::coordinate_is_angle(j) {
+                        let unwrapped = match self.last_angle[k] {
+                            None => raw,
+                            Some(last) => {
+                                let two_pi = 2.0 * std::f64::consts::PI;
+                                last + (raw - last + std::f64::consts::PI).rem_euclid(two_pi)
+                                    - std::f64::consts::PI
+                            }
+                        };
+                        self.last_angle[k] = Some(unwrapped);
+                        unwrapped
+                    } else {
+                        raw
+                    }
+                }
+                SensorKind::JointForce { joint, component }
+                | SensorKind::JointTorque { joint, component } => {
+                    let j = &model.joints[joint.0];
+                    let start = data.layout.joint_row_start[joint.0];
+                    let n = data.layout.joint_rows[joint.0].len();
+                    let (f, m) = joints::reaction_on_b(
+                        model,
+                        j,
+                        &pair(&nodes, [j.node_a, j.node_b]),
+                        &state.lambda[start..start + n],
+                        state.t,
+                    );
+                    if matches!(s.kind, SensorKind::JointForce { .. }) {
+                        f[*component]
+                    } else {
+                        m[*component]
+                    }
+                }
+                SensorKind::KineticEnergy
+                | SensorKind::PotentialEnergy
+                | SensorKind::TotalEnergy => {
+                    let (ke, pe) = *energy.get_or_insert_with(|| energies(model, state));
+                    match s.kind {
+                        SensorKind::KineticEnergy => ke,
+                        SensorKind::PotentialEnergy => pe,
+                        _ => ke + pe,
+                    }
+                }
+                SensorKind::ConstraintViolation => constraint_violation(model, data, state, &nodes),
+            };
+            out.push(value);
+        }
+        out
+    }
+}
+
+/// Inertial velocity of a node's origin (for tests and tools).
+pub fn origin_velocity(group: Group, q: &flexmb_lie::Frame, v: &Vec6) -> flexmb_lie::Vec3 {
+    let u = v.fixed_rows::<3>(0).into_owned();
+    match group {
+        Group::R3xSO3 => u,
+        Group::SE3 => q.r * u,
+    }
+}
+
+/// Largest `|Phi|` over the active constraint rows at `state`.
+pub fn constraint_violation(model: &Model, data: &Data, state: &State, nodes: &[NodeState]) -> f64 {
+    let mut worst = 0.0f64;
+    for (j, joint) in model.joints.iter().enumerate() {
+        let p = pair(nodes, [joint.node_a, joint.node_b]);
+        for (r, row) in data.layout.joint_rows[j].iter().enumerate() {
+            if data.layout.row_unknown[data.layout.joint_row_start[j] + r].is_some() {
+                let v = joints::evaluate_row(model.group, joint, *row, &p, state.t);
+                worst = worst.max(v.phi.abs());
+            }
+        }
+    }
+    worst
+}

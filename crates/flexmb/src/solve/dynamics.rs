@@ -1,0 +1,395 @@
+//! Lie group generalized-alpha time integration of the index-3 DAE
+//!
+//! ```text
+//! M vdot - hat(v)^T M v + g(q, t) + B(q)^T lambda = 0,    Phi(q, t) = 0,
+//! ```
+//!
+//! one step `n -> n+1` (Brüls & Cardona 2010, Eqs. (40)-(44); Arnold & Brüls 2007):
+//!
+//! ```text
+//! q_{n+1} = q_n exp(tilde(dq)),   dq = h v_n + (1/2 - beta) h^2 a_n + beta h^2 a_{n+1}
+//! v_{n+1} = v_n + (1 - gamma) h a_n + gamma h a_{n+1}
+//! (1 - alpha_m) a_{n+1} + alpha_m a_n = (1 - alpha_f) vdot_{n+1} + alpha_f vdot_n
+//! ```
+//!
+//! The step reads as a checklist: `predict`, then repeat { `update_configuration`,
+//! `assemble` (residual and iteration matrix), `factorize`, `solve`, `correct`, check the
+//! weighted norm } until converged, then `update_algorithmic_acceleration`. A failed step is
+//! retried with a quarter of the step size down to `h_min`; the run then stops with a
+//! diagnosis (step, time, the worst equation and its node or joint). The output callback is
+//! called at every output time, so what was computed is never lost.
+
+use super::generalized_alpha::GaParameters;
+use super::initial::{initial_accelerations, load_nodes, prepare_layout};
+use super::linear::LinearError;
+use super::newton::{weighted_norm, NewtonSettings};
+use crate::assembly::{assemble, ConstraintRhs, Scaling};
+use crate::data::Data;
+use crate::elements::Coefficients;
+use crate::error::SolveError;
+use crate::model::Model;
+use crate::state::State;
+use flexmb_lie::Vec6;
+
+/// Settings of a dynamic analysis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DynamicSettings {
+    /// Final time [s].
+    pub t_end: f64,
+    /// Nominal step size [s].
+    pub h: f64,
+    /// Spectral radius at infinity, in `[0, 1]`.
+    pub rho_inf: f64,
+    /// Time between outputs [s]; 0 for every step.
+    pub output_interval: f64,
+    /// Smallest step size tried before giving up [s].
+    pub h_min: f64,
+    pub newton: NewtonSettings,
+}
+
+impl DynamicSettings {
+    /// Defaults for a given end time and step.
+    pub fn new(t_end: f64, h: f64) -> Self {
+        Self {
+            t_end,
+            h,
+            rho_inf: 0.9,
+            output_interval: 0.0,
+            h_min: h * 1e-4,
+            newton: NewtonSettings::default(),
+        }
+    }
+}
+
+/// Work done by a solver, for summaries and for spotting cost changes in review.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Stats {
+    pub steps: usize,
+    pub newton_iterations: usize,
+    pub rejected_steps: usize,
+    pub factorizations: usize,
+    pub max_iterations_in_a_step: usize,
+    pub outputs: usize,
+}
+
+/// Why a step failed (before step-size reduction decides what to do).
+#[derive(Clone, Debug)]
+struct StepFailure {
+    reason: String,
+    worst_unknown: Option<usize>,
+}
+
+/// A dynamic analysis in progress: model (borrowed, immutable), data and state.
+pub struct Simulation<'m> {
+    pub model: &'m Model,
+    pub data: Data,
+    pub state: State,
+    pub settings: DynamicSettings,
+    pub params: GaParameters,
+    pub stats: Stats,
+    /// Notes for the user (e.g. redundant constraints removed).
+    pub warnings: Vec<String>,
+    /// State at the start of the current step (restored when a step is rejected).
+    saved: State,
+    /// Size of the constraint-block regularization when it is on (see [`Scaling`]).
+    regularization: f64,
+    /// Steps left with the regularization on (switched on by a singular matrix or a failure).
+    regularized_steps: usize,
+}
+
+/// Steps that keep the regularization after a singular matrix or a rejected step.
+const REGULARIZED_STEPS: usize = 20;
+
+impl<'m> Simulation<'m> {
+    /// Validates the model, builds the data and computes consistent initial conditions.
+    pub fn new(model: &'m Model, settings: DynamicSettings) -> Result<Self, SolveError> {
+        model
+            .validate()
+            .map_err(|e| SolveError::Model(e.to_string()))?;
+        check_settings(&settings)?;
+        let (layout, warnings) = prepare_layout(model);
+        let n_rows = layout.n_rows;
+        let mut data = Data::new(model, layout).map_err(|e| SolveError::Model(e.to_string()))?;
+        let mut state = State::initial(model, n_rows);
+        initial_accelerations(model, &mut data, &mut state)?;
+        Ok(Self {
+            model,
+            saved: state.clone(),
+            data,
+            state,
+            params: GaParameters::from_rho_inf(settings.rho_inf),
+            settings,
+            stats: Stats::default(),
+            warnings,
+            regularization: 1e-9 / model.bodies.iter().map(|b| b.mass).fold(1e-300, f64::max),
+            regularized_steps: 0,
+        })
+    }
+
+    /// Runs to `t_end`, calling `output` at t = 0 and at every output time. Stops at the
+    /// first error of `output` or when a step cannot be completed even at `h_min`.
+    pub fn run(
+        &mut self,
+        output: &mut dyn FnMut(&Simulation) -> Result<(), String>,
+    ) -> Result<Stats, SolveError> {
+        let s = self.settings;
+        let eps = 1e-9 * s.h;
+        let out_dt = if s.output_interval > 0.0 {
+            s.output_interval
+        } else {
+            0.0
+        };
+        output(self).map_err(SolveError::Output)?;
+        self.stats.outputs += 1;
+        let mut k_out = 1usize;
+        let mut h = s.h;
+        let mut successes = 0usize;
+        let mut reductions = 0usize;
+        while self.state.t < s.t_end - eps {
+            let target = if out_dt > 0.0 {
+                (k_out as f64 * out_dt).min(s.t_end)
+            } else {
+                s.t_end
+            };
+            let mut h_try = h.min(target - self.state.t);
+            if target - (self.state.t + h_try) < eps {
+                h_try = target - self.state.t;
+            }
+            match self.step(h_try) {
+                Ok(iterations) => {
+                    self.stats.steps += 1;
+                    self.stats.max_iterations_in_a_step =
+                        self.stats.max_iterations_in_a_step.max(iterations);
+                    successes += 1;
+                    if h < s.h && successes >= 4 {
+                        h = (2.0 * h).min(s.h);
+                        successes = 0;
+                    }
+                    let reached = (self.state.t - target).abs() <= eps;
+                    if out_dt == 0.0 || reached {
+                        output(self).map_err(SolveError::Output)?;
+                        self.stats.outputs += 1;
+                        if reached && out_dt > 0.0 {
+                            k_out += 1;
+                        }
+                    }
+                }
+                Err(failure) => {
+                    self.stats.rejected_steps += 1;
+                    self.regularized_steps = REGULARIZED_STEPS;
+                    self.state = self.saved.clone();
+                    successes = 0;
+                    h = h_try * 0.25;
+                    reductions += 1;
+                    // Give up when the step can no longer shrink, or when rejections keep
+                    // coming back after the step size recovers (an unstable solution).
+                    let thrashing = self.stats.rejected_steps > 100 + self.stats.steps / 10;
+                    if h < s.h_min || thrashing {
+                        let worst = failure
+                            .worst_unknown
+                            .map(|i| self.data.layout.describe_unknown(self.model, i))
+                            .unwrap_or_else(|| "unknown".into());
+                        return Err(SolveError::NewtonFailed {
+                            step: self.stats.steps + 1,
+                            t: self.state.t,
+                            h: h_try,
+                            reductions,
+                            reason: if thrashing {
+                                format!(
+                                    "{} ({} steps rejected so far)",
+                                    failure.reason, self.stats.rejected_steps
+                                )
+                            } else {
+                                failure.reason
+                            },
+                            worst_equation: worst,
+                        });
+                    }
+                }
+            }
+        }
+        self.stats.factorizations = self.data.solver.factorizations();
+        Ok(self.stats)
+    }
+
+    /// One generalized-alpha step of size `h`; returns the Newton iterations used.
+    fn step(&mut self, h: f64) -> Result<usize, StepFailure> {
+        self.saved.clone_from(&self.state);
+        let model = self.model;
+        let group = model.group;
+        let p = self.params;
+        let n = self.data.layout.n_nodes;
+        let nd = self.data.layout.n_dofs;
+        let bp = p.beta_prime(h);
+        let gp = p.gamma_prime(h);
+        let scale = 1.0 / bp;
+        let mut sc = Scaling {
+            row_scale: scale,
+            coef: Coefficients {
+                m: 1.0,
+                c: gp * scale,
+                k: scale,
+            },
+            constraint_rhs: ConstraintRhs::Position,
+            load_factor: 1.0,
+            regularization: if self.regularized_steps > 0 {
+                self.regularization
+            } else {
+                0.0
+            },
+        };
+        self.regularized_steps = self.regularized_steps.saturating_sub(1);
+        let t_new = self.saved.t + h;
+        // predict: vdot_{n+1} = vdot_n, lambda_{n+1} = lambda_n
+        // increments h dq of every node, flat (6 per node)
+        let mut dq = vec![0.0; nd];
+        for i in 0..n {
+            let (v0, vd0, a0) = (self.saved.v[i], self.saved.vdot[i], self.saved.a[i]);
+            let a1 =
+                (vd0 * p.alpha_f + vd0 * (1.0 - p.alpha_f) - a0 * p.alpha_m) / (1.0 - p.alpha_m);
+            self.state.vdot[i] = vd0;
+            self.state.v[i] = v0 + a0 * (h * (1.0 - p.gamma)) + a1 * (h * p.gamma);
+            let inc = v0 * h + a0 * (h * h * (0.5 - p.beta)) + a1 * (h * h * p.beta);
+            dq[6 * i..6 * i + 6].copy_from_slice(inc.as_slice());
+        }
+        self.state.t = t_new;
+        let max_mu = self.saved.lambda.iter().fold(0.0f64, |m, l| m.max(l.abs())) * scale;
+        let rtol = self.settings.newton.rtol;
+        let atol = self.settings.newton.atol;
+        let mut previous = f64::INFINITY;
+        let mut previous_mu = f64::INFINITY;
+        for iteration in 1..=self.settings.newton.max_iterations {
+            // update_configuration
+            for i in 0..n {
+                let node = &mut self.data.nodes[i];
+                let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
+                node.q = group.integrate(&self.saved.q[i], &inc);
+                node.v = self.state.v[i];
+                node.vdot = self.state.vdot[i];
+                node.t = group.tangent(&inc);
+            }
+            assemble(model, &mut self.data, t_new, &self.state.lambda, &sc, true);
+            if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
+                return Err(StepFailure {
+                    reason: "non-finite residual".into(),
+                    worst_unknown: Some(i),
+                });
+            }
+            // factorize (regularized if the matrix turns out singular)
+            let mut factorized = self.data.solver.factorize(&self.data.values);
+            if matches!(factorized, Err(LinearError::Singular { .. })) && sc.regularization == 0.0 {
+                sc.regularization = self.regularization;
+                self.regularized_steps = REGULARIZED_STEPS;
+                let n_unknowns = self.data.layout.n_unknowns();
+                let diag = self.data.values.len() - n_unknowns;
+                for v in &mut self.data.values[diag + nd..] {
+                    *v = -sc.regularization;
+                }
+                factorized = self.data.solver.factorize(&self.data.values);
+            }
+            if let Err(e) = factorized {
+                let col = match e {
+                    LinearError::Singular { column } => column,
+                    _ => None,
+                };
+                return Err(StepFailure {
+                    reason: format!("singular iteration matrix ({e})"),
+                    worst_unknown: col,
+                });
+            }
+            // solve
+            let dx = &mut self.data.correction;
+            for (d, r) in dx.iter_mut().zip(&self.data.residual) {
+                *d = -r;
+            }
+            self.data.solver.solve_in_place(dx);
+            if let Some(i) = dx.iter().position(|d| !d.is_finite()) {
+                return Err(StepFailure {
+                    reason: "non-finite Newton correction".into(),
+                    worst_unknown: Some(i),
+                });
+            }
+            // correct
+            for i in 0..n {
+                let d = Vec6::from_column_slice(&dx[6 * i..6 * i + 6]);
+                for k in 0..6 {
+                    dq[6 * i + k] += d[k];
+                }
+                self.state.v[i] += d * gp;
+                self.state.vdot[i] += d * bp;
+            }
+            for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
+                if let Some(k) = slot {
+                    self.state.lambda[row] += dx[nd + k] / scale;
+                }
+            }
+            // weighted norm of the corrections
+            // multipliers: relative to the largest one of the previous step
+            let mu_atol = rtol * max_mu + 1e-300;
+            let (e_q, worst_q) = weighted_norm(&dx[..nd], &dq, &|_| atol, rtol);
+            let mut e_mu = 0.0;
+            let mut worst_mu = 0;
+            if self.data.layout.n_active > 0 && max_mu > 0.0 {
+                let (e, w) = weighted_norm(&dx[nd..], &dx[nd..], &|_| mu_atol, 0.0);
+                e_mu = e;
+                worst_mu = nd + w;
+            }
+            let err = e_q.max(e_mu);
+            self.stats.newton_iterations += 1;
+            // The multipliers of a badly scaled mechanism can stall at their round-off floor
+            // once the configuration has converged: accept when they stop decreasing.
+            let multipliers_stalled = iteration >= 2 && e_q <= 1.0 && e_mu > 0.5 * previous_mu;
+            previous_mu = e_mu;
+            if err <= 1.0 || multipliers_stalled {
+                for i in 0..n {
+                    let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
+                    let mut q = group.integrate(&self.saved.q[i], &inc);
+                    q.orthonormalize();
+                    self.state.q[i] = q;
+                    self.state.a[i] = (self.saved.vdot[i] * p.alpha_f
+                        + self.state.vdot[i] * (1.0 - p.alpha_f)
+                        - self.saved.a[i] * p.alpha_m)
+                        / (1.0 - p.alpha_m);
+                }
+                load_nodes(&self.state, &mut self.data);
+                return Ok(iteration);
+            }
+            let worst = if e_q >= e_mu { worst_q } else { worst_mu };
+            if iteration >= 3 && err > previous {
+                return Err(StepFailure {
+                    reason: format!(
+                        "Newton diverging (weighted correction {err:.3e} after {previous:.3e})"
+                    ),
+                    worst_unknown: Some(worst),
+                });
+            }
+            if iteration == self.settings.newton.max_iterations {
+                return Err(StepFailure {
+                    reason: format!(
+                        "no convergence in {iteration} iterations (weighted correction {err:.3e})"
+                    ),
+                    worst_unknown: Some(worst),
+                });
+            }
+            previous = err;
+        }
+        unreachable!("the loop returns")
+    }
+}
+
+fn check_settings(s: &DynamicSettings) -> Result<(), SolveError> {
+    let bad = |f: &str, m: &str| Err(SolveError::Model(format!("solver field '{f}': {m}")));
+    if !(s.h > 0.0 && s.h.is_finite()) {
+        return bad("h", "must be positive");
+    }
+    if !(s.t_end > 0.0 && s.t_end.is_finite()) {
+        return bad("t_end", "must be positive");
+    }
+    if !(0.0..=1.0).contains(&s.rho_inf) {
+        return bad("rho_inf", "must be in [0, 1]");
+    }
+    if s.output_interval < 0.0 {
+        return bad("output_interval", "must be >= 0");
+    }
+    Ok(())
+}

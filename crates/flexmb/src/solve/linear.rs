@@ -1,0 +1,975 @@
+//! Linear solver for the Newton iterations of the implicit integrator.
+//!
+//! Every Newton iteration of the integrator solves `A dx = -r` with an
+//! iteration matrix `A` whose sparsity pattern is fixed for the whole run
+//! (it only depends on the model topology) while its values change at every
+//! iteration. [`LinearSolver`] therefore separates the work in two phases:
+//!
+//! * [`LinearSolver::new`] / [`LinearSolver::with_backend`] receive the
+//!   pattern as a list of `(row, col)` triplet positions (duplicates allowed,
+//!   their values are summed), build the compressed storage and the map from
+//!   triplet to storage slot once, and, for the sparse backend, run the
+//!   symbolic analysis (COLAMD fill-reducing column ordering chosen by faer)
+//!   once.
+//! * [`LinearSolver::factorize`] scatters a new set of values into the
+//!   preallocated storage and computes the numeric LU factorization, reusing
+//!   all buffers; [`LinearSolver::solve_in_place`] and
+//!   [`LinearSolver::solve_transpose_in_place`] then solve with `A` or `A^T`.
+//!
+//! # Backends
+//!
+//! * [`Backend::Dense`] (chosen by [`LinearSolver::new`] for `n <=`
+//!   [`DENSE_MAX`]): the values are summed into a preallocated column-major
+//!   `n x n` matrix that faer factors in place with partial pivoting
+//!   (`PA = LU`); permutation and scratch memory are preallocated, so neither
+//!   factorization nor solve allocates. Small systems (a few bodies and joints,
+//!   6 to ~150 unknowns) are dominated by the fixed overhead of sparse
+//!   machinery (a graph traversal per column, indirect addressing,
+//!   permutations: about 0.5 us per unknown), while a dense LU of that size is
+//!   cache-resident, vectorized arithmetic (about 1 us at 9 unknowns, 50 us at
+//!   110).
+//! * [`Backend::Sparse`]: left-looking (Gilbert-Peierls) simplicial sparse LU of
+//!   faer with full partial pivoting on the rows and the COLAMD column ordering
+//!   computed once. The iteration matrices of multibody dynamics are
+//!   saddle-point matrices `[[S, B^T], [B, 0]]` with a zero diagonal block, so
+//!   a factorization without row pivoting (or with a static pivot order) would
+//!   break down; partial pivoting handles them. The `L`/`U` storage and the
+//!   row permutation are reused between factorizations; they only grow if a
+//!   new pivot sequence produces more fill than any previous one.
+//!
+//! # Singularity rule
+//!
+//! After the numeric factorization every pivot `u_kk` (diagonal of `U`) is
+//! checked; the factorization is rejected with [`LinearError::Singular`] if a
+//! pivot is exactly zero, non-finite, or `|u_kk| <= PIVOT_TOLERANCE * max_ij
+//! |a_ij|` (with [`PIVOT_TOLERANCE`] `= 1e-13`, relative to the largest
+//! absolute entry of the assembled matrix). A matrix with a non-finite entry
+//! is rejected as well. The reported column is the unknown (column of `A`)
+//! whose elimination produced the bad pivot; it is `None` when no single
+//! unknown can be blamed (all-zero matrix).
+//!
+//! Faer's numeric LU routines do not report small or zero pivots themselves
+//! (they divide by them and carry on), which is why the check is done here on
+//! the factors, and why the sparse backend uses the simplicial LU, whose `U`
+//! factor is accessible (faer's supernodal LU hides its factors; it factors a
+//! 1000-body chain about 1.6x faster but solves 2x slower).
+
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::lu::partial_pivoting::{factor as dense_factor, solve as dense_solve};
+use faer::perm::PermRef;
+use faer::sparse::linalg::lu::{factorize_symbolic_lu, simplicial, LuSymbolicParams, SymbolicLu};
+use faer::sparse::linalg::{LuError, SupernodalThreshold};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
+use faer::{Conj, MatMut, MatRef, Par};
+
+/// Largest number of unknowns for which [`LinearSolver::new`] picks the dense
+/// backend.
+///
+/// Measured on 2 cores (release, see `examples/linear_timing.rs`): on the
+/// sparsest realistic topology, a chain of bodies (block-tridiagonal, 11
+/// unknowns per body and joint), the sparse LU catches up with the dense one
+/// around 90 unknowns and is 2x faster at 154; on patterns with more fill
+/// (random 5-30 % density) the dense LU is 4-10x faster than the sparse one at
+/// 120-150 unknowns. 150 bounds the loss in the first case and keeps the large
+/// gain in the second.
+pub const DENSE_MAX: usize = 150;
+
+/// Relative pivot tolerance: a pivot with `|pivot| <= PIVOT_TOLERANCE * max
+/// |a_ij|` is treated as zero and the matrix is reported singular.
+pub const PIVOT_TOLERANCE: f64 = 1e-13;
+
+/// Which backend a solver uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    Dense,
+    Sparse,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum LinearError {
+    #[error("the iteration matrix is singular (zero or tiny pivot{})", .column.map(|c| format!(" at unknown {c}")).unwrap_or_default())]
+    Singular { column: Option<usize> },
+    #[error("sparse factorization failed: {0}")]
+    Factorization(String),
+}
+
+/// Square n x n matrix with a fixed pattern given as a list of (row, col)
+/// triplet positions (duplicates allowed: their values are summed). Values are
+/// supplied per factorization in the same order as the pattern.
+pub struct LinearSolver {
+    n: usize,
+    /// `slots[k]`: storage index (dense: column-major `i + j * n`; sparse:
+    /// position in the CSC value array) receiving the k-th triplet value.
+    slots: Vec<usize>,
+    factorizations: usize,
+    /// Whether the last call to `factorize` succeeded.
+    factorized: bool,
+    /// `min_k |u_kk| / max_ij |a_ij|` of the last successful factorization.
+    min_pivot_ratio: f64,
+    inner: Inner,
+}
+
+enum Inner {
+    Dense(DenseLu),
+    Sparse(Box<SparseLu>),
+}
+
+struct DenseLu {
+    /// Column-major `n x n` matrix, overwritten by its LU factors.
+    lu: Vec<f64>,
+    perm_fwd: Vec<usize>,
+    perm_inv: Vec<usize>,
+    mem: MemBuffer,
+}
+
+struct SparseLu {
+    /// CSC pattern of `A` (sorted, duplicates merged).
+    pattern: SymbolicSparseColMat<usize>,
+    /// CSC values of `A`.
+    values: Vec<f64>,
+    /// Symbolic analysis: holds the fill-reducing column permutation.
+    symbolic: SymbolicLu<usize>,
+    lu: simplicial::SimplicialLu<usize, f64>,
+    row_perm_fwd: Vec<usize>,
+    row_perm_inv: Vec<usize>,
+    mem: MemBuffer,
+}
+
+impl LinearSolver {
+    /// Chooses [`Backend::Dense`] when `n <= DENSE_MAX`, [`Backend::Sparse`]
+    /// otherwise.
+    ///
+    /// # Panics
+    /// If a pattern entry lies outside the `n x n` matrix.
+    pub fn new(n: usize, pattern: &[(usize, usize)]) -> Result<Self, LinearError> {
+        let backend = if n <= DENSE_MAX {
+            Backend::Dense
+        } else {
+            Backend::Sparse
+        };
+        Self::with_backend(n, pattern, backend)
+    }
+
+    /// Builds a solver with an explicit backend. For the sparse backend this
+    /// performs the symbolic analysis (fill-reducing ordering).
+    ///
+    /// # Panics
+    /// If a pattern entry lies outside the `n x n` matrix.
+    pub fn with_backend(
+        n: usize,
+        pattern: &[(usize, usize)],
+        backend: Backend,
+    ) -> Result<Self, LinearError> {
+        for (k, &(i, j)) in pattern.iter().enumerate() {
+            assert!(
+                i < n && j < n,
+                "pattern entry {k} = ({i}, {j}) outside the {n} x {n} matrix"
+            );
+        }
+        let (slots, inner) = match backend {
+            Backend::Dense => {
+                let slots = pattern.iter().map(|&(i, j)| i + j * n).collect();
+                let req = StackReq::any_of(&[
+                    dense_factor::lu_in_place_scratch::<usize, f64>(
+                        n,
+                        n,
+                        Par::Seq,
+                        Default::default(),
+                    ),
+                    dense_solve::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq),
+                    dense_solve::solve_transpose_in_place_scratch::<usize, f64>(n, 1, Par::Seq),
+                ]);
+                let dense = DenseLu {
+                    lu: vec![0.0; n * n],
+                    perm_fwd: (0..n).collect(),
+                    perm_inv: (0..n).collect(),
+                    mem: MemBuffer::new(req),
+                };
+                (slots, Inner::Dense(dense))
+            }
+            Backend::Sparse => {
+                let (col_ptr, row_idx, slots) = compress_pattern(n, pattern);
+                let nnz = row_idx.len();
+                let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+                let params = LuSymbolicParams {
+                    // The simplicial LU exposes U, needed for the pivot check.
+                    supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
+                    ..Default::default()
+                };
+                let symbolic = factorize_symbolic_lu(pattern.as_ref(), params)
+                    .map_err(|e| LinearError::Factorization(format!("{e:?}")))?;
+                let req = StackReq::any_of(&[
+                    simplicial::factorize_simplicial_numeric_lu_scratch::<usize, f64>(n, n),
+                    simplicial::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq),
+                    simplicial::solve_transpose_in_place_scratch::<usize, f64>(n, 1, Par::Seq),
+                ]);
+                let sparse = SparseLu {
+                    pattern,
+                    values: vec![0.0; nnz],
+                    symbolic,
+                    lu: simplicial::SimplicialLu::new(),
+                    row_perm_fwd: (0..n).collect(),
+                    row_perm_inv: (0..n).collect(),
+                    mem: MemBuffer::try_new(req).map_err(|_| {
+                        LinearError::Factorization("out of memory for the LU scratch".into())
+                    })?,
+                };
+                (slots, Inner::Sparse(Box::new(sparse)))
+            }
+        };
+        Ok(Self {
+            n,
+            slots,
+            factorizations: 0,
+            factorized: false,
+            min_pivot_ratio: f64::NAN,
+            inner,
+        })
+    }
+
+    /// The backend in use.
+    pub fn backend(&self) -> Backend {
+        match self.inner {
+            Inner::Dense(_) => Backend::Dense,
+            Inner::Sparse(_) => Backend::Sparse,
+        }
+    }
+
+    /// Number of unknowns.
+    pub fn n(&self) -> usize {
+        self.n
+    }
+
+    /// Number of triplet positions of the pattern (the expected length of the
+    /// `values` passed to [`factorize`](Self::factorize)).
+    pub fn pattern_len(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Number of structurally distinct nonzeros of the matrix (duplicates
+    /// merged; for the dense backend `n * n`).
+    pub fn nnz(&self) -> usize {
+        match &self.inner {
+            Inner::Dense(_) => self.n * self.n,
+            Inner::Sparse(s) => s.values.len(),
+        }
+    }
+
+    /// Whether the last call to [`factorize`](Self::factorize) succeeded, i.e.
+    /// whether the solve functions can be used.
+    pub fn is_factorized(&self) -> bool {
+        self.factorized
+    }
+
+    /// `min_k |u_kk| / max_ij |a_ij|` of the last successful factorization
+    /// (`None` before any). A cheap conditioning indicator: values close to
+    /// [`PIVOT_TOLERANCE`] announce a nearly singular iteration matrix.
+    pub fn min_pivot_ratio(&self) -> Option<f64> {
+        self.factorized.then_some(self.min_pivot_ratio)
+    }
+
+    /// Numeric factorization with the given values (`values.len() ==
+    /// pattern.len()`, duplicates summed). Does not allocate in the steady
+    /// state. Returns [`LinearError::Singular`] on a zero, non-finite or tiny
+    /// pivot (see the module documentation); the solver then has no usable
+    /// factorization until the next successful call.
+    ///
+    /// # Panics
+    /// If `values.len()` differs from the pattern length.
+    pub fn factorize(&mut self, values: &[f64]) -> Result<(), LinearError> {
+        assert_eq!(
+            values.len(),
+            self.slots.len(),
+            "factorize: {} values for a pattern of {} entries",
+            values.len(),
+            self.slots.len()
+        );
+        self.factorizations += 1;
+        self.factorized = false;
+        let n = self.n;
+        if n == 0 {
+            self.factorized = true;
+            self.min_pivot_ratio = f64::INFINITY;
+            return Ok(());
+        }
+        let min_ratio = match &mut self.inner {
+            Inner::Dense(d) => d.factorize(n, &self.slots, values)?,
+            Inner::Sparse(s) => s.factorize(n, &self.slots, values)?,
+        };
+        self.min_pivot_ratio = min_ratio;
+        self.factorized = true;
+        Ok(())
+    }
+
+    /// Solve `A x = b` in place (`b` overwritten by `x`) with the last
+    /// factorization.
+    ///
+    /// # Panics
+    /// If `b.len() != n` or if there is no successful factorization.
+    pub fn solve_in_place(&mut self, b: &mut [f64]) {
+        self.solve_impl(b, false);
+    }
+
+    /// Solve `A^T x = b` in place (`b` overwritten by `x`) with the last
+    /// factorization (for adjoint sensitivity analysis).
+    ///
+    /// # Panics
+    /// If `b.len() != n` or if there is no successful factorization.
+    pub fn solve_transpose_in_place(&mut self, b: &mut [f64]) {
+        self.solve_impl(b, true);
+    }
+
+    /// Number of numeric factorizations done so far (every call to
+    /// [`factorize`](Self::factorize), including those reporting a singular
+    /// matrix).
+    pub fn factorizations(&self) -> usize {
+        self.factorizations
+    }
+
+    fn solve_impl(&mut self, b: &mut [f64], transpose: bool) {
+        let n = self.n;
+        assert_eq!(
+            b.len(),
+            n,
+            "solve: right-hand side of length {} for n = {n}",
+            b.len()
+        );
+        assert!(
+            self.factorized,
+            "solve called without a successful factorization"
+        );
+        if n == 0 {
+            return;
+        }
+        let rhs = MatMut::from_column_major_slice_mut(b, n, 1);
+        match &mut self.inner {
+            Inner::Dense(d) => {
+                let lu = MatRef::from_column_major_slice(&d.lu, n, n);
+                let perm = PermRef::new_checked(&d.perm_fwd, &d.perm_inv, n);
+                let stack = MemStack::new(&mut d.mem);
+                // L (unit lower) and U (upper) share the same storage; the
+                // triangular solves only read their own triangle.
+                if transpose {
+                    dense_solve::solve_transpose_in_place_with_conj(
+                        lu,
+                        lu,
+                        perm,
+                        Conj::No,
+                        rhs,
+                        Par::Seq,
+                        stack,
+                    );
+                } else {
+                    dense_solve::solve_in_place_with_conj(
+                        lu,
+                        lu,
+                        perm,
+                        Conj::No,
+                        rhs,
+                        Par::Seq,
+                        stack,
+                    );
+                }
+            }
+            Inner::Sparse(s) => {
+                let s = &mut **s;
+                let row_perm = PermRef::new_checked(&s.row_perm_fwd, &s.row_perm_inv, n);
+                let col_perm = s.symbolic.col_perm();
+                let stack = MemStack::new(&mut s.mem);
+                if transpose {
+                    s.lu.solve_transpose_in_place_with_conj(
+                        row_perm,
+                        col_perm,
+                        Conj::No,
+                        rhs,
+                        Par::Seq,
+                        stack,
+                    );
+                } else {
+                    s.lu.solve_in_place_with_conj(
+                        row_perm,
+                        col_perm,
+                        Conj::No,
+                        rhs,
+                        Par::Seq,
+                        stack,
+                    );
+                }
+            }
+        }
+    }
+}
+
+impl DenseLu {
+    /// Assembles, factors and checks the pivots; returns the smallest relative
+    /// pivot.
+    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Result<f64, LinearError> {
+        self.lu.fill(0.0);
+        for (&s, &v) in slots.iter().zip(values) {
+            self.lu[s] += v;
+        }
+        // Entries outside the pattern are zero: the pattern slots suffice.
+        let max_bits = slots.iter().map(|&s| abs_bits(self.lu[s])).max();
+        let max_abs = check_max_abs(max_bits, || {
+            slots
+                .iter()
+                .find(|&&s| !self.lu[s].is_finite())
+                .map(|&s| s / n)
+        })?;
+        let stack = MemStack::new(&mut self.mem);
+        dense_factor::lu_in_place(
+            MatMut::from_column_major_slice_mut(&mut self.lu, n, n),
+            &mut self.perm_fwd,
+            &mut self.perm_inv,
+            Par::Seq,
+            stack,
+            Default::default(),
+        );
+        let mut min_ratio = f64::INFINITY;
+        for k in 0..n {
+            let pivot = self.lu[k + k * n];
+            min_ratio = check_pivot(pivot, max_abs, k, min_ratio)?;
+        }
+        Ok(min_ratio)
+    }
+}
+
+impl SparseLu {
+    /// Assembles, factors and checks the pivots; returns the smallest relative
+    /// pivot.
+    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Result<f64, LinearError> {
+        self.values.fill(0.0);
+        for (&s, &v) in slots.iter().zip(values) {
+            self.values[s] += v;
+        }
+        let max_bits = self.values.iter().map(|&v| abs_bits(v)).max();
+        let max_abs = check_max_abs(max_bits, || {
+            let k = self.values.iter().position(|v| !v.is_finite())?;
+            Some(self.pattern.col_ptr().partition_point(|&p| p <= k) - 1)
+        })?;
+        let col_perm = self.symbolic.col_perm();
+        let stack = MemStack::new(&mut self.mem);
+        let a = SparseColMatRef::new(self.pattern.as_ref(), &self.values);
+        simplicial::factorize_simplicial_numeric_lu(
+            &mut self.row_perm_fwd,
+            &mut self.row_perm_inv,
+            &mut self.lu,
+            a,
+            col_perm,
+            stack,
+        )
+        .map_err(|e| match e {
+            LuError::SymbolicSingular { index } => LinearError::Singular {
+                column: Some(col_perm.arrays().0[index]),
+            },
+            LuError::Generic(e) => LinearError::Factorization(format!("{e:?}")),
+        })?;
+        // Column j of U holds the pivot of the j-th eliminated column (the
+        // original column col_perm[j]) as its entry in row j.
+        let u = self.lu.u_factor_unsorted();
+        let mut min_ratio = f64::INFINITY;
+        for j in 0..n {
+            let pivot = u
+                .row_idx_of_col_raw(j)
+                .iter()
+                .zip(u.val_of_col(j))
+                .rev()
+                .find(|(&i, _)| i == j)
+                .map_or(0.0, |(_, &v)| v);
+            min_ratio = check_pivot(pivot, max_abs, col_perm.arrays().0[j], min_ratio)?;
+        }
+        Ok(min_ratio)
+    }
+}
+
+/// Bit pattern of `|v|`. For non-negative IEEE doubles the integer order of
+/// the bit patterns is the numeric order, and every non-finite value (inf,
+/// NaN) has a larger pattern than any finite one, so a plain integer maximum
+/// gives both the largest magnitude and a finiteness check, without the
+/// NaN-handling branches of `f64::max`.
+fn abs_bits(v: f64) -> u64 {
+    v.to_bits() & !(1u64 << 63)
+}
+
+/// Turns the maximum of [`abs_bits`] over the matrix entries into the largest
+/// absolute entry. A non-finite entry is reported as singular at the column
+/// found by `non_finite_column` (only evaluated on that error path), an
+/// all-zero (or empty) matrix as singular without a column.
+fn check_max_abs(
+    max_bits: Option<u64>,
+    non_finite_column: impl FnOnce() -> Option<usize>,
+) -> Result<f64, LinearError> {
+    const INF_BITS: u64 = 0x7ff0_0000_0000_0000;
+    match max_bits {
+        Some(bits) if bits >= INF_BITS => Err(LinearError::Singular {
+            column: non_finite_column(),
+        }),
+        Some(bits) if bits > 0 => Ok(f64::from_bits(bits)),
+        _ => Err(LinearError::Singular { column: None }),
+    }
+}
+
+/// Applies the singularity rule to one pivot; returns the updated minimum of
+/// `|pivot| / max_abs`.
+fn check_pivot(
+    pivot: f64,
+    max_abs: f64,
+    column: usize,
+    min_ratio: f64,
+) -> Result<f64, LinearError> {
+    let abs = pivot.abs();
+    if !pivot.is_finite() || abs <= PIVOT_TOLERANCE * max_abs {
+        return Err(LinearError::Singular {
+            column: Some(column),
+        });
+    }
+    Ok(min_ratio.min(abs / max_abs))
+}
+
+/// Compresses a triplet pattern to CSC (rows sorted within each column,
+/// duplicates merged). Returns `(col_ptr, row_idx, slots)` where `slots[k]` is
+/// the CSC position of the k-th triplet.
+fn compress_pattern(n: usize, pattern: &[(usize, usize)]) -> (Vec<usize>, Vec<usize>, Vec<usize>) {
+    let mut order: Vec<usize> = (0..pattern.len()).collect();
+    order.sort_unstable_by_key(|&k| (pattern[k].1, pattern[k].0));
+    let mut col_ptr = vec![0usize; n + 1];
+    let mut row_idx = Vec::with_capacity(pattern.len());
+    let mut slots = vec![0usize; pattern.len()];
+    let mut last = None;
+    for &k in &order {
+        let (i, j) = pattern[k];
+        if last != Some((i, j)) {
+            row_idx.push(i);
+            col_ptr[j + 1] += 1;
+            last = Some((i, j));
+        }
+        slots[k] = row_idx.len() - 1;
+    }
+    for j in 0..n {
+        col_ptr[j + 1] += col_ptr[j];
+    }
+    (col_ptr, row_idx, slots)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Minimal deterministic linear congruential generator (Knuth MMIX).
+    struct Lcg(u64);
+
+    impl Lcg {
+        fn next_u64(&mut self) -> u64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            self.0
+        }
+        /// Uniform in [0, 1).
+        fn next_f64(&mut self) -> f64 {
+            (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+        }
+        fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+            lo + (hi - lo) * self.next_f64()
+        }
+        fn below(&mut self, n: usize) -> usize {
+            ((self.next_u64() >> 33) % n as u64) as usize
+        }
+    }
+
+    struct System {
+        n: usize,
+        pattern: Vec<(usize, usize)>,
+        values: Vec<f64>,
+    }
+
+    /// Random well-conditioned, nonsymmetric sparse saddle-point matrix
+    /// `[[S, G^T], [B, 0]]` with `ns` primal unknowns and `nc` constraints:
+    /// `S` strictly diagonally dominant, `B` full row rank (one dominant entry
+    /// per row in distinct columns), `G = B + small perturbation`.
+    fn saddle_system(ns: usize, nc: usize, seed: u64) -> System {
+        assert!(nc <= ns);
+        let mut rng = Lcg(seed);
+        let n = ns + nc;
+        let mut pattern = Vec::new();
+        let mut values = Vec::new();
+        for i in 0..ns {
+            let mut off_sum = 0.0;
+            for _ in 0..3 {
+                let j = rng.below(ns);
+                if j != i {
+                    let v = rng.uniform(-1.0, 1.0);
+                    off_sum += f64::abs(v);
+                    pattern.push((i, j));
+                    values.push(v);
+                }
+            }
+            pattern.push((i, i));
+            values.push(2.0 + off_sum + rng.next_f64());
+        }
+        for r in 0..nc {
+            let mut cols = vec![(
+                r * ns / nc,
+                rng.uniform(1.0, 2.0) * if rng.below(2) == 0 { 1.0 } else { -1.0 },
+            )];
+            for _ in 0..2 {
+                let c = rng.below(ns);
+                if cols.iter().all(|&(cc, _)| cc != c) {
+                    cols.push((c, rng.uniform(-0.2, 0.2)));
+                }
+            }
+            for (c, v) in cols {
+                pattern.push((ns + r, c));
+                values.push(v);
+                pattern.push((c, ns + r));
+                values.push(v + rng.uniform(-0.05, 0.05));
+            }
+        }
+        System { n, pattern, values }
+    }
+
+    fn matvec(
+        n: usize,
+        pattern: &[(usize, usize)],
+        values: &[f64],
+        x: &[f64],
+        transpose: bool,
+    ) -> Vec<f64> {
+        let mut y = vec![0.0; n];
+        for (&(i, j), &v) in pattern.iter().zip(values) {
+            if transpose {
+                y[j] += v * x[i];
+            } else {
+                y[i] += v * x[j];
+            }
+        }
+        y
+    }
+
+    fn norm_inf(v: &[f64]) -> f64 {
+        v.iter().fold(0.0, |m, x| f64::max(m, x.abs()))
+    }
+
+    fn random_rhs(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = Lcg(seed);
+        (0..n).map(|_| rng.uniform(-1.0, 1.0)).collect()
+    }
+
+    /// Solves with the given backend and returns x, checking the relative
+    /// residual.
+    fn solve_checked(sys: &System, backend: Backend, b: &[f64], transpose: bool) -> Vec<f64> {
+        let mut solver = LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
+        assert_eq!(solver.backend(), backend);
+        solver.factorize(&sys.values).unwrap();
+        let mut x = b.to_vec();
+        if transpose {
+            solver.solve_transpose_in_place(&mut x);
+        } else {
+            solver.solve_in_place(&mut x);
+        }
+        assert!(x.iter().all(|v| v.is_finite()));
+        let ax = matvec(sys.n, &sys.pattern, &sys.values, &x, transpose);
+        let res: Vec<f64> = ax.iter().zip(b).map(|(a, b)| a - b).collect();
+        let a_norm = norm_inf(&sys.values) * 8.0;
+        let rel = norm_inf(&res) / (a_norm * norm_inf(&x) + norm_inf(b));
+        assert!(
+            rel < 1e-13,
+            "{backend:?} transpose={transpose}: relative residual {rel:e}"
+        );
+        x
+    }
+
+    fn assert_close(x: &[f64], y: &[f64], tol: f64) {
+        let diff: Vec<f64> = x.iter().zip(y).map(|(a, b)| a - b).collect();
+        let rel = norm_inf(&diff) / norm_inf(x);
+        assert!(rel < tol, "solutions differ: relative {rel:e}");
+    }
+
+    fn both_backends_agree(ns: usize, nc: usize, seed: u64) {
+        let sys = saddle_system(ns, nc, seed);
+        let b = random_rhs(sys.n, seed + 1);
+        for transpose in [false, true] {
+            let xd = solve_checked(&sys, Backend::Dense, &b, transpose);
+            let xs = solve_checked(&sys, Backend::Sparse, &b, transpose);
+            assert_close(&xd, &xs, 1e-10);
+        }
+    }
+
+    #[test]
+    fn dense_size_saddle_point_both_backends() {
+        both_backends_agree(14, 6, 1);
+        both_backends_agree(6, 3, 7);
+    }
+
+    #[test]
+    fn sparse_size_saddle_point_both_backends() {
+        both_backends_agree(300, 100, 2);
+    }
+
+    #[test]
+    fn new_picks_backend_by_size() {
+        let small = saddle_system(14, 6, 3);
+        assert_eq!(
+            LinearSolver::new(small.n, &small.pattern)
+                .unwrap()
+                .backend(),
+            Backend::Dense
+        );
+        let large = saddle_system(300, 100, 4);
+        let solver = LinearSolver::new(large.n, &large.pattern).unwrap();
+        assert_eq!(solver.backend(), Backend::Sparse);
+        assert_eq!(solver.n(), 400);
+        assert_eq!(solver.pattern_len(), large.pattern.len());
+        let edge = saddle_system(DENSE_MAX - 50, 50, 5);
+        assert_eq!(
+            LinearSolver::new(edge.n, &edge.pattern).unwrap().backend(),
+            Backend::Dense
+        );
+        let edge = saddle_system(DENSE_MAX - 49, 50, 5);
+        assert_eq!(
+            LinearSolver::new(edge.n, &edge.pattern).unwrap().backend(),
+            Backend::Sparse
+        );
+    }
+
+    #[test]
+    fn duplicates_are_summed() {
+        for (ns, nc) in [(14, 6), (300, 100)] {
+            let sys = saddle_system(ns, nc, 11);
+            let b = random_rhs(sys.n, 12);
+            // Split every value into two duplicated entries, in a shuffled
+            // order.
+            let mut rng = Lcg(13);
+            let mut entries: Vec<((usize, usize), f64)> = Vec::new();
+            for (&p, &v) in sys.pattern.iter().zip(&sys.values) {
+                let w = rng.uniform(-1.0, 1.0);
+                entries.push((p, w));
+                entries.push((p, v - w));
+            }
+            for k in (1..entries.len()).rev() {
+                entries.swap(k, rng.below(k + 1));
+            }
+            let dup = System {
+                n: sys.n,
+                pattern: entries.iter().map(|e| e.0).collect(),
+                values: entries.iter().map(|e| e.1).collect(),
+            };
+            for backend in [Backend::Dense, Backend::Sparse] {
+                let x = solve_checked(&sys, backend, &b, false);
+                let mut solver = LinearSolver::with_backend(dup.n, &dup.pattern, backend).unwrap();
+                assert_eq!(solver.pattern_len(), 2 * sys.pattern.len());
+                if backend == Backend::Sparse {
+                    // Same merged structure as the original pattern.
+                    let reference =
+                        LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
+                    assert_eq!(solver.nnz(), reference.nnz());
+                }
+                solver.factorize(&dup.values).unwrap();
+                let mut y = b.clone();
+                solver.solve_in_place(&mut y);
+                assert_close(&x, &y, 1e-10);
+            }
+        }
+    }
+
+    #[test]
+    fn transpose_solve_matches_explicit_transpose() {
+        for (ns, nc) in [(14, 6), (300, 100)] {
+            let sys = saddle_system(ns, nc, 21);
+            let b = random_rhs(sys.n, 22);
+            let transposed = System {
+                n: sys.n,
+                pattern: sys.pattern.iter().map(|&(i, j)| (j, i)).collect(),
+                values: sys.values.clone(),
+            };
+            for backend in [Backend::Dense, Backend::Sparse] {
+                let xt = solve_checked(&sys, backend, &b, true);
+                let x = solve_checked(&transposed, backend, &b, false);
+                assert_close(&x, &xt, 1e-10);
+            }
+        }
+    }
+
+    #[test]
+    fn zero_row_is_singular_on_both_backends() {
+        for (ns, nc) in [(14, 6), (300, 100)] {
+            let sys = saddle_system(ns, nc, 31);
+            for row in [0, ns / 2, ns + nc / 2] {
+                // Row present in the pattern with zero values.
+                let values: Vec<f64> = sys
+                    .pattern
+                    .iter()
+                    .zip(&sys.values)
+                    .map(|(&(i, _), &v)| if i == row { 0.0 } else { v })
+                    .collect();
+                // Row absent from the pattern (structurally singular).
+                let (pattern_s, values_s): (Vec<_>, Vec<_>) = sys
+                    .pattern
+                    .iter()
+                    .zip(&sys.values)
+                    .filter(|(&(i, _), _)| i != row)
+                    .map(|(&p, &v)| (p, v))
+                    .unzip();
+                for backend in [Backend::Dense, Backend::Sparse] {
+                    let mut solver =
+                        LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
+                    let err = solver.factorize(&values).unwrap_err();
+                    assert!(
+                        matches!(err, LinearError::Singular { column: Some(_) }),
+                        "{backend:?}: {err}"
+                    );
+                    assert!(!solver.is_factorized());
+                    // The solver recovers with good values on the same pattern.
+                    solver.factorize(&sys.values).unwrap();
+                    assert!(solver.is_factorized());
+
+                    let mut solver =
+                        LinearSolver::with_backend(sys.n, &pattern_s, backend).unwrap();
+                    let err = solver.factorize(&values_s).unwrap_err();
+                    assert!(
+                        matches!(err, LinearError::Singular { column: Some(_) }),
+                        "{backend:?}: {err}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn rank_deficient_and_tiny_pivots_are_singular() {
+        // Row 2 = row 0 + row 1: rounding leaves a tiny, nonzero pivot.
+        let pattern = [
+            (0, 0),
+            (0, 1),
+            (0, 2),
+            (1, 0),
+            (1, 1),
+            (1, 2),
+            (2, 0),
+            (2, 1),
+            (2, 2),
+        ];
+        let (r0, r1) = ([0.1, 0.7, 0.3], [0.3, 0.2, 0.9]);
+        let values = [
+            r0[0],
+            r0[1],
+            r0[2],
+            r1[0],
+            r1[1],
+            r1[2],
+            r0[0] + r1[0],
+            r0[1] + r1[1],
+            r0[2] + r1[2],
+        ];
+        // Scaled-down row: pivot ~1e-15 relative to the largest entry.
+        let mut scaled = [2.0, 1.0, 0.5, 1.0, 3.0, 1.0, 0.5, 1.0, 4.0];
+        scaled[6..].iter_mut().for_each(|v| *v *= 1e-14);
+        for backend in [Backend::Dense, Backend::Sparse] {
+            let mut solver = LinearSolver::with_backend(3, &pattern, backend).unwrap();
+            assert!(matches!(
+                solver.factorize(&values),
+                Err(LinearError::Singular { column: Some(_) })
+            ));
+            assert!(matches!(
+                solver.factorize(&scaled),
+                Err(LinearError::Singular { column: Some(_) })
+            ));
+            assert!(matches!(
+                solver.factorize(&[0.0; 9]),
+                Err(LinearError::Singular { column: None })
+            ));
+            let mut nan = [2.0, 1.0, 0.5, 1.0, 3.0, 1.0, 0.5, 1.0, 4.0];
+            nan[4] = f64::NAN;
+            assert!(matches!(
+                solver.factorize(&nan),
+                Err(LinearError::Singular { column: Some(1) })
+            ));
+            nan[4] = f64::INFINITY;
+            assert!(matches!(
+                solver.factorize(&nan),
+                Err(LinearError::Singular { column: Some(1) })
+            ));
+            assert_eq!(solver.factorizations(), 5);
+            solver
+                .factorize(&[2.0, 1.0, 0.5, 1.0, 3.0, 1.0, 0.5, 1.0, 4.0])
+                .unwrap();
+            assert!(solver.min_pivot_ratio().unwrap() > 0.1);
+        }
+        let err = LinearError::Singular { column: Some(3) };
+        assert_eq!(
+            err.to_string(),
+            "the iteration matrix is singular (zero or tiny pivot at unknown 3)"
+        );
+        let err = LinearError::Singular { column: None };
+        assert_eq!(
+            err.to_string(),
+            "the iteration matrix is singular (zero or tiny pivot)"
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "without a successful factorization")]
+    fn solve_after_failed_factorization_panics() {
+        let mut solver = LinearSolver::with_backend(2, &[(0, 0), (1, 1)], Backend::Dense).unwrap();
+        let _ = solver.factorize(&[1.0, 0.0]);
+        solver.solve_in_place(&mut [1.0, 1.0]);
+    }
+
+    #[test]
+    fn refactorization_with_new_values() {
+        for (ns, nc) in [(14, 6), (300, 100)] {
+            let sys = saddle_system(ns, nc, 41);
+            let b = random_rhs(sys.n, 42);
+            for backend in [Backend::Dense, Backend::Sparse] {
+                let mut solver = LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
+                let mut rng = Lcg(43);
+                for it in 0..4 {
+                    // New values on the same pattern (Newton-like drift,
+                    // including sign changes that alter the pivot sequence).
+                    let values: Vec<f64> = if it == 0 {
+                        sys.values.clone()
+                    } else {
+                        sys.values
+                            .iter()
+                            .map(|v| v * rng.uniform(0.5, 1.5))
+                            .collect()
+                    };
+                    let reference = System {
+                        n: sys.n,
+                        pattern: sys.pattern.clone(),
+                        values: values.clone(),
+                    };
+                    solver.factorize(&values).unwrap();
+                    let mut x = b.clone();
+                    solver.solve_in_place(&mut x);
+                    let expected = solve_checked(&reference, Backend::Dense, &b, false);
+                    assert_close(&expected, &x, 1e-10);
+                    let mut xt = b.clone();
+                    solver.solve_transpose_in_place(&mut xt);
+                    let expected = solve_checked(&reference, Backend::Dense, &b, true);
+                    assert_close(&expected, &xt, 1e-10);
+                }
+                assert_eq!(solver.factorizations(), 4);
+            }
+        }
+    }
+
+    #[test]
+    fn solver_is_send_and_sync() {
+        fn assert_send_sync<T: Send + Sync>() {}
+        assert_send_sync::<LinearSolver>();
+        assert_send_sync::<LinearError>();
+    }
+
+    #[test]
+    fn empty_system() {
+        for backend in [Backend::Dense, Backend::Sparse] {
+            let mut solver = LinearSolver::with_backend(0, &[], backend).unwrap();
+            solver.factorize(&[]).unwrap();
+            solver.solve_in_place(&mut []);
+            solver.solve_transpose_in_place(&mut []);
+            assert_eq!(solver.factorizations(), 1);
+        }
+    }
+}

@@ -1,0 +1,13 @@
+//! Solvers: generalized-alpha time integration on the Lie group, consistent initial
+//! conditions, and the linear solver behind both.
+
+pub mod dynamics;
+pub mod generalized_alpha;
+pub mod initial;
+pub mod linear;
+pub mod newton;
+
+pub use dynamics::{DynamicSettings, Simulation, Stats};
+pub use generalized_alpha::GaParameters;
+pub use initial::{initial_accelerations, prepare_layout};
+pub use newton::NewtonSettings;

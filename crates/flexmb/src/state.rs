@@ -1,0 +1,50 @@
+//! The state: everything that changes during a run.
+
+use crate::model::Model;
+use flexmb_lie::{Frame, Group, Vec6};
+
+/// Configuration, velocities, accelerations and multipliers at one time.
+///
+/// Shapes: `q, v, vdot, a` have one entry per node (`n_nodes`); `lambda` one per constraint
+/// row of every joint, in joint order (`n_rows`, rows removed as redundant stay 0).
+#[derive(Clone, Debug, PartialEq)]
+pub struct State {
+    pub t: f64,
+    /// Node configurations on the group.
+    pub q: Vec<Frame>,
+    /// Velocities `v` (6 per node, group convention).
+    pub v: Vec<Vec6>,
+    /// Accelerations `vdot = dv/dt`.
+    pub vdot: Vec<Vec6>,
+    /// Algorithmic accelerations `a` of the generalized-alpha scheme.
+    pub a: Vec<Vec6>,
+    /// Lagrange multipliers (unscaled, physical units of the rows' generalized forces).
+    pub lambda: Vec<f64>,
+}
+
+impl State {
+    /// The model's initial configuration and velocities; accelerations and multipliers zero
+    /// (see [`crate::solve::initial_accelerations`] for consistent ones).
+    pub fn initial(model: &Model, n_rows: usize) -> Self {
+        let v = model
+            .nodes
+            .iter()
+            .map(|n| {
+                let u = match model.group {
+                    Group::R3xSO3 => n.velocity,
+                    Group::SE3 => n.frame.r.transpose() * n.velocity,
+                };
+                flexmb_lie::join(&u, &n.angular_velocity)
+            })
+            .collect();
+        let n = model.nodes.len();
+        Self {
+            t: 0.0,
+            q: model.nodes.iter().map(|n| n.frame).collect(),
+            v,
+            vdot: vec![Vec6::zeros(); n],
+            a: vec![Vec6::zeros(); n],
+            lambda: vec![0.0; n_rows],
+        }
+    }
+}

@@ -1,0 +1,106 @@
+//! Helpers shared by the physics tests: run an example model file with overrides and
+//! collect its sensor time histories.
+
+#![allow(dead_code)]
+
+use flexmb::input::{read_model_file, Analysis};
+use flexmb::sensors::SensorEvaluator;
+use flexmb::{Simulation, SolveError};
+use std::path::PathBuf;
+
+/// Path of a file in the repository's `examples/` folder.
+pub fn example(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples")
+        .join(name)
+}
+
+/// Path of a file in the repository's `tests/reference/` folder.
+pub fn reference(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/reference")
+        .join(name)
+}
+
+/// Sensor histories of a run: column names and rows `(t, values)`.
+pub struct History {
+    pub names: Vec<String>,
+    pub rows: Vec<(f64, Vec<f64>)>,
+    pub stats: flexmb::solve::Stats,
+    pub warnings: Vec<String>,
+}
+
+impl History {
+    /// Index of a sensor column.
+    pub fn column(&self, name: &str) -> usize {
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .unwrap_or_else(|| panic!("no sensor '{name}'"))
+    }
+
+    /// Value of a sensor at the output time closest to `t`.
+    pub fn at(&self, name: &str, t: f64) -> f64 {
+        let c = self.column(name);
+        let row = self
+            .rows
+            .iter()
+            .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))
+            .expect("rows");
+        assert!(
+            (row.0 - t).abs() < 1e-9,
+            "no output at t = {t} (closest {})",
+            row.0
+        );
+        row.1[c]
+    }
+
+    /// Time series of one sensor.
+    pub fn series(&self, name: &str) -> Vec<(f64, f64)> {
+        let c = self.column(name);
+        self.rows.iter().map(|(t, v)| (*t, v[c])).collect()
+    }
+
+    pub fn last(&self, name: &str) -> f64 {
+        let c = self.column(name);
+        self.rows.last().expect("rows").1[c]
+    }
+}
+
+/// Runs an example with `--set` style overrides; returns the histories or the solver error.
+pub fn try_run(name: &str, overrides: &[&str]) -> Result<History, SolveError> {
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    let file = read_model_file(&example(name), &overrides).unwrap_or_else(|e| panic!("{e}"));
+    let Analysis::Dynamic(settings) = file.analysis;
+    let model = &file.model;
+    let mut sim = Simulation::new(model, settings)?;
+    let mut sensors = SensorEvaluator::new(model);
+    let mut rows = Vec::new();
+    let result = sim.run(&mut |s| {
+        rows.push((s.state.t, sensors.evaluate(s.model, &s.data, &s.state)));
+        Ok(())
+    });
+    let stats = result?;
+    Ok(History {
+        names: SensorEvaluator::names(model),
+        rows,
+        stats,
+        warnings: sim.warnings.clone(),
+    })
+}
+
+/// Like [`try_run`], panicking with the diagnosis on failure.
+pub fn run(name: &str, overrides: &[&str]) -> History {
+    try_run(name, overrides).unwrap_or_else(|e| panic!("{name} {overrides:?}: {e}"))
+}
+
+/// Least-squares slope of log(err) against log(h).
+pub fn order(h: &[f64], err: &[f64]) -> f64 {
+    let x: Vec<f64> = h.iter().map(|v| v.ln()).collect();
+    let y: Vec<f64> = err.iter().map(|v| v.ln()).collect();
+    let n = x.len() as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let sxy: f64 = x.iter().zip(&y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    let sxx: f64 = x.iter().map(|a| (a - mx) * (a - mx)).sum();
+    sxy / sxx
+}

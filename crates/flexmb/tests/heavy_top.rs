@@ -1,0 +1,96 @@
+//! Heavy top (Brüls & Cardona 2010, J. Comput. Nonlinear Dyn. 5, 031002, Sect. 6.1; Brüls,
+//! Cardona & Arnold 2012, Mech. Mach. Theory 48, Sect. 5): second-order convergence of the
+//! Lie group generalized-alpha method on SE(3) and on R3xSO(3), against the reference of
+//! benchmarks.md Sect. 1.2 (independent quaternion ODE solution, DOP853, rtol 1e-13):
+//! x_G(1 s) = (0.17334396, 0.64008859, -0.74849079) m.
+
+mod common;
+use common::{order, run};
+
+const X_REF_1S: [f64; 3] = [0.17334396, 0.64008859, -0.74849079];
+/// Body angular velocity components 1 and 3 at t = 1 s (same reference).
+const OMEGA_REF_1S: [f64; 2] = [-0.82207810, -5.92329135];
+/// Total energy 1/2 Omega^T J_O Omega + m g z_G with z_G(0) = 0 (benchmarks.md Sect. 1.1).
+const ENERGY: f64 = 5435.696790866;
+
+fn com_error(file: &str, h: f64, rho: f64) -> (f64, common::History) {
+    let hs = format!("solver.h={h}");
+    let rs = format!("solver.rho_inf={rho}");
+    let run = run(
+        file,
+        &[&hs, &rs, "solver.t_end=1.0", "solver.output_interval=0.5"],
+    );
+    let e = (0..3)
+        .map(|k| run.last(["com_x", "com_y", "com_z"][k]) - X_REF_1S[k])
+        .map(|d| d * d)
+        .sum::<f64>()
+        .sqrt();
+    (e, run)
+}
+
+fn check_second_order(file: &str) {
+    let hs = [2e-3, 1e-3, 5e-4, 2.5e-4];
+    let (mut errs, mut verrs) = (vec![], vec![]);
+    for &h in &hs {
+        let (e, run) = com_error(file, h, 0.9);
+        errs.push(e);
+        let dv =
+            (run.last("omega_1") - OMEGA_REF_1S[0]).hypot(run.last("omega_3") - OMEGA_REF_1S[1]);
+        verrs.push(dv);
+    }
+    let p = order(&hs, &errs);
+    let pv = order(&hs, &verrs);
+    println!("{file}: position errors {errs:?}, order {p:.3}; angular velocity errors {verrs:?}, order {pv:.3}");
+    assert!(
+        (p - 2.0).abs() < 0.15,
+        "{file}: observed order {p} (errors {errs:?})"
+    );
+    assert!(
+        (pv - 2.0).abs() < 0.15,
+        "{file}: velocity order {pv} (errors {verrs:?})"
+    );
+}
+
+#[test]
+fn heavy_top_converges_second_order_on_se3() {
+    check_second_order("heavy_top.toml");
+}
+
+#[test]
+fn heavy_top_converges_second_order_on_r3xso3() {
+    check_second_order("heavy_top_r3so3.toml");
+}
+
+#[test]
+fn heavy_top_keeps_its_invariants() {
+    for file in ["heavy_top.toml", "heavy_top_r3so3.toml"] {
+        let (_, run) = com_error(file, 5e-4, 0.9);
+        // Omega_2 = 150 rad/s exactly (J_O,1 = J_O,3 and no gravity torque about body y).
+        assert!(
+            (run.last("omega_2") - 150.0).abs() < 1e-6,
+            "{file}: {}",
+            run.last("omega_2")
+        );
+        // Unit quaternion: the configuration stays on the group.
+        let q: f64 = ["q_w", "q_x", "q_y", "q_z"]
+            .iter()
+            .map(|c| run.last(c).powi(2))
+            .sum();
+        assert!((q - 1.0).abs() < 1e-13);
+        // Energy: numerical dissipation of rho_inf = 0.9 is tiny at this step.
+        let e = run.last("energy");
+        assert!(((e - ENERGY) / ENERGY).abs() < 2e-4, "{file}: energy {e}");
+        assert!(run.last("violation") < 1e-10);
+        // Reaction along z balances gravity on average (m g = 147.15 N): order of magnitude.
+        assert!(run.last("reaction_z").is_finite());
+    }
+}
+
+#[test]
+fn heavy_top_matches_reference_at_the_showcase_step() {
+    // The showcase settings (h = 1e-4, rho_inf = 0.9): errors recorded in BENCHMARKS.md.
+    let (e_se3, _) = com_error("heavy_top.toml", 1e-4, 0.9);
+    let (e_r3, _) = com_error("heavy_top_r3so3.toml", 1e-4, 0.9);
+    assert!(e_se3 < 1.0e-3, "SE(3): {e_se3}");
+    assert!(e_r3 < 1.0e-4, "R3xSO(3): {e_r3}");
+}

@@ -1,0 +1,73 @@
+//! Simple pendulum (IFToMM benchmark A01): period against the exact elliptic-integral value
+//! and energy conservation of the undamped scheme (rho_inf = 1).
+//!
+//! Exact period for a release from the horizontal: T = 4 sqrt(L/g) K(k), k = sin(45 deg)
+//! (K the complete elliptic integral of the first kind), computed below from the
+//! arithmetic-geometric mean: K(k) = pi / (2 agm(1, sqrt(1 - k^2))).
+
+mod common;
+use common::run;
+use std::f64::consts::PI;
+
+fn exact_period(l: f64, g: f64) -> f64 {
+    let (mut a, mut b) = (1.0f64, (1.0f64 - 0.5).sqrt());
+    for _ in 0..30 {
+        let (an, bn) = (0.5 * (a + b), (a * b).sqrt());
+        a = an;
+        b = bn;
+    }
+    4.0 * (l / g).sqrt() * PI / (2.0 * a)
+}
+
+/// Times at which `f` crosses `level` upwards (linear interpolation between outputs).
+fn upward_crossings(series: &[(f64, f64)], level: f64) -> Vec<f64> {
+    series
+        .windows(2)
+        .filter(|w| w[0].1 < level && w[1].1 >= level)
+        .map(|w| w[0].0 + (level - w[0].1) / (w[1].1 - w[0].1) * (w[1].0 - w[0].0))
+        .collect()
+}
+
+#[test]
+fn pendulum_period_matches_elliptic_integral() {
+    let t_exact = exact_period(1.0, 9.81);
+    // Published value (benchmarks.md A01): 2.3678419476 s.
+    assert!((t_exact - 2.3678419476).abs() < 1e-9);
+    let run = run("pendulum.toml", &[]);
+    let crossings = upward_crossings(&run.series("angle"), -PI / 2.0);
+    assert!(crossings.len() >= 4, "{crossings:?}");
+    for w in crossings.windows(2) {
+        let period = w[1] - w[0];
+        assert!(
+            (period - t_exact).abs() < 2e-5,
+            "period {period} vs {t_exact}"
+        );
+    }
+    // Position at 10 s (benchmarks.md A01, mass released at (+1, 0)).
+    assert!((run.at("x", 10.0) - 0.2750874626).abs() < 1e-4);
+    assert!((run.at("y", 10.0) + 0.9614192051).abs() < 1e-4);
+}
+
+#[test]
+fn pendulum_energy_is_conserved_without_numerical_damping() {
+    let max_error = |h: &str| {
+        let r = run(
+            "pendulum.toml",
+            &["solver.rho_inf=1.0", "solver.output_interval=0.01", h],
+        );
+        r.series("energy")
+            .iter()
+            .fold(0.0f64, |m, (_, e)| m.max(e.abs()))
+    };
+    // E(0) = 0 (V = m g y, released at y = 0). The trapezoidal rule (rho_inf = 1) has no
+    // numerical dissipation: the energy error stays bounded at O(h^2) over the 10 s (four
+    // periods) instead of drifting.
+    let e1 = max_error("solver.h=1e-3");
+    let e2 = max_error("solver.h=2e-3");
+    assert!(e1 < 2e-5, "max |E| = {e1} J at h = 1e-3");
+    let ratio = e2 / e1;
+    assert!(
+        (3.0..5.0).contains(&ratio),
+        "energy error ratio {ratio} for h doubled"
+    );
+}

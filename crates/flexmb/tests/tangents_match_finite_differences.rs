@@ -1,0 +1,383 @@
+//! Every analytic derivative against central differences taken on the manifold
+//! (`q -> q exp(+-eps e_k)`, never `q +- eps e_k`): element tangents K, C, M; joint
+//! gradients B and their derivatives H; parameter derivatives. One shared checker serves all.
+
+use flexmb::elements::{Coefficients, Context, ElementKernel, Mat12, NodeState, Parameter, Vec12};
+use flexmb::joints;
+use flexmb::model::{
+    JointKind, Load, LoadFrame, Model, NodeId, RigidBody, SpringDamper, TimeFunction,
+};
+use flexmb_lie::{Frame, Group, Mat3, Mat6, Vec3, Vec6};
+
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+    fn v3(&mut self, s: f64) -> Vec3 {
+        Vec3::new(self.next(), self.next(), self.next()) * s
+    }
+    fn v6(&mut self, s: f64) -> Vec6 {
+        let (a, b) = (self.v3(s), self.v3(s));
+        flexmb_lie::join(&a, &b)
+    }
+    fn node(&mut self, group: Group) -> NodeState {
+        NodeState {
+            q: group.exp(&self.v6(1.5)),
+            v: self.v6(2.0),
+            vdot: self.v6(3.0),
+            t: Mat6::identity(),
+        }
+    }
+}
+
+const EPS: f64 = 1e-6;
+
+fn perturb(group: Group, nodes: &[NodeState; 2], k: usize, e: f64, what: char) -> [NodeState; 2] {
+    let mut out = *nodes;
+    let (a, i) = (k / 6, k % 6);
+    let mut d = Vec6::zeros();
+    d[i] = e;
+    match what {
+        'q' => out[a].q = group.integrate(&nodes[a].q, &d),
+        'v' => out[a].v += d,
+        _ => out[a].vdot += d,
+    }
+    out
+}
+
+fn assert_close(analytic: &Mat12, fd: &Mat12, what: &str, active: [bool; 2]) {
+    let scale = 1.0 + fd.abs().max();
+    for i in 0..12 {
+        for j in 0..12 {
+            if !active[i / 6] || !active[j / 6] {
+                continue;
+            }
+            let (a, f) = (analytic[(i, j)], fd[(i, j)]);
+            assert!(
+                (a - f).abs() < 2e-6 * scale,
+                "{what}: entry ({i}, {j}) analytic {a:.9e} vs finite difference {f:.9e}"
+            );
+        }
+    }
+}
+
+/// The shared checker for force elements: K (with T = I), C and M.
+fn check_element(name: &str, kernel: &dyn ElementKernel, model: &Model, nodes: &[NodeState; 2]) {
+    let group = model.group;
+    let ctx = Context {
+        model,
+        group,
+        t: 0.37,
+        gravity_scale: 1.0,
+        load_scale: 1.0,
+    };
+    let active = [kernel.nodes()[0].is_some(), kernel.nodes()[1].is_some()];
+    for (what, coef) in [
+        (
+            'q',
+            Coefficients {
+                m: 0.0,
+                c: 0.0,
+                k: 1.0,
+            },
+        ),
+        (
+            'v',
+            Coefficients {
+                m: 0.0,
+                c: 1.0,
+                k: 0.0,
+            },
+        ),
+        (
+            'a',
+            Coefficients {
+                m: 1.0,
+                c: 0.0,
+                k: 0.0,
+            },
+        ),
+    ] {
+        let mut r = Vec12::zeros();
+        let mut s = Mat12::zeros();
+        kernel.evaluate(&ctx, nodes, &mut r, Some((&coef, &mut s)));
+        let mut fd = Mat12::zeros();
+        for k in 0..12 {
+            if !active[k / 6] {
+                continue;
+            }
+            let (mut rp, mut rm) = (Vec12::zeros(), Vec12::zeros());
+            kernel.evaluate(&ctx, &perturb(group, nodes, k, EPS, what), &mut rp, None);
+            kernel.evaluate(&ctx, &perturb(group, nodes, k, -EPS, what), &mut rm, None);
+            fd.set_column(k, &((rp - rm) / (2.0 * EPS)));
+        }
+        assert_close(
+            &s,
+            &fd,
+            &format!("{name} on {group:?}, derivative wrt {what}"),
+            active,
+        );
+    }
+}
+
+fn models() -> Vec<Model> {
+    let mut out = vec![];
+    for group in [Group::R3xSO3, Group::SE3] {
+        let mut m = Model::new(group);
+        m.gravity = Vec3::new(0.3, -9.81, 1.2);
+        m.add_node("a", Frame::identity());
+        m.add_node("b", Frame::identity());
+        out.push(m);
+    }
+    out
+}
+
+#[test]
+fn rigid_body_tangents_match_finite_differences() {
+    let mut rng = Lcg(1);
+    for model in models() {
+        for com in [Vec3::zeros(), Vec3::new(0.3, -0.7, 0.2)] {
+            let body = RigidBody {
+                name: "b".into(),
+                node: NodeId(0),
+                mass: 2.5,
+                com,
+                inertia: Mat3::new(0.3, 0.01, -0.02, 0.01, 0.4, 0.03, -0.02, 0.03, 0.5),
+            };
+            let nodes = [rng.node(model.group), rng.node(model.group)];
+            check_element("rigid body", &body, &model, &nodes);
+        }
+    }
+}
+
+#[test]
+fn load_tangents_match_finite_differences() {
+    let mut rng = Lcg(2);
+    for model in models() {
+        for frame in [LoadFrame::Inertial, LoadFrame::Body] {
+            let load = Load {
+                name: "l".into(),
+                node: NodeId(0),
+                force: Vec3::new(1.0, -2.0, 3.0),
+                torque: Vec3::new(-0.5, 0.7, 0.2),
+                frame,
+                function: TimeFunction::Sine {
+                    amplitude: 2.0,
+                    frequency: 1.0,
+                    phase: 0.3,
+                    offset: 0.5,
+                },
+            };
+            let nodes = [rng.node(model.group), rng.node(model.group)];
+            check_element("load", &load, &model, &nodes);
+        }
+    }
+}
+
+#[test]
+fn spring_damper_tangents_match_finite_differences() {
+    let mut rng = Lcg(3);
+    for model in models() {
+        for ground_a in [false, true] {
+            let spring = SpringDamper {
+                name: "s".into(),
+                node_a: (!ground_a).then_some(NodeId(0)),
+                node_b: Some(NodeId(1)),
+                point_a: Vec3::new(0.2, 0.1, -0.3),
+                point_b: Vec3::new(-0.1, 0.4, 0.2),
+                stiffness: 120.0,
+                damping: 3.5,
+                rest_length: 0.4,
+            };
+            let mut nodes = [rng.node(model.group), rng.node(model.group)];
+            if ground_a {
+                nodes[0] = NodeState::ground(Frame::identity());
+            }
+            check_element("spring-damper", &spring, &model, &nodes);
+        }
+    }
+}
+
+#[test]
+fn joint_gradients_and_their_derivatives_match_finite_differences() {
+    let mut rng = Lcg(4);
+    for base in models() {
+        let group = base.group;
+        for kind in [
+            JointKind::Fixed,
+            JointKind::Spherical,
+            JointKind::Revolute,
+            JointKind::Prismatic,
+            JointKind::Cylindrical,
+            JointKind::Universal,
+            JointKind::Planar,
+        ] {
+            for ground_a in [false, true] {
+                let mut model = base.clone();
+                model.nodes[0].frame = group.exp(&rng.v6(1.0));
+                model.nodes[1].frame = group.exp(&rng.v6(1.0));
+                let ob = (kind == JointKind::Universal).then(|| {
+                    flexmb_lie::so3::exp(&Vec3::new(0.0, std::f64::consts::FRAC_PI_2, 0.0))
+                });
+                let id = model.add_joint(
+                    "j",
+                    kind,
+                    (!ground_a).then_some(NodeId(0)),
+                    Some(NodeId(1)),
+                    rng.v3(1.0),
+                    flexmb_lie::so3::exp(&rng.v3(1.0)),
+                    ob,
+                );
+                if matches!(kind, JointKind::Revolute | JointKind::Prismatic) {
+                    model.joints[id.0].drive = Some(TimeFunction::Sine {
+                        amplitude: 0.4,
+                        frequency: 0.5,
+                        phase: 0.1,
+                        offset: 0.0,
+                    });
+                }
+                let joint = &model.joints[id.0];
+                let mut nodes = [rng.node(group), rng.node(group)];
+                if ground_a {
+                    nodes[0] = NodeState::ground(Frame::identity());
+                }
+                let active = [!ground_a, true];
+                let t = 0.8;
+                for row in joints::rows(joint) {
+                    let rv = joints::evaluate_row(group, joint, row, &nodes, t);
+                    let mut fd_b = Vec12::zeros();
+                    let mut fd_h = Mat12::zeros();
+                    for k in 0..12 {
+                        if !active[k / 6] {
+                            continue;
+                        }
+                        let p = joints::evaluate_row(
+                            group,
+                            joint,
+                            row,
+                            &perturb(group, &nodes, k, EPS, 'q'),
+                            t,
+                        );
+                        let m = joints::evaluate_row(
+                            group,
+                            joint,
+                            row,
+                            &perturb(group, &nodes, k, -EPS, 'q'),
+                            t,
+                        );
+                        fd_b[k] = (p.phi - m.phi) / (2.0 * EPS);
+                        fd_h.set_column(k, &((p.b - m.b) / (2.0 * EPS)));
+                    }
+                    let what = format!("{kind:?} row {row:?} on {group:?} (ground a: {ground_a})");
+                    for k in 0..12 {
+                        assert!(
+                            (rv.b[k] - fd_b[k]).abs() < 1e-7,
+                            "{what}: B entry {k}: {} vs {}",
+                            rv.b[k],
+                            fd_b[k]
+                        );
+                    }
+                    assert_close(&rv.h, &fd_h, &format!("{what}: H"), active);
+                    // time derivatives of driven rows
+                    let tp = joints::evaluate_row(group, joint, row, &nodes, t + EPS);
+                    let tm = joints::evaluate_row(group, joint, row, &nodes, t - EPS);
+                    assert!(
+                        (rv.phi_t - (tp.phi - tm.phi) / (2.0 * EPS)).abs() < 1e-7,
+                        "{what}: Phi_t"
+                    );
+                    assert!(
+                        (rv.phi_tt - (tp.phi_t - tm.phi_t) / (2.0 * EPS)).abs() < 1e-6,
+                        "{what}: Phi_tt"
+                    );
+                    for k in 0..12 {
+                        assert!(
+                            (rv.b_t[k] - (tp.b[k] - tm.b[k]) / (2.0 * EPS)).abs() < 1e-7,
+                            "{what}: B_t"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences() {
+    let mut rng = Lcg(5);
+    for model in models() {
+        let ctx = Context {
+            model: &model,
+            group: model.group,
+            t: 0.0,
+            gravity_scale: 1.0,
+            load_scale: 1.0,
+        };
+        let nodes = [rng.node(model.group), rng.node(model.group)];
+        let body = RigidBody {
+            name: "b".into(),
+            node: NodeId(0),
+            mass: 2.5,
+            com: Vec3::new(0.3, -0.7, 0.2),
+            inertia: Mat3::from_diagonal(&Vec3::new(0.3, 0.4, 0.5)),
+        };
+        let spring = SpringDamper {
+            name: "s".into(),
+            node_a: Some(NodeId(0)),
+            node_b: Some(NodeId(1)),
+            point_a: Vec3::new(0.2, 0.1, -0.3),
+            point_b: Vec3::new(-0.1, 0.4, 0.2),
+            stiffness: 120.0,
+            damping: 3.5,
+            rest_length: 0.4,
+        };
+        let e = 1e-6;
+        let fd = |f: &dyn Fn(f64) -> Vec12, p: f64| (f(p + e) - f(p - e)) / (2.0 * e);
+        let eval_body = |m: f64| {
+            let mut b = body.clone();
+            b.mass = m;
+            let mut r = Vec12::zeros();
+            b.evaluate(&ctx, &nodes, &mut r, None);
+            r
+        };
+        let mut dr = Vec12::zeros();
+        assert!(body.parameter_derivative(&ctx, &Parameter::BodyMass("b".into()), &nodes, &mut dr));
+        assert!((dr - fd(&eval_body, body.mass)).norm() < 1e-6 * (1.0 + dr.norm()));
+        for (param, which) in [
+            (Parameter::SpringStiffness("s".into()), 0),
+            (Parameter::SpringDamping("s".into()), 1),
+        ] {
+            let eval = |p: f64| {
+                let mut s = spring.clone();
+                if which == 0 {
+                    s.stiffness = p
+                } else {
+                    s.damping = p
+                }
+                let mut r = Vec12::zeros();
+                s.evaluate(&ctx, &nodes, &mut r, None);
+                r
+            };
+            let p0 = if which == 0 {
+                spring.stiffness
+            } else {
+                spring.damping
+            };
+            assert!(spring.parameter_derivative(&ctx, &param, &nodes, &mut dr));
+            assert!(
+                (dr - fd(&eval, p0)).norm() < 1e-6 * (1.0 + dr.norm()),
+                "{param:?}"
+            );
+        }
+        assert!(!body.parameter_derivative(
+            &ctx,
+            &Parameter::BodyMass("other".into()),
+            &nodes,
+            &mut dr
+        ));
+    }
+}
