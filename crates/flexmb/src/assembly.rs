@@ -93,63 +93,65 @@ pub fn assemble(
             pos = scatter_blocks(&mut data.values, pos, dofs, &s);
         }
     }
+    let needs_h = sc.constraint_rhs == ConstraintRhs::Acceleration;
     for (j, joint) in model.joints.iter().enumerate() {
         let slots = [joint.node_a, joint.node_b];
         let nodes = gather(data, slots, &ground);
         let dofs = [layout.dof(slots[0]), layout.dof(slots[1])];
+        let active = [dofs[0].is_some(), dofs[1].is_some()];
         let start = layout.joint_row_start[j];
+        let rows = &layout.joint_rows[j];
+        let lam = &lambda[start..start + rows.len()];
         let mut k = Mat12::zeros();
+        let jv = joints::evaluate_joint(
+            model.group,
+            joint,
+            rows,
+            &nodes,
+            t,
+            lam,
+            matrix.then_some(&mut k),
+        );
         let mut vloc = Vec12::zeros();
         for (ka, _) in active_slots(dofs) {
             vloc.fixed_rows_mut::<6>(6 * ka).copy_from(&nodes[ka].v);
         }
-        let rows = &layout.joint_rows[j];
-        // Row values are needed twice (K block first, then B rows): evaluate once.
-        let mut vals = [None; 8];
-        for (ri, row) in rows.iter().enumerate() {
-            let rv = joints::evaluate_row(model.group, joint, *row, &nodes, t);
-            let lam = lambda[start + ri];
-            data.phi[start + ri] = rv.phi;
+        for ri in 0..rows.len() {
+            data.phi[start + ri] = jv.phi[ri];
             if layout.row_unknown[start + ri].is_some() {
                 for (ka, a) in active_slots(dofs) {
                     for i in 0..6 {
-                        data.residual[a + i] += sc.row_scale * rv.b[6 * ka + i] * lam;
+                        data.residual[a + i] += sc.row_scale * jv.b[ri][6 * ka + i] * lam[ri];
                     }
                 }
             }
-            if matrix {
-                k += rv.h * lam;
-            }
-            vals[ri] = Some(rv);
         }
         if matrix {
-            let mut kt = k * sc.coef.k * sc.row_scale / sc.row_scale;
-            crate::elements::physical::apply_tangent_full(
-                &nodes,
-                [dofs[0].is_some(), dofs[1].is_some()],
-                &mut kt,
-                &sc.coef,
-                &k,
-            );
+            // c_k K_c T, column block by column block
+            let mut kt = k * sc.coef.k;
+            crate::elements::physical::apply_tangent_full(&nodes, active, &mut kt, &sc.coef, &k);
             pos = scatter_blocks(&mut data.values, pos, dofs, &kt);
         }
-        for (ri, rv) in vals.iter().take(rows.len()).enumerate() {
-            let rv = rv.as_ref().expect("evaluated above");
+        for ri in 0..rows.len() {
             let Some(c) = layout.row_unknown[start + ri] else {
                 continue;
             };
             let c = n_dofs + c;
+            let b = &jv.b[ri];
             data.residual[c] = match sc.constraint_rhs {
-                ConstraintRhs::Position => rv.phi,
-                ConstraintRhs::Acceleration => rv.convective(&vloc),
-                ConstraintRhs::Velocity => rv.b.dot(&vloc) + rv.phi_t,
+                ConstraintRhs::Position => jv.phi[ri],
+                ConstraintRhs::Acceleration if needs_h => {
+                    joints::evaluate_row(model.group, joint, rows[ri], &nodes, t).convective(&vloc)
+                }
+                ConstraintRhs::Acceleration => unreachable!(),
+                ConstraintRhs::Velocity => b.dot(&vloc) + jv.phi_t[ri],
             };
             if matrix {
                 for (ka, _) in active_slots(dofs) {
-                    let bt = nodes[ka].t.transpose() * rv.b.fixed_rows::<6>(6 * ka);
+                    let bt = nodes[ka].t.transpose() * b.fixed_rows::<6>(6 * ka);
                     for i in 0..6 {
                         data.values[pos] = bt[i];
-                        data.values[pos + 1] = rv.b[6 * ka + i];
+                        data.values[pos + 1] = b[6 * ka + i];
                         pos += 2;
                     }
                 }

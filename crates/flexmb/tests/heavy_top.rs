@@ -80,7 +80,12 @@ fn heavy_top_keeps_its_invariants() {
         // Energy: numerical dissipation of rho_inf = 0.9 is tiny at this step.
         let e = run.last("energy");
         assert!(((e - ENERGY) / ENERGY).abs() < 2e-4, "{file}: energy {e}");
-        assert!(run.last("violation") < 1e-10);
+        // Constraints hold to the Newton tolerance (rtol 1e-6 on increments of ~0.08 rad).
+        assert!(
+            run.last("violation") < 1e-7,
+            "{file}: {}",
+            run.last("violation")
+        );
         // Reaction along z balances gravity on average (m g = 147.15 N): order of magnitude.
         assert!(run.last("reaction_z").is_finite());
     }

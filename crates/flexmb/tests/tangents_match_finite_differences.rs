@@ -248,6 +248,24 @@ fn joint_gradients_and_their_derivatives_match_finite_differences() {
                 }
                 let active = [!ground_a, true];
                 let t = 0.8;
+                // The fast joint-level path agrees with the row-by-row evaluation.
+                let rows = joints::rows(joint);
+                let lambda: Vec<f64> = (0..rows.len()).map(|_| rng.next() * 10.0).collect();
+                let mut k = Mat12::zeros();
+                let jv =
+                    joints::evaluate_joint(group, joint, &rows, &nodes, t, &lambda, Some(&mut k));
+                let mut k_rows = Mat12::zeros();
+                for (r, row) in rows.iter().enumerate() {
+                    let rv = joints::evaluate_row(group, joint, *row, &nodes, t);
+                    assert!((rv.phi - jv.phi[r]).abs() < 1e-14);
+                    assert!((rv.phi_t - jv.phi_t[r]).abs() < 1e-12);
+                    assert!((rv.b - jv.b[r]).norm() < 1e-13, "{kind:?} row {r}");
+                    k_rows += rv.h * lambda[r];
+                }
+                assert!(
+                    (k - k_rows).norm() < 1e-12 * (1.0 + k.norm()),
+                    "{kind:?} on {group:?}"
+                );
                 for row in joints::rows(joint) {
                     let rv = joints::evaluate_row(group, joint, row, &nodes, t);
                     let mut fd_b = Vec12::zeros();

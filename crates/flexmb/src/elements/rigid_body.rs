@@ -137,6 +137,32 @@ impl RigidBody {
         (r, mm, cm, k)
     }
 
+    /// Residual only (the hot path of iterations that reuse the iteration matrix).
+    pub fn residual(&self, ctx: &Context, n: &NodeState) -> Vec6 {
+        let m = self.mass;
+        let g = ctx.model.gravity * (m * ctx.gravity_scale);
+        let xt = hat(&self.com);
+        match ctx.group {
+            Group::SE3 => {
+                let mm = self.mass_matrix_se3();
+                let wg = n.q.r.transpose() * g;
+                mm * n.vdot
+                    - se3::ad(&n.v).transpose() * (mm * n.v)
+                    - flexmb_lie::join(&wg, &(xt * wg))
+            }
+            Group::R3xSO3 => {
+                let (ud, omd) = split(&n.vdot);
+                let om = n.v.fixed_rows::<3>(3).into_owned();
+                let omt = hat(&om);
+                let c = -xt * omd + omt * (omt * self.com);
+                let f_g = (ud + n.q.r * c) * m - g;
+                let b = n.q.r.transpose() * f_g;
+                let jc = self.inertia;
+                flexmb_lie::join(&f_g, &(xt * b + jc * omd + omt * (jc * om)))
+            }
+        }
+    }
+
     fn local(&self, ctx: &Context, n: &NodeState, unit_mass: bool) -> (Vec6, Mat6, Mat6, Mat6) {
         match ctx.group {
             Group::SE3 => self.residual_se3(ctx, n, unit_mass),
@@ -158,8 +184,12 @@ impl ElementKernel for RigidBody {
         s: Option<(&Coefficients, &mut Mat12)>,
     ) {
         let n = &nodes[0];
-        let (res, mm, c, k) = self.local(ctx, n, false);
         r.fill(0.0);
+        if s.is_none() {
+            r.fixed_rows_mut::<6>(0).copy_from(&self.residual(ctx, n));
+            return;
+        }
+        let (res, mm, c, k) = self.local(ctx, n, false);
         r.fixed_rows_mut::<6>(0).copy_from(&res);
         if let Some((coef, s)) = s {
             s.fill(0.0);

@@ -189,6 +189,9 @@ fn read_solver(t: &Table<'_>) -> Result<DynamicSettings> {
         "rtol",
         "atol",
         "max_iterations",
+        "reuse_jacobian",
+        "max_contraction",
+        "max_jacobian_age",
     ])?;
     t.req("analysis")?.choice(&["dynamic"])?;
     let t_end = positive(&t.req("t_end")?)?;
@@ -221,6 +224,22 @@ fn read_solver(t: &Table<'_>) -> Result<DynamicSettings> {
             return Err(f.err(format!("must be between 1 and 10000, got {n}")));
         }
         s.newton.max_iterations = n as usize;
+    }
+    if let Some(f) = t.field("reuse_jacobian") {
+        s.newton.reuse_jacobian = f.bool()?;
+    }
+    if let Some(f) = t.field("max_contraction") {
+        s.newton.max_contraction = positive(&f)?;
+        if s.newton.max_contraction >= 1.0 {
+            return Err(f.err(format!("must be below 1, got {}", s.newton.max_contraction)));
+        }
+    }
+    if let Some(f) = t.field("max_jacobian_age") {
+        let n = f.int()?;
+        if n < 1 {
+            return Err(f.err(format!("must be at least 1, got {n}")));
+        }
+        s.newton.max_jacobian_age = n as usize;
     }
     Ok(s)
 }

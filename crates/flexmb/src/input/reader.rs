@@ -214,6 +214,13 @@ impl<'a> Field<'a> {
         }
     }
 
+    pub fn bool(&self) -> Result<bool> {
+        match self.value.get_ref() {
+            DeValue::Boolean(b) => Ok(*b),
+            _ => Err(self.expected("a boolean (true or false)")),
+        }
+    }
+
     pub fn str(&self) -> Result<&'a str> {
         match self.value.get_ref() {
             DeValue::String(s) => Ok(s.as_ref()),

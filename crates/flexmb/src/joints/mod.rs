@@ -25,7 +25,7 @@ pub mod primitives;
 use crate::elements::{Mat12, NodeState, Vec12};
 use crate::model::{Joint, JointKind, Model};
 use flexmb_lie::{so3::hat, Frame, Group, Vec3};
-use primitives::{dot1, dot2, Primitive};
+use primitives::{dot1, dot1_into, dot2, dot2_into, Primitive};
 
 /// One scalar constraint row of a joint.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -276,4 +276,115 @@ pub fn reaction_on_b(
     let point = fb.point(&joint.frame_b.x);
     let torque = moment_node - (point - fb.x).cross(&force);
     (force, torque)
+}
+
+/// Most rows a joint can have (fixed joint: 6; driven prismatic: 6).
+pub const MAX_ROWS: usize = 6;
+
+/// All rows of a joint evaluated at once, in group coordinates: the fast path of the
+/// Newton loop (one transformation to group coordinates per joint instead of per row).
+#[derive(Clone, Copy, Debug)]
+pub struct JointValues {
+    pub n_rows: usize,
+    /// `Phi` per row.
+    pub phi: [f64; MAX_ROWS],
+    /// Rows of `B` (group coordinates).
+    pub b: [Vec12; MAX_ROWS],
+    /// `dPhi/dt` per row.
+    pub phi_t: [f64; MAX_ROWS],
+}
+
+/// Evaluates every row of a joint; if `k` is given, sets it to
+/// `K_c = sum_r lambda_r dB_r^T/dw` in group coordinates (12 x 12).
+pub fn evaluate_joint(
+    group: Group,
+    joint: &Joint,
+    rows: &[Row],
+    nodes: &[NodeState; 2],
+    t: f64,
+    lambda: &[f64],
+    mut k: Option<&mut Mat12>,
+) -> JointValues {
+    let (fa, fb) = node_frames(joint, nodes);
+    let qa = &joint.frame_a;
+    let qb = &joint.frame_b;
+    let axis_a = |i: usize| qa.r.column(i).into_owned();
+    let axis_b = |i: usize| qb.r.column(i).into_owned();
+    let mut out = JointValues {
+        n_rows: rows.len(),
+        phi: [0.0; MAX_ROWS],
+        b: [Vec12::zeros(); MAX_ROWS],
+        phi_t: [0.0; MAX_ROWS],
+    };
+    if let Some(k) = k.as_deref_mut() {
+        k.fill(0.0);
+    }
+    let mut force = Vec12::zeros();
+    for (r, row) in rows.iter().enumerate() {
+        let w = lambda[r];
+        let (phi, g) = match *row {
+            Row::Dot1 { a, b } => dot1_into(&fa, &axis_a(a), &fb, &axis_b(b), w, k.as_deref_mut()),
+            Row::Dot2 { a } => dot2_into(&fa, &axis_a(a), &qa.x, &fb, &qb.x, w, k.as_deref_mut()),
+            Row::DriveAngle => {
+                let (th, thd, _) = joint.drive.as_ref().map_or((0.0, 0.0, 0.0), |f| f.eval(t));
+                let (s, c) = th.sin_cos();
+                let (p1, g1) = dot1_into(&fa, &axis_a(1), &fb, &axis_b(0), w * c, k.as_deref_mut());
+                let (p2, g2) =
+                    dot1_into(&fa, &axis_a(0), &fb, &axis_b(0), -w * s, k.as_deref_mut());
+                out.phi_t[r] = -s * thd * p1 - c * thd * p2;
+                (c * p1 - s * p2, g1 * c - g2 * s)
+            }
+            Row::DriveSlide => {
+                let (sd, sdd, _) = joint.drive.as_ref().map_or((0.0, 0.0, 0.0), |f| f.eval(t));
+                out.phi_t[r] = -sdd;
+                let (p, g) = dot2_into(&fa, &axis_a(2), &qa.x, &fb, &qb.x, w, k.as_deref_mut());
+                (p - sd, g)
+            }
+        };
+        out.phi[r] = phi;
+        out.b[r] = g;
+        force += g * w;
+    }
+    let active = [joint.node_a.is_some(), joint.node_b.is_some()];
+    if group == Group::SE3 {
+        let rots = [fa.r, fb.r];
+        for b in out.b.iter_mut().take(rows.len()) {
+            for a in 0..2 {
+                let v = rots[a].transpose() * b.fixed_rows::<3>(6 * a);
+                b.fixed_rows_mut::<3>(6 * a).copy_from(&v);
+            }
+        }
+        if let Some(k) = k.as_deref_mut() {
+            // K_g = P^T K_p P + blockdiag([[0, tilde(R^T f)], [0, 0]]), P = diag(R_a, I, R_b, I)
+            for i in 0..4 {
+                for j in 0..4 {
+                    let mut blk: flexmb_lie::Mat3 = k.fixed_view::<3, 3>(3 * i, 3 * j).into_owned();
+                    if i % 2 == 0 {
+                        blk = rots[i / 2].transpose() * blk;
+                    }
+                    if j % 2 == 0 {
+                        blk *= rots[j / 2];
+                    }
+                    k.fixed_view_mut::<3, 3>(3 * i, 3 * j).copy_from(&blk);
+                }
+            }
+            for a in 0..2 {
+                let f = rots[a].transpose() * force.fixed_rows::<3>(6 * a);
+                let mut blk = k.fixed_view_mut::<3, 3>(6 * a, 6 * a + 3);
+                blk += hat(&f);
+            }
+        }
+    }
+    for a in 0..2 {
+        if !active[a] {
+            for b in out.b.iter_mut().take(rows.len()) {
+                b.fixed_rows_mut::<6>(6 * a).fill(0.0);
+            }
+            if let Some(k) = k.as_deref_mut() {
+                k.fixed_rows_mut::<6>(6 * a).fill(0.0);
+                k.fixed_columns_mut::<6>(6 * a).fill(0.0);
+            }
+        }
+    }
+    out
 }

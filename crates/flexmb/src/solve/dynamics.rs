@@ -95,6 +95,22 @@ pub struct Simulation<'m> {
     regularization: f64,
     /// Steps left with the regularization on (switched on by a singular matrix or a failure).
     regularized_steps: usize,
+    /// `(h, regularization)` of the factorized iteration matrix, `None` if there is none.
+    jacobian: Option<(f64, f64)>,
+    /// Steps since the iteration matrix was last factorized.
+    jacobian_age: usize,
+    /// Configuration increments of the current step (scratch, `6 n_nodes`).
+    increments: Vec<f64>,
+    /// Accelerations and multipliers at the start of the previous step, for the predictor.
+    previous: Previous,
+}
+
+/// Start of the previous accepted step (`h = 0` when there is none).
+#[derive(Clone, Debug, Default)]
+struct Previous {
+    h: f64,
+    vdot: Vec<Vec6>,
+    lambda: Vec<f64>,
 }
 
 /// Steps that keep the regularization after a singular matrix or a rejected step.
@@ -123,6 +139,10 @@ impl<'m> Simulation<'m> {
             warnings,
             regularization: 1e-9 / model.bodies.iter().map(|b| b.mass).fold(1e-300, f64::max),
             regularized_steps: 0,
+            jacobian: None,
+            jacobian_age: 0,
+            increments: Vec::new(),
+            previous: Previous::default(),
         })
     }
 
@@ -208,17 +228,18 @@ impl<'m> Simulation<'m> {
                 }
             }
         }
-        self.stats.factorizations = self.data.solver.factorizations();
         Ok(self.stats)
     }
 
     /// One generalized-alpha step of size `h`; returns the Newton iterations used.
+    ///
+    /// Newton's iteration matrix is reused across iterations and steps while the iteration
+    /// contracts fast (a chord method: the converged solution is the same, each iteration is
+    /// cheaper); it is rebuilt when `h` or the regularization changes, when the contraction
+    /// rate exceeds [`NewtonSettings::max_contraction`], or when the iteration diverges.
     fn step(&mut self, h: f64) -> Result<usize, StepFailure> {
         self.saved.clone_from(&self.state);
-        let model = self.model;
-        let group = model.group;
         let p = self.params;
-        let n = self.data.layout.n_nodes;
         let nd = self.data.layout.n_dofs;
         let bp = p.beta_prime(h);
         let gp = p.gamma_prime(h);
@@ -240,96 +261,62 @@ impl<'m> Simulation<'m> {
         };
         self.regularized_steps = self.regularized_steps.saturating_sub(1);
         let t_new = self.saved.t + h;
-        // predict: vdot_{n+1} = vdot_n, lambda_{n+1} = lambda_n
-        // increments h dq of every node, flat (6 per node)
-        let mut dq = vec![0.0; nd];
-        for i in 0..n {
-            let (v0, vd0, a0) = (self.saved.v[i], self.saved.vdot[i], self.saved.a[i]);
-            let a1 =
-                (vd0 * p.alpha_f + vd0 * (1.0 - p.alpha_f) - a0 * p.alpha_m) / (1.0 - p.alpha_m);
-            self.state.vdot[i] = vd0;
-            self.state.v[i] = v0 + a0 * (h * (1.0 - p.gamma)) + a1 * (h * p.gamma);
-            let inc = v0 * h + a0 * (h * h * (0.5 - p.beta)) + a1 * (h * h * p.beta);
-            dq[6 * i..6 * i + 6].copy_from_slice(inc.as_slice());
-        }
+        let mut dq = std::mem::take(&mut self.increments);
+        self.predict(h, &mut dq);
         self.state.t = t_new;
         let max_mu = self.saved.lambda.iter().fold(0.0f64, |m, l| m.max(l.abs())) * scale;
-        let rtol = self.settings.newton.rtol;
-        let atol = self.settings.newton.atol;
+        let newton = self.settings.newton;
         let mut previous = f64::INFINITY;
         let mut previous_mu = f64::INFINITY;
-        for iteration in 1..=self.settings.newton.max_iterations {
-            // update_configuration
-            for i in 0..n {
-                let node = &mut self.data.nodes[i];
-                let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
-                node.q = group.integrate(&self.saved.q[i], &inc);
-                node.v = self.state.v[i];
-                node.vdot = self.state.vdot[i];
-                node.t = group.tangent(&inc);
-            }
-            assemble(model, &mut self.data, t_new, &self.state.lambda, &sc, true);
+        let same_matrix = self
+            .jacobian
+            .is_some_and(|(hj, reg)| (hj - h).abs() <= 1e-6 * h && reg == sc.regularization);
+        let mut refresh =
+            !newton.reuse_jacobian || !same_matrix || self.jacobian_age >= newton.max_jacobian_age;
+        let mut result = Err(StepFailure {
+            reason: "no iteration".into(),
+            worst_unknown: None,
+        });
+        for iteration in 1..=newton.max_iterations {
+            let fresh = refresh;
+            self.update_configuration(&dq, fresh);
+            assemble(
+                self.model,
+                &mut self.data,
+                t_new,
+                &self.state.lambda,
+                &sc,
+                fresh,
+            );
             if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
-                return Err(StepFailure {
+                result = Err(StepFailure {
                     reason: "non-finite residual".into(),
                     worst_unknown: Some(i),
                 });
+                break;
             }
-            // factorize (regularized if the matrix turns out singular)
-            let mut factorized = self.data.solver.factorize(&self.data.values);
-            if matches!(factorized, Err(LinearError::Singular { .. })) && sc.regularization == 0.0 {
-                sc.regularization = self.regularization;
-                self.regularized_steps = REGULARIZED_STEPS;
-                let n_unknowns = self.data.layout.n_unknowns();
-                let diag = self.data.values.len() - n_unknowns;
-                for v in &mut self.data.values[diag + nd..] {
-                    *v = -sc.regularization;
+            if fresh {
+                if let Err(failure) = self.factorize(&mut sc) {
+                    result = Err(failure);
+                    break;
                 }
-                factorized = self.data.solver.factorize(&self.data.values);
+                self.jacobian = Some((h, sc.regularization));
+                self.jacobian_age = 0;
+                refresh = false;
             }
-            if let Err(e) = factorized {
-                let col = match e {
-                    LinearError::Singular { column } => column,
-                    _ => None,
-                };
-                return Err(StepFailure {
-                    reason: format!("singular iteration matrix ({e})"),
-                    worst_unknown: col,
-                });
+            if let Err(failure) = self.solve() {
+                result = Err(failure);
+                break;
             }
-            // solve
-            let dx = &mut self.data.correction;
-            for (d, r) in dx.iter_mut().zip(&self.data.residual) {
-                *d = -r;
-            }
-            self.data.solver.solve_in_place(dx);
-            if let Some(i) = dx.iter().position(|d| !d.is_finite()) {
-                return Err(StepFailure {
-                    reason: "non-finite Newton correction".into(),
-                    worst_unknown: Some(i),
-                });
-            }
-            // correct
-            for i in 0..n {
-                let d = Vec6::from_column_slice(&dx[6 * i..6 * i + 6]);
-                for k in 0..6 {
-                    dq[6 * i + k] += d[k];
-                }
-                self.state.v[i] += d * gp;
-                self.state.vdot[i] += d * bp;
-            }
-            for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
-                if let Some(k) = slot {
-                    self.state.lambda[row] += dx[nd + k] / scale;
-                }
-            }
-            // weighted norm of the corrections
-            // multipliers: relative to the largest one of the previous step
-            let mu_atol = rtol * max_mu + 1e-300;
-            let (e_q, worst_q) = weighted_norm(&dx[..nd], &dq, &|_| atol, rtol);
+            self.correct(&mut dq, gp, bp, scale);
+            // weighted norms of the corrections: increments, then multipliers relative to
+            // the largest multiplier of the previous step
+            let dx = &self.data.correction;
+            let (e_q, worst_q) = weighted_norm(&dx[..nd], &dq, &|_| newton.atol, newton.rtol);
             let mut e_mu = 0.0;
             let mut worst_mu = 0;
             if self.data.layout.n_active > 0 && max_mu > 0.0 {
+                let mu_atol = newton.rtol * max_mu;
                 let (e, w) = weighted_norm(&dx[nd..], &dx[nd..], &|_| mu_atol, 0.0);
                 e_mu = e;
                 worst_mu = nd + w;
@@ -339,32 +326,29 @@ impl<'m> Simulation<'m> {
             // The multipliers of a badly scaled mechanism can stall at their round-off floor
             // once the configuration has converged: accept when they stop decreasing.
             let multipliers_stalled = iteration >= 2 && e_q <= 1.0 && e_mu > 0.5 * previous_mu;
-            previous_mu = e_mu;
             if err <= 1.0 || multipliers_stalled {
-                for i in 0..n {
-                    let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
-                    let mut q = group.integrate(&self.saved.q[i], &inc);
-                    q.orthonormalize();
-                    self.state.q[i] = q;
-                    self.state.a[i] = (self.saved.vdot[i] * p.alpha_f
-                        + self.state.vdot[i] * (1.0 - p.alpha_f)
-                        - self.saved.a[i] * p.alpha_m)
-                        / (1.0 - p.alpha_m);
-                }
-                load_nodes(&self.state, &mut self.data);
-                return Ok(iteration);
+                self.finish_step(&dq);
+                result = Ok(iteration);
+                break;
             }
             let worst = if e_q >= e_mu { worst_q } else { worst_mu };
-            if iteration >= 3 && err > previous {
-                return Err(StepFailure {
-                    reason: format!(
-                        "Newton diverging (weighted correction {err:.3e} after {previous:.3e})"
-                    ),
-                    worst_unknown: Some(worst),
-                });
+            let contraction = err / previous;
+            if iteration >= 2 && contraction > newton.max_contraction {
+                if !fresh {
+                    // A stale matrix converges too slowly: rebuild it and go on.
+                    refresh = true;
+                } else if iteration >= 3 && contraction > 1.0 {
+                    result = Err(StepFailure {
+                        reason: format!(
+                            "Newton diverging (weighted correction {err:.3e} after {previous:.3e})"
+                        ),
+                        worst_unknown: Some(worst),
+                    });
+                    break;
+                }
             }
-            if iteration == self.settings.newton.max_iterations {
-                return Err(StepFailure {
+            if iteration == newton.max_iterations {
+                result = Err(StepFailure {
                     reason: format!(
                         "no convergence in {iteration} iterations (weighted correction {err:.3e})"
                     ),
@@ -372,8 +356,148 @@ impl<'m> Simulation<'m> {
                 });
             }
             previous = err;
+            previous_mu = e_mu;
         }
-        unreachable!("the loop returns")
+        self.increments = dq;
+        match result {
+            Ok(_) => {
+                self.jacobian_age += 1;
+                self.previous.h = h;
+                self.previous.vdot.clone_from(&self.saved.vdot);
+                self.previous.lambda.clone_from(&self.saved.lambda);
+            }
+            Err(_) => {
+                self.jacobian = None;
+                self.previous.h = 0.0;
+            }
+        }
+        result
+    }
+
+    /// Predictor: `vdot_{n+1} = vdot_n`, `lambda_{n+1} = lambda_n`, and the `v`, `a` and
+    /// increment that the generalized-alpha formulas give for it.
+    fn predict(&mut self, h: f64, dq: &mut Vec<f64>) {
+        let p = self.params;
+        let n = self.data.layout.n_nodes;
+        dq.clear();
+        dq.resize(6 * n, 0.0);
+        // Linear extrapolation of vdot and lambda from the last two steps when there are
+        // two (a closer start saves Newton iterations; the solution does not depend on it).
+        let ratio = if self.previous.h > 0.0 {
+            h / self.previous.h
+        } else {
+            0.0
+        };
+        for i in 0..n {
+            let (v0, vd0, a0) = (self.saved.v[i], self.saved.vdot[i], self.saved.a[i]);
+            let vd1 = if ratio > 0.0 {
+                vd0 + (vd0 - self.previous.vdot[i]) * ratio
+            } else {
+                vd0
+            };
+            let a1 =
+                (vd0 * p.alpha_f + vd1 * (1.0 - p.alpha_f) - a0 * p.alpha_m) / (1.0 - p.alpha_m);
+            self.state.vdot[i] = vd1;
+            self.state.v[i] = v0 + a0 * (h * (1.0 - p.gamma)) + a1 * (h * p.gamma);
+            let inc = v0 * h + a0 * (h * h * (0.5 - p.beta)) + a1 * (h * h * p.beta);
+            dq[6 * i..6 * i + 6].copy_from_slice(inc.as_slice());
+        }
+        if ratio > 0.0 {
+            for (k, l) in self.state.lambda.iter_mut().enumerate() {
+                *l += (*l - self.previous.lambda[k]) * ratio;
+            }
+        }
+    }
+
+    /// `q = q_n exp(dq)` and, when the matrix is rebuilt, the tangent operators `T(dq)`.
+    fn update_configuration(&mut self, dq: &[f64], tangents: bool) {
+        let group = self.model.group;
+        for (i, node) in self.data.nodes.iter_mut().enumerate() {
+            let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
+            node.q = group.integrate(&self.saved.q[i], &inc);
+            node.v = self.state.v[i];
+            node.vdot = self.state.vdot[i];
+            if tangents {
+                node.t = group.tangent(&inc);
+            }
+        }
+    }
+
+    /// Numeric factorization of the iteration matrix, regularized if it is singular.
+    fn factorize(&mut self, sc: &mut Scaling) -> Result<(), StepFailure> {
+        self.stats.factorizations += 1;
+        let mut factorized = self.data.solver.factorize(&self.data.values);
+        if matches!(factorized, Err(LinearError::Singular { .. })) && sc.regularization == 0.0 {
+            sc.regularization = self.regularization;
+            self.regularized_steps = REGULARIZED_STEPS;
+            let n_unknowns = self.data.layout.n_unknowns();
+            let nd = self.data.layout.n_dofs;
+            let diag = self.data.values.len() - n_unknowns;
+            for v in &mut self.data.values[diag + nd..] {
+                *v = -sc.regularization;
+            }
+            factorized = self.data.solver.factorize(&self.data.values);
+        }
+        factorized.map_err(|e| StepFailure {
+            reason: format!("singular iteration matrix ({e})"),
+            worst_unknown: match e {
+                LinearError::Singular { column } => column,
+                _ => None,
+            },
+        })
+    }
+
+    /// Newton correction `dx = -S^-1 residual`.
+    fn solve(&mut self) -> Result<(), StepFailure> {
+        let dx = &mut self.data.correction;
+        for (d, r) in dx.iter_mut().zip(&self.data.residual) {
+            *d = -r;
+        }
+        self.data.solver.solve_in_place(dx);
+        match dx.iter().position(|d| !d.is_finite()) {
+            Some(i) => Err(StepFailure {
+                reason: "non-finite Newton correction".into(),
+                worst_unknown: Some(i),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// `dq += dx`, `v += gamma' dx`, `vdot += beta' dx`, `lambda += dmu / s`.
+    fn correct(&mut self, dq: &mut [f64], gp: f64, bp: f64, scale: f64) {
+        let dx = &self.data.correction;
+        let nd = self.data.layout.n_dofs;
+        for i in 0..self.data.layout.n_nodes {
+            let d = Vec6::from_column_slice(&dx[6 * i..6 * i + 6]);
+            for k in 0..6 {
+                dq[6 * i + k] += d[k];
+            }
+            self.state.v[i] += d * gp;
+            self.state.vdot[i] += d * bp;
+        }
+        for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
+            if let Some(k) = slot {
+                self.state.lambda[row] += dx[nd + k] / scale;
+            }
+        }
+    }
+
+    /// Final configuration and algorithmic acceleration
+    /// `a_{n+1} = (alpha_f vdot_n + (1 - alpha_f) vdot_{n+1} - alpha_m a_n) / (1 - alpha_m)`.
+    fn finish_step(&mut self, dq: &[f64]) {
+        let p = self.params;
+        let group = self.model.group;
+        for i in 0..self.data.layout.n_nodes {
+            let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
+            let mut q = group.integrate(&self.saved.q[i], &inc);
+            q.orthonormalize();
+            self.state.q[i] = q;
+            self.state.a[i] = (self.saved.vdot[i] * p.alpha_f
+                + self.state.vdot[i] * (1.0 - p.alpha_f)
+                - self.saved.a[i] * p.alpha_m)
+                / (1.0 - p.alpha_m);
+        }
+        load_nodes(&self.state, &mut self.data);
     }
 }
 

@@ -15,6 +15,14 @@ pub struct NewtonSettings {
     pub atol: f64,
     /// Iterations before a step is rejected.
     pub max_iterations: usize,
+    /// Reuse the factorized iteration matrix across iterations and steps (chord method)
+    /// while it contracts fast enough.
+    pub reuse_jacobian: bool,
+    /// Contraction rate (ratio of successive weighted corrections) above which a reused
+    /// matrix is rebuilt.
+    pub max_contraction: f64,
+    /// Steps after which a reused matrix is rebuilt anyway.
+    pub max_jacobian_age: usize,
 }
 
 impl Default for NewtonSettings {
@@ -23,6 +31,9 @@ impl Default for NewtonSettings {
             rtol: 1e-6,
             atol: 1e-9,
             max_iterations: 12,
+            reuse_jacobian: true,
+            max_contraction: 0.25,
+            max_jacobian_age: 100,
         }
     }
 }

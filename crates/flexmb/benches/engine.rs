@@ -1,0 +1,143 @@
+//! Engine benchmarks behind BENCHMARKS.md: wall time per step and Newton iterations per step
+//! for the heavy top and the N-link pendulum chains, release build, one thread.
+//!
+//! ```text
+//! cargo bench -p flexmb --bench engine              # all cases, each in its own process
+//! cargo bench -p flexmb --bench engine -- chain_1000  # one case
+//! ```
+//! Each case runs in a child process so that its peak memory (VmHWM) is its own.
+
+use flexmb::input::{read_model_file, Analysis};
+use flexmb::{Simulation, State};
+use std::path::PathBuf;
+use std::time::Instant;
+
+const CASES: &[&str] = &[
+    "heavy_top_se3",
+    "heavy_top_r3so3",
+    "chain_10",
+    "chain_100",
+    "chain_1000",
+];
+
+fn example(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples")
+        .join(name)
+}
+
+/// Peak resident memory of this process [MB] (Linux).
+fn peak_memory_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
+                l.split_whitespace()
+                    .nth(1)
+                    .map(|v| v.parse::<f64>().unwrap_or(0.0) / 1024.0)
+            })
+        })
+        .unwrap_or(f64::NAN)
+}
+
+struct Outcome {
+    steps: usize,
+    iterations: usize,
+    seconds: f64,
+    state: State,
+}
+
+fn solve(file: &str, overrides: &[String]) -> Outcome {
+    let mf = read_model_file(&example(file), overrides).expect("model file");
+    let Analysis::Dynamic(settings) = mf.analysis;
+    let mut sim = Simulation::new(&mf.model, settings).expect("initial conditions");
+    let t0 = Instant::now();
+    let stats = sim.run(&mut |_| Ok(())).expect("run");
+    Outcome {
+        steps: stats.steps,
+        iterations: stats.newton_iterations,
+        seconds: t0.elapsed().as_secs_f64(),
+        state: sim.state.clone(),
+    }
+}
+
+/// Heavy top with rho_inf = 0.6 to t = 1 s at several steps: error of the centre of mass
+/// against the reference x_G(1 s) (benchmarks.md Sect. 1.2) and solve time.
+fn heavy_top(file: &str) {
+    let reference = [0.17334396, 0.64008859, -0.74849079];
+    println!("| case | h [s] | steps | error x_G(1 s) [m] | solve time [ms] | time/step [us] | Newton it./step |");
+    println!("|---|---|---|---|---|---|---|");
+    for h in [1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5] {
+        let o = solve(
+            file,
+            &[
+                format!("solver.h={h}"),
+                "solver.rho_inf=0.6".into(),
+                "solver.t_end=1.0".into(),
+                "solver.output_interval=0".into(),
+            ],
+        );
+        let x = o.state.q[0].x;
+        let err = ((x[0] - reference[0]).powi(2)
+            + (x[1] - reference[1]).powi(2)
+            + (x[2] - reference[2]).powi(2))
+        .sqrt();
+        println!(
+            "| {file} | {h:.3e} | {} | {err:.3e} | {:.2} | {:.2} | {:.2} |",
+            o.steps,
+            o.seconds * 1e3,
+            o.seconds * 1e6 / o.steps as f64,
+            o.iterations as f64 / o.steps as f64
+        );
+    }
+}
+
+fn chain(n: usize) {
+    let file = format!("chain_{n}.toml");
+    let o = solve(&file, &["solver.output_interval=0".into()]);
+    println!(
+        "| chain_{n} | {} | {:.3} | {:.1} | {:.3} | {:.2} | {:.1} |",
+        o.steps,
+        o.seconds,
+        o.seconds * 1e6 / o.steps as f64,
+        o.seconds * 1e9 / (o.steps * n) as f64,
+        o.iterations as f64 / o.steps as f64,
+        peak_memory_mb()
+    );
+}
+
+fn run_case(case: &str) {
+    match case {
+        "heavy_top_se3" => heavy_top("heavy_top.toml"),
+        "heavy_top_r3so3" => heavy_top("heavy_top_r3so3.toml"),
+        c if c.starts_with("chain_") => chain(c[6..].parse().expect("chain size")),
+        other => panic!("unknown case {other}; cases: {CASES:?}"),
+    }
+}
+
+fn main() {
+    // `cargo bench` passes `--bench`; ignore flags.
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    if let Some(case) = args.first() {
+        run_case(case);
+        return;
+    }
+    let exe = std::env::current_exe().expect("own path");
+    for case in CASES {
+        if case.starts_with("chain_") && *case == "chain_10" {
+            println!("\n| case | steps | solve time [s] | time/step [us] | time/step/link [us] | Newton it./step | peak memory [MB] |");
+            println!("|---|---|---|---|---|---|---|");
+        }
+        let out = std::process::Command::new(&exe)
+            .arg(case)
+            .output()
+            .expect("child");
+        print!("{}", String::from_utf8_lossy(&out.stdout));
+        if !out.status.success() {
+            eprintln!("{case} failed: {}", String::from_utf8_lossy(&out.stderr));
+        }
+    }
+}
