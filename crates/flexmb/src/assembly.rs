@@ -45,6 +45,8 @@ pub struct Scaling {
     /// in a four-bar passing its dead point) and tends to the least-norm multipliers; the
     /// residual is unchanged, so a converged solution is exact.
     pub regularization: f64,
+    /// Factor on the velocity-level rows of the stabilized formulation (`1/gamma'`).
+    pub velocity_scale: f64,
 }
 
 fn gather(data: &Data, slots: [Option<NodeId>; 2], ground: &[NodeState; 2]) -> [NodeState; 2] {
@@ -133,10 +135,15 @@ pub fn assemble(
             pos = scatter_blocks(&mut data.values, pos, dofs, &kt);
         }
         for ri in 0..rows.len() {
-            let Some(c) = layout.row_unknown[start + ri] else {
+            data.b_rows[start + ri] = jv.b[ri];
+            let Some(k) = layout.row_unknown[start + ri] else {
                 continue;
             };
-            let c = n_dofs + c;
+            if layout.stabilized {
+                data.residual[layout.zeta(k)] =
+                    (jv.b[ri].dot(&vloc) + jv.phi_t[ri]) * sc.velocity_scale;
+            }
+            let c = n_dofs + k;
             let b = &jv.b[ri];
             data.residual[c] = match sc.constraint_rhs {
                 ConstraintRhs::Position => jv.phi[ri],
@@ -158,6 +165,35 @@ pub fn assemble(
             }
         }
     }
+    if matrix && layout.stabilized {
+        // Velocity-level rows: B.
+        for (j, joint) in model.joints.iter().enumerate() {
+            let dofs = [layout.dof(joint.node_a), layout.dof(joint.node_b)];
+            let start = layout.joint_row_start[j];
+            for ri in 0..layout.joint_rows[j].len() {
+                if layout.row_unknown[start + ri].is_none() {
+                    continue;
+                }
+                for (ka, _) in active_slots(dofs) {
+                    for i in 0..6 {
+                        data.values[pos] = data.b_rows[start + ri][6 * ka + i];
+                        pos += 1;
+                    }
+                }
+            }
+        }
+        // Position rows against the stabilization unknowns: B B_n^T, node by node.
+        for rows in &layout.node_rows {
+            for &(r1, s1) in rows {
+                for &(r2, s2) in rows {
+                    let b1 = data.b_rows[r1].fixed_rows::<6>(6 * s1);
+                    let b2 = data.b_start[r2].fixed_rows::<6>(6 * s2);
+                    data.values[pos] = b1.dot(&b2);
+                    pos += 1;
+                }
+            }
+        }
+    }
     if matrix {
         // Diagonal entries come last in the pattern, one per unknown.
         let n = layout.n_unknowns();
@@ -167,6 +203,11 @@ pub fn assemble(
         for v in &mut data.values[pos + n_dofs..pos + n] {
             *v = -sc.regularization;
         }
+        debug_assert_eq!(
+            pos + n,
+            data.values.len(),
+            "assembly order differs from the pattern"
+        );
     }
 }
 
@@ -188,4 +229,26 @@ fn scatter_blocks(
         }
     }
     pos
+}
+
+/// Rows of `B(q)` at the configuration in `data.nodes` into `data.b_rows` (group coordinates,
+/// tangent operators ignored): `B(q_n)` for the stabilized formulation.
+pub fn constraint_rows(model: &Model, data: &mut Data, t: f64) {
+    let ground = [NodeState::ground(Default::default()); 2];
+    let zeros = [0.0; joints::MAX_ROWS];
+    for (j, joint) in model.joints.iter().enumerate() {
+        let nodes = gather(data, [joint.node_a, joint.node_b], &ground);
+        let start = data.layout.joint_row_start[j];
+        let rows = &data.layout.joint_rows[j];
+        let jv = joints::evaluate_joint(
+            model.group,
+            joint,
+            rows,
+            &nodes,
+            t,
+            &zeros[..rows.len()],
+            None,
+        );
+        data.b_rows[start..start + rows.len()].copy_from_slice(&jv.b[..rows.len()]);
+    }
 }

@@ -3,8 +3,12 @@
 //! [`Layout`] numbers the unknowns of the Newton iteration:
 //!
 //! ```text
-//! [ node 0 (6) | node 1 (6) | ... | node n-1 (6) | active constraint rows (n_active) ]
+//! [ node 0 (6) | ... | node n-1 (6) | multipliers (n_active) | stabilization (n_active) ]
 //! ```
+//!
+//! The last block exists only in the stabilized index-2 formulation (see
+//! [`crate::solve::dynamics`]): one unknown `zeta` per active row, with the velocity-level
+//! constraint as its equation.
 //!
 //! Each node's 6 entries are a vector in the Lie algebra (translation, then rotation).
 //! Constraint rows that are redundant (linearly dependent on others, e.g. in an
@@ -33,6 +37,10 @@ pub struct Layout {
     pub row_unknown: Vec<Option<usize>>,
     /// Number of independent rows (multiplier unknowns).
     pub n_active: usize,
+    /// Stabilized index-2 formulation: `n_active` more unknowns and equations.
+    pub stabilized: bool,
+    /// Active rows touching each node, as `(row, slot)` (slot 0 = joint's node A).
+    pub node_rows: Vec<Vec<(usize, usize)>>,
     /// Force elements.
     pub elements: Vec<ElementRef>,
 }
@@ -55,17 +63,45 @@ impl Layout {
             n_rows,
             row_unknown: (0..n_rows).map(Some).collect(),
             n_active: n_rows,
+            stabilized: false,
+            node_rows: Vec::new(),
             elements: ElementRef::all(model),
         }
+        .with_node_rows(model)
+    }
+
+    /// Recomputes [`Layout::node_rows`] from the active rows.
+    fn with_node_rows(mut self, model: &Model) -> Self {
+        let mut node_rows = vec![Vec::new(); self.n_nodes];
+        for (j, joint) in model.joints.iter().enumerate() {
+            for r in 0..self.joint_rows[j].len() {
+                let row = self.joint_row_start[j] + r;
+                if self.row_unknown[row].is_none() {
+                    continue;
+                }
+                for (slot, node) in [joint.node_a, joint.node_b].into_iter().enumerate() {
+                    if let Some(n) = node {
+                        node_rows[n.0].push((row, slot));
+                    }
+                }
+            }
+        }
+        self.node_rows = node_rows;
+        self
     }
 
     /// Total Newton unknowns.
     pub fn n_unknowns(&self) -> usize {
-        self.n_dofs + self.n_active
+        self.n_dofs + self.n_active * (1 + self.stabilized as usize)
+    }
+
+    /// Index of the stabilization unknown (and velocity-constraint equation) of active row `k`.
+    pub fn zeta(&self, k: usize) -> usize {
+        self.n_dofs + self.n_active + k
     }
 
     /// Marks the given rows as redundant.
-    pub fn deactivate_rows(&mut self, redundant: &[usize]) {
+    pub fn deactivate_rows(&mut self, model: &Model, redundant: &[usize]) {
         let mut k = 0;
         for r in 0..self.n_rows {
             if redundant.contains(&r) {
@@ -76,6 +112,8 @@ impl Layout {
             }
         }
         self.n_active = k;
+        let layout = std::mem::replace(self, Layout::new(model));
+        *self = layout.with_node_rows(model);
     }
 
     /// Global dof offset of a node slot.
@@ -94,12 +132,16 @@ impl Layout {
                 COMP[i % 6]
             );
         }
-        let k = i - self.n_dofs;
+        let (k, what) = if i >= self.n_dofs + self.n_active {
+            (i - self.n_dofs - self.n_active, "velocity-level constraint")
+        } else {
+            (i - self.n_dofs, "constraint")
+        };
         for (j, start) in self.joint_row_start.iter().enumerate() {
             for (r, row) in self.joint_rows[j].iter().enumerate() {
                 if self.row_unknown[start + r] == Some(k) {
                     return format!(
-                        "constraint row {} ({:?}) of joint '{}' ({})",
+                        "{what} row {} ({:?}) of joint '{}' ({})",
                         r + 1,
                         row,
                         model.joints[j].name,
@@ -127,6 +169,10 @@ pub struct Data {
     pub nodes: Vec<NodeState>,
     /// Constraint values `Phi` (`n_rows`).
     pub phi: Vec<f64>,
+    /// Rows of `B` at the current iterate (`n_rows`, group coordinates).
+    pub b_rows: Vec<crate::elements::Vec12>,
+    /// Rows of `B(q_n)` at the start of the step (`n_rows`; stabilized formulation).
+    pub b_start: Vec<crate::elements::Vec12>,
     pub solver: LinearSolver,
 }
 
@@ -151,6 +197,8 @@ impl Data {
                 })
                 .collect(),
             phi: vec![0.0; layout.n_rows],
+            b_rows: vec![crate::elements::Vec12::zeros(); layout.n_rows],
+            b_start: vec![crate::elements::Vec12::zeros(); layout.n_rows],
             pattern,
             solver,
             layout,
@@ -190,6 +238,34 @@ fn build_pattern(model: &Model, layout: &Layout) -> Vec<(usize, usize)> {
                 for i in 0..6 {
                     p.push((c, a + i));
                     p.push((a + i, c));
+                }
+            }
+        }
+    }
+    if layout.stabilized {
+        // Velocity-level rows: B (row x node dofs), in the joint order of the assembly.
+        for (j, joint) in model.joints.iter().enumerate() {
+            let slots = [layout.dof(joint.node_a), layout.dof(joint.node_b)];
+            for r in 0..layout.joint_rows[j].len() {
+                let Some(k) = layout.row_unknown[layout.joint_row_start[j] + r] else {
+                    continue;
+                };
+                for (_, a) in active_slots(slots) {
+                    for i in 0..6 {
+                        p.push((layout.zeta(k), a + i));
+                    }
+                }
+            }
+        }
+        // Position rows against the stabilization unknowns: B B_n^T, node by node.
+        for rows in &layout.node_rows {
+            for &(r1, _) in rows {
+                for &(r2, _) in rows {
+                    let (k1, k2) = (
+                        layout.row_unknown[r1].unwrap(),
+                        layout.row_unknown[r2].unwrap(),
+                    );
+                    p.push((layout.n_dofs + k1, layout.zeta(k2)));
                 }
             }
         }

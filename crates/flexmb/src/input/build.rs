@@ -192,6 +192,7 @@ fn read_solver(t: &Table<'_>) -> Result<DynamicSettings> {
         "reuse_jacobian",
         "max_contraction",
         "max_jacobian_age",
+        "formulation",
     ])?;
     t.req("analysis")?.choice(&["dynamic"])?;
     let t_end = positive(&t.req("t_end")?)?;
@@ -224,6 +225,13 @@ fn read_solver(t: &Table<'_>) -> Result<DynamicSettings> {
             return Err(f.err(format!("must be between 1 and 10000, got {n}")));
         }
         s.newton.max_iterations = n as usize;
+    }
+    if let Some(f) = t.field("formulation") {
+        s.formulation = match f.choice(&["auto", "index3", "index2"])? {
+            "index3" => crate::solve::Formulation::Index3,
+            "index2" => crate::solve::Formulation::StabilizedIndex2,
+            _ => crate::solve::Formulation::Auto,
+        };
     }
     if let Some(f) = t.field("reuse_jacobian") {
         s.newton.reuse_jacobian = f.bool()?;

@@ -12,6 +12,14 @@
 //! (1 - alpha_m) a_{n+1} + alpha_m a_n = (1 - alpha_f) vdot_{n+1} + alpha_f vdot_n
 //! ```
 //!
+//! **Stabilized index-2 formulation** (Gear, Gupta & Leimkuhler 1985 on the Lie group:
+//! Arnold, Brüls & Cardona 2015, Numer. Math. 129, Sect. 3; Arnold & Hante 2017): the
+//! velocity-level constraint `B(q) v + Phi_t = 0` is imposed at `t_{n+1}` as well, with one
+//! more unknown `zeta` per constraint row that moves the configuration only,
+//! `q_{n+1} = q_n exp(tilde(dq + B(q_n)^T zeta))`. It removes the weak instability of the
+//! index-3 form without numerical damping (`rho_inf = 1`), at the cost of `m` more unknowns;
+//! [`Formulation::Auto`] uses it for `rho_inf >= 0.95`.
+//!
 //! The step reads as a checklist: `predict`, then repeat { `update_configuration`,
 //! `assemble` (residual and iteration matrix), `factorize`, `solve`, `correct`, check the
 //! weighted norm } until converged, then `update_algorithmic_acceleration`. A failed step is
@@ -31,6 +39,18 @@ use crate::model::Model;
 use crate::state::State;
 use flexmb_lie::Vec6;
 
+/// Which form of the constraints the integrator imposes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Formulation {
+    /// Position-level constraints only (index 3).
+    Index3,
+    /// Position- and velocity-level constraints (stabilized index 2, GGL).
+    StabilizedIndex2,
+    /// Index 3 for `rho_inf < 0.95`, stabilized index 2 above (where index 3 without
+    /// numerical damping can become unstable).
+    Auto,
+}
+
 /// Settings of a dynamic analysis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DynamicSettings {
@@ -45,6 +65,18 @@ pub struct DynamicSettings {
     /// Smallest step size tried before giving up [s].
     pub h_min: f64,
     pub newton: NewtonSettings,
+    pub formulation: Formulation,
+}
+
+impl DynamicSettings {
+    /// Whether the stabilized index-2 formulation is used.
+    pub fn stabilized(&self) -> bool {
+        match self.formulation {
+            Formulation::Index3 => false,
+            Formulation::StabilizedIndex2 => true,
+            Formulation::Auto => self.rho_inf >= 0.95,
+        }
+    }
 }
 
 impl DynamicSettings {
@@ -57,6 +89,7 @@ impl DynamicSettings {
             output_interval: 0.0,
             h_min: h * 1e-4,
             newton: NewtonSettings::default(),
+            formulation: Formulation::Auto,
         }
     }
 }
@@ -101,6 +134,10 @@ pub struct Simulation<'m> {
     jacobian_age: usize,
     /// Configuration increments of the current step (scratch, `6 n_nodes`).
     increments: Vec<f64>,
+    /// Total increments `dq + B(q_n)^T zeta` (stabilized formulation; scratch, `6 n_nodes`).
+    total: Vec<f64>,
+    /// Stabilization unknowns of the current step (`n_active`).
+    zeta: Vec<f64>,
     /// Accelerations and multipliers at the start of the previous step, for the predictor.
     previous: Previous,
 }
@@ -125,9 +162,16 @@ impl<'m> Simulation<'m> {
         check_settings(&settings)?;
         let (layout, warnings) = prepare_layout(model);
         let n_rows = layout.n_rows;
-        let mut data = Data::new(model, layout).map_err(|e| SolveError::Model(e.to_string()))?;
+        let model_error = |e: LinearError| SolveError::Model(e.to_string());
+        let mut data = Data::new(model, layout.clone()).map_err(model_error)?;
         let mut state = State::initial(model, n_rows);
         initial_accelerations(model, &mut data, &mut state)?;
+        if settings.stabilized() {
+            let mut stabilized = layout;
+            stabilized.stabilized = true;
+            data = Data::new(model, stabilized).map_err(model_error)?;
+            load_nodes(&state, &mut data);
+        }
         Ok(Self {
             model,
             saved: state.clone(),
@@ -142,6 +186,8 @@ impl<'m> Simulation<'m> {
             jacobian: None,
             jacobian_age: 0,
             increments: Vec::new(),
+            total: Vec::new(),
+            zeta: Vec::new(),
             previous: Previous::default(),
         })
     }
@@ -258,7 +304,15 @@ impl<'m> Simulation<'m> {
             } else {
                 0.0
             },
+            velocity_scale: 1.0 / gp,
         };
+        let stabilized = self.data.layout.stabilized;
+        if stabilized {
+            crate::assembly::constraint_rows(self.model, &mut self.data, self.saved.t);
+            self.data.b_start.clone_from(&self.data.b_rows);
+            self.zeta.clear();
+            self.zeta.resize(self.data.layout.n_active, 0.0);
+        }
         self.regularized_steps = self.regularized_steps.saturating_sub(1);
         let t_new = self.saved.t + h;
         let mut dq = std::mem::take(&mut self.increments);
@@ -279,7 +333,9 @@ impl<'m> Simulation<'m> {
         });
         for iteration in 1..=newton.max_iterations {
             let fresh = refresh;
-            self.update_configuration(&dq, fresh);
+            let total = self.total_increments(&dq);
+            self.update_configuration(&total, fresh);
+            self.total = total;
             assemble(
                 self.model,
                 &mut self.data,
@@ -309,6 +365,16 @@ impl<'m> Simulation<'m> {
                 break;
             }
             self.correct(&mut dq, gp, bp, scale);
+            let e_zeta = if stabilized {
+                let na = self.data.layout.n_active;
+                let dz = &self.data.correction[nd + na..];
+                for (z, d) in self.zeta.iter_mut().zip(dz) {
+                    *z += d;
+                }
+                weighted_norm(dz, &self.zeta, &|_| newton.atol, newton.rtol).0
+            } else {
+                0.0
+            };
             // weighted norms of the corrections: increments, then multipliers relative to
             // the largest multiplier of the previous step
             let dx = &self.data.correction;
@@ -317,17 +383,21 @@ impl<'m> Simulation<'m> {
             let mut worst_mu = 0;
             if self.data.layout.n_active > 0 && max_mu > 0.0 {
                 let mu_atol = newton.rtol * max_mu;
-                let (e, w) = weighted_norm(&dx[nd..], &dx[nd..], &|_| mu_atol, 0.0);
+                let mu = &dx[nd..nd + self.data.layout.n_active];
+                let (e, w) = weighted_norm(mu, mu, &|_| mu_atol, 0.0);
                 e_mu = e;
                 worst_mu = nd + w;
             }
-            let err = e_q.max(e_mu);
+            let err = e_q.max(e_mu).max(e_zeta);
             self.stats.newton_iterations += 1;
             // The multipliers of a badly scaled mechanism can stall at their round-off floor
             // once the configuration has converged: accept when they stop decreasing.
-            let multipliers_stalled = iteration >= 2 && e_q <= 1.0 && e_mu > 0.5 * previous_mu;
+            let multipliers_stalled =
+                iteration >= 2 && e_q.max(e_zeta) <= 1.0 && e_mu > 0.5 * previous_mu;
             if err <= 1.0 || multipliers_stalled {
-                self.finish_step(&dq);
+                let total = self.total_increments(&dq);
+                self.finish_step(&total);
+                self.total = total;
                 result = Ok(iteration);
                 break;
             }
@@ -480,6 +550,29 @@ impl<'m> Simulation<'m> {
                 self.state.lambda[row] += dx[nd + k] / scale;
             }
         }
+    }
+
+    /// `dq + B(q_n)^T zeta` in the stabilized formulation, `dq` otherwise. Returns a copy
+    /// held in a reused buffer.
+    fn total_increments(&mut self, dq: &[f64]) -> Vec<f64> {
+        let mut total = std::mem::take(&mut self.total);
+        total.clear();
+        total.extend_from_slice(dq);
+        if self.data.layout.stabilized {
+            for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
+                let Some(k) = slot else { continue };
+                let (j, _) = super::initial::locate_row(&self.data.layout, row);
+                let joint = &self.model.joints[j];
+                for (s, node) in [joint.node_a, joint.node_b].into_iter().enumerate() {
+                    if let Some(n) = node {
+                        for i in 0..6 {
+                            total[6 * n.0 + i] += self.data.b_start[row][6 * s + i] * self.zeta[*k];
+                        }
+                    }
+                }
+            }
+        }
+        total
     }
 
     /// Final configuration and algorithmic acceleration

@@ -114,7 +114,7 @@ pub fn prepare_layout(model: &Model) -> (Layout, Vec<String>) {
             layout.joint_rows[j][r]
         ));
     }
-    layout.deactivate_rows(&redundant);
+    layout.deactivate_rows(model, &redundant);
     (layout, warnings)
 }
 
@@ -151,6 +151,7 @@ pub fn initial_accelerations(
         constraint_rhs: ConstraintRhs::Position,
         load_factor: 1.0,
         regularization: 0.0,
+        velocity_scale: 1.0,
     };
     assemble(model, data, state.t, &zeros, &sc, false);
     if let Some((row, v)) = worst(&data.phi) {
