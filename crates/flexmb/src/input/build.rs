@@ -193,6 +193,10 @@ fn read_solver(t: &Table<'_>) -> Result<DynamicSettings> {
         "max_contraction",
         "max_jacobian_age",
         "formulation",
+        "scheme",
+        "hht_alpha",
+        "newmark_beta",
+        "newmark_gamma",
     ])?;
     t.req("analysis")?.choice(&["dynamic"])?;
     let t_end = positive(&t.req("t_end")?)?;
@@ -232,6 +236,44 @@ fn read_solver(t: &Table<'_>) -> Result<DynamicSettings> {
             "index2" => crate::solve::Formulation::StabilizedIndex2,
             _ => crate::solve::Formulation::Auto,
         };
+    }
+    let scheme = t
+        .field("scheme")
+        .map(|f| f.choice(&["generalized_alpha", "hht", "newmark"]))
+        .transpose()?;
+    let only_for = |key: &str, which: &str| -> Result<()> {
+        if t.has(key) && scheme != Some(which) {
+            return Err(t.key_err(key, format!("only allowed with scheme = \"{which}\"")));
+        }
+        Ok(())
+    };
+    only_for("hht_alpha", "hht")?;
+    only_for("newmark_beta", "newmark")?;
+    only_for("newmark_gamma", "newmark")?;
+    match scheme {
+        Some("hht") => {
+            let f = t.req("hht_alpha")?;
+            let alpha = f.f64()?;
+            if !(0.0..=1.0 / 3.0).contains(&alpha) {
+                return Err(f.err(format!("must be in [0, 1/3], got {alpha}")));
+            }
+            s.scheme = crate::solve::Scheme::Hht { alpha };
+        }
+        Some("newmark") => {
+            let beta = t.opt_f64("newmark_beta")?.unwrap_or(0.25);
+            let gamma = t.opt_f64("newmark_gamma")?.unwrap_or(0.5);
+            if !(gamma >= 0.5 && beta >= 0.25 * (gamma + 0.5).powi(2) - 1e-12) {
+                let f = t
+                    .field("newmark_beta")
+                    .or_else(|| t.field("newmark_gamma"))
+                    .unwrap_or(t.req("scheme")?);
+                return Err(f.err(format!(
+                    "Newmark needs gamma >= 1/2 and beta >= (gamma + 1/2)^2 / 4 for unconditional stability, got beta = {beta}, gamma = {gamma}"
+                )));
+            }
+            s.scheme = crate::solve::Scheme::Newmark { beta, gamma };
+        }
+        _ => {}
     }
     if let Some(f) = t.field("reuse_jacobian") {
         s.newton.reuse_jacobian = f.bool()?;

@@ -51,6 +51,49 @@ pub enum Formulation {
     Auto,
 }
 
+/// The member of the generalized-alpha family to use.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Scheme {
+    /// Chung & Hulbert's optimal parameters for `DynamicSettings::rho_inf`.
+    GeneralizedAlpha,
+    /// HHT-alpha (Hilber, Hughes & Taylor 1977), `alpha` in `[0, 1/3]`.
+    Hht { alpha: f64 },
+    /// Newmark with `alpha_m = alpha_f = 0` (`beta = 1/4, gamma = 1/2`: trapezoidal rule).
+    Newmark { beta: f64, gamma: f64 },
+}
+
+impl Scheme {
+    /// Spectral radius at infinity: how much the scheme damps the highest frequencies
+    /// (1: not at all). Newmark with `gamma > 1/2` counts as damped.
+    pub fn spectral_radius_at_infinity(&self, rho_inf: f64) -> f64 {
+        match *self {
+            Scheme::GeneralizedAlpha => rho_inf,
+            Scheme::Hht { alpha } => (1.0 - alpha) / (1.0 + alpha),
+            Scheme::Newmark { gamma, .. } => {
+                if gamma <= 0.5 + 1e-12 {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// The four parameters of the scheme.
+    pub fn parameters(&self, rho_inf: f64) -> GaParameters {
+        match *self {
+            Scheme::GeneralizedAlpha => GaParameters::from_rho_inf(rho_inf),
+            Scheme::Hht { alpha } => GaParameters::hht(alpha),
+            Scheme::Newmark { beta, gamma } => GaParameters {
+                alpha_m: 0.0,
+                alpha_f: 0.0,
+                beta,
+                gamma,
+            },
+        }
+    }
+}
+
 /// Settings of a dynamic analysis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DynamicSettings {
@@ -66,6 +109,7 @@ pub struct DynamicSettings {
     pub h_min: f64,
     pub newton: NewtonSettings,
     pub formulation: Formulation,
+    pub scheme: Scheme,
 }
 
 impl DynamicSettings {
@@ -74,7 +118,7 @@ impl DynamicSettings {
         match self.formulation {
             Formulation::Index3 => false,
             Formulation::StabilizedIndex2 => true,
-            Formulation::Auto => self.rho_inf >= 0.95,
+            Formulation::Auto => self.scheme.spectral_radius_at_infinity(self.rho_inf) >= 0.95,
         }
     }
 }
@@ -90,6 +134,7 @@ impl DynamicSettings {
             h_min: h * 1e-4,
             newton: NewtonSettings::default(),
             formulation: Formulation::Auto,
+            scheme: Scheme::GeneralizedAlpha,
         }
     }
 }
@@ -177,7 +222,7 @@ impl<'m> Simulation<'m> {
             saved: state.clone(),
             data,
             state,
-            params: GaParameters::from_rho_inf(settings.rho_inf),
+            params: settings.scheme.parameters(settings.rho_inf),
             settings,
             stats: Stats::default(),
             warnings,

@@ -7,7 +7,7 @@ pub mod initial;
 pub mod linear;
 pub mod newton;
 
-pub use dynamics::{DynamicSettings, Formulation, Simulation, Stats};
+pub use dynamics::{DynamicSettings, Formulation, Scheme, Simulation, Stats};
 pub use generalized_alpha::GaParameters;
 pub use initial::{initial_accelerations, prepare_layout};
 pub use newton::NewtonSettings;
