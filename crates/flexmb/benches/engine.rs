@@ -67,7 +67,7 @@ fn heavy_top(file: &str) {
     let reference = [0.17334396, 0.64008859, -0.74849079];
     println!("| case | h [s] | steps | error x_G(1 s) [m] | solve time [ms] | time/step [us] | Newton it./step |");
     println!("|---|---|---|---|---|---|---|");
-    for h in [1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5] {
+    for h in [1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 4.5e-5, 3.125e-5] {
         let o = solve(
             file,
             &[
@@ -96,11 +96,11 @@ fn chain(n: usize) {
     let file = format!("chain_{n}.toml");
     let o = solve(&file, &["solver.output_interval=0".into()]);
     println!(
-        "| chain_{n} | {} | {:.3} | {:.1} | {:.3} | {:.2} | {:.1} |",
+        "| chain_{n} | {} | {:.3} | {:.1} | {:.2} | {:.2} | {:.1} |",
         o.steps,
         o.seconds,
         o.seconds * 1e6 / o.steps as f64,
-        o.seconds * 1e9 / (o.steps * n) as f64,
+        o.seconds * 1e6 / (o.steps * n) as f64,
         o.iterations as f64 / o.steps as f64,
         peak_memory_mb()
     );

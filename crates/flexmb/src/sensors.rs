@@ -165,13 +165,15 @@ pub fn origin_velocity(group: Group, q: &flexmb_lie::Frame, v: &Vec6) -> flexmb_
 
 /// Largest `|Phi|` over the active constraint rows at `state`.
 pub fn constraint_violation(model: &Model, data: &Data, state: &State, nodes: &[NodeState]) -> f64 {
+    let zeros = [0.0; joints::MAX_ROWS];
     let mut worst = 0.0f64;
     for (j, joint) in model.joints.iter().enumerate() {
         let p = pair(nodes, [joint.node_a, joint.node_b]);
-        for (r, row) in data.layout.joint_rows[j].iter().enumerate() {
+        let rows = &data.layout.joint_rows[j];
+        let jv = joints::evaluate_joint(model.group, joint, rows, &p, state.t, &zeros[..rows.len()], None);
+        for r in 0..rows.len() {
             if data.layout.row_unknown[data.layout.joint_row_start[j] + r].is_some() {
-                let v = joints::evaluate_row(model.group, joint, *row, &p, state.t);
-                worst = worst.max(v.phi.abs());
+                worst = worst.max(jv.phi[r].abs());
             }
         }
     }
