@@ -48,7 +48,10 @@ fn run_writes_sensors_and_summary() {
     assert!(status.success());
     let csv = std::fs::read_to_string(out.join("sensors.csv")).expect("csv");
     let mut lines = csv.lines();
-    assert_eq!(lines.next(), Some("time,x,y,angle,energy"));
+    assert_eq!(
+        lines.next(),
+        Some("time,x,y,angle,energy,reaction_x,reaction_y")
+    );
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len(), 11, "t = 0, 0.01, ..., 0.1");
     assert!(rows[10].starts_with("1.000000000000e-1,"));

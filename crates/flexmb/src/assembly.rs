@@ -16,7 +16,7 @@
 
 use crate::data::{active_slots, Data};
 use crate::elements::{Coefficients, Context, ElementKernel, Mat12, NodeState, Vec12};
-use crate::joints;
+use crate::joints::{self, ConstraintKernel};
 use crate::model::{Model, NodeId};
 
 /// What the constraint rows of the right-hand side hold.
@@ -105,15 +105,7 @@ pub fn assemble(
         let rows = &layout.joint_rows[j];
         let lam = &lambda[start..start + rows.len()];
         let mut k = Mat12::zeros();
-        let jv = joints::evaluate_joint(
-            model.group,
-            joint,
-            rows,
-            &nodes,
-            t,
-            lam,
-            matrix.then_some(&mut k),
-        );
+        let jv = joint.evaluate(model.group, rows, &nodes, t, lam, matrix.then_some(&mut k));
         let mut vloc = Vec12::zeros();
         for (ka, _) in active_slots(dofs) {
             vloc.fixed_rows_mut::<6>(6 * ka).copy_from(&nodes[ka].v);
@@ -240,15 +232,7 @@ pub fn constraint_rows(model: &Model, data: &mut Data, t: f64) {
         let nodes = gather(data, [joint.node_a, joint.node_b], &ground);
         let start = data.layout.joint_row_start[j];
         let rows = &data.layout.joint_rows[j];
-        let jv = joints::evaluate_joint(
-            model.group,
-            joint,
-            rows,
-            &nodes,
-            t,
-            &zeros[..rows.len()],
-            None,
-        );
+        let jv = joint.evaluate(model.group, rows, &nodes, t, &zeros[..rows.len()], None);
         data.b_rows[start..start + rows.len()].copy_from_slice(&jv.b[..rows.len()]);
     }
 }

@@ -170,7 +170,15 @@ pub fn constraint_violation(model: &Model, data: &Data, state: &State, nodes: &[
     for (j, joint) in model.joints.iter().enumerate() {
         let p = pair(nodes, [joint.node_a, joint.node_b]);
         let rows = &data.layout.joint_rows[j];
-        let jv = joints::evaluate_joint(model.group, joint, rows, &p, state.t, &zeros[..rows.len()], None);
+        let jv = joints::evaluate_joint(
+            model.group,
+            joint,
+            rows,
+            &p,
+            state.t,
+            &zeros[..rows.len()],
+            None,
+        );
         for r in 0..rows.len() {
             if data.layout.row_unknown[data.layout.joint_row_start[j] + r].is_some() {
                 worst = worst.max(jv.phi[r].abs());

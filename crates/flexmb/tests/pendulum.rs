@@ -71,3 +71,28 @@ fn pendulum_energy_is_conserved_without_numerical_damping() {
         "energy error ratio {ratio} for h doubled"
     );
 }
+
+#[test]
+fn pendulum_joint_reaction_is_three_times_the_weight_at_the_bottom() {
+    // Released from the horizontal: v^2 = 2 g L at the bottom, so the pivot pulls the bob
+    // up with m g + m v^2 / L = 3 m g (and with 0 at the release, where the link is slack
+    // in the radial direction: m v^2 / L = 0 and gravity is perpendicular to the link).
+    let run = run("pendulum.toml", &["solver.t_end=1.0"]);
+    let ys = run.series("y");
+    let (k, _) = ys
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1 .1.total_cmp(&b.1 .1))
+        .expect("rows");
+    let (fx, fy) = (
+        run.rows[k].1[run.column("reaction_x")],
+        run.rows[k].1[run.column("reaction_y")],
+    );
+    assert!(
+        (fy - 3.0 * 9.81).abs() < 1e-2,
+        "vertical reaction at the bottom {fy}"
+    );
+    assert!(fx.abs() < 5e-2, "horizontal reaction at the bottom {fx}");
+    let f0 = run.rows[0].1[run.column("reaction_x")].hypot(run.rows[0].1[run.column("reaction_y")]);
+    assert!(f0 < 1e-6, "reaction at release {f0}");
+}

@@ -22,8 +22,8 @@
 
 pub mod primitives;
 
-use crate::elements::{Mat12, NodeState, Vec12};
-use crate::model::{Joint, JointKind, Model};
+use crate::elements::{Mat12, NodeState, Parameter, Vec12};
+use crate::model::{Joint, JointKind, Model, NodeId};
 use flexmb_lie::{so3::hat, Frame, Group, Vec3};
 use primitives::{dot1, dot1_into, dot2, dot2_into, Primitive};
 
@@ -387,4 +387,58 @@ pub fn evaluate_joint(
         }
     }
     out
+}
+
+/// The capability set every constraint offers, mirroring [`crate::elements::ElementKernel`]:
+/// its nodes and rows, the rows' values, gradients and gradient derivatives (what the
+/// residual and the iteration matrix need), and derivatives with respect to named model
+/// parameters (what sensitivity analysis needs). Simulation and sensitivities share it.
+pub trait ConstraintKernel {
+    /// The two nodes (`None` = ground).
+    fn nodes(&self) -> [Option<NodeId>; 2];
+    /// The scalar rows.
+    fn rows(&self) -> Vec<Row>;
+    /// Values and gradients of all rows, and `K_c = sum lambda_r dB_r^T/dw` if asked.
+    fn evaluate(
+        &self,
+        group: Group,
+        rows: &[Row],
+        nodes: &[NodeState; 2],
+        t: f64,
+        lambda: &[f64],
+        k: Option<&mut Mat12>,
+    ) -> JointValues;
+    /// `dPhi/dp` (per row) and `d(B^T lambda)/dp` (12); `false` if independent of `param`.
+    /// No joint parameter is differentiable yet (joint geometry will be).
+    fn parameter_derivative(
+        &self,
+        _param: &Parameter,
+        _nodes: &[NodeState; 2],
+        _t: f64,
+        _lambda: &[f64],
+        _dphi: &mut [f64],
+        _dforce: &mut Vec12,
+    ) -> bool {
+        false
+    }
+}
+
+impl ConstraintKernel for Joint {
+    fn nodes(&self) -> [Option<NodeId>; 2] {
+        [self.node_a, self.node_b]
+    }
+    fn rows(&self) -> Vec<Row> {
+        rows(self)
+    }
+    fn evaluate(
+        &self,
+        group: Group,
+        rows: &[Row],
+        nodes: &[NodeState; 2],
+        t: f64,
+        lambda: &[f64],
+        k: Option<&mut Mat12>,
+    ) -> JointValues {
+        evaluate_joint(group, self, rows, nodes, t, lambda, k)
+    }
 }
