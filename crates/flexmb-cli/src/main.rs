@@ -5,7 +5,7 @@
 //! flexmb check MODEL.toml [--set ...]
 //! ```
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
@@ -103,24 +103,31 @@ fn run(cli: Cli) -> Result<i32> {
         }
         Command::Check { model, set } => {
             let file = flexmb::input::read_model_file(&model, &set)?;
-            let flexmb::input::Analysis::Dynamic(settings) = file.analysis;
-            match flexmb::Simulation::new(&file.model, settings) {
-                Ok(sim) => {
-                    for w in &sim.warnings {
-                        eprintln!("warning: {w}");
-                    }
-                    println!(
-                        "{}: {} nodes, {} bodies, {} joints, {} unknowns: ok",
-                        model.display(),
-                        file.model.nodes.len(),
-                        file.model.bodies.len(),
-                        file.model.joints.len(),
-                        sim.data.layout.n_unknowns()
-                    );
-                    Ok(0)
+            let (unknowns, warnings) = match &file.analysis {
+                flexmb::input::Analysis::Dynamic(settings) => {
+                    let sim = flexmb::Simulation::new(&file.model, *settings)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", model.display()))?;
+                    (sim.data.layout.n_unknowns(), sim.warnings)
                 }
-                Err(e) => bail!("{}: {e}", model.display()),
+                flexmb::input::Analysis::Static(settings) => {
+                    let s = flexmb::solve::Statics::new(&file.model, *settings)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", model.display()))?;
+                    (s.data.layout.n_unknowns(), s.warnings)
+                }
+            };
+            for w in &warnings {
+                eprintln!("warning: {w}");
             }
+            println!(
+                "{}: {} nodes, {} bodies, {} beam elements, {} joints, {} unknowns: ok",
+                model.display(),
+                file.model.nodes.len(),
+                file.model.bodies.len(),
+                file.model.beams.len(),
+                file.model.joints.len(),
+                unknowns
+            );
+            Ok(0)
         }
     }
 }

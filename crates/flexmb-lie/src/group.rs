@@ -85,6 +85,23 @@ impl Group {
         }
     }
 
+    /// `d/dw [ T^-1(w)^T sigma ]` at fixed `sigma` (see
+    /// [`se3::tangent_inv_transpose_derivative`]). For R3xSO(3) only the rotation block,
+    /// [`so3::tangent_inv_transpose_derivative`], is nonzero.
+    pub fn tangent_inv_transpose_derivative(self, w: &Vec6, sigma: &Vec6) -> Mat6 {
+        match self {
+            Group::R3xSO3 => {
+                let (_, theta) = split(w);
+                let (_, m) = split(sigma);
+                let mut g = Mat6::zeros();
+                g.fixed_view_mut::<3, 3>(3, 3)
+                    .copy_from(&so3::tangent_inv_transpose_derivative(&theta, &m));
+                g
+            }
+            Group::SE3 => se3::tangent_inv_transpose_derivative(w, sigma),
+        }
+    }
+
     /// Name used in model files and outputs.
     pub fn name(self) -> &'static str {
         match self {

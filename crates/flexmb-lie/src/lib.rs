@@ -10,7 +10,9 @@
 //! Both store the same data, a [`Frame`] (position and rotation matrix); they differ in how a
 //! tangent vector `w` (translation part first, then rotation) moves a configuration:
 //! `q exp(tilde(w))`. Everything a solver needs is in [`Group`]: `integrate`, `difference`,
-//! the tangent operator `T` (`exp(w + dw) = exp(w) exp(T(w) dw)`) and its inverse.
+//! the tangent operator `T` (`exp(w + dw) = exp(w) exp(T(w) dw)`) and its inverse, and the
+//! derivative `d/dw [T^-1(w)^T sigma]` that the tangent stiffness of the SE(3) beam needs
+//! ([`tangent_inv_transpose_derivative`], [`tangent_inv_transpose_derivative_so3`]).
 //!
 //! Formulas are closed form with Taylor series near zero rotation; the logarithm goes through
 //! a quaternion and is robust up to and including a rotation of pi.
@@ -31,6 +33,8 @@ pub mod so3;
 
 pub use frame::Frame;
 pub use group::Group;
+pub use se3::tangent_inv_transpose_derivative;
+pub use so3::tangent_inv_transpose_derivative as tangent_inv_transpose_derivative_so3;
 
 /// 3-vector.
 pub type Vec3 = nalgebra::Vector3<f64>;

@@ -215,3 +215,201 @@ fn se3_adjoint_identities() {
         assert!((se3::tangent(&a) * a - a).norm() < 1e-14);
     }
 }
+
+/// Rotation angles at which the beam evaluates `G`: exact zero, the series range, both sides
+/// of the series/closed-form switch (|theta| = 1.5) and large angles.
+const G_ANGLES: [f64; 10] = [0.0, 1e-9, 1e-5, 1e-3, 0.5, 1.4999, 1.5, 1.5001, 2.8, 3.1];
+
+fn rotation(rng: &mut Lcg, angle: f64) -> Vec3 {
+    rng.vec3(1.0).normalize() * angle
+}
+
+#[test]
+fn so3_tangent_inv_transpose_derivative_matches_central_differences() {
+    let mut rng = Lcg(21);
+    let eps = 1e-6;
+    for &angle in &G_ANGLES {
+        for _ in 0..5 {
+            let x = rotation(&mut rng, angle);
+            let m = rng.vec3(3.0);
+            let g = flexmb_lie::tangent_inv_transpose_derivative_so3(&x, &m);
+            assert!(g.iter().all(|v| v.is_finite()));
+            let f = |y: &Vec3| so3::tangent_inv(y).transpose() * m;
+            let mut fd = Mat3::zeros();
+            for k in 0..3 {
+                let mut e = Vec3::zeros();
+                e[k] = eps;
+                fd.set_column(k, &((f(&(x + e)) - f(&(x - e))) / (2.0 * eps)));
+            }
+            assert!(
+                (g - fd).norm() < 1e-7 * g.norm().max(1.0),
+                "angle {angle}: {g} vs {fd}"
+            );
+        }
+    }
+    // Exactly at zero: G(0, m) = 1/2 tilde(m).
+    let m = Vec3::new(1.0, -2.0, 0.5);
+    let g0 = so3::tangent_inv_transpose_derivative(&Vec3::zeros(), &m);
+    assert_eq!(g0, so3::hat(&m) * 0.5);
+}
+
+#[test]
+fn se3_tangent_inv_transpose_derivative_matches_central_differences() {
+    let mut rng = Lcg(23);
+    let eps = 1e-6;
+    for g in groups() {
+        for &angle in &G_ANGLES {
+            for _ in 0..6 {
+                let theta = rotation(&mut rng, angle);
+                let u = rng.vec3(3.0);
+                let d = Vec6::new(u.x, u.y, u.z, theta.x, theta.y, theta.z);
+                let sigma = rng.vec6(5.0, 2.0);
+                let gd = g.tangent_inv_transpose_derivative(&d, &sigma);
+                assert!(gd.iter().all(|v| v.is_finite()), "{g:?} angle {angle}");
+                if g == Group::SE3 {
+                    assert_eq!(gd, se3::tangent_inv_transpose_derivative(&d, &sigma));
+                }
+                let f = |y: &Vec6| g.tangent_inv(y).transpose() * sigma;
+                let mut fd = Mat6::zeros();
+                for k in 0..6 {
+                    let mut e = Vec6::zeros();
+                    e[k] = eps;
+                    fd.set_column(k, &((f(&(d + e)) - f(&(d - e))) / (2.0 * eps)));
+                }
+                let err = (gd - fd).norm() / gd.norm().max(1.0);
+                assert!(
+                    err < 1e-7,
+                    "{g:?} angle {angle}: rel err {err:e}\n{gd}\n{fd}"
+                );
+            }
+        }
+    }
+}
+
+/// `d(eps) = log((H_A exp(eps_1 a_1) exp(eps_2 a_2))^-1 H_B exp(eps_1 b_1) exp(eps_2 b_2))`,
+/// with `z_i = [a_i; b_i]` (12-vectors, node A first).
+fn beam_relative_motion(ha: &Frame, hb: &Frame, z: &[(f64, [f64; 12])]) -> Vec6 {
+    let (mut a, mut b) = (*ha, *hb);
+    for (e, zi) in z {
+        let wa = Vec6::from_column_slice(&zi[..6]) * *e;
+        let wb = Vec6::from_column_slice(&zi[6..]) * *e;
+        a = a.compose(&se3::exp(&wa));
+        b = b.compose(&se3::exp(&wb));
+    }
+    se3::log(&a.inverse().compose(&b))
+}
+
+fn beam_p(d: &Vec6) -> nalgebra::SMatrix<f64, 6, 12> {
+    let mut p = nalgebra::SMatrix::<f64, 6, 12>::zeros();
+    p.fixed_view_mut::<6, 6>(0, 0)
+        .copy_from(&(-se3::tangent_inv(&(-d))));
+    p.fixed_view_mut::<6, 6>(0, 6)
+        .copy_from(&se3::tangent_inv(d));
+    p
+}
+
+fn unit12(k: usize) -> [f64; 12] {
+    let mut z = [0.0; 12];
+    z[k] = 1.0;
+    z
+}
+
+/// Nodes `H_A` (random) and `H_B = H_A exp(d)` with the rotation of `d` of a given angle.
+fn beam_nodes(rng: &mut Lcg, angle: f64) -> (Frame, Frame, Vec6) {
+    let ha = se3::exp(&rng.vec6(2.0, 2.0));
+    let theta = rotation(rng, angle);
+    let u = rng.vec3(2.0);
+    let d = Vec6::new(u.x, u.y, u.z, theta.x, theta.y, theta.z);
+    let hb = ha.compose(&se3::exp(&d));
+    let d = se3::log(&ha.inverse().compose(&hb)); // what the beam actually sees
+    (ha, hb, d)
+}
+
+#[test]
+fn beam_relative_motion_variation_is_p_of_d() {
+    // delta log(H_A^-1 H_B) = [-T^-1(-d), T^-1(d)] [w_A; w_B].
+    let mut rng = Lcg(29);
+    let eps = 1e-6;
+    for &angle in &G_ANGLES {
+        for _ in 0..4 {
+            let (ha, hb, d) = beam_nodes(&mut rng, angle);
+            let p = beam_p(&d);
+            for k in 0..12 {
+                let plus = beam_relative_motion(&ha, &hb, &[(eps, unit12(k))]);
+                let minus = beam_relative_motion(&ha, &hb, &[(-eps, unit12(k))]);
+                let col = (plus - minus) / (2.0 * eps);
+                assert!(
+                    (col - p.column(k)).norm() < 1e-7 * (1.0 + d.norm()),
+                    "angle {angle} k {k}: {col:?} vs {:?}",
+                    p.column(k)
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn beam_geometric_stiffness_matches_second_derivative_of_log() {
+    // f(e1, e2) = sigma . d(e1, e2) with the ordered perturbation of `beam_relative_motion`:
+    // d f/d e2 at e2 = 0 is sigma^T P(d(e1, 0)) z_2 exactly, so
+    // d^2 f/(d e1 d e2) = z_2^T [G(-d, sigma); G(d, sigma)] P(d) z_1.
+    let mut rng = Lcg(31);
+    let h = 2e-4;
+    for &angle in &G_ANGLES {
+        for _ in 0..2 {
+            let (ha, hb, d) = beam_nodes(&mut rng, angle);
+            let sigma = rng.vec6(3.0, 2.0);
+            let mut gs = nalgebra::SMatrix::<f64, 12, 6>::zeros();
+            gs.fixed_view_mut::<6, 6>(0, 0)
+                .copy_from(&se3::tangent_inv_transpose_derivative(&(-d), &sigma));
+            gs.fixed_view_mut::<6, 6>(6, 0)
+                .copy_from(&se3::tangent_inv_transpose_derivative(&d, &sigma));
+            let kg = gs * beam_p(&d);
+            let f = |e1: f64, e2: f64, i: usize, j: usize| {
+                sigma.dot(&beam_relative_motion(
+                    &ha,
+                    &hb,
+                    &[(e1, unit12(j)), (e2, unit12(i))],
+                ))
+            };
+            let mut fd = nalgebra::SMatrix::<f64, 12, 12>::zeros();
+            for i in 0..12 {
+                for j in 0..12 {
+                    fd[(i, j)] = (f(h, h, i, j) - f(h, -h, i, j) - f(-h, h, i, j)
+                        + f(-h, -h, i, j))
+                        / (4.0 * h * h);
+                }
+            }
+            let err = (kg - fd).norm() / kg.norm().max(1.0);
+            assert!(err < 1e-5, "angle {angle}: rel err {err:e}\n{kg}\n{fd}");
+        }
+    }
+}
+
+#[test]
+fn se3_tangent_matches_its_power_series_at_all_angles() {
+    // T(x) = sum_k (-ad(x))^k/(k+1)!: an independent reference for the closed forms, in
+    // particular for the coupling block in the small-angle range where they cancel.
+    let mut rng = Lcg(37);
+    for &angle in &[
+        0.0, 1e-9, 1.1e-4, 3e-4, 1e-3, 1e-2, 0.3, 1.4999, 1.5001, 2.8, 3.1,
+    ] {
+        for _ in 0..4 {
+            let theta = rotation(&mut rng, angle);
+            let u = rng.vec3(2.0);
+            let w = Vec6::new(u.x, u.y, u.z, theta.x, theta.y, theta.z);
+            let a = -se3::ad(&w);
+            let (mut term, mut sum) = (Mat6::identity(), Mat6::identity());
+            for k in 1..60 {
+                term = term * a / (k as f64 + 1.0);
+                sum += term;
+            }
+            let t = se3::tangent(&w);
+            assert!(
+                (t - sum).norm() < 1e-14 * (1.0 + w.norm()).powi(2),
+                "angle {angle}: {:e}",
+                (t - sum).norm()
+            );
+        }
+    }
+}

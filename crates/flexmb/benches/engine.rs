@@ -49,7 +49,9 @@ struct Outcome {
 
 fn solve(file: &str, overrides: &[String]) -> Outcome {
     let mf = read_model_file(&example(file), overrides).expect("model file");
-    let Analysis::Dynamic(settings) = mf.analysis;
+    let Analysis::Dynamic(settings) = mf.analysis else {
+        panic!("{file} is not a dynamic analysis")
+    };
     let mut sim = Simulation::new(&mf.model, settings).expect("initial conditions");
     let t0 = Instant::now();
     let stats = sim.run(&mut |_| Ok(())).expect("run");

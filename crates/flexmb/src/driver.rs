@@ -3,7 +3,7 @@
 use crate::input::{Analysis, ModelFile};
 use crate::output::{CsvWriter, Summary};
 use crate::sensors::SensorEvaluator;
-use crate::solve::Simulation;
+use crate::solve::{Simulation, StaticSettings, Statics};
 use std::path::Path;
 use std::time::Instant;
 
@@ -16,9 +16,90 @@ pub fn run(
     progress: &mut dyn FnMut(f64, f64),
 ) -> std::io::Result<Summary> {
     std::fs::create_dir_all(out_dir)?;
+    match &file.analysis {
+        Analysis::Dynamic(settings) => run_dynamic(file, settings, out_dir, progress),
+        Analysis::Static(settings) => run_static(file, settings, out_dir, progress),
+    }
+}
+
+/// Static analysis: `sensors.csv` has the load factor in its first column.
+fn run_static(
+    file: &ModelFile,
+    settings: &StaticSettings,
+    out_dir: &Path,
+    progress: &mut dyn FnMut(f64, f64),
+) -> std::io::Result<Summary> {
     let start = Instant::now();
     let model = &file.model;
-    let Analysis::Dynamic(settings) = &file.analysis;
+    let mut summary = Summary {
+        status: "running".into(),
+        title: model.title.clone(),
+        analysis: "static".into(),
+        group: model.group.name().into(),
+        t_end: settings.load_factor,
+        ..Default::default()
+    };
+    let summary_path = out_dir.join("summary.json");
+    summary.write(&summary_path)?;
+    let names = SensorEvaluator::names(model);
+    let mut csv =
+        CsvWriter::create_with_first_column(&out_dir.join("sensors.csv"), "load_factor", &names)?;
+    let mut statics = match Statics::new(model, *settings) {
+        Ok(s) => s,
+        Err(e) => {
+            summary.status = "failed".into();
+            summary.error = Some(e.to_string());
+            summary.wall_seconds = start.elapsed().as_secs_f64();
+            summary.write(&summary_path)?;
+            return Ok(summary);
+        }
+    };
+    summary.unknowns = statics.data.layout.n_unknowns();
+    summary.linear_solver = format!("{:?}", statics.data.solver.backend()).to_lowercase();
+    summary.warnings = statics.warnings.clone();
+    let mut sensors = SensorEvaluator::new(model);
+    let mut output_seconds = 0.0;
+    let target = settings.load_factor;
+    let result = statics.run(&mut |s| {
+        let t0 = Instant::now();
+        let values = sensors.evaluate(s.model, &s.data, &s.state);
+        csv.row(s.load_factor, &values)
+            .map_err(|e| format!("writing {}: {e}", csv.path().display()))?;
+        progress(s.load_factor, target);
+        output_seconds += t0.elapsed().as_secs_f64();
+        Ok(())
+    });
+    let wall = start.elapsed().as_secs_f64();
+    summary.steps = statics.stats.steps;
+    summary.newton_iterations = statics.stats.newton_iterations;
+    summary.rejected_steps = statics.stats.rejected_steps;
+    summary.factorizations = statics.stats.factorizations;
+    summary.outputs = statics.stats.steps + 1;
+    summary.newton_iterations_per_step =
+        statics.stats.newton_iterations as f64 / statics.stats.steps.max(1) as f64;
+    summary.t_reached = statics.load_factor;
+    summary.wall_seconds = wall;
+    summary.solve_seconds = (wall - output_seconds).max(0.0);
+    match result {
+        Ok(_) => summary.status = "ok".into(),
+        Err(e) => {
+            summary.status = "failed".into();
+            summary.error = Some(e.to_string());
+        }
+    }
+    summary.write(&summary_path)?;
+    Ok(summary)
+}
+
+/// Dynamic analysis: `sensors.csv` has the time in its first column.
+fn run_dynamic(
+    file: &ModelFile,
+    settings: &crate::solve::DynamicSettings,
+    out_dir: &Path,
+    progress: &mut dyn FnMut(f64, f64),
+) -> std::io::Result<Summary> {
+    let start = Instant::now();
+    let model = &file.model;
     let mut summary = Summary {
         status: "running".into(),
         title: model.title.clone(),

@@ -147,6 +147,16 @@ impl SensorEvaluator {
                     }
                 }
                 SensorKind::ConstraintViolation => constraint_violation(model, data, state, &nodes),
+                SensorKind::BeamStrain { beam, component }
+                | SensorKind::BeamStress { beam, component } => {
+                    let b = &model.beams[*beam];
+                    let st = b.state(&[nodes[b.nodes[0].0], nodes[b.nodes[1].0]]);
+                    if matches!(s.kind, SensorKind::BeamStrain { .. }) {
+                        st.strain[*component]
+                    } else {
+                        st.stress[*component]
+                    }
+                }
             };
             out.push(value);
         }

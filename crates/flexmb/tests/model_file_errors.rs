@@ -6,6 +6,7 @@ use flexmb::model::{
     box_inertia, frame_from_axis, rotation_from_vector, JointKind, Model, NodeId, Sensor,
     SensorKind, SpringDamper, TimeFunction,
 };
+use flexmb::solve::{StaticMethod, StaticSettings};
 use flexmb::DynamicSettings;
 use flexmb_lie::{Frame, Group, Mat3, Vec3};
 use std::path::PathBuf;
@@ -160,6 +161,7 @@ fn good(overrides: &[&str]) -> Result<ModelFile, InputError> {
 fn dynamic(file: &ModelFile) -> DynamicSettings {
     match file.analysis {
         Analysis::Dynamic(s) => s,
+        Analysis::Static(_) => panic!("not a dynamic analysis"),
     }
 }
 
@@ -670,6 +672,26 @@ fn documented_examples_are_valid() {
     // Frame B of the universal joint has its z axis along axis_b.
     let zb = crank.nodes[1].frame.r * crank.joints[1].frame_b.r.column(2);
     assert!((zb - Vec3::y()).norm() < 1e-12);
+    let bend = files
+        .iter()
+        .find(|f| f.model.title == "45-degree bend")
+        .expect("the bend example");
+    assert!(matches!(bend.analysis, Analysis::Static(_)));
+    assert_eq!(bend.model.nodes.len(), 9);
+    assert_eq!(bend.model.beams.len(), 8);
+    let tip = bend.model.nodes[8].frame.x;
+    let c = std::f64::consts::FRAC_1_SQRT_2;
+    assert!((tip - Vec3::new(100.0 * c, 100.0 * (1.0 - c), 0.0)).norm() < 1e-10);
+    let frame = files
+        .iter()
+        .find(|f| f.model.title == "L frame")
+        .expect("the frame example");
+    assert_eq!(frame.model.nodes.len(), 7);
+    assert_eq!(frame.model.beams.len(), 6);
+    assert_eq!(
+        frame.model.bodies[0].node,
+        frame.model.node_id("arm.2").unwrap()
+    );
 }
 
 /// The documented examples start: consistent initial conditions and a few steps.
@@ -693,6 +715,25 @@ fn documented_examples_run() {
         if !block.starts_with("flexmb = 1") {
             continue;
         }
+        let file = parse_model_str(block, "model-format.md", &[]).unwrap();
+        if let Analysis::Static(settings) = file.analysis {
+            let mut statics = flexmb::solve::Statics::new(&file.model, settings)
+                .unwrap_or_else(|e| panic!("{}: {e}", file.model.title));
+            statics
+                .run(&mut |_| Ok(()))
+                .unwrap_or_else(|e| panic!("{}: {e}", file.model.title));
+            assert!((statics.load_factor - settings.load_factor).abs() < 1e-9);
+            if file.model.title == "45-degree bend" {
+                // Close to the reference tip position (Simo & Vu-Quoc 1986).
+                let tip = statics.state.q[8].x;
+                let reference = Vec3::new(47.23, 15.79, 53.37);
+                assert!(
+                    (tip - reference).norm() < 0.02 * reference.norm(),
+                    "{tip:?}"
+                );
+            }
+            continue;
+        }
         let file =
             parse_model_str(block, "model-format.md", &["solver.t_end=0.02".to_string()]).unwrap();
         let mut sim = flexmb::Simulation::new(&file.model, dynamic(&file))
@@ -702,4 +743,501 @@ fn documented_examples_run() {
             .unwrap_or_else(|e| panic!("{}: {e}", file.model.title));
         assert!(stats.steps >= 20, "{stats:?}");
     }
+}
+
+const BEAMS: &str = r#"flexmb = 1
+title = "Beams"
+
+[model]
+group = "SE3"
+gravity = [0.0, 0.0, -9.81]
+
+[solver]
+analysis = "static"
+load_factor = 2.0
+increment = 0.05
+rtol = 1e-9
+
+[[beam]]
+name = "a"
+start = [0.0, 0.0, 0.0]
+end = [4.0, 0.0, 0.0]
+elements = 4
+orientation = [0.0, 0.0, 1.0]
+section = { EA = 1e6, GA2 = 1e6, GA3 = 1e6, GJ = 1e3, EI2 = 1e3, EI3 = 1e3, rhoA = 1.0, rhoJ = 20.0, rhoI2 = 10.0, rhoI3 = 10.0 }
+
+[[beam]]
+name = "b"
+start_node = "a.4"
+end = [4.0, 2.0, 0.0]
+elements = 2
+orientation = [0.0, 0.0, 5.0]
+section = { E = 2.1e11, nu = 0.3, A = 1e-4, I2 = 1e-8, I3 = 2e-8, J = 3e-8, rho = 7800.0 }
+
+[[beam]]
+name = "ring"
+start = [10.0, 0.0, 0.0]
+arc = { center = [0.0, 0.0, 0.0], axis = [0.0, 0.0, 1.0], angle_deg = 90.0 }
+elements = 3
+orientation = [0.0, 0.0, 1.0]
+section = { stiffness = [[1e6, 0, 0, 0, 0, 0], [0, 1e6, 0, 0, 0, 0], [0, 0, 1e6, 0, 0, 0], [0, 0, 0, 1e3, 0, 0], [0, 0, 0, 0, 1e3, 0], [0, 0, 0, 0, 0, 1e3]], mass_per_length = 1.0, rotary_inertia = [20.0, 10.0, 10.0] }
+
+[[joint]]
+name = "clamp"
+type = "fixed"
+node_b = "a.0"
+position = [0.0, 0.0, 0.0]
+
+[[load]]
+name = "tip"
+node = "b.2"
+force = [0.0, 0.0, -10.0]
+
+[[sensor]]
+name = "root_moment"
+type = "beam_stress"
+beam = "a[0]"
+component = "bending_2"
+
+[[sensor]]
+name = "ring_strain"
+type = "beam_strain"
+beam = "ring[2]"
+component = "axial"
+
+[[body]]
+name = "weight"
+node = "b.2"
+mass = 2.0
+inertia = [0.1, 0.1, 0.1]
+"#;
+
+fn beams_with(from: &str, to: &str) -> String {
+    assert!(BEAMS.contains(from), "{from:?} not in BEAMS");
+    match parse_model_str(&BEAMS.replacen(from, to, 1), "beams.toml", &[]) {
+        Ok(_) => panic!("accepted with {to:?}"),
+        Err(e) => {
+            println!("{e}");
+            e.to_string()
+        }
+    }
+}
+
+fn close(a: &Mat3, b: &Mat3) -> bool {
+    (a - b).norm() < 1e-12
+}
+
+#[test]
+fn beams_are_meshed() {
+    let file = parse_model_str(BEAMS, "beams.toml", &[]).unwrap();
+    let m = &file.model;
+    let names: Vec<&str> = m.nodes.iter().map(|n| n.name.as_str()).collect();
+    assert_eq!(
+        names,
+        ["a.0", "a.1", "a.2", "a.3", "a.4", "b.1", "b.2", "ring.0", "ring.1", "ring.2", "ring.3"]
+    );
+    let elements: Vec<&str> = m.beams.iter().map(|b| b.name.as_str()).collect();
+    assert_eq!(
+        elements,
+        ["a[0]", "a[1]", "a[2]", "a[3]", "b[0]", "b[1]", "ring[0]", "ring[1]", "ring[2]"]
+    );
+    let id = |name: &str| m.node_id(name).unwrap();
+    // Straight beams: equal spacing, section frame x along the beam, z along orientation.
+    for i in 0..=4 {
+        let n = &m.nodes[id(&format!("a.{i}")).0];
+        assert!((n.frame.x - Vec3::new(i as f64, 0.0, 0.0)).norm() < 1e-14);
+        assert!(close(&n.frame.r, &Mat3::identity()));
+        assert_eq!(n.velocity, Vec3::zeros());
+    }
+    let b2 = &m.nodes[id("b.2").0];
+    assert!((b2.frame.x - Vec3::new(4.0, 2.0, 0.0)).norm() < 1e-14);
+    let quarter = rotation_from_vector(&(Vec3::z() * std::f64::consts::FRAC_PI_2));
+    assert!(close(&b2.frame.r, &quarter));
+    assert!((m.nodes[id("b.1").0].frame.x - Vec3::new(4.0, 1.0, 0.0)).norm() < 1e-14);
+    // The shared node keeps the frame of beam a; beam b's section there is turned by 90 deg.
+    let (a3, b0) = (&m.beams[3], &m.beams[4]);
+    assert_eq!(a3.nodes, [id("a.3"), id("a.4")]);
+    assert_eq!(b0.nodes, [id("a.4"), id("b.1")]);
+    assert!(close(&a3.offset_b, &Mat3::identity()));
+    assert!(close(&b0.offset_a, &quarter));
+    assert!(close(&b0.offset_b, &Mat3::identity()));
+    for b in &m.beams[..6] {
+        assert!((b.length - 1.0).abs() < 1e-12, "{}: {}", b.name, b.length);
+    }
+    // Material form: EA = E A, GA = G A with G = E / (2 (1 + nu)), rhoJ = rho (I2 + I3).
+    let s = &b0.section;
+    let g = 2.1e11 / 2.6;
+    let expected = [2.1e7, g * 1e-4, g * 1e-4, g * 3e-8, 2.1e3, 4.2e3];
+    for (k, e) in expected.iter().enumerate() {
+        assert!((s.stiffness[(k, k)] - e).abs() < 1e-9 * e, "C[{k}]");
+    }
+    assert!((s.mass_per_length - 0.78).abs() < 1e-12);
+    assert!((s.rotary_inertia[(0, 0)] - 7800.0 * 3e-8).abs() < 1e-15);
+    // Arc: nodes on the circle, x tangent, z along the arc's axis, arc-length elements.
+    for i in 0..=3 {
+        let phi = (30.0 * i as f64).to_radians();
+        let n = &m.nodes[id(&format!("ring.{i}")).0];
+        let p = Vec3::new(10.0 * phi.cos(), 10.0 * phi.sin(), 0.0);
+        assert!((n.frame.x - p).norm() < 1e-12, "{}", n.name);
+        let x = n.frame.r.column(0).into_owned();
+        assert!((x - Vec3::new(-phi.sin(), phi.cos(), 0.0)).norm() < 1e-12);
+        assert!((n.frame.r.column(2) - Vec3::z()).norm() < 1e-12);
+        assert!((n.frame.r.determinant() - 1.0).abs() < 1e-12);
+    }
+    for b in &m.beams[6..] {
+        assert!((b.length - 10.0 * 30f64.to_radians()).abs() < 1e-9);
+        assert!(close(&b.offset_a, &Mat3::identity()));
+    }
+    assert_eq!(m.beams[6].section.stiffness[(3, 3)], 1e3);
+    // Joints and loads refer to beam nodes by name; beam sensors to elements.
+    assert_eq!(m.joints[0].node_b, Some(id("a.0")));
+    assert_eq!(m.loads[0].node, id("b.2"));
+    assert_eq!(m.bodies[0].node, id("b.2"));
+    assert_eq!(
+        m.sensors[0].kind,
+        SensorKind::BeamStress {
+            beam: 0,
+            component: 4
+        }
+    );
+    assert_eq!(
+        m.sensors[1].kind,
+        SensorKind::BeamStrain {
+            beam: 8,
+            component: 0
+        }
+    );
+    // Static analysis.
+    let Analysis::Static(s) = file.analysis else {
+        panic!("not static")
+    };
+    let mut expected = StaticSettings::new();
+    expected.load_factor = 2.0;
+    expected.initial_increment = 0.05;
+    expected.newton.rtol = 1e-9;
+    assert_eq!(s, expected);
+    assert_eq!(s.method, StaticMethod::LoadControl);
+}
+
+#[test]
+fn beam_end_node_and_negative_arc() {
+    // An arc turning clockwise, ending at an existing node; a beam between two nodes.
+    let text = BEAMS
+        .replace(
+            "[[beam]]\nname = \"ring\"",
+            "[[node]]\nname = \"rim\"\nposition = [0.0, -10.0, 0.0]\n\n[[beam]]\nname = \"ring\"",
+        )
+        .replace("angle_deg = 90.0 }", "angle_deg = -90.0 }\nend_node = \"rim\"")
+        .replace(
+            "\n[[joint]]",
+            "\n[[beam]]\nname = \"tie\"\nstart_node = \"b.2\"\nend = [0.0, -10.0, 0.0]\nend_node = \"rim\"\nelements = 1\norientation = [0, 0, 1]\nsection = { E = 1e9, G = 4e8, A = 1e-3, I2 = 1e-6, I3 = 1e-6, J = 2e-6, rho = 1000, k2 = 0.8, k3 = 0.9 }\n\n[[joint]]",
+        );
+    let file = parse_model_str(&text, "beams.toml", &[]).unwrap_or_else(|e| panic!("{e}"));
+    let m = &file.model;
+    let rim = m.node_id("rim").unwrap();
+    assert_eq!(m.node_id("ring.3"), None);
+    let ring2 = &m.nodes[m.node_id("ring.2").unwrap().0];
+    assert!((ring2.frame.x - Vec3::new(5.0, -5.0 * 3f64.sqrt(), 0.0)).norm() < 1e-12);
+    // Clockwise: the tangent is -z x r.
+    let x = ring2.frame.r.column(0).into_owned();
+    assert!((x - Vec3::new(-3f64.sqrt() / 2.0, -0.5, 0.0)).norm() < 1e-12);
+    let last = m.beams.iter().find(|b| b.name == "ring[2]").unwrap();
+    assert_eq!(last.nodes[1], rim);
+    // The rim node has the identity orientation: the offset is the section frame there.
+    let frame = Mat3::from_columns(&[-Vec3::x(), -Vec3::y(), Vec3::z()]);
+    assert!(close(&last.offset_b, &frame));
+    let tie = m.beams.iter().find(|b| b.name == "tie[0]").unwrap();
+    assert_eq!(tie.nodes, [m.node_id("b.2").unwrap(), rim]);
+    let s = &tie.section;
+    assert!((s.stiffness[(1, 1)] - 0.8 * 4e8 * 1e-3).abs() < 1e-6);
+    assert!((s.stiffness[(2, 2)] - 0.9 * 4e8 * 1e-3).abs() < 1e-6);
+    assert!((tie.length - (4.0f64.powi(2) + 12.0f64.powi(2)).sqrt()).abs() < 1e-12);
+}
+
+#[test]
+fn beam_errors_name_their_field() {
+    let sec = "section = { EA = 1e6,";
+    // Sectional properties must be positive.
+    let e = beams_with("GJ = 1e3", "GJ = -1");
+    assert_contains(
+        &e,
+        &[
+            "beams.toml:20:",
+            "field 'beam[0].section.GJ' (beam 'a')",
+            "must be positive",
+        ],
+    );
+    // Mixed forms.
+    let e = beams_with(sec, "section = { E = 1.0, EA = 1e6,");
+    assert_contains(&e, &["field 'beam[0].section.EA'", "use one form"]);
+    let e = beams_with("mass_per_length = 1.0, ", "");
+    assert_contains(&e, &["field 'beam[2].section.mass_per_length'", "required"]);
+    let e = beams_with("nu = 0.3", "G = 1e10, nu = 0.3");
+    assert_contains(&e, &["field 'beam[1].section.nu'", "either G or nu"]);
+    // A stiffness matrix that is symmetric but not positive definite: Model::validate, at the
+    // section's line, naming the element.
+    let e = beams_with("[[1e6, 0, 0,", "[[-1e6, 0, 0,");
+    assert_contains(
+        &e,
+        &[
+            "beams.toml:36:",
+            "field 'beam[2].section' (beam 'ring')",
+            "element 'ring[0]'",
+            "positive definite",
+        ],
+    );
+    let e = beams_with("[0, 1e6, 0, 0, 0, 0]", "[1, 1e6, 0, 0, 0, 0]");
+    assert_contains(&e, &["field 'beam[2].section.stiffness'", "symmetric"]);
+    // Geometry.
+    let e = beams_with("end = [4.0, 2.0, 0.0]", "end = [4.0, 0.0, 0.0]");
+    assert_contains(
+        &e,
+        &["field 'beam[1].end'", "must differ from the start point"],
+    );
+    let e = beams_with("elements = 4", "elements = 0");
+    assert_contains(&e, &["field 'beam[0].elements'", "between 1 and"]);
+    let e = beams_with("angle_deg = 90.0", "angle_deg = 400.0");
+    assert_contains(&e, &["field 'beam[2].arc.angle_deg'", "360"]);
+    let e = beams_with(
+        "angle_deg = 90.0 }\nelements = 3",
+        "angle_deg = 270.0 }\nelements = 1",
+    );
+    assert_contains(
+        &e,
+        &["field 'beam[2].arc.angle_deg'", "less than 180 degrees"],
+    );
+    let e = beams_with("center = [0.0, 0.0, 0.0]", "center = [10.0, 0.0, -1.0]");
+    assert_contains(&e, &["field 'beam[2].arc.center'", "on the arc's axis"]);
+    // In-plane orientation: parallel to the tangent in the middle of the arc (at 45 deg).
+    let e = beams_with(
+        "elements = 3\norientation = [0.0, 0.0, 1.0]",
+        "elements = 3\norientation = [-1.0, 1.0, 0.0]",
+    );
+    assert_contains(
+        &e,
+        &[
+            "beams.toml:35:",
+            "field 'beam[2].orientation'",
+            "parallel",
+            "at [7.07",
+        ],
+    );
+    let e = beams_with(
+        "start_node = \"a.4\"",
+        "start_node = \"a.4\"\nstart = [0, 0, 0]",
+    );
+    assert_contains(&e, &["field 'beam[1].start_node'", "not both"]);
+    // A beam starting at a later beam's node.
+    let e = beams_with("start_node = \"a.4\"", "start_node = \"ring.0\"");
+    assert_contains(&e, &["field 'beam[1].start_node'", "unknown node 'ring.0'"]);
+    // Generated node names must not clash with other nodes.
+    let e = beams_with(
+        "[[beam]]\nname = \"a\"",
+        "[[node]]\nname = \"a.2\"\n\n[[beam]]\nname = \"a\"",
+    );
+    assert_contains(
+        &e,
+        &[
+            "field 'beam[0].name'",
+            "creates a node named 'a.2'",
+            "node[0]",
+        ],
+    );
+    let e = beams_with("name = \"b\"", "name = \"a\"");
+    assert_contains(&e, &["field 'beam[1].name'", "duplicate beam name 'a'"]);
+    // Beam sensors.
+    let e = beams_with("beam = \"a[0]\"", "beam = \"a\"");
+    assert_contains(
+        &e,
+        &["field 'sensor[0].beam'", "4 elements", "'a[0]' to 'a[3]'"],
+    );
+    let e = beams_with("beam = \"a[0]\"", "beam = \"a[4]\"");
+    assert_contains(
+        &e,
+        &[
+            "field 'sensor[0].beam'",
+            "unknown beam element 'a[4]'",
+            "did you mean",
+        ],
+    );
+    let e = beams_with("component = \"bending_2\"", "component = \"bending_y\"");
+    assert_contains(&e, &["field 'sensor[0].component'", "\"bending_2\""]);
+    let e = beams_with(
+        "component = \"axial\"",
+        "component = \"axial\"\nnode = \"a.1\"",
+    );
+    assert_contains(&e, &["field 'sensor[1].node'", "beam_strain"]);
+    // Static settings.
+    let e = beams_with("increment = 0.05", "increment = 0.05\nh = 1e-3");
+    assert_contains(
+        &e,
+        &[
+            "beams.toml:12:",
+            "field 'solver.h'",
+            "dynamic analysis",
+            "analysis = \"static\"",
+        ],
+    );
+    let e = beams_with("increment = 0.05", "increment = -0.05");
+    assert_contains(&e, &["field 'solver.increment'", "must be positive"]);
+    let e = beams_with("increment = 0.05", "increment = 0.05\narc_length = 0.2");
+    assert_contains(
+        &e,
+        &["field 'solver.arc_length'", "method = \"arc_length\""],
+    );
+    let e = beams_with("increment = 0.05", "increment = 0.05\nmethod = \"riks\"");
+    assert_contains(&e, &["field 'solver.method'", "\"arc_length\""]);
+    let e = beams_with("increment = 0.05", "increment = 0.05\nmin_increment = 0.1");
+    assert_contains(&e, &["field 'solver.increment'", "below min_increment"]);
+}
+
+#[test]
+fn static_solver_settings() {
+    let file = parse_model_str(
+        BEAMS,
+        "beams.toml",
+        &[
+            "solver.method=arc_length".into(),
+            "solver.arc_length=0.5".into(),
+            "solver.max_steps=50".into(),
+            "solver.target_iterations=4".into(),
+            "solver.max_iterations=40".into(),
+            "solver.min_increment=1e-4".into(),
+            "solver.max_increment=0.5".into(),
+            "solver.atol=1e-12".into(),
+        ],
+    )
+    .unwrap();
+    let Analysis::Static(s) = file.analysis else {
+        panic!("not static")
+    };
+    assert_eq!(s.method, StaticMethod::ArcLength);
+    assert_eq!(s.arc_length, 0.5);
+    assert_eq!(s.max_steps, 50);
+    assert_eq!(s.target_iterations, 4);
+    assert_eq!(s.newton.max_iterations, 40);
+    assert_eq!(s.newton.atol, 1e-12);
+    assert_eq!(s.min_increment, 1e-4);
+    assert_eq!(s.max_increment, 0.5);
+    assert_eq!(s.load_factor, 2.0);
+    // Overrides reach beams like any item.
+    let file = parse_model_str(
+        BEAMS,
+        "beams.toml",
+        &[
+            "beam.a.elements=8".into(),
+            "beam.ring.arc.angle_deg=-60".into(),
+        ],
+    )
+    .unwrap();
+    let m = &file.model;
+    assert_eq!(
+        m.beams.iter().filter(|b| b.name.starts_with("a[")).count(),
+        8
+    );
+    let end = m.nodes[m.node_id("ring.3").unwrap().0].frame.x;
+    assert!((end - Vec3::new(5.0, -5.0 * 3f64.sqrt(), 0.0)).norm() < 1e-12);
+}
+
+/// Byte mutations of the beam file give errors, never panics.
+#[test]
+fn no_panic_on_damaged_beam_input() {
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    let alphabet = b"0-.e[]{}=\"',\n axyz_19";
+    for _ in 0..3000 {
+        let mut bytes = BEAMS.as_bytes().to_vec();
+        for _ in 0..1 + next() % 3 {
+            let i = (next() % bytes.len() as u64) as usize;
+            bytes[i] = alphabet[(next() % alphabet.len() as u64) as usize];
+        }
+        if let Ok(text) = String::from_utf8(bytes) {
+            let _ = parse_model_str(&text, "t.toml", &[]);
+        }
+    }
+}
+
+#[test]
+fn beam_end_and_arc() {
+    check(
+        "beam_end_and_arc",
+        21,
+        "beam[0].arc",
+        &["(beam 'leg')", "either end", "not both"],
+    );
+}
+
+#[test]
+fn beam_unknown_section_key() {
+    check(
+        "beam_unknown_section_key",
+        23,
+        "beam[0].section.EIy",
+        &["unknown key 'EIy'", "did you mean 'EI2'", "(beam 'leg')"],
+    );
+}
+
+#[test]
+fn beam_nonpositive_ea() {
+    check(
+        "beam_nonpositive_ea",
+        23,
+        "beam[0].section.EA",
+        &["must be positive, got 0"],
+    );
+}
+
+#[test]
+fn beam_orientation_parallel_to_axis() {
+    check(
+        "beam_orientation_parallel",
+        22,
+        "beam[0].orientation",
+        &["parallel to the beam's axis"],
+    );
+}
+
+#[test]
+fn beam_dangling_start_node() {
+    check(
+        "beam_dangling_start_node",
+        19,
+        "beam[0].start_node",
+        &["unknown node 'tpi'", "did you mean 'tip'"],
+    );
+}
+
+#[test]
+fn beam_end_node_not_at_end_point() {
+    check(
+        "beam_end_node_off",
+        21,
+        "beam[0].end_node",
+        &["node 'tip'", "not at the end point"],
+    );
+}
+
+#[test]
+fn beam_needs_se3() {
+    check(
+        "beam_group",
+        18,
+        "beam[0].name",
+        &["(beam 'leg')", "SE(3)", "\"SE3\""],
+    );
+}
+
+#[test]
+fn static_key_in_dynamic_solver() {
+    check(
+        "static_key_in_dynamic",
+        13,
+        "solver.load_factor",
+        &["static analysis", "analysis = \"dynamic\""],
+    );
 }

@@ -5,7 +5,8 @@
 use flexmb::elements::{Coefficients, Context, ElementKernel, Mat12, NodeState, Parameter, Vec12};
 use flexmb::joints;
 use flexmb::model::{
-    JointKind, Load, LoadFrame, Model, NodeId, RigidBody, SpringDamper, TimeFunction,
+    Beam, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, RigidBody, SpringDamper,
+    TimeFunction,
 };
 use flexmb_lie::{Frame, Group, Mat3, Mat6, Vec3, Vec6};
 
@@ -398,4 +399,107 @@ fn parameter_derivatives_match_finite_differences() {
             &mut dr
         ));
     }
+}
+
+#[test]
+fn beam_tangents_match_finite_differences() {
+    let mut rng = Lcg(6);
+    let mut model = Model::new(Group::SE3);
+    model.gravity = Vec3::new(0.3, -9.81, 1.2);
+    model.add_node("a", Frame::identity());
+    model.add_node("b", Frame::identity());
+    // A full (non-diagonal) symmetric positive definite section.
+    let mut c = flexmb_lie::Mat6::from_diagonal(&Vec6::new(1e3, 4e2, 5e2, 30.0, 40.0, 60.0));
+    c[(0, 4)] = 15.0;
+    c[(4, 0)] = 15.0;
+    c[(3, 5)] = 5.0;
+    c[(5, 3)] = 5.0;
+    let section = BeamSection {
+        stiffness: c,
+        mass_per_length: 2.0,
+        rotary_inertia: Mat3::new(0.3, 0.01, 0.0, 0.01, 0.2, 0.02, 0.0, 0.02, 0.1),
+    };
+    for (offsets, curved) in [(false, false), (true, false), (true, true)] {
+        // Reference: a straight (or curved) element of length ~1.3 with arbitrary offsets.
+        let d0 = if curved {
+            Vec6::new(1.3, 0.0, 0.0, 0.1, 0.2, 0.5)
+        } else {
+            Vec6::new(1.3, 0.0, 0.0, 0.0, 0.0, 0.0)
+        };
+        let o = |on: bool, rng: &mut Lcg| {
+            if on {
+                flexmb_lie::so3::exp(&rng.v3(1.0))
+            } else {
+                Mat3::identity()
+            }
+        };
+        let beam = Beam {
+            name: "b".into(),
+            nodes: [NodeId(0), NodeId(1)],
+            section: section.clone(),
+            offset_a: o(offsets, &mut rng),
+            offset_b: o(offsets, &mut rng),
+            d0,
+            length: flexmb::elements::beam::arc_length(&d0),
+        };
+        // Deformed configurations: node b near a exp(d0), with large rotations of the whole.
+        for _ in 0..3 {
+            let mut nodes = [rng.node(Group::SE3), rng.node(Group::SE3)];
+            let ha = nodes[0]
+                .q
+                .compose(&Frame::new(Vec3::zeros(), beam.offset_a));
+            let hb = ha.compose(&flexmb_lie::se3::exp(&(d0 + rng.v6(0.3))));
+            nodes[1].q = Frame::new(hb.x, hb.r * beam.offset_b.transpose());
+            check_element("beam", &beam, &model, &nodes);
+        }
+    }
+}
+
+#[test]
+fn beam_tangent_is_invariant_under_rigid_motion() {
+    // Sonneville, Cardona & Brüls 2014, Sect. 4.3: K_t depends on the relative motion only.
+    let mut rng = Lcg(8);
+    let mut model = Model::new(Group::SE3);
+    model.add_node("a", Frame::identity());
+    model.add_node("b", Frame::identity());
+    let section = BeamSection::diagonal([1e3, 4e2, 5e2, 30.0, 40.0, 60.0], 1.0, [0.1, 0.05, 0.05]);
+    let d0 = Vec6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let beam = Beam {
+        name: "b".into(),
+        nodes: [NodeId(0), NodeId(1)],
+        section,
+        offset_a: Mat3::identity(),
+        offset_b: Mat3::identity(),
+        d0,
+        length: 1.0,
+    };
+    let ctx = Context {
+        model: &model,
+        group: Group::SE3,
+        t: 0.0,
+        gravity_scale: 1.0,
+        load_scale: 1.0,
+    };
+    let stiffness = |nodes: &[NodeState; 2]| {
+        let mut r = Vec12::zeros();
+        let mut s = Mat12::zeros();
+        let coef = Coefficients {
+            m: 0.0,
+            c: 0.0,
+            k: 1.0,
+        };
+        beam.evaluate(&ctx, nodes, &mut r, Some((&coef, &mut s)));
+        (r, s)
+    };
+    let mut nodes = [NodeState::ground(Frame::identity()); 2];
+    nodes[1].q = flexmb_lie::se3::exp(&(d0 + rng.v6(0.4)));
+    let (r0, k0) = stiffness(&nodes);
+    let rigid = flexmb_lie::se3::exp(&rng.v6(2.0));
+    let moved = [
+        NodeState::ground(rigid.compose(&nodes[0].q)),
+        NodeState::ground(rigid.compose(&nodes[1].q)),
+    ];
+    let (r1, k1) = stiffness(&moved);
+    assert!((r0 - r1).norm() < 1e-9 * r0.norm());
+    assert!((k0 - k1).norm() < 1e-9 * k0.norm());
 }

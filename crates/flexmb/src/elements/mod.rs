@@ -22,6 +22,7 @@
 //! variation, body rotation variation) are converted to the group's coordinates by
 //! [`physical`].
 
+pub mod beam;
 pub mod load;
 pub mod physical;
 pub mod rigid_body;
@@ -111,6 +112,7 @@ pub enum Parameter {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ElementRef {
     Body(usize),
+    Beam(usize),
     Load(usize),
     Spring(usize),
 }
@@ -152,6 +154,7 @@ impl ElementRef {
     /// All force elements of a model.
     pub fn all(model: &Model) -> Vec<ElementRef> {
         let mut out: Vec<ElementRef> = (0..model.bodies.len()).map(ElementRef::Body).collect();
+        out.extend((0..model.beams.len()).map(ElementRef::Beam));
         out.extend((0..model.loads.len()).map(ElementRef::Load));
         out.extend((0..model.springs.len()).map(ElementRef::Spring));
         out
@@ -161,6 +164,7 @@ impl ElementRef {
     pub fn kernel<'m>(&self, model: &'m Model) -> Kernel<'m> {
         match *self {
             ElementRef::Body(i) => Kernel::Body(&model.bodies[i]),
+            ElementRef::Beam(i) => Kernel::Beam(&model.beams[i]),
             ElementRef::Load(i) => Kernel::Load(&model.loads[i]),
             ElementRef::Spring(i) => Kernel::Spring(&model.springs[i]),
         }
@@ -170,6 +174,7 @@ impl ElementRef {
     pub fn describe(&self, model: &Model) -> String {
         match *self {
             ElementRef::Body(i) => format!("body '{}'", model.bodies[i].name),
+            ElementRef::Beam(i) => format!("beam element '{}'", model.beams[i].name),
             ElementRef::Load(i) => format!("load '{}'", model.loads[i].name),
             ElementRef::Spring(i) => format!("spring '{}'", model.springs[i].name),
         }
@@ -179,6 +184,7 @@ impl ElementRef {
 /// Borrowed kernel of a built-in element.
 pub enum Kernel<'m> {
     Body(&'m crate::model::RigidBody),
+    Beam(&'m crate::model::Beam),
     Load(&'m crate::model::Load),
     Spring(&'m crate::model::SpringDamper),
 }
@@ -187,6 +193,7 @@ macro_rules! dispatch {
     ($self:ident, $k:ident => $e:expr) => {
         match $self {
             Kernel::Body($k) => $e,
+            Kernel::Beam($k) => $e,
             Kernel::Load($k) => $e,
             Kernel::Spring($k) => $e,
         }

@@ -163,7 +163,13 @@ impl RigidBody {
         }
     }
 
-    fn local(&self, ctx: &Context, n: &NodeState, unit_mass: bool) -> (Vec6, Mat6, Mat6, Mat6) {
+    /// Residual, mass matrix, C_t and K_t of the body (unit mass: their derivative wrt m).
+    pub(crate) fn local(
+        &self,
+        ctx: &Context,
+        n: &NodeState,
+        unit_mass: bool,
+    ) -> (Vec6, Mat6, Mat6, Mat6) {
         match ctx.group {
             Group::SE3 => self.residual_se3(ctx, n, unit_mass),
             Group::R3xSO3 => self.residual_r3so3(ctx, n, unit_mass),

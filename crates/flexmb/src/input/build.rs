@@ -9,7 +9,7 @@ use crate::model::{
     box_inertia, frame_from_axis, rotation_from_vector, JointKind, Load, LoadFrame, Model, NodeId,
     Sensor, SensorFrame, SensorKind, SpringDamper, TimeFunction,
 };
-use crate::solve::DynamicSettings;
+use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
 use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
 use std::collections::HashMap;
 
@@ -24,6 +24,7 @@ const TOP_KEYS: &[&str] = &[
     "joint",
     "load",
     "spring",
+    "beam",
     "sensor",
 ];
 const NODE_STATE_KEYS: &[&str] = &[
@@ -36,31 +37,61 @@ const NODE_STATE_KEYS: &[&str] = &[
 const GROUND: &str = "ground";
 
 /// Where a model item came from in the file, to place errors found by `Model::validate`.
-struct Origin {
+#[derive(Clone)]
+pub(super) struct Origin {
     path: String,
     item: Option<ItemLabel>,
     span: Span,
     fields: Vec<(String, Span)>,
+    /// Fields of the model item that have another name in the file:
+    /// `(field of Model::validate, key of the file's table)`.
+    aliases: Vec<(&'static str, &'static str)>,
+    /// Put before the message (names the element of a meshed beam), except for the fields
+    /// in `unprefixed`.
+    prefix: String,
+    unprefixed: Vec<&'static str>,
 }
 
 impl Origin {
-    fn of(t: &Table<'_>) -> Self {
+    pub(super) fn of(t: &Table<'_>) -> Self {
         Self {
             path: t.path.clone(),
             item: t.item.clone(),
             span: t.span.clone(),
             fields: t.spans(),
+            aliases: Vec::new(),
+            prefix: String::new(),
+            unprefixed: Vec::new(),
         }
+    }
+
+    /// Maps the model field `field` to the file key `key`.
+    pub(super) fn alias(mut self, field: &'static str, key: &'static str) -> Self {
+        self.aliases.push((field, key));
+        self
+    }
+
+    pub(super) fn prefixed(mut self, prefix: String) -> Self {
+        self.prefix = prefix;
+        self
+    }
+
+    /// No prefix for errors about the model field `field`.
+    pub(super) fn unprefixed(mut self, field: &'static str) -> Self {
+        self.unprefixed.push(field);
+        self
     }
 }
 
 #[derive(Default)]
-struct Origins {
-    nodes: Vec<Origin>,
+pub(super) struct Origins {
+    pub nodes: Vec<Origin>,
     bodies: Vec<Origin>,
     joints: Vec<Origin>,
     loads: Vec<Origin>,
     springs: Vec<Origin>,
+    /// One per element of `Model::beams`.
+    pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
 }
 
@@ -96,10 +127,17 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     model.title = title;
     model.gravity = mt.opt_vec3("gravity")?.unwrap_or_else(Vec3::zeros);
 
-    let settings = read_solver(&top.req("solver")?.table()?)?;
+    let analysis = read_solver(&top.req("solver")?.table()?)?;
 
     let mut origins = Origins::default();
-    read_nodes_and_bodies(&top, &mut model, &mut origins)?;
+    // Beams are meshed after the nodes of [[node]] and [[body]] exist (a beam may start at
+    // them) and before the bodies are attached (a body may sit on a beam node).
+    read_nodes_and_bodies(
+        &top,
+        &mut model,
+        &mut origins,
+        |model, origins, node_names| super::beam::read_beams(&top, model, origins, node_names),
+    )?;
     read_joints(&top, &mut model, &mut origins)?;
     read_loads(&top, &mut model, &mut origins)?;
     read_springs(&top, &mut model, &mut origins)?;
@@ -110,7 +148,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
         .map_err(|e| map_model_error(src, e, &origins))?;
     Ok(ModelFile {
         model,
-        analysis: Analysis::Dynamic(settings),
+        analysis,
         description,
     })
 }
@@ -126,20 +164,30 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
         "joint" => &origins.joints,
         "load" => &origins.loads,
         "spring" => &origins.springs,
+        "beam" => &origins.beams,
         _ => &origins.sensors,
     };
     match list.get(item.index) {
         Some(o) => {
+            let key = o
+                .aliases
+                .iter()
+                .find(|(f, _)| *f == item.field)
+                .map_or(item.field, |(_, k)| *k);
             let span = o
                 .fields
                 .iter()
-                .find(|(k, _)| k == item.field)
+                .find(|(k, _)| k == key)
                 .map_or(o.span.clone(), |(_, s)| s.clone());
             src.field_error(
                 &span,
-                &format!("{}.{}", o.path, item.field),
+                &format!("{}.{key}", o.path),
                 o.item.as_ref(),
-                message,
+                if o.unprefixed.contains(&item.field) {
+                    message
+                } else {
+                    format!("{}{message}", o.prefix)
+                },
             )
         }
         None => src.field_error(
@@ -151,7 +199,7 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
     }
 }
 
-fn positive(f: &Field<'_>) -> Result<f64> {
+pub(super) fn positive(f: &Field<'_>) -> Result<f64> {
     let v = f.f64()?;
     if v > 0.0 {
         Ok(v)
@@ -160,7 +208,7 @@ fn positive(f: &Field<'_>) -> Result<f64> {
     }
 }
 
-fn non_negative(f: &Field<'_>) -> Result<f64> {
+pub(super) fn non_negative(f: &Field<'_>) -> Result<f64> {
     let v = f.f64()?;
     if v >= 0.0 {
         Ok(v)
@@ -169,7 +217,7 @@ fn non_negative(f: &Field<'_>) -> Result<f64> {
     }
 }
 
-fn nonzero_vec3(f: &Field<'_>) -> Result<Vec3> {
+pub(super) fn nonzero_vec3(f: &Field<'_>) -> Result<Vec3> {
     let v = f.vec3()?;
     if v.norm() > 1e-12 && v.norm().is_finite() {
         Ok(v)
@@ -178,27 +226,164 @@ fn nonzero_vec3(f: &Field<'_>) -> Result<Vec3> {
     }
 }
 
-fn read_solver(t: &Table<'_>) -> Result<DynamicSettings> {
-    t.check_keys(&[
-        "analysis",
-        "t_end",
-        "h",
-        "rho_inf",
-        "output_interval",
-        "h_min",
-        "rtol",
-        "atol",
-        "max_iterations",
-        "reuse_jacobian",
-        "max_contraction",
-        "max_jacobian_age",
-        "formulation",
-        "scheme",
-        "hht_alpha",
-        "newmark_beta",
-        "newmark_gamma",
-    ])?;
-    t.req("analysis")?.choice(&["dynamic"])?;
+/// Keys of `[solver]` common to both analyses (the Newton settings).
+const SOLVER_SHARED_KEYS: &[&str] = &["analysis", "rtol", "atol", "max_iterations"];
+/// Keys of `[solver]` that only a dynamic analysis has.
+const SOLVER_DYNAMIC_KEYS: &[&str] = &[
+    "t_end",
+    "h",
+    "rho_inf",
+    "output_interval",
+    "h_min",
+    "reuse_jacobian",
+    "max_contraction",
+    "max_jacobian_age",
+    "formulation",
+    "scheme",
+    "hht_alpha",
+    "newmark_beta",
+    "newmark_gamma",
+];
+/// Keys of `[solver]` that only a static analysis has.
+const SOLVER_STATIC_KEYS: &[&str] = &[
+    "load_factor",
+    "increment",
+    "min_increment",
+    "max_increment",
+    "method",
+    "arc_length",
+    "max_steps",
+    "target_iterations",
+];
+
+fn read_solver(t: &Table<'_>) -> Result<Analysis> {
+    let all: Vec<&str> = [SOLVER_SHARED_KEYS, SOLVER_DYNAMIC_KEYS, SOLVER_STATIC_KEYS].concat();
+    t.check_keys(&all)?;
+    let kind = t.req("analysis")?.choice(&["dynamic", "static"])?;
+    let (other, other_keys) = match kind {
+        "dynamic" => ("static", SOLVER_STATIC_KEYS),
+        _ => ("dynamic", SOLVER_DYNAMIC_KEYS),
+    };
+    if let Some(key) = t.first_key_of(other_keys) {
+        return Err(t.key_name_err(
+            key,
+            format!("is a setting of the {other} analysis, not allowed with analysis = \"{kind}\""),
+        ));
+    }
+    let (newton, analysis) = if kind == "dynamic" {
+        let s = read_dynamic(t)?;
+        (s.newton, Analysis::Dynamic(s))
+    } else {
+        let s = read_static(t)?;
+        (s.newton, Analysis::Static(s))
+    };
+    let newton = read_newton(t, newton)?;
+    Ok(match analysis {
+        Analysis::Dynamic(mut s) => {
+            s.newton = newton;
+            Analysis::Dynamic(s)
+        }
+        Analysis::Static(mut s) => {
+            s.newton = newton;
+            Analysis::Static(s)
+        }
+    })
+}
+
+/// The Newton keys shared by both analyses, over the analysis' defaults.
+fn read_newton(t: &Table<'_>, mut n: NewtonSettings) -> Result<NewtonSettings> {
+    if let Some(f) = t.field("rtol") {
+        n.rtol = positive(&f)?;
+    }
+    if let Some(f) = t.field("atol") {
+        n.atol = positive(&f)?;
+    }
+    if let Some(f) = t.field("max_iterations") {
+        let v = f.int()?;
+        if !(1..=10_000).contains(&v) {
+            return Err(f.err(format!("must be between 1 and 10000, got {v}")));
+        }
+        n.max_iterations = v as usize;
+    }
+    Ok(n)
+}
+
+/// A positive integer at most `max`.
+fn count(f: &Field<'_>, max: i64) -> Result<usize> {
+    let n = f.int()?;
+    if !(1..=max).contains(&n) {
+        return Err(f.err(format!("must be between 1 and {max}, got {n}")));
+    }
+    Ok(n as usize)
+}
+
+fn read_static(t: &Table<'_>) -> Result<StaticSettings> {
+    let mut s = StaticSettings::new();
+    if let Some(f) = t.field("load_factor") {
+        s.load_factor = f.f64()?;
+        if s.load_factor == 0.0 {
+            return Err(f.err("must not be 0 (the final load factor)"));
+        }
+    }
+    if let Some(f) = t.field("increment") {
+        s.initial_increment = positive(&f)?;
+    }
+    if let Some(f) = t.field("min_increment") {
+        s.min_increment = positive(&f)?;
+    }
+    if let Some(f) = t.field("max_increment") {
+        s.max_increment = positive(&f)?;
+    }
+    if s.min_increment > s.max_increment {
+        let key = if t.has("min_increment") {
+            "min_increment"
+        } else {
+            "max_increment"
+        };
+        return Err(t.key_err(
+            key,
+            format!(
+                "min_increment = {} exceeds max_increment = {}",
+                s.min_increment, s.max_increment
+            ),
+        ));
+    }
+    if s.initial_increment < s.min_increment {
+        let key = if t.has("increment") {
+            "increment"
+        } else {
+            "min_increment"
+        };
+        return Err(t.key_err(
+            key,
+            format!(
+                "increment = {} is below min_increment = {}",
+                s.initial_increment, s.min_increment
+            ),
+        ));
+    }
+    if let Some(m) = t.opt_choice("method", &["load_control", "arc_length"])? {
+        s.method = match m {
+            "arc_length" => StaticMethod::ArcLength,
+            _ => StaticMethod::LoadControl,
+        };
+    }
+    if let Some(f) = t.field("arc_length") {
+        if s.method != StaticMethod::ArcLength {
+            return Err(t.key_name_err("arc_length", "only allowed with method = \"arc_length\""));
+        }
+        s.arc_length = positive(&f)?;
+    }
+    if let Some(f) = t.field("max_steps") {
+        s.max_steps = count(&f, 100_000_000)?;
+    }
+    if let Some(f) = t.field("target_iterations") {
+        s.target_iterations = count(&f, 10_000)?;
+    }
+    Ok(s)
+}
+
+fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
     let t_end = positive(&t.req("t_end")?)?;
     let h = positive(&t.req("h")?)?;
     let mut s = DynamicSettings::new(t_end, h);
@@ -216,19 +401,6 @@ fn read_solver(t: &Table<'_>) -> Result<DynamicSettings> {
         if s.h_min > h {
             return Err(f.err(format!("must not exceed h = {h}, got {}", s.h_min)));
         }
-    }
-    if let Some(f) = t.field("rtol") {
-        s.newton.rtol = positive(&f)?;
-    }
-    if let Some(f) = t.field("atol") {
-        s.newton.atol = positive(&f)?;
-    }
-    if let Some(f) = t.field("max_iterations") {
-        let n = f.int()?;
-        if !(1..=10_000).contains(&n) {
-            return Err(f.err(format!("must be between 1 and 10000, got {n}")));
-        }
-        s.newton.max_iterations = n as usize;
     }
     if let Some(f) = t.field("formulation") {
         s.formulation = match f.choice(&["auto", "index3", "index2"])? {
@@ -295,7 +467,11 @@ fn read_solver(t: &Table<'_>) -> Result<DynamicSettings> {
 }
 
 /// Reads `name`: a non-empty string, unique within `seen` (name -> path of its first use).
-fn read_name(t: &Table<'_>, seen: &mut HashMap<String, String>, what: &str) -> Result<String> {
+pub(super) fn read_name(
+    t: &Table<'_>,
+    seen: &mut HashMap<String, String>,
+    what: &str,
+) -> Result<String> {
     let f = t.req("name")?;
     let name = f.str()?;
     if name.trim().is_empty() {
@@ -450,7 +626,15 @@ fn read_inertia(f: &Field<'_>, mass: f64) -> Result<Mat3> {
     Ok(inertia)
 }
 
-fn read_nodes_and_bodies(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+/// Reads the [[node]] items, creates the nodes of the [[body]] items that bring their own,
+/// calls `between` with the node names (and the path of the item that created each node),
+/// then adds the bodies.
+fn read_nodes_and_bodies(
+    top: &Table<'_>,
+    model: &mut Model,
+    origins: &mut Origins,
+    between: impl FnOnce(&mut Model, &mut Origins, &mut HashMap<String, String>) -> Result<()>,
+) -> Result<()> {
     let mut node_names = HashMap::new();
     for t in top.items("node")? {
         let mut keys = vec!["name"];
@@ -505,6 +689,7 @@ fn read_nodes_and_bodies(top: &Table<'_>, model: &mut Model, origins: &mut Origi
         }
         own_nodes.push(None);
     }
+    between(model, origins, &mut node_names)?;
     // Pass 2: the bodies, on any node.
     for (t, own) in bodies.iter().zip(own_nodes) {
         let name = t.req("name")?.str()?;
@@ -522,7 +707,7 @@ fn read_nodes_and_bodies(top: &Table<'_>, model: &mut Model, origins: &mut Origi
 }
 
 /// A node name (not the ground).
-fn require_node(model: &Model, f: &Field<'_>) -> Result<NodeId> {
+pub(super) fn require_node(model: &Model, f: &Field<'_>) -> Result<NodeId> {
     match resolve_node(model, f, false)? {
         Some(id) => Ok(id),
         None => Err(f.err("must be a node, not the ground")),
@@ -803,6 +988,14 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
 fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
     const XYZ: &[&str] = &["x", "y", "z"];
     const WXYZ: &[&str] = &["w", "x", "y", "z"];
+    const BEAM: &[&str] = &[
+        "axial",
+        "shear_2",
+        "shear_3",
+        "torsion",
+        "bending_2",
+        "bending_3",
+    ];
     let mut names = HashMap::new();
     for t in top.items("sensor")? {
         t.check_keys(&[
@@ -813,6 +1006,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "component",
             "frame",
             "joint",
+            "beam",
         ])?;
         let name = read_name(&t, &mut names, "sensor")?;
         if name.contains([',', '"', '\n', '\r']) {
@@ -833,6 +1027,8 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "potential_energy",
             "total_energy",
             "constraint_violation",
+            "beam_strain",
+            "beam_stress",
         ])?;
         let why = format!("for a {ty} sensor");
         let uses: &[&str] = match ty {
@@ -841,9 +1037,10 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "angular_velocity" => &["node", "component", "frame"],
             "joint_coordinate" => &["joint"],
             "joint_force" | "joint_torque" => &["joint", "component"],
+            "beam_strain" | "beam_stress" => &["beam", "component"],
             _ => &[],
         };
-        for k in ["node", "point", "component", "frame", "joint"] {
+        for k in ["node", "point", "component", "frame", "joint", "beam"] {
             if !uses.contains(&k) {
                 t.forbid(k, &why)?;
             }
@@ -922,6 +1119,14 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "joint_torque" => SensorKind::JointTorque {
                 joint: joint()?,
                 component: component(XYZ)?,
+            },
+            "beam_strain" => SensorKind::BeamStrain {
+                beam: super::beam::require_element(model, &t.req("beam")?)?,
+                component: component(BEAM)?,
+            },
+            "beam_stress" => SensorKind::BeamStress {
+                beam: super::beam::require_element(model, &t.req("beam")?)?,
+                component: component(BEAM)?,
             },
             "kinetic_energy" => SensorKind::KineticEnergy,
             "potential_energy" => SensorKind::PotentialEnergy,

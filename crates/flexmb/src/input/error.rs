@@ -19,7 +19,8 @@ impl fmt::Display for Location {
 /// The model item a field belongs to, e.g. body 'crank'.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ItemLabel {
-    /// Table name in the model file: "node", "body", "joint", "load", "spring", "sensor".
+    /// Table name in the model file: "node", "body", "beam", "joint", "load", "spring",
+    /// "sensor".
     pub table: &'static str,
     pub name: String,
 }

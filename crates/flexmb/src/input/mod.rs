@@ -1,6 +1,7 @@
 //! The TOML model file: a front end that builds the same [`Model`] a Rust user builds by hand
-//! (with [`Model::new`], [`Model::add_node`], [`Model::add_body`], [`Model::add_joint`], ...)
-//! plus the settings of the analysis to run on it.
+//! (with [`Model::new`], [`Model::add_node`], [`Model::add_body`], [`Model::add_joint`],
+//! [`Model::add_beam`], ...) plus the settings of the analysis to run on it, dynamic or static.
+//! `[[beam]]` items are meshed here into nodes `<name>.<i>` and elements `<name>[<i>]`.
 //!
 //! The format is documented in `docs/model-format.md`. Every error names the file, the line
 //! and the path of the field (`body[2].mass`), including the errors of [`Model::validate`],
@@ -9,7 +10,7 @@
 //! ```no_run
 //! use flexmb::input::{read_model_file, Analysis};
 //! let file = read_model_file("top.toml".as_ref(), &["solver.h=5e-4".to_string()])?;
-//! let Analysis::Dynamic(settings) = file.analysis;
+//! let Analysis::Dynamic(settings) = file.analysis else { panic!("not dynamic") };
 //! let mut sim = flexmb::Simulation::new(&file.model, settings).unwrap();
 //! # Ok::<(), flexmb::input::InputError>(())
 //! ```
@@ -27,6 +28,7 @@
 //! the position of the value it replaces, so errors about it point at that line and name the
 //! override.
 
+mod beam;
 mod build;
 mod error;
 mod overrides;
@@ -55,6 +57,18 @@ pub struct ModelFile {
 pub enum Analysis {
     /// `analysis = "dynamic"`: time integration with the Lie group generalized-alpha method.
     Dynamic(DynamicSettings),
+    /// `analysis = "static"`: equilibrium followed in the load factor.
+    Static(crate::solve::StaticSettings),
+}
+
+impl Analysis {
+    /// The dynamic settings, if this is a dynamic analysis.
+    pub fn dynamic(&self) -> Option<&DynamicSettings> {
+        match self {
+            Analysis::Dynamic(s) => Some(s),
+            Analysis::Static(_) => None,
+        }
+    }
 }
 
 /// Reads, overrides and checks a model file. Errors are reported with `path` as file name.

@@ -387,6 +387,25 @@ impl<'a> Table<'a> {
         }
     }
 
+    /// Error about `key`, at the key itself (for a key that should not be there).
+    pub fn key_name_err(&self, key: &str, message: impl Into<String>) -> InputError {
+        self.src.field_error(
+            &self.key_span(key),
+            &self.child_path(key),
+            self.item.as_ref(),
+            message,
+        )
+    }
+
+    /// The first (in file order) of `keys` present in the table.
+    pub fn first_key_of(&self, keys: &[&str]) -> Option<&'a str> {
+        self.map
+            .iter()
+            .filter(|(k, _)| keys.contains(&k.get_ref().as_ref()))
+            .min_by_key(|(k, _)| k.span().start)
+            .map(|(k, _)| k.get_ref().as_ref())
+    }
+
     /// Fails if `key` is present: it is not meaningful in this context.
     pub fn forbid(&self, key: &str, why: &str) -> Result<()> {
         if self.has(key) {

@@ -141,6 +141,56 @@ pub struct SpringDamper {
     pub rest_length: f64,
 }
 
+/// Cross-section properties of a beam, in the section frame (x along the beam axis, y and z
+/// the section's principal axes). Strain components are ordered
+/// `(epsilon_1, gamma_2, gamma_3, kappa_1, kappa_2, kappa_3)`: axial strain, two shear
+/// strains, torsion and two bending curvatures; the stiffness is then
+/// `diag(EA, GA_2, GA_3, GJ, EI_2, EI_3)` in the common case.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BeamSection {
+    /// Sectional stiffness C (6 x 6, symmetric positive definite) [N, N m^2 blocks].
+    pub stiffness: flexmb_lie::Mat6,
+    /// Mass per unit length rho A [kg/m], > 0.
+    pub mass_per_length: f64,
+    /// Sectional rotary inertia per unit length diag(rho J, rho I_2, rho I_3) or full [kg m].
+    pub rotary_inertia: Mat3,
+}
+
+impl BeamSection {
+    /// The common case: diagonal stiffness and rotary inertia.
+    pub fn diagonal(stiffness: [f64; 6], mass_per_length: f64, rotary_inertia: [f64; 3]) -> Self {
+        Self {
+            stiffness: flexmb_lie::Mat6::from_diagonal(&flexmb_lie::Vec6::from_column_slice(
+                &stiffness,
+            )),
+            mass_per_length,
+            rotary_inertia: Mat3::from_diagonal(&Vec3::from_column_slice(&rotary_inertia)),
+        }
+    }
+}
+
+/// A two-node geometrically exact beam element on SE(3) (see [`crate::elements::beam`]).
+///
+/// The element's section frames at its ends are the node frames composed with constant
+/// rotations `offset_a`, `offset_b` (identity when a node's frame already has x along the
+/// element), so nodes shared by members of different directions (an elbow) need no joint.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Beam {
+    pub name: String,
+    pub nodes: [NodeId; 2],
+    pub section: BeamSection,
+    /// Section frame at end A relative to node A (rotation).
+    pub offset_a: Mat3,
+    /// Section frame at end B relative to node B (rotation).
+    pub offset_b: Mat3,
+    /// Relative motion of the end frames in the reference configuration,
+    /// `d_0 = log(H_a0^-1 H_b0)` (translation, rotation).
+    pub d0: flexmb_lie::Vec6,
+    /// Reference length [m] (length of the element's axis, `|translation of d_0|` for a
+    /// straight element).
+    pub length: f64,
+}
+
 /// Frame in which a vector sensor reports its components.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SensorFrame {
@@ -193,6 +243,18 @@ pub enum SensorKind {
     TotalEnergy,
     /// Largest |Phi| over all constraint equations.
     ConstraintViolation,
+    /// Strain component of a beam element (0..6: axial, shear 2, shear 3, torsion,
+    /// curvature 2, curvature 3), constant along the element.
+    BeamStrain {
+        beam: usize,
+        component: usize,
+    },
+    /// Stress resultant of a beam element (0..6: axial force, shear forces 2 and 3 [N],
+    /// torque, bending moments 2 and 3 [N m]), section frame.
+    BeamStress {
+        beam: usize,
+        component: usize,
+    },
 }
 
 /// A named output channel.
@@ -215,13 +277,14 @@ pub struct Model {
     pub joints: Vec<Joint>,
     pub loads: Vec<Load>,
     pub springs: Vec<SpringDamper>,
+    pub beams: Vec<Beam>,
     pub sensors: Vec<Sensor>,
 }
 
 /// Reference to one item of a model and one of its fields, for error messages.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ItemRef {
-    /// Table name in the model file: "node", "body", "joint", "load", "spring", "sensor".
+    /// Table name in the model file: "node", "body", "beam", "joint", "load", "spring", "sensor".
     pub table: &'static str,
     pub index: usize,
     pub name: String,
@@ -240,8 +303,75 @@ impl Model {
             joints: Vec::new(),
             loads: Vec::new(),
             springs: Vec::new(),
+            beams: Vec::new(),
             sensors: Vec::new(),
         }
+    }
+
+    /// Adds a beam element between two nodes, with the section frames at both ends given as
+    /// rotations in the inertial frame at t = 0 (x along the element axis); returns its index.
+    pub fn add_beam(
+        &mut self,
+        name: &str,
+        nodes: [NodeId; 2],
+        section: BeamSection,
+        frames: [Mat3; 2],
+    ) -> usize {
+        let (na, nb) = (&self.nodes[nodes[0].0].frame, &self.nodes[nodes[1].0].frame);
+        let offset_a = na.r.transpose() * frames[0];
+        let offset_b = nb.r.transpose() * frames[1];
+        let ha = Frame::new(na.x, frames[0]);
+        let hb = Frame::new(nb.x, frames[1]);
+        let d0 = flexmb_lie::se3::log(&ha.inverse().compose(&hb));
+        let length = crate::elements::beam::arc_length(&d0);
+        self.beams.push(Beam {
+            name: name.to_string(),
+            nodes,
+            section,
+            offset_a,
+            offset_b,
+            d0,
+            length,
+        });
+        self.beams.len() - 1
+    }
+
+    /// Adds `n` beam elements along the straight segment from node `a` to a new node at
+    /// `end` (plus `n - 1` intermediate nodes named `<name>.<i>`, and the end node
+    /// `<name>.<n>` unless `end_node` is an existing node there). The section's z axis is
+    /// `z_axis` projected on the plane normal to the segment. Returns the node ids, `a` first.
+    pub fn add_straight_beam(
+        &mut self,
+        name: &str,
+        a: NodeId,
+        end: Vec3,
+        end_node: Option<NodeId>,
+        n: usize,
+        z_axis: &Vec3,
+        section: &BeamSection,
+    ) -> Vec<NodeId> {
+        let start = self.nodes[a.0].frame.x;
+        let r = section_frame(&(end - start), z_axis);
+        let mut ids = vec![a];
+        for i in 1..=n {
+            let id = match end_node {
+                Some(id) if i == n => id,
+                _ => {
+                    let p = start + (end - start) * (i as f64 / n as f64);
+                    self.add_node(&format!("{name}.{i}"), Frame::new(p, r))
+                }
+            };
+            ids.push(id);
+        }
+        for i in 0..n {
+            self.add_beam(
+                &format!("{name}[{i}]"),
+                [ids[i], ids[i + 1]],
+                section.clone(),
+                [r, r],
+            );
+        }
+        ids
     }
 
     /// Adds a node at rest; returns its id.
@@ -452,6 +582,62 @@ impl Model {
                 }
             }
         }
+        for (i, b) in self.beams.iter().enumerate() {
+            for (field, id) in [("node_a", b.nodes[0]), ("node_b", b.nodes[1])] {
+                check_node("beam", i, &b.name, field, Some(id))?;
+            }
+            if self.group != Group::SE3 {
+                return Err(bad(
+                    "beam",
+                    i,
+                    &b.name,
+                    "group",
+                    "beams are formulated on SE(3): set the model's group to \"SE3\"".into(),
+                ));
+            }
+            if b.nodes[0] == b.nodes[1] || b.length.is_nan() || b.length <= 0.0 {
+                return Err(bad(
+                    "beam",
+                    i,
+                    &b.name,
+                    "length",
+                    format!("must be positive, got {}", b.length),
+                ));
+            }
+            let c = &b.section.stiffness;
+            let sym = (c - c.transpose()).norm();
+            if sym > 1e-9 * c.norm() || c.cholesky().is_none() {
+                return Err(bad(
+                    "beam",
+                    i,
+                    &b.name,
+                    "section",
+                    "the sectional stiffness must be symmetric positive definite".into(),
+                ));
+            }
+            if b.section.mass_per_length.is_nan() || b.section.mass_per_length <= 0.0 {
+                return Err(bad(
+                    "beam",
+                    i,
+                    &b.name,
+                    "section",
+                    format!(
+                        "mass per length must be positive, got {}",
+                        b.section.mass_per_length
+                    ),
+                ));
+            }
+            let j = &b.section.rotary_inertia;
+            if (j - j.transpose()).norm() > 1e-9 * j.norm() || j.cholesky().is_none() {
+                return Err(bad(
+                    "beam",
+                    i,
+                    &b.name,
+                    "section",
+                    "the sectional rotary inertia must be symmetric positive definite".into(),
+                ));
+            }
+        }
         for (i, s) in self.sensors.iter().enumerate() {
             let node = match &s.kind {
                 SensorKind::Position { node, .. }
@@ -481,6 +667,14 @@ pub fn frame_from_axis(axis: &Vec3, reference: Option<&Vec3>) -> Mat3 {
         .expect("x or y is not parallel to z");
     let y = z.cross(&x);
     Mat3::from_columns(&[x, y, z])
+}
+
+/// Section frame of a beam: x along `axis`, z along `z_axis` projected on the plane normal to
+/// x, y = z cross x. `z_axis` must not be parallel to `axis`.
+pub fn section_frame(axis: &Vec3, z_axis: &Vec3) -> Mat3 {
+    let x = axis.normalize();
+    let z = (z_axis - x * x.dot(z_axis)).normalize();
+    Mat3::from_columns(&[x, z.cross(&x), z])
 }
 
 /// Inertia of a homogeneous box of mass `m` and side lengths `a`, about its centre, box axes.

@@ -21,8 +21,17 @@ pub struct CsvWriter {
 impl CsvWriter {
     /// Creates the file and writes the header `time,<names>`.
     pub fn create(path: &Path, names: &[String]) -> std::io::Result<Self> {
+        Self::create_with_first_column(path, "time", names)
+    }
+
+    /// Creates the file and writes the header `<first>,<names>`.
+    pub fn create_with_first_column(
+        path: &Path,
+        first: &str,
+        names: &[String],
+    ) -> std::io::Result<Self> {
         let mut out = BufWriter::new(File::create(path)?);
-        write!(out, "time")?;
+        write!(out, "{first}")?;
         for n in names {
             write!(out, ",{n}")?;
         }

@@ -185,6 +185,10 @@ pub struct Simulation<'m> {
     zeta: Vec<f64>,
     /// Accelerations and multipliers at the start of the previous step, for the predictor.
     previous: Previous,
+    /// Whether the current step iterated with a reused (stale) iteration matrix.
+    used_stale_matrix: bool,
+    /// Rebuild the iteration matrix at every iteration of the next step.
+    fresh_only: bool,
 }
 
 /// Start of the previous accepted step (`h = 0` when there is none).
@@ -226,7 +230,7 @@ impl<'m> Simulation<'m> {
             settings,
             stats: Stats::default(),
             warnings,
-            regularization: 1e-9 / model.bodies.iter().map(|b| b.mass).fold(1e-300, f64::max),
+            regularization: 1e-9 / mass_scale(model),
             regularized_steps: 0,
             jacobian: None,
             jacobian_age: 0,
@@ -234,6 +238,8 @@ impl<'m> Simulation<'m> {
             total: Vec::new(),
             zeta: Vec::new(),
             previous: Previous::default(),
+            used_stale_matrix: false,
+            fresh_only: false,
         })
     }
 
@@ -287,6 +293,14 @@ impl<'m> Simulation<'m> {
                 }
                 Err(failure) => {
                     self.stats.rejected_steps += 1;
+                    if self.used_stale_matrix {
+                        // Iterations with a reused matrix may have led Newton astray: retry
+                        // the same step with a fresh matrix before reducing it.
+                        self.state = self.saved.clone();
+                        self.used_stale_matrix = false;
+                        self.fresh_only = true;
+                        continue;
+                    }
                     self.regularized_steps = REGULARIZED_STEPS;
                     self.state = self.saved.clone();
                     successes = 0;
@@ -370,14 +384,19 @@ impl<'m> Simulation<'m> {
         let same_matrix = self
             .jacobian
             .is_some_and(|(hj, reg)| (hj - h).abs() <= 1e-6 * h && reg == sc.regularization);
-        let mut refresh =
-            !newton.reuse_jacobian || !same_matrix || self.jacobian_age >= newton.max_jacobian_age;
+        let mut refresh = !newton.reuse_jacobian
+            || self.fresh_only
+            || !same_matrix
+            || self.jacobian_age >= newton.max_jacobian_age;
+        let fresh_only = std::mem::take(&mut self.fresh_only);
+        self.used_stale_matrix = false;
         let mut result = Err(StepFailure {
             reason: "no iteration".into(),
             worst_unknown: None,
         });
         for iteration in 1..=newton.max_iterations {
-            let fresh = refresh;
+            let fresh = refresh || fresh_only;
+            self.used_stale_matrix |= !fresh;
             let total = self.total_increments(&dq);
             self.update_configuration(&total, fresh);
             self.total = total;
@@ -636,6 +655,22 @@ impl<'m> Simulation<'m> {
                 / (1.0 - p.alpha_m);
         }
         load_nodes(&self.state, &mut self.data);
+    }
+}
+
+/// Largest nodal mass of the model [kg] (1 if there is none): the scale of the
+/// regularization of singular iteration matrices.
+fn mass_scale(model: &Model) -> f64 {
+    let bodies = model.bodies.iter().map(|b| b.mass);
+    let beams = model
+        .beams
+        .iter()
+        .map(|b| 0.5 * b.section.mass_per_length * b.length);
+    let m = bodies.chain(beams).fold(0.0, f64::max);
+    if m > 0.0 {
+        m
+    } else {
+        1.0
     }
 }
 

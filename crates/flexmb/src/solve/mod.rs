@@ -6,8 +6,10 @@ pub mod generalized_alpha;
 pub mod initial;
 pub mod linear;
 pub mod newton;
+pub mod statics;
 
 pub use dynamics::{DynamicSettings, Formulation, Scheme, Simulation, Stats};
 pub use generalized_alpha::GaParameters;
 pub use initial::{initial_accelerations, prepare_layout};
 pub use newton::NewtonSettings;
+pub use statics::{StaticMethod, StaticSettings, StaticStats, Statics};

@@ -71,7 +71,9 @@ impl History {
 pub fn try_run(name: &str, overrides: &[&str]) -> Result<History, SolveError> {
     let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
     let file = read_model_file(&example(name), &overrides).unwrap_or_else(|e| panic!("{e}"));
-    let Analysis::Dynamic(settings) = file.analysis;
+    let Analysis::Dynamic(settings) = file.analysis else {
+        panic!("{name} is not a dynamic analysis")
+    };
     let model = &file.model;
     let mut sim = Simulation::new(model, settings)?;
     let mut sensors = SensorEvaluator::new(model);
