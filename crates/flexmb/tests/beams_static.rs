@@ -154,3 +154,111 @@ fn bathe_bolourchi_bend_matches_continuum_reference() {
     println!("bend: tip {x:?}, error {:.3e}", (x - reference).norm());
     assert!((x - reference).norm() < 0.05, "tip {x:?} vs {reference:?}");
 }
+
+/// Von Mises truss (two inclined springs meeting at an apex that slides vertically) under a
+/// vertical dead load: the exact equilibrium path lambda P = 2 k (L0 - L) y / L has a limit
+/// point and snaps through; arc-length continuation must follow it past the limit point
+/// (Crisfield 1981, Comput. Struct. 13, Sect. 5: the shallow truss).
+#[test]
+fn arc_length_follows_the_von_mises_truss_through_its_limit_points() {
+    use flexmb::model::SpringDamper;
+    use flexmb::solve::StaticMethod;
+    let (b, h0, k): (f64, f64, f64) = (1.0, 0.2, 1000.0);
+    let l0 = (b * b + h0 * h0).sqrt();
+    let mut m = Model::new(Group::SE3);
+    let apex = m.add_node(
+        "apex",
+        Frame::new(Vec3::new(0.0, h0, 0.0), Mat3::identity()),
+    );
+    // The apex slides along y: a prismatic joint whose axis (joint z) is the global y axis.
+    let slide = Mat3::from_columns(&[Vec3::z(), Vec3::x(), Vec3::y()]);
+    m.add_joint(
+        "slide",
+        flexmb::model::JointKind::Prismatic,
+        None,
+        Some(apex),
+        Vec3::new(0.0, h0, 0.0),
+        slide,
+        None,
+    );
+    for (name, x) in [("left", -b), ("right", b)] {
+        m.springs.push(SpringDamper {
+            name: name.into(),
+            node_a: None,
+            node_b: Some(apex),
+            point_a: Vec3::new(x, 0.0, 0.0),
+            point_b: Vec3::zeros(),
+            stiffness: k,
+            damping: 0.0,
+            rest_length: l0,
+        });
+    }
+    m.loads.push(Load {
+        name: "p".into(),
+        node: apex,
+        force: Vec3::new(0.0, -1.0, 0.0),
+        torque: Vec3::zeros(),
+        frame: LoadFrame::Inertial,
+        function: TimeFunction::Constant { value: 1.0 },
+    });
+    let mut settings = StaticSettings::new();
+    settings.method = StaticMethod::ArcLength;
+    settings.arc_length = 0.01;
+    settings.load_factor = 10.0;
+    let mut statics = Statics::new(&m, settings).expect("starts");
+    let mut path = vec![];
+    statics
+        .run(&mut |s| {
+            let y = s.state.q[apex.0].x.y;
+            let l = (b * b + y * y).sqrt();
+            let exact = 2.0 * k * (l0 - l) * y / l;
+            assert!(
+                (s.load_factor - exact).abs() < 1e-6 * (1.0 + exact.abs()),
+                "y {y}: lambda {} vs {exact}",
+                s.load_factor
+            );
+            path.push((y, s.load_factor));
+            Ok(())
+        })
+        .expect("follows the path");
+    // Largest load factor before the path turns back, smallest one after it.
+    let turn = path
+        .windows(2)
+        .position(|w| w[1].1 < w[0].1)
+        .expect("the path turns back");
+    let lmax = path[..=turn].iter().fold(f64::MIN, |m, p| m.max(p.1));
+    let lmin = path[turn..].iter().fold(f64::MAX, |m, p| m.min(p.1));
+    // Limit loads of the exact path: max of 2 k (L0 - L) y / L over 0 < y < h0 and its mirror.
+    let exact_max = (1..10_000)
+        .map(|i| {
+            let y = h0 * i as f64 / 10_000.0;
+            let l = (b * b + y * y).sqrt();
+            2.0 * k * (l0 - l) * y / l
+        })
+        .fold(f64::MIN, f64::max);
+    // The converged points sample the path (steps of at most 4 x 0.01 in y): the largest and
+    // smallest sampled loads are within a few percent of the limit loads.
+    assert!(
+        lmax > 0.95 * exact_max && lmax <= exact_max * (1.0 + 1e-9),
+        "upper limit point: {lmax} (exact {exact_max})"
+    );
+    assert!(
+        lmin < -0.95 * exact_max && lmin >= -exact_max * (1.0 + 1e-9),
+        "lower limit point: {lmin} (exact {})",
+        -exact_max
+    );
+    assert!(
+        statics.load_factor >= 10.0 - 1e-9,
+        "reached the final load factor: {}",
+        statics.load_factor
+    );
+    assert!(
+        path.last().unwrap().0 < -h0,
+        "snapped through: y = {}",
+        path.last().unwrap().0
+    );
+    println!(
+        "von Mises truss: {} steps, limit loads {lmin:.4} / {lmax:.4} (exact +-{exact_max:.4})",
+        path.len()
+    );
+}

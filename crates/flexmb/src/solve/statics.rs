@@ -47,7 +47,8 @@ pub struct StaticSettings {
     /// Largest load increment (load control).
     pub max_increment: f64,
     pub method: StaticMethod,
-    /// Arc length of the first step (arc-length method) [m, rad].
+    /// Arc length of the first step (arc-length method) [m, rad]; later steps adapt between
+    /// 1e-6 and 4 times this value.
     pub arc_length: f64,
     /// Most load steps.
     pub max_steps: usize,
@@ -219,7 +220,7 @@ impl<'m> Statics<'m> {
                 inc * remaining.signum()
             };
             let saved = self.state.clone();
-            match self.solve_at(self.load_factor + step, None) {
+            match self.solve_at(self.load_factor + step) {
                 Ok(c) => {
                     self.load_factor = if step == remaining {
                         target
@@ -264,14 +265,9 @@ impl<'m> Statics<'m> {
         }
     }
 
-    /// Newton at a fixed load factor (load control), or with the load factor as an unknown
-    /// constrained by the arc length `arc` (`Some((delta_l, previous increment))`).
-    /// On success the state holds the converged configuration; returns the iterations.
-    fn solve_at(
-        &mut self,
-        lambda: f64,
-        _arc: Option<f64>,
-    ) -> Result<Converged, (String, Option<usize>)> {
+    /// Newton at a fixed load factor (load control). On success the state holds the
+    /// converged configuration; returns the iterations.
+    fn solve_at(&mut self, lambda: f64) -> Result<Converged, (String, Option<usize>)> {
         let n = self.data.layout.n_nodes;
         let nd = self.data.layout.n_dofs;
         let group = self.model.group;
@@ -352,10 +348,223 @@ impl<'m> Statics<'m> {
 
     fn run_arc_length(
         &mut self,
-        _output: &mut dyn FnMut(&Statics) -> Result<(), String>,
+        output: &mut dyn FnMut(&Statics) -> Result<(), String>,
     ) -> Result<(), SolveError> {
-        Err(SolveError::Model(
-            "arc-length continuation is not available yet".into(),
-        ))
+        let s = self.settings;
+        let target = s.load_factor;
+        let mut dl = s.arc_length;
+        let dl_min = s.arc_length * 1e-6;
+        let dl_max = s.arc_length * 4.0;
+        // Direction of the previous converged increment (dq, dlambda), for the predictor's sign.
+        let mut previous: Option<(Vec<f64>, f64)> = None;
+        while (target - self.load_factor) * target.signum() > 1e-12 * target.abs().max(1.0) {
+            if self.stats.steps >= s.max_steps {
+                return Err(self.failure(
+                    "the maximum number of arc-length steps was reached".into(),
+                    None,
+                    dl,
+                ));
+            }
+            let saved = self.state.clone();
+            let lambda0 = self.load_factor;
+            match self.arc_length_step(dl, previous.as_ref(), target.signum()) {
+                Ok((dq, dlambda, iterations)) => {
+                    if (lambda0 + dlambda - target) * target.signum() > 0.0 {
+                        // Crossed the final load factor: end exactly on it with a load-control
+                        // solve from the last converged state (or keep the crossing point).
+                        let crossed = self.state.clone();
+                        self.state = saved.clone();
+                        load_nodes(&self.state, &mut self.data);
+                        if self.solve_at(target).is_ok() {
+                            self.load_factor = target;
+                        } else {
+                            self.state = crossed;
+                            load_nodes(&self.state, &mut self.data);
+                            self.load_factor = lambda0 + dlambda;
+                        }
+                        self.stats.steps += 1;
+                        output(self).map_err(SolveError::Output)?;
+                        break;
+                    }
+                    self.stats.steps += 1;
+                    self.load_factor = lambda0 + dlambda;
+                    output(self).map_err(SolveError::Output)?;
+                    previous = Some((dq, dlambda));
+                    let ratio = (s.target_iterations as f64 / iterations.max(1) as f64).sqrt();
+                    dl = (dl * ratio.clamp(0.5, 2.0)).min(dl_max);
+                }
+                Err((reason, worst)) => {
+                    self.stats.rejected_steps += 1;
+                    self.state = saved;
+                    load_nodes(&self.state, &mut self.data);
+                    dl *= 0.5;
+                    if dl < dl_min {
+                        return Err(self.failure(reason, worst, dl));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Puts `q = q_0 exp(dq)` (and the tangent operators) into the data.
+    fn set_configuration(&mut self, q0: &[flexmb_lie::Frame], dq: &[f64]) {
+        let group = self.model.group;
+        for (i, node) in self.data.nodes.iter_mut().enumerate() {
+            let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
+            node.q = group.integrate(&q0[i], &inc);
+            node.v = Vec6::zeros();
+            node.vdot = Vec6::zeros();
+            node.t = group.tangent(&inc);
+        }
+    }
+
+    /// `dR/dlambda` of the scaled system at the configuration in the data: the applied loads
+    /// and gravity (linear in lambda) on the equilibrium rows, `Phi_t` (driven joints, with
+    /// time = lambda) on the constraint rows.
+    fn load_derivative(&mut self, lambda: f64) -> Vec<f64> {
+        let nd = self.data.layout.n_dofs;
+        self.assemble(1.0, false);
+        let r1 = self.data.residual.clone();
+        self.assemble(0.0, false);
+        let mut out: Vec<f64> = r1
+            .iter()
+            .zip(&self.data.residual)
+            .map(|(a, b)| a - b)
+            .collect();
+        let mut sc = self.scaling(lambda);
+        sc.constraint_rhs = ConstraintRhs::Velocity;
+        assemble(
+            self.model,
+            &mut self.data,
+            lambda,
+            &self.state.lambda,
+            &sc,
+            false,
+        );
+        out[nd..].copy_from_slice(&self.data.residual[nd..]);
+        out
+    }
+
+    /// One arc-length step (Crisfield's cylindrical constraint `|dq| = dl`); returns the
+    /// converged increment, the load increment and the iterations.
+    fn arc_length_step(
+        &mut self,
+        dl: f64,
+        previous: Option<&(Vec<f64>, f64)>,
+        direction: f64,
+    ) -> Result<(Vec<f64>, f64, usize), (String, Option<usize>)> {
+        let n = self.data.layout.n_nodes;
+        let nd = self.data.layout.n_dofs;
+        let nu = self.data.layout.n_unknowns();
+        let group = self.model.group;
+        let q0 = self.state.q.clone();
+        let lambda0 = self.load_factor;
+        let newton = self.settings.newton;
+        let mut dq = vec![0.0; nd];
+        let mut dlambda = 0.0;
+        let mut xb = vec![0.0; nu];
+        for iteration in 0..=newton.max_iterations {
+            let lambda = lambda0 + dlambda;
+            self.set_configuration(&q0, &dq);
+            let f = self.load_derivative(lambda);
+            self.assemble(lambda, true);
+            if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
+                return Err(("non-finite residual".into(), Some(i)));
+            }
+            self.stats.factorizations += 1;
+            if let Err(e) = self.data.solver.factorize(&self.data.values) {
+                let col = match e {
+                    LinearError::Singular { column } => column,
+                    _ => None,
+                };
+                return Err((format!("singular tangent matrix ({e})"), col));
+            }
+            // x_b = S^-1 (-dR/dlambda): the response to a unit load increment.
+            for (x, v) in xb.iter_mut().zip(&f) {
+                *x = -v;
+            }
+            self.data.solver.solve_in_place(&mut xb);
+            let norm_b = xb[..nd].iter().map(|v| v * v).sum::<f64>();
+            if iteration == 0 {
+                // Predictor: dlambda along the tangent, signed to continue the path.
+                let mut sign = direction;
+                if let Some((pq, _)) = previous {
+                    // Follow the path: the new tangent points along the last increment
+                    // (Feng, Peric & Owen 1996), which turns lambda back at limit points.
+                    let dot: f64 = pq.iter().zip(&xb[..nd]).map(|(a, b)| a * b).sum();
+                    sign = dot.signum();
+                }
+                let dlam = sign * dl / norm_b.sqrt().max(1e-300);
+                for k in 0..nd {
+                    dq[k] = dlam * xb[k];
+                }
+                for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
+                    if let Some(k) = slot {
+                        self.state.lambda[row] += dlam * xb[nd + k] / self.row_scale;
+                    }
+                }
+                dlambda = dlam;
+                continue;
+            }
+            // x_a = S^-1 (-R)
+            let xa = &mut self.data.correction;
+            for (d, r) in xa.iter_mut().zip(&self.data.residual) {
+                *d = -r;
+            }
+            self.data.solver.solve_in_place(xa);
+            let xa = self.data.correction.clone();
+            // |dq + xa + dmu xb|^2 = dl^2
+            let u: Vec<f64> = (0..nd).map(|k| dq[k] + xa[k]).collect();
+            let a1 = norm_b;
+            let a2 = 2.0 * u.iter().zip(&xb).map(|(a, b)| a * b).sum::<f64>();
+            let a3 = u.iter().map(|v| v * v).sum::<f64>() - dl * dl;
+            let disc = a2 * a2 - 4.0 * a1 * a3;
+            if disc < 0.0 || a1 <= 0.0 {
+                return Err(("no real root of the arc-length constraint".into(), None));
+            }
+            let roots = [
+                (-a2 + disc.sqrt()) / (2.0 * a1),
+                (-a2 - disc.sqrt()) / (2.0 * a1),
+            ];
+            // Crisfield: the root whose new increment is closest to the current one.
+            let score = |m: f64| (0..nd).map(|k| (u[k] + m * xb[k]) * dq[k]).sum::<f64>();
+            let dmu = if score(roots[0]) >= score(roots[1]) {
+                roots[0]
+            } else {
+                roots[1]
+            };
+            let mut correction = vec![0.0; nd];
+            for k in 0..nd {
+                correction[k] = xa[k] + dmu * xb[k];
+                dq[k] += correction[k];
+            }
+            dlambda += dmu;
+            for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
+                if let Some(k) = slot {
+                    self.state.lambda[row] += (xa[nd + k] + dmu * xb[nd + k]) / self.row_scale;
+                }
+            }
+            self.stats.newton_iterations += 1;
+            let (err, worst) = weighted_norm(&correction, &dq, &|_| newton.atol, newton.rtol);
+            if err <= 1.0 && dmu.abs() <= newton.rtol * dlambda.abs().max(1e-12) + newton.atol {
+                for i in 0..n {
+                    let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
+                    let mut q = group.integrate(&q0[i], &inc);
+                    q.orthonormalize();
+                    self.state.q[i] = q;
+                }
+                self.state.t = lambda0 + dlambda;
+                load_nodes(&self.state, &mut self.data);
+                return Ok((dq, dlambda, iteration));
+            }
+            if iteration == newton.max_iterations {
+                return Err((
+                    format!("no convergence in {iteration} iterations"),
+                    Some(worst),
+                ));
+            }
+        }
+        Err(("no convergence".into(), None))
     }
 }
