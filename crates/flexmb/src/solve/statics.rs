@@ -111,6 +111,16 @@ pub struct Statics<'m> {
     row_scale: f64,
 }
 
+/// Why a load step failed: the reason and, if known, the worst unknown.
+type Failure = (String, Option<usize>);
+
+/// A converged arc-length step: configuration increment, load increment, iterations.
+struct ArcStep {
+    dq: Vec<f64>,
+    dlambda: f64,
+    iterations: usize,
+}
+
 /// What one Newton solve at a load step returns.
 struct Converged {
     iterations: usize,
@@ -267,7 +277,7 @@ impl<'m> Statics<'m> {
 
     /// Newton at a fixed load factor (load control). On success the state holds the
     /// converged configuration; returns the iterations.
-    fn solve_at(&mut self, lambda: f64) -> Result<Converged, (String, Option<usize>)> {
+    fn solve_at(&mut self, lambda: f64) -> Result<Converged, Failure> {
         let n = self.data.layout.n_nodes;
         let nd = self.data.layout.n_dofs;
         let group = self.model.group;
@@ -368,7 +378,11 @@ impl<'m> Statics<'m> {
             let saved = self.state.clone();
             let lambda0 = self.load_factor;
             match self.arc_length_step(dl, previous.as_ref(), target.signum()) {
-                Ok((dq, dlambda, iterations)) => {
+                Ok(ArcStep {
+                    dq,
+                    dlambda,
+                    iterations,
+                }) => {
                     if (lambda0 + dlambda - target) * target.signum() > 0.0 {
                         // Crossed the final load factor: end exactly on it with a load-control
                         // solve from the last converged state (or keep the crossing point).
@@ -453,7 +467,7 @@ impl<'m> Statics<'m> {
         dl: f64,
         previous: Option<&(Vec<f64>, f64)>,
         direction: f64,
-    ) -> Result<(Vec<f64>, f64, usize), (String, Option<usize>)> {
+    ) -> Result<ArcStep, Failure> {
         let n = self.data.layout.n_nodes;
         let nd = self.data.layout.n_dofs;
         let nu = self.data.layout.n_unknowns();
@@ -556,7 +570,11 @@ impl<'m> Statics<'m> {
                 }
                 self.state.t = lambda0 + dlambda;
                 load_nodes(&self.state, &mut self.data);
-                return Ok((dq, dlambda, iteration));
+                return Ok(ArcStep {
+                    dq,
+                    dlambda,
+                    iterations: iteration,
+                });
             }
             if iteration == newton.max_iterations {
                 return Err((
