@@ -1,5 +1,7 @@
 //! Dynamic beam benchmarks against published references.
 
+mod common;
+
 use flexmb::model::{BeamSection, JointKind, Load, LoadFrame, Model, TimeFunction};
 use flexmb::{DynamicSettings, Simulation};
 use flexmb_lie::{Frame, Group, Mat3, Vec3};
@@ -90,4 +92,68 @@ fn right_angle_cantilever_matches_simo_vu_quoc_peaks() {
     assert!((elbow_max.1 - 5.5).abs() < 0.05 * 5.5 && (elbow_max.0 - 3.0).abs() < 0.4);
     assert!((tip_max.1 - 8.2).abs() < 0.05 * 8.2 && (tip_max.0 - 7.75).abs() < 0.4);
     assert!((tip_min.1 + 9.65).abs() < 0.05 * 9.65 && (tip_min.0 - 16.1).abs() < 0.4);
+}
+
+#[test]
+fn right_angle_cantilever_example_matches_the_reference_and_runs_for_every_rho_inf() {
+    // Issue 3, item 7: h = 0.25 and 0.125 for rho_inf in {0, 0.5, 0.8, 0.9}.
+    for h in ["0.25", "0.125"] {
+        for rho in ["0.0", "0.5", "0.8", "0.9"] {
+            let run = common::run(
+                "right_angle_cantilever.toml",
+                &[&format!("solver.h={h}"), &format!("solver.rho_inf={rho}")],
+            );
+            assert!(
+                (run.rows.last().unwrap().0 - 30.0).abs() < 1e-9,
+                "h {h}, rho_inf {rho}"
+            );
+            if h == "0.125" && rho == "0.5" {
+                let elbow: Vec<(f64, f64, f64)> = run
+                    .series("elbow_w")
+                    .iter()
+                    .zip(run.series("tip_w"))
+                    .map(|(a, b)| (a.0, a.1, b.1))
+                    .collect();
+                let tip_min = extremum(&elbow, 1, 12.0, 19.0, false);
+                assert!(
+                    (tip_min.1 + 9.65).abs() < 0.05 * 9.65,
+                    "tip min {tip_min:?}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn spin_up_matches_the_reference_tip_deflection() {
+    // benchmarks.md Sect. 5.3: min u2 = -0.5738 m at t = 6.75 s (converged planar reference;
+    // -0.57706 for 10 lumped-mass elements), u1 after the spin-up 5.14e-4 m.
+    let run = common::run("spin_up.toml", &["solver.t_end=20.0"]);
+    let hub: Vec<(f64, f64, f64, f64)> = run
+        .series("psi")
+        .iter()
+        .zip(run.series("tip_x"))
+        .zip(run.series("tip_y"))
+        .map(|(((t, psi), (_, x)), (_, y))| {
+            let (s, c) = psi.sin_cos();
+            (*t, x * c + y * s - 10.0, -x * s + y * c, *psi)
+        })
+        .collect();
+    let (t_min, u2_min) = hub.iter().fold(
+        (0.0, f64::MAX),
+        |m, r| if r.2 < m.1 { (r.0, r.2) } else { m },
+    );
+    assert!(
+        (u2_min + 0.5738).abs() < 0.01 * 0.5738,
+        "min u2 {u2_min} at {t_min}"
+    );
+    assert!((t_min - 6.75).abs() < 0.2, "time of min u2 {t_min}");
+    let late: Vec<f64> = hub.iter().filter(|r| r.0 > 16.0).map(|r| r.1).collect();
+    let u1 = late.iter().sum::<f64>() / late.len() as f64;
+    assert!(
+        (u1 - 5.14e-4).abs() < 0.02 * 5.14e-4,
+        "stretch after spin-up {u1}"
+    );
+    // The hub follows the prescribed rotation: psi(20) = 6 (20 - 7.5) = 75 rad (unwrapped).
+    assert!((hub.last().unwrap().3 - 75.0).abs() < 1e-6);
 }

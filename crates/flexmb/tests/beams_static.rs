@@ -1,4 +1,7 @@
-//! Static large-rotation beam problems against analytic and published references.
+//! Static large-rotation beam problems against analytic and published references, built
+//! with the Rust API and run from the example model files.
+
+mod common;
 
 use flexmb::model::{BeamSection, Load, LoadFrame, Model, TimeFunction};
 use flexmb::solve::{StaticSettings, Statics};
@@ -261,4 +264,73 @@ fn arc_length_follows_the_von_mises_truss_through_its_limit_points() {
         "von Mises truss: {} steps, limit loads {lmin:.4} / {lmax:.4} (exact +-{exact_max:.4})",
         path.len()
     );
+}
+
+#[test]
+fn roll_up_example_follows_the_exact_circle_at_every_load_step() {
+    let run = common::run_static("roll_up.toml", &[]);
+    assert!(run.rows.len() >= 5);
+    for (lam, _) in &run.rows {
+        let (x, z) = (run.at("tip_x", *lam), run.at("tip_z", *lam));
+        let (ex, ez) = if *lam == 0.0 {
+            (1.0, 0.0)
+        } else {
+            let rho = 1.0 / (2.0 * PI * lam);
+            (
+                rho * (2.0 * PI * lam).sin(),
+                rho * (1.0 - (2.0 * PI * lam).cos()),
+            )
+        };
+        assert!(
+            (x - ex).abs() < 1e-8 && (z - ez).abs() < 1e-8,
+            "lambda {lam}: ({x}, {z}) vs ({ex}, {ez})"
+        );
+        // Constant bending moment M = 2 pi EI lambda / L along the beam.
+        let m = run.at("root_moment", *lam);
+        assert!((m.abs() - 2.0 * PI * 2.0 * lam).abs() < 1e-6, "moment {m}");
+    }
+    assert!((run.rows.last().unwrap().0 - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn bend_example_matches_the_continuum_reference_at_the_published_loads() {
+    // Uniform steps of 50 so that the published load levels are output steps.
+    let run = common::run_static("bend_45.toml", &["solver.max_increment=50.0"]);
+    let reference = [
+        (300.0, [58.7791, 22.2448, 40.1919]),
+        (450.0, [52.2386, 18.5082, 48.5029]),
+        (600.0, [47.1504, 15.6848, 53.4749]),
+    ];
+    for (p, r) in reference {
+        let x = [run.at("tip_x", p), run.at("tip_y", p), run.at("tip_z", p)];
+        let err = (0..3).map(|k| (x[k] - r[k]).powi(2)).sum::<f64>().sqrt();
+        // 32 two-node elements: O(h^2) mesh error of about 0.01 (0.02 % of the tip motion).
+        assert!(err < 0.03, "P = {p}: tip {x:?} vs {r:?} (error {err})");
+    }
+}
+
+#[test]
+fn bend_converges_under_mesh_refinement() {
+    let errs: Vec<f64> = [8, 16, 32]
+        .iter()
+        .map(|n| {
+            let run = common::run_static(
+                "bend_45.toml",
+                &[
+                    &format!("beam.arc.elements={n}"),
+                    &format!("load.tip_force.node=\"arc.{n}\""),
+                    &format!("sensor.tip_x.node=\"arc.{n}\""),
+                    &format!("sensor.tip_y.node=\"arc.{n}\""),
+                    &format!("sensor.tip_z.node=\"arc.{n}\""),
+                    &format!("joint.clamp.node_b=\"arc.0\""),
+                ],
+            );
+            let r = [47.1504, 15.6848, 53.4749];
+            let x = [run.last("tip_x"), run.last("tip_y"), run.last("tip_z")];
+            (0..3).map(|k| (x[k] - r[k]).powi(2)).sum::<f64>().sqrt()
+        })
+        .collect();
+    println!("bend errors for 8, 16, 32 elements: {errs:?}");
+    let p = common::order(&[8.0f64.recip(), 16.0f64.recip(), 32.0f64.recip()], &errs);
+    assert!(p > 1.7, "mesh convergence order {p} ({errs:?})");
 }

@@ -5,6 +5,7 @@
 
 use flexmb::input::{read_model_file, Analysis};
 use flexmb::sensors::SensorEvaluator;
+use flexmb::solve::Statics;
 use flexmb::{Simulation, SolveError};
 use std::path::PathBuf;
 
@@ -105,4 +106,35 @@ pub fn order(h: &[f64], err: &[f64]) -> f64 {
     let sxy: f64 = x.iter().zip(&y).map(|(a, b)| (a - mx) * (b - my)).sum();
     let sxx: f64 = x.iter().map(|a| (a - mx) * (a - mx)).sum();
     sxy / sxx
+}
+
+/// Runs a static example; the rows' first entry is the load factor.
+pub fn run_static(name: &str, overrides: &[&str]) -> History {
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    let file = read_model_file(&example(name), &overrides).unwrap_or_else(|e| panic!("{e}"));
+    let Analysis::Static(settings) = file.analysis else {
+        panic!("{name} is not a static analysis")
+    };
+    let model = &file.model;
+    let mut statics = Statics::new(model, settings).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let mut sensors = SensorEvaluator::new(model);
+    let mut rows = Vec::new();
+    let stats = statics
+        .run(&mut |s| {
+            rows.push((s.load_factor, sensors.evaluate(s.model, &s.data, &s.state)));
+            Ok(())
+        })
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    History {
+        names: SensorEvaluator::names(model),
+        rows,
+        stats: flexmb::solve::Stats {
+            steps: stats.steps,
+            newton_iterations: stats.newton_iterations,
+            rejected_steps: stats.rejected_steps,
+            factorizations: stats.factorizations,
+            ..Default::default()
+        },
+        warnings: statics.warnings.clone(),
+    }
 }
