@@ -322,7 +322,6 @@ fn bend_converges_under_mesh_refinement() {
                     &format!("sensor.tip_x.node=\"arc.{n}\""),
                     &format!("sensor.tip_y.node=\"arc.{n}\""),
                     &format!("sensor.tip_z.node=\"arc.{n}\""),
-                    &format!("joint.clamp.node_b=\"arc.0\""),
                 ],
             );
             let r = [47.1504, 15.6848, 53.4749];
