@@ -254,6 +254,7 @@ const SOLVER_STATIC_KEYS: &[&str] = &[
     "arc_length",
     "max_steps",
     "target_iterations",
+    "adaptive",
 ];
 
 fn read_solver(t: &Table<'_>) -> Result<Analysis> {
@@ -376,6 +377,9 @@ fn read_static(t: &Table<'_>) -> Result<StaticSettings> {
     }
     if let Some(f) = t.field("max_steps") {
         s.max_steps = count(&f, 100_000_000)?;
+    }
+    if let Some(f) = t.field("adaptive") {
+        s.adaptive = f.bool()?;
     }
     if let Some(f) = t.field("target_iterations") {
         s.target_iterations = count(&f, 10_000)?;

@@ -54,6 +54,9 @@ pub struct StaticSettings {
     pub max_steps: usize,
     /// Newton iterations aimed at per step: increments grow when fewer are needed.
     pub target_iterations: usize,
+    /// Adapt the load increment (load control); `false`: uniform steps of
+    /// `initial_increment`, and a failed step stops the analysis.
+    pub adaptive: bool,
     pub newton: NewtonSettings,
 }
 
@@ -69,6 +72,7 @@ impl StaticSettings {
             arc_length: 0.1,
             max_steps: 10_000,
             target_iterations: 6,
+            adaptive: true,
             newton: NewtonSettings {
                 rtol: 1e-8,
                 atol: 1e-10,
@@ -239,10 +243,12 @@ impl<'m> Statics<'m> {
                     };
                     self.stats.steps += 1;
                     output(self).map_err(SolveError::Output)?;
-                    if c.iterations <= s.target_iterations / 2 {
-                        inc = (inc * 1.5).min(s.max_increment);
-                    } else if c.iterations > s.target_iterations {
-                        inc *= 0.7;
+                    if s.adaptive {
+                        if c.iterations <= s.target_iterations / 2 {
+                            inc = (inc * 1.5).min(s.max_increment);
+                        } else if c.iterations > s.target_iterations {
+                            inc *= 0.7;
+                        }
                     }
                 }
                 Err((reason, worst)) => {
@@ -250,7 +256,7 @@ impl<'m> Statics<'m> {
                     self.state = saved;
                     load_nodes(&self.state, &mut self.data);
                     inc *= 0.5;
-                    if inc < s.min_increment {
+                    if inc < s.min_increment || !s.adaptive {
                         return Err(self.failure(reason, worst, inc));
                     }
                 }
@@ -314,6 +320,7 @@ impl<'m> Statics<'m> {
             if let Some(i) = dx.iter().position(|d| !d.is_finite()) {
                 return Err(("non-finite Newton correction".into(), Some(i)));
             }
+            let dx = &self.data.correction;
             for k in 0..nd {
                 dq[k] += dx[k];
             }
@@ -340,7 +347,7 @@ impl<'m> Statics<'m> {
                     iterations: iteration,
                 });
             }
-            if iteration >= 4 && err > previous {
+            if iteration >= 4 && err > 10.0 * previous {
                 return Err((
                     format!(
                         "Newton diverging (weighted correction {err:.3e} after {previous:.3e})"
