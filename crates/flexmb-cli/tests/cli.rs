@@ -55,6 +55,10 @@ fn run_writes_sensors_and_summary() {
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len(), 11, "t = 0, 0.01, ..., 0.1");
     assert!(rows[10].starts_with("1.000000000000e-1,"));
+    // The deformed shape: one row per node and output step.
+    let nodes = std::fs::read_to_string(out.join("nodes.csv")).expect("nodes.csv");
+    assert_eq!(nodes.lines().next(), Some("time,node,x,y,z,qw,qx,qy,qz"));
+    assert_eq!(nodes.lines().count(), 1 + 11);
     let s = summary(&out);
     assert_eq!(s["status"], "ok");
     assert_eq!(s["steps"], 100);

@@ -18,6 +18,11 @@ const CASES: &[&str] = &[
     "chain_10",
     "chain_100",
     "chain_1000",
+    "right_angle_cantilever",
+    "roll_up",
+    "beam_100",
+    "beam_1000",
+    "beam_10000",
 ];
 
 fn example(name: &str) -> PathBuf {
@@ -108,8 +113,88 @@ fn chain(n: usize) {
     );
 }
 
+/// Right-angle cantilever, 10 elements per leg, h = 0.125, 30 s (the example file).
+fn right_angle_cantilever() {
+    let o = solve(
+        "right_angle_cantilever.toml",
+        &["solver.output_interval=0".into()],
+    );
+    println!(
+        "| right_angle_cantilever (20 elements) | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
+        o.steps,
+        o.seconds * 1e3,
+        o.seconds * 1e6 / o.steps as f64,
+        o.seconds * 1e6 / (o.steps * 20) as f64,
+        o.iterations as f64 / o.steps as f64
+    );
+}
+
+/// Roll-up (static, 10 elements): adaptive load stepping.
+fn roll_up() {
+    let mf = read_model_file(&example("roll_up.toml"), &[]).expect("model file");
+    let Analysis::Static(settings) = mf.analysis else {
+        panic!("roll_up.toml is static")
+    };
+    let t0 = Instant::now();
+    let mut statics = flexmb::solve::Statics::new(&mf.model, settings).expect("starts");
+    let stats = statics.run(&mut |_| Ok(())).expect("converges");
+    let dt = t0.elapsed().as_secs_f64();
+    println!(
+        "| roll_up (10 elements, static) | {} load steps | {:.2} | {} Newton iterations | | |",
+        stats.steps,
+        dt * 1e3,
+        stats.newton_iterations
+    );
+}
+
+/// A straight cantilever of `n` elements (10 m, right-angle cantilever section) under
+/// gravity: 20 steps of h = 1e-3 s.
+fn long_beam(n: usize) {
+    use flexmb::model::{BeamSection, JointKind, Model};
+    use flexmb_lie::{Frame, Group, Mat3, Vec3};
+    let section = BeamSection::diagonal([1e6, 1e6, 1e6, 1e3, 1e3, 1e3], 1.0, [20.0, 10.0, 10.0]);
+    let mut m = Model::new(Group::SE3);
+    m.gravity = Vec3::new(0.0, 0.0, -9.81);
+    let root = m.add_node("root", Frame::identity());
+    m.add_straight_beam(
+        "beam",
+        root,
+        Vec3::new(10.0, 0.0, 0.0),
+        None,
+        n,
+        &Vec3::z(),
+        &section,
+    );
+    m.add_joint(
+        "clamp",
+        JointKind::Fixed,
+        None,
+        Some(root),
+        Vec3::zeros(),
+        Mat3::identity(),
+        None,
+    );
+    let mut s = flexmb::DynamicSettings::new(0.02, 1e-3);
+    s.rho_inf = 0.5;
+    let mut sim = Simulation::new(&m, s).expect("starts");
+    let t0 = Instant::now();
+    let stats = sim.run(&mut |_| Ok(())).expect("runs");
+    let dt = t0.elapsed().as_secs_f64();
+    println!(
+        "| beam_{n} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
+        stats.steps,
+        dt * 1e3,
+        dt * 1e6 / stats.steps as f64,
+        dt * 1e6 / (stats.steps * n) as f64,
+        stats.newton_iterations as f64 / stats.steps as f64
+    );
+}
+
 fn run_case(case: &str) {
     match case {
+        "right_angle_cantilever" => right_angle_cantilever(),
+        "roll_up" => roll_up(),
+        c if c.starts_with("beam_") => long_beam(c[5..].parse().expect("beam size")),
         "heavy_top_se3" => heavy_top("heavy_top.toml"),
         "heavy_top_r3so3" => heavy_top("heavy_top_r3so3.toml"),
         c if c.starts_with("chain_") => chain(c[6..].parse().expect("chain size")),
@@ -129,7 +214,11 @@ fn main() {
     }
     let exe = std::env::current_exe().expect("own path");
     for case in CASES {
-        if case.starts_with("chain_") && *case == "chain_10" {
+        if *case == "right_angle_cantilever" {
+            println!("\n| case | steps | solve time [ms] | time/step [us] | time/step/element [us] | Newton it./step |");
+            println!("|---|---|---|---|---|---|");
+        }
+        if *case == "chain_10" {
             println!("\n| case | steps | solve time [s] | time/step [us] | time/step/link [us] | Newton it./step | peak memory [MB] |");
             println!("|---|---|---|---|---|---|---|");
         }

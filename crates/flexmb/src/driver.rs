@@ -1,7 +1,7 @@
 //! The run of a model file into an output directory: what `flexmb run` does.
 
 use crate::input::{Analysis, ModelFile};
-use crate::output::{CsvWriter, Summary};
+use crate::output::{CsvWriter, ShapeWriter, Summary};
 use crate::sensors::SensorEvaluator;
 use crate::solve::{Simulation, StaticSettings, Statics};
 use std::path::Path;
@@ -44,6 +44,7 @@ fn run_static(
     let names = SensorEvaluator::names(model);
     let mut csv =
         CsvWriter::create_with_first_column(&out_dir.join("sensors.csv"), "load_factor", &names)?;
+    let mut shape = ShapeWriter::create(out_dir, "load_factor", model)?;
     let mut statics = match Statics::new(model, *settings) {
         Ok(s) => s,
         Err(e) => {
@@ -65,6 +66,9 @@ fn run_static(
         let values = sensors.evaluate(s.model, &s.data, &s.state);
         csv.row(s.load_factor, &values)
             .map_err(|e| format!("writing {}: {e}", csv.path().display()))?;
+        shape
+            .write(s.load_factor, s.model, &s.state)
+            .map_err(|e| format!("writing nodes.csv: {e}"))?;
         progress(s.load_factor, target);
         output_seconds += t0.elapsed().as_secs_f64();
         Ok(())
@@ -112,6 +116,7 @@ fn run_dynamic(
     summary.write(&summary_path)?;
     let names = SensorEvaluator::names(model);
     let mut csv = CsvWriter::create(&out_dir.join("sensors.csv"), &names)?;
+    let mut shape = ShapeWriter::create(out_dir, "time", model)?;
     let mut sim = match Simulation::new(model, *settings) {
         Ok(sim) => sim,
         Err(e) => {
@@ -133,6 +138,9 @@ fn run_dynamic(
         let values = sensors.evaluate(s.model, &s.data, &s.state);
         csv.row(s.state.t, &values)
             .map_err(|e| format!("writing {}: {e}", csv.path().display()))?;
+        shape
+            .write(s.state.t, s.model, &s.state)
+            .map_err(|e| format!("writing nodes.csv: {e}"))?;
         progress(s.state.t, t_end);
         output_seconds += t0.elapsed().as_secs_f64();
         Ok(())
