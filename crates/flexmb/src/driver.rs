@@ -82,6 +82,7 @@ fn run_static(
     summary.newton_iterations_per_step =
         statics.stats.newton_iterations as f64 / statics.stats.steps.max(1) as f64;
     summary.t_reached = statics.load_factor;
+    summary.warnings = statics.warnings.clone();
     summary.wall_seconds = wall;
     summary.solve_seconds = (wall - output_seconds).max(0.0);
     match result {

@@ -50,7 +50,8 @@ pub struct StaticSettings {
     /// Arc length of the first step (arc-length method) [m, rad]; later steps adapt between
     /// 1e-6 and 4 times this value.
     pub arc_length: f64,
-    /// Most load steps.
+    /// Most load steps (load control: reaching it is a failure; arc-length: the path is
+    /// followed for at most this many steps, a normal end).
     pub max_steps: usize,
     /// Newton iterations aimed at per step: increments grow when fewer are needed.
     pub target_iterations: usize,
@@ -376,11 +377,12 @@ impl<'m> Statics<'m> {
         let mut previous: Option<(Vec<f64>, f64)> = None;
         while (target - self.load_factor) * target.signum() > 1e-12 * target.abs().max(1.0) {
             if self.stats.steps >= s.max_steps {
-                return Err(self.failure(
-                    "the maximum number of arc-length steps was reached".into(),
-                    None,
-                    dl,
+                // A path is followed for a number of steps: this is a normal end.
+                self.warnings.push(format!(
+                    "arc-length continuation stopped after max_steps = {} steps at load factor {:.6e}",
+                    s.max_steps, self.load_factor
                 ));
+                return Ok(());
             }
             let saved = self.state.clone();
             let lambda0 = self.load_factor;
