@@ -157,3 +157,28 @@ fn spin_up_matches_the_reference_tip_deflection() {
     // The hub follows the prescribed rotation: psi(20) = 6 (20 - 7.5) = 75 rad (unwrapped).
     assert!((hub.last().unwrap().3 - 75.0).abs() < 1e-6);
 }
+
+#[test]
+fn right_angle_cantilever_without_numerical_damping_runs_or_stops_with_a_diagnosis() {
+    // rho_inf = 1 leaves the stiff axial modes undamped (issue 3, item 7): the run either
+    // reaches 30 s or stops with the Newton diagnosis (step, time, worst equation).
+    for h in ["0.25", "0.125"] {
+        match common::try_run(
+            "right_angle_cantilever.toml",
+            &[&format!("solver.h={h}"), "solver.rho_inf=1.0"],
+        ) {
+            Ok(run) => assert!((run.rows.last().unwrap().0 - 30.0).abs() < 1e-9),
+            Err(e) => {
+                let text = e.to_string();
+                assert!(
+                    text.contains("Newton failed at step") && text.contains("worst equation: "),
+                    "{text}"
+                );
+                assert!(
+                    text.contains("node '") || text.contains("joint '"),
+                    "{text}"
+                );
+            }
+        }
+    }
+}
