@@ -333,3 +333,78 @@ fn bend_converges_under_mesh_refinement() {
     let p = common::order(&[8.0f64.recip(), 16.0f64.recip(), 32.0f64.recip()], &errs);
     assert!(p > 1.7, "mesh convergence order {p} ({errs:?})");
 }
+
+/// Extremum of `p(u)` near sample `k`: vertex of the parabola through samples k-1, k, k+1.
+fn vertex(samples: &[(f64, f64)], k: usize) -> f64 {
+    let ((x0, y0), (x1, y1), (x2, y2)) = (samples[k - 1], samples[k], samples[k + 1]);
+    let d = (x0 - x1) * (x0 - x2) * (x1 - x2);
+    let a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / d;
+    let b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / d;
+    let c = (x1 * x2 * (x1 - x2) * y0 + x2 * x0 * (x2 - x0) * y1 + x0 * x1 * (x0 - x1) * y2) / d;
+    c - b * b / (4.0 * a)
+}
+
+/// Lee's frame followed by arc-length continuation through its snap-back, against the
+/// independent reference of tests/reference/lee_frame_reference.* (shooting solution of
+/// the extensible elastica, 10 digits): first limit load 18.5567 kN (literature: about
+/// 18.5 kN), lowest load on the path -9.4144 kN. Mesh convergence from 12 cm to 6 cm elements.
+#[test]
+fn lee_frame_limit_loads_converge_to_the_reference() {
+    let limits = |n: usize| {
+        let (c, l, r) = (10 * n, 2 * n, 8 * n);
+        let run = common::run_static(
+            "lee_frame.toml",
+            &[
+                &format!("beam.column.elements={c}"),
+                &format!("beam.beam_left.elements={l}"),
+                &format!("beam.beam_right.elements={r}"),
+                &format!("beam.beam_left.start_node=\"column.{c}\""),
+                &format!("beam.beam_right.start_node=\"beam_left.{l}\""),
+                &format!("joint.B.node_b=\"beam_right.{r}\""),
+                &format!("load.P.node=\"beam_left.{l}\""),
+                &format!("sensor.x.node=\"beam_left.{l}\""),
+                &format!("sensor.y.node=\"beam_left.{l}\""),
+                "solver.arc_length=1.0",
+            ],
+        );
+        let path: Vec<(f64, f64)> = run
+            .rows
+            .iter()
+            .map(|(p, v)| (v[run.column("x")] - 24.0, *p))
+            .collect();
+        let k_max = (1..path.len() - 1)
+            .find(|&k| path[k].1 >= path[k - 1].1 && path[k].1 > path[k + 1].1)
+            .expect("a maximum");
+        let k_min = (k_max + 1..path.len() - 1)
+            .find(|&k| path[k].1 <= path[k - 1].1 && path[k].1 < path[k + 1].1)
+            .expect("a minimum");
+        (vertex(&path, k_max), vertex(&path, k_min))
+    };
+    let (max1, min1) = limits(1);
+    let (max2, min2) = limits(2);
+    println!(
+        "Lee frame limit loads: 12 cm elements {max1:.4} / {min1:.4}, 6 cm {max2:.4} / {min2:.4}"
+    );
+    let (ref_max, ref_min) = (18.5567, -9.4144);
+    assert!(
+        (max2 - ref_max).abs() < 0.005 * ref_max,
+        "limit load {max2}"
+    );
+    assert!(
+        (min2 - ref_min).abs() < 0.01 * ref_min.abs(),
+        "lowest load {min2}"
+    );
+    // Mesh refinement moves both towards the reference at second order (4 times closer), so
+    // Richardson extrapolation lands on it.
+    assert!((max2 - ref_max).abs() < 0.3 * (max1 - ref_max).abs());
+    assert!((min2 - ref_min).abs() < 0.3 * (min1 - ref_min).abs());
+    let (rich_max, rich_min) = (max2 + (max2 - max1) / 3.0, min2 + (min2 - min1) / 3.0);
+    assert!(
+        (rich_max - ref_max).abs() < 5e-4 * ref_max,
+        "extrapolated limit load {rich_max}"
+    );
+    assert!(
+        (rich_min - ref_min).abs() < 1e-3 * ref_min.abs(),
+        "extrapolated lowest load {rich_min}"
+    );
+}
