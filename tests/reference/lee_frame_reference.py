@@ -310,13 +310,16 @@ class ReissnerFE:
 
     def elem(self, q):
         """Vectorised element internal forces (ne,6) and tangents (ne,6,6)."""
-        h = self.h
         u = q[self.dofs]                        # (ne,6)
         Xa = self.X[self.conn[:, 0]]
         Xb = self.X[self.conn[:, 1]]
-        d = (Xb - Xa + u[:, 3:5] - u[:, 0:2]) / h
-        phi = self.alpha + 0.5 * (u[:, 2] + u[:, 5])
-        c, s = np.cos(phi), np.sin(phi)
+        h = np.linalg.norm(Xb - Xa, axis=1)     # element reference lengths
+        t0 = (Xb - Xa) / h[:, None]             # exact initial tangents (no cos(pi/2) round-off)
+        d = (Xb - Xa + u[:, 3:5] - u[:, 0:2]) / h[:, None]
+        thm = 0.5 * (u[:, 2] + u[:, 5])
+        ct, st = np.cos(thm), np.sin(thm)
+        c = t0[:, 0] * ct - t0[:, 1] * st       # t = R(theta_m) t0 = (cos phi, sin phi)
+        s = t0[:, 1] * ct + t0[:, 0] * st
         t = np.stack([c, s], 1)
         nv = np.stack([-s, c], 1)
         eps = (d * t).sum(1) - 1
@@ -325,12 +328,14 @@ class ReissnerFE:
         N, Q, M = self.ea * eps, self.ga * gam, self.ei * kap
         ne = u.shape[0]
         Be = np.zeros((ne, 6)); Bg = np.zeros((ne, 6)); Bk = np.zeros((ne, 6))
-        Be[:, 0:2] = -t / h; Be[:, 3:5] = t / h; Be[:, 2] = Be[:, 5] = 0.5 * gam
-        Bg[:, 0:2] = -nv / h; Bg[:, 3:5] = nv / h; Bg[:, 2] = Bg[:, 5] = -0.5 * (1 + eps)
+        hc = h[:, None]
+        Be[:, 0:2] = -t / hc; Be[:, 3:5] = t / hc; Be[:, 2] = Be[:, 5] = 0.5 * gam
+        Bg[:, 0:2] = -nv / hc; Bg[:, 3:5] = nv / hc; Bg[:, 2] = Bg[:, 5] = -0.5 * (1 + eps)
         Bk[:, 2] = -1 / h; Bk[:, 5] = 1 / h
-        fe = h * (Be * N[:, None] + Bg * Q[:, None] + Bk * M[:, None])
-        Ke = h * (self.ea * Be[:, :, None] * Be[:, None, :] + self.ga * Bg[:, :, None] * Bg[:, None, :]
-                  + self.ei * Bk[:, :, None] * Bk[:, None, :])
+        fe = hc * (Be * N[:, None] + Bg * Q[:, None] + Bk * M[:, None])
+        Ke = h[:, None, None] * (self.ea * Be[:, :, None] * Be[:, None, :]
+                                 + self.ga * Bg[:, :, None] * Bg[:, None, :]
+                                 + self.ei * Bk[:, :, None] * Bk[:, None, :])
         # geometric part: d depends on translations (Dd = [-I/h, I/h]), phi on rotations (1/2, 1/2)
         Dd = np.zeros((ne, 2, 6))
         Dd[:, 0, 0] = Dd[:, 1, 1] = -1 / h
@@ -340,7 +345,7 @@ class ReissnerFE:
         a = np.einsum('ei,eij->ej', N[:, None] * nv - Q[:, None] * t, Dd)   # (ne,6)
         G = a[:, :, None] * dphi[None, None, :] + dphi[None, :, None] * a[:, None, :]
         G += (-(N * (1 + eps)) - Q * gam)[:, None, None] * np.outer(dphi, dphi)[None]
-        Ke += h * G
+        Ke += h[:, None, None] * G
         return fe, Ke
 
     def fun(self, z):
@@ -417,6 +422,39 @@ def linear_frame(ea=EA, ga=None, ei=EI):
     return x[6], -x[7]
 
 
+# ====================================================================== literature data
+# Leahu-Aluas & Abed-Meraim, Struct. Eng. Mech. 38(6) (2011) 767, doi 10.12989/sem.2011.38.6.767,
+# Table 11 (as transcribed in betelgeuze-kang/Structural-Analysis, benchmark/lee_frame.py; there
+# converted to m, here back to cm): (u [cm], v [cm], P [kN]).
+LEAHU_ALUAS_2011 = [
+    (0.000, 0.000, 0.00), (0.096, 2.045, 2.99), (1.006, 7.300, 8.02), (4.376, 17.849, 12.85),
+    (12.032, 32.687, 16.57), (22.602, 45.160, 18.47), (28.531, 49.916, 18.59),
+    (37.873, 55.282, 17.78), (47.475, 58.826, 16.01), (57.242, 60.741, 13.45),
+    (67.061, 60.574, 9.84), (76.393, 56.363, 3.88), (78.947, 53.369, 0.59),
+    (80.896, 50.916, -3.63), (83.117, 51.439, -6.63), (86.972, 54.360, -8.92),
+    (90.642, 58.737, -9.51), (93.210, 63.913, -8.86), (94.400, 69.411, -7.52),
+    (94.223, 74.880, -5.74), (92.826, 80.094, -3.50), (88.987, 87.205, 2.02),
+    (86.206, 91.649, 12.91)]
+
+
+def compare_literature(pts, lit=LEAHU_ALUAS_2011):
+    """pts: dense path (u, v, P).  For each literature point, the nearest point of our path in
+    the (u, v) plane (projection on the polyline, P interpolated linearly)."""
+    out = []
+    for (ul, vl, Pl) in lit:
+        best = None
+        for k in range(len(pts) - 1):
+            a, b = pts[k], pts[k + 1]
+            d = b[:2] - a[:2]
+            tt = 0.0 if d @ d == 0 else np.clip(((np.array([ul, vl]) - a[:2]) @ d) / (d @ d), 0, 1)
+            p = a + tt * (b - a)
+            dist = math.hypot(p[0] - ul, p[1] - vl)
+            if best is None or dist < best[0]:
+                best = (dist, p)
+        out.append((ul, vl, Pl, best[0], best[1][2]))
+    return out
+
+
 # ====================================================================== driver helpers
 def run_path(model, ds, stop_v=None, pmax_stop=None, nmax=20000, verbose=True):
     cont = Continuation(model.fun, model.weights())
@@ -467,6 +505,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--skip-fe", action="store_true")
+    ap.add_argument("--skip-shoot", action="store_true", help="FE part only (CSV not rewritten)")
     args = ap.parse_args()
     np.set_printoptions(precision=10)
     results = {}
@@ -483,8 +522,15 @@ def main():
     results["linear"] = lin
 
     # ---------------- method A: shooting, primary, shear rigid
-    steps_list = [24, 48] if args.quick else [24, 48, 96]
     ds = 0.02 if args.quick else 0.01
+    if not args.skip_shoot:
+        run_shooting(args, ds, vt, results)
+    if not args.skip_fe:
+        run_fe(args, ds, vt, results)
+
+
+def run_shooting(args, ds, vt, results):
+    steps_list = [24, 48] if args.quick else [24, 48, 96]
     print("== method A: multiple shooting, shear-rigid (GA = inf), EA = %g" % EA)
     shoot = {}
     for nst in steps_list:
@@ -520,6 +566,10 @@ def main():
         for u, v, P in sel:
             f.write("%.8f,%.8f,%.8f\n" % (v, u, P))
     print("   wrote lee_frame_reference.csv (%d rows)" % len(sel))
+    print("   comparison with Leahu-Aluas & Abed-Meraim (2011) Table 11 (nearest path point in (u,v)):")
+    print("       u_lit    v_lit   P_lit  | dist(u,v)  P_here   P_here-P_lit")
+    for (ul, vl, Pl, dist, Ph) in compare_literature(pts):
+        print("     %7.3f %8.3f %7.2f  | %8.3f  %8.3f  %+7.3f" % (ul, vl, Pl, dist, Ph, Ph - Pl))
     results["shoot"] = {k: dict(limP=d["limP"], limv=d["limv"], cross=d["cross"],
                                 dvdP0=d["dvdP0"], dudP0=d["dudP0"]) for k, d in shoot.items()}
 
@@ -541,8 +591,10 @@ def main():
                 print("     v = %5.1f   P = %.10f  u = %.8f" % (tg, P, u))
     results["variants"] = var
 
+
+def run_fe(args, ds, vt, results):
     # ---------------- method B: FE
-    if not args.skip_fe:
+    if True:
         print("== method B: Reissner FE (1-pt integration), shear-rigid via GA = 1e4 EA penalty")
         fe = {}
         for nel in ([20, 40] if args.quick else [40, 80, 160, 320]):
@@ -579,9 +631,6 @@ def main():
         mf2 = ReissnerFE(320, ga=GA_TIM)
         (u2, v2, P2), _, _ = first_limit(mf2, ds)
         print("   Timoshenko FE 160: P_max = %.10f, 320: %.10f, extrap %.10f" % (P, P2, P2 + (P2 - P) / 3))
-
-    with open(os.path.join(HERE, "lee_frame_results.json"), "w") as f:
-        json.dump(results, f, indent=1, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
 
 
 if __name__ == "__main__":

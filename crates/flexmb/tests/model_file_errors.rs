@@ -1241,3 +1241,48 @@ fn static_key_in_dynamic_solver() {
         &["static analysis", "analysis = \"dynamic\""],
     );
 }
+
+const BEAM_LOAD: &str = r#"flexmb = 1
+[model]
+group = "SE3"
+[solver]
+analysis = "static"
+[[beam]]
+name = "b"
+start = [0.0, 0.0, 0.0]
+end = [3.0, 0.0, 0.0]
+elements = 3
+orientation = [0.0, 0.0, 1.0]
+section = { EA = 1e6, GA2 = 1e6, GA3 = 1e6, GJ = 1e3, EI2 = 1e3, EI3 = 1e3, rhoA = 1.0, rhoJ = 1.0, rhoI2 = 0.5, rhoI3 = 0.5 }
+[[load]]
+name = "q"
+beam = "b"
+force_per_length = [0.0, 0.0, -2.0]
+"#;
+
+#[test]
+fn distributed_beam_load_is_lumped_to_the_beam_nodes() {
+    let file = parse_model_str(BEAM_LOAD, "beam_load.toml", &[]).unwrap();
+    let loads = &file.model.loads;
+    assert_eq!(loads.len(), 4, "one load per node of the 3-element beam");
+    let total: f64 = loads.iter().map(|l| l.force.z).sum();
+    assert!((total + 6.0).abs() < 1e-12);
+    assert!((loads[0].force.z + 1.0).abs() < 1e-12 && (loads[1].force.z + 2.0).abs() < 1e-12);
+    assert_eq!(loads[0].name, "q@b.0");
+    let bad = BEAM_LOAD.replace("beam = \"b\"", "beam = \"b\"\nnode = \"b.1\"");
+    let e = parse_model_str(&bad, "beam_load.toml", &[])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("beam_load.toml:16:") && e.contains("node"),
+        "{e}"
+    );
+    let bad = BEAM_LOAD.replace("beam = \"b\"", "beam = \"nope\"");
+    let e = parse_model_str(&bad, "beam_load.toml", &[])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("beam_load.toml:15:") && e.contains("nope"),
+        "{e}"
+    );
+}

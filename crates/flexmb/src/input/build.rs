@@ -910,11 +910,18 @@ fn read_joints(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Res
 fn read_loads(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
     let mut names = HashMap::new();
     for t in top.items("load")? {
-        t.check_keys(&["name", "node", "force", "torque", "frame", "function"])?;
+        t.check_keys(&[
+            "name",
+            "node",
+            "beam",
+            "force",
+            "torque",
+            "force_per_length",
+            "torque_per_length",
+            "frame",
+            "function",
+        ])?;
         let name = read_name(&t, &mut names, "load")?;
-        let node = require_node(model, &t.req("node")?)?;
-        let force = t.opt_vec3("force")?.unwrap_or_else(Vec3::zeros);
-        let torque = t.opt_vec3("torque")?.unwrap_or_else(Vec3::zeros);
         let frame = match t.opt_choice("frame", &["inertial", "body"])? {
             Some("body") => LoadFrame::Body,
             _ => LoadFrame::Inertial,
@@ -923,6 +930,51 @@ fn read_loads(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
             Some(f) => read_function(&f)?,
             None => TimeFunction::Constant { value: 1.0 },
         };
+        if let Some(beam) = t.field("beam") {
+            // A load distributed along every element of a [[beam]], lumped to its nodes.
+            t.forbid(
+                "node",
+                "with `beam`: a load acts on a `node` or along a `beam`, not both",
+            )?;
+            t.forbid(
+                "force",
+                "with `beam`: a distributed load takes `force_per_length`",
+            )?;
+            t.forbid(
+                "torque",
+                "with `beam`: a distributed load takes `torque_per_length`",
+            )?;
+            let beam_name = beam.str()?;
+            let prefix = format!("{beam_name}[");
+            let elements: Vec<usize> = model
+                .beams
+                .iter()
+                .enumerate()
+                .filter(|(_, b)| b.name.starts_with(&prefix))
+                .map(|(i, _)| i)
+                .collect();
+            if elements.is_empty() {
+                return Err(beam.err(format!("no [[beam]] named '{beam_name}'")));
+            }
+            let f = t.opt_vec3("force_per_length")?.unwrap_or_else(Vec3::zeros);
+            let m = t.opt_vec3("torque_per_length")?.unwrap_or_else(Vec3::zeros);
+            let added = model.add_beam_load(&name, &elements, f, m, frame, function);
+            for _ in 0..added {
+                origins.loads.push(Origin::of(&t));
+            }
+            continue;
+        }
+        t.forbid(
+            "force_per_length",
+            "without `beam`: only a distributed load takes it",
+        )?;
+        t.forbid(
+            "torque_per_length",
+            "without `beam`: only a distributed load takes it",
+        )?;
+        let node = require_node(model, &t.req("node")?)?;
+        let force = t.opt_vec3("force")?.unwrap_or_else(Vec3::zeros);
+        let torque = t.opt_vec3("torque")?.unwrap_or_else(Vec3::zeros);
         model.loads.push(Load {
             name,
             node,

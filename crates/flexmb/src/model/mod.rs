@@ -336,6 +336,45 @@ impl Model {
         self.beams.len() - 1
     }
 
+    /// Adds a load distributed along beam elements (per unit length of their reference
+    /// axis), lumped to their nodes: each element gives half of `f L` to each of its two
+    /// nodes (consistent for a uniform load on two-node elements up to O(L^2) in the
+    /// moments). One [`Load`] is added per loaded node, named `<name>@<node>`; returns how
+    /// many. In the `Body` frame the per-length force and torque are given in each node's
+    /// frame (the section frame of generated beam nodes).
+    pub fn add_beam_load(
+        &mut self,
+        name: &str,
+        elements: &[usize],
+        force_per_length: Vec3,
+        torque_per_length: Vec3,
+        frame: LoadFrame,
+        function: TimeFunction,
+    ) -> usize {
+        let mut share: Vec<(NodeId, f64)> = Vec::new();
+        for &e in elements {
+            let b = &self.beams[e];
+            for node in b.nodes {
+                match share.iter_mut().find(|(n, _)| *n == node) {
+                    Some(entry) => entry.1 += 0.5 * b.length,
+                    None => share.push((node, 0.5 * b.length)),
+                }
+            }
+        }
+        for (node, length) in &share {
+            let node_name = self.nodes[node.0].name.clone();
+            self.loads.push(Load {
+                name: format!("{name}@{node_name}"),
+                node: *node,
+                force: force_per_length * *length,
+                torque: torque_per_length * *length,
+                frame,
+                function: function.clone(),
+            });
+        }
+        share.len()
+    }
+
     /// Adds `n` beam elements along the straight segment from node `a` to a new node at
     /// `end` (plus `n - 1` intermediate nodes named `<name>.<i>`, and the end node
     /// `<name>.<n>` unless `end_node` is an existing node there). The section's z axis is
