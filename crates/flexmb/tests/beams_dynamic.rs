@@ -232,3 +232,75 @@ fn flexible_four_bar_balances_energy_and_converges_in_the_step() {
         "the 5-degree misalignment forces an out-of-plane deflection"
     );
 }
+
+/// Stiffness-proportional Rayleigh damping: the first bending mode of a cantilever decays
+/// with the damping ratio zeta = beta omega_1 / 2 (Clough & Penzien, "Dynamics of
+/// Structures", Sect. 12-5), measured from the logarithmic decrement of the tip response
+/// with the undamped scheme (rho_inf = 1) so that only the physical damping acts.
+#[test]
+fn rayleigh_damping_gives_the_modal_damping_ratio() {
+    let beta = 5e-4;
+    let section = BeamSection::diagonal([1e7, 1e7, 1e7, 1e3, 1e3, 1e3], 1.0, [0.02, 0.01, 0.01])
+        .with_damping(0.0, beta);
+    let mut m = Model::new(Group::SE3);
+    let root = m.add_node("root", Frame::identity());
+    let ids = m.add_straight_beam(
+        "beam",
+        root,
+        Vec3::new(1.0, 0.0, 0.0),
+        None,
+        10,
+        &Vec3::z(),
+        &section,
+    );
+    let tip = *ids.last().unwrap();
+    m.add_joint(
+        "clamp",
+        JointKind::Fixed,
+        None,
+        Some(root),
+        Vec3::zeros(),
+        Mat3::identity(),
+        None,
+    );
+    m.loads.push(Load {
+        name: "tap".into(),
+        node: tip,
+        force: Vec3::new(0.0, 0.0, 1.0),
+        torque: Vec3::zeros(),
+        frame: LoadFrame::Inertial,
+        function: TimeFunction::Table {
+            points: vec![(0.0, 0.0), (0.005, 1.0), (0.01, 0.0)],
+        },
+    });
+    let mut s = DynamicSettings::new(1.0, 2e-4);
+    s.rho_inf = 1.0;
+    let mut sim = Simulation::new(&m, s).expect("starts");
+    let mut w = vec![];
+    sim.run(&mut |s| {
+        w.push((s.state.t, s.state.q[tip.0].x.z));
+        Ok(())
+    })
+    .expect("runs");
+    // Peaks of the tip deflection after the higher modes have died out (t > 0.2 s).
+    let peaks: Vec<(f64, f64)> = w
+        .windows(3)
+        .filter(|p| p[1].0 > 0.2 && p[1].1 > p[0].1 && p[1].1 >= p[2].1 && p[1].1 > 0.0)
+        .map(|p| p[1])
+        .collect();
+    assert!(peaks.len() >= 4, "{peaks:?}");
+    let n = peaks.len() - 1;
+    let period = (peaks[n].0 - peaks[0].0) / n as f64;
+    let omega = 2.0 * std::f64::consts::PI / period;
+    let delta = (peaks[0].1 / peaks[n].1).ln() / n as f64;
+    let zeta = delta / (4.0 * std::f64::consts::PI * std::f64::consts::PI + delta * delta).sqrt();
+    // First bending frequency of the cantilever (Euler-Bernoulli): 1.875^2 sqrt(EI / (rho A L^4)).
+    let omega_exact = 1.875104f64.powi(2) * (1e3f64 / 1.0).sqrt();
+    println!("omega {omega:.2} (Euler-Bernoulli {omega_exact:.2}), zeta {zeta:.5} (beta omega / 2 = {:.5})", beta * omega / 2.0);
+    // Lumped mass, rotary inertia and 10 elements lower it by a few percent.
+    assert!((omega - omega_exact).abs() < 0.04 * omega_exact);
+    assert!(
+        (zeta - beta * omega / 2.0).abs() < 0.05 * beta * omega / 2.0,
+        "zeta {zeta}"
+    );
+}

@@ -418,6 +418,8 @@ fn beam_tangents_match_finite_differences() {
         stiffness: c,
         mass_per_length: 2.0,
         rotary_inertia: Mat3::new(0.3, 0.01, 0.0, 0.01, 0.2, 0.02, 0.0, 0.02, 0.1),
+        damping_mass: 0.7,
+        damping_stiffness: 0.03,
     };
     for (offsets, curved) in [(false, false), (true, false), (true, true)] {
         // Reference: a straight (or curved) element of length ~1.3 with arbitrary offsets.

@@ -22,6 +22,12 @@
 //! `K_t` depends on the relative motion only: it is invariant under a superimposed rigid
 //! motion, and the element is free of shear locking (the strain is exactly constant).
 //!
+//! Rayleigh damping (optional): stiffness-proportional stress resultants
+//! `sigma_d = beta C (P v) / L` (`P v` is the rate of `d`), giving `f_d = P^T sigma_d`,
+//! `C_t = beta P^T C P / L` and, in `K_t`, the derivatives of `P` at fixed `v`
+//! (`H(x, y) = d(T^-1(x) y)/dx`, obtained from `G` by `H_ij = y . G(x, e_i)_{:,j}`);
+//! mass-proportional forces `alpha M v` on the lumped nodal masses.
+//!
 //! Inertia is lumped: each node carries half the element's mass `rho A L / 2` and rotary
 //! inertia `J L / 2` as a rigid body at the node (SE(3) form of [`super::rigid_body`]),
 //! including gravity. Beams need SE(3) nodes: on R3xSO(3) the model is rejected with a clear
@@ -44,6 +50,19 @@ fn offset_map(o: &Mat3) -> Mat6 {
     a.fixed_view_mut::<3, 3>(0, 0).copy_from(&o.transpose());
     a.fixed_view_mut::<3, 3>(3, 3).copy_from(&o.transpose());
     a
+}
+
+/// `H(x, y) = d(T^-1(x) y)/dx` from the transposed derivative `G`:
+/// `e_i . T^-1(x) y = (T^-1(x)^T e_i) . y`, so row `i` of `H` is `y^T G(x, e_i)`.
+fn tangent_inv_derivative(x: &Vec6, y: &Vec6) -> Mat6 {
+    let mut h = Mat6::zeros();
+    for i in 0..6 {
+        let mut e = Vec6::zeros();
+        e[i] = 1.0;
+        let row = y.transpose() * se3::tangent_inv_transpose_derivative(x, &e);
+        h.set_row(i, &row);
+    }
+    h
 }
 
 /// Kinematic and static quantities of one element state.
@@ -115,7 +134,25 @@ impl ElementKernel for Beam {
             .copy_from(&(-se3::tangent_inv(&(-st.d)) * aa));
         p.fixed_view_mut::<6, 6>(0, 6)
             .copy_from(&(se3::tangent_inv(&st.d) * ab));
-        *r = p.transpose() * st.stress;
+        let (alpha, beta) = (self.section.damping_mass, self.section.damping_stiffness);
+        let mut v = Vec12::zeros();
+        v.fixed_rows_mut::<6>(0).copy_from(&nodes[0].v);
+        v.fixed_rows_mut::<6>(6).copy_from(&nodes[1].v);
+        let c_over_l = self.section.stiffness / self.length;
+        // total stress resultants: elastic plus stiffness-proportional damping
+        let sigma = if beta > 0.0 {
+            st.stress + c_over_l * (p * v) * beta
+        } else {
+            st.stress
+        };
+        *r = p.transpose() * sigma;
+        if alpha > 0.0 {
+            for end in 0..2 {
+                let mm = self.lumped(end).mass_matrix_se3();
+                let mut re = r.fixed_rows_mut::<6>(6 * end);
+                re += mm * v.fixed_rows::<6>(6 * end) * alpha;
+            }
+        }
         let mut blocks = [(Vec6::zeros(), Mat6::zeros(), Mat6::zeros(), Mat6::zeros()); 2];
         for (end, blk) in blocks.iter_mut().enumerate() {
             let body = self.lumped(end);
@@ -136,13 +173,29 @@ impl ElementKernel for Beam {
             return;
         };
         let mut geometric = SMatrix::<f64, 12, 6>::zeros();
-        geometric.fixed_view_mut::<6, 6>(0, 0).copy_from(
-            &(aa.transpose() * se3::tangent_inv_transpose_derivative(&(-st.d), &st.stress)),
-        );
-        geometric.fixed_view_mut::<6, 6>(6, 0).copy_from(
-            &(ab.transpose() * se3::tangent_inv_transpose_derivative(&st.d, &st.stress)),
-        );
-        let mut k = p.transpose() * (self.section.stiffness / self.length) * p + geometric * p;
+        geometric
+            .fixed_view_mut::<6, 6>(0, 0)
+            .copy_from(&(aa.transpose() * se3::tangent_inv_transpose_derivative(&(-st.d), &sigma)));
+        geometric
+            .fixed_view_mut::<6, 6>(6, 0)
+            .copy_from(&(ab.transpose() * se3::tangent_inv_transpose_derivative(&st.d, &sigma)));
+        let mut k = p.transpose() * c_over_l * p + geometric * p;
+        let mut c_t = Mat12::zeros();
+        if beta > 0.0 {
+            // d(P v)/dd at fixed v, then through P to the node variations
+            let va = aa * v.fixed_rows::<6>(0);
+            let vb = ab * v.fixed_rows::<6>(6);
+            let ddot = tangent_inv_derivative(&(-st.d), &va) + tangent_inv_derivative(&st.d, &vb);
+            k += p.transpose() * c_over_l * beta * ddot * p;
+            c_t += p.transpose() * c_over_l * beta * p;
+        }
+        if alpha > 0.0 {
+            for end in 0..2 {
+                let mm = self.lumped(end).mass_matrix_se3();
+                let mut cb = c_t.fixed_view_mut::<6, 6>(6 * end, 6 * end);
+                cb += mm * alpha;
+            }
+        }
         for (end, blk) in blocks.iter().enumerate() {
             let mut kb = k.fixed_view_mut::<6, 6>(6 * end, 6 * end);
             kb += blk.3;
@@ -152,9 +205,8 @@ impl ElementKernel for Beam {
             let mut sb = s.fixed_view_mut::<6, 6>(6 * end, 6 * end);
             sb += blk.1 * coef.m + blk.2 * coef.c;
         }
-        *s += k * coef.k;
+        *s += k * coef.k + c_t * coef.c;
         super::physical::apply_tangent_full(nodes, [true, true], s, coef, &k);
-        let _ = &mut k;
     }
 
     fn kinetic_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {

@@ -18,6 +18,7 @@ const BEAM_KEYS: &[&str] = &[
     "elements",
     "orientation",
     "section",
+    "damping",
 ];
 
 /// Most elements of one `[[beam]]`.
@@ -242,7 +243,23 @@ pub(super) fn read_beams(
             )));
         }
 
-        let section = read_section(&t.req("section")?)?;
+        let mut section = read_section(&t.req("section")?)?;
+        if let Some(f) = t.field("damping") {
+            let d = f.table()?;
+            d.check_keys(&["mass", "stiffness"])?;
+            for (key, slot) in [
+                ("mass", &mut section.damping_mass),
+                ("stiffness", &mut section.damping_stiffness),
+            ] {
+                if let Some(v) = d.field(key) {
+                    let x = v.f64()?;
+                    if x < 0.0 {
+                        return Err(v.err(format!("must be >= 0, got {x}")));
+                    }
+                    *slot = x;
+                }
+            }
+        }
 
         // Nodes.
         let origin = Origin::of(&t);
@@ -450,6 +467,8 @@ fn read_section(f: &Field<'_>) -> Result<BeamSection> {
             stiffness: read_stiffness(&t.req("stiffness")?)?,
             mass_per_length: num("mass_per_length")?,
             rotary_inertia: read_rotary_inertia(&t.req("rotary_inertia")?)?,
+            damping_mass: 0.0,
+            damping_stiffness: 0.0,
         },
     };
     let finite = section

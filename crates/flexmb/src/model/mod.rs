@@ -154,6 +154,12 @@ pub struct BeamSection {
     pub mass_per_length: f64,
     /// Sectional rotary inertia per unit length diag(rho J, rho I_2, rho I_3) or full [kg m].
     pub rotary_inertia: Mat3,
+    /// Rayleigh damping, mass-proportional coefficient alpha [1/s]: nodal forces
+    /// `alpha M v` (this also damps rigid motion, as Rayleigh damping does).
+    pub damping_mass: f64,
+    /// Rayleigh damping, stiffness-proportional coefficient beta [s]: stress resultants
+    /// `beta C depsilon/dt` (objective: no force under rigid motion).
+    pub damping_stiffness: f64,
 }
 
 impl BeamSection {
@@ -165,7 +171,17 @@ impl BeamSection {
             )),
             mass_per_length,
             rotary_inertia: Mat3::from_diagonal(&Vec3::from_column_slice(&rotary_inertia)),
+            damping_mass: 0.0,
+            damping_stiffness: 0.0,
         }
+    }
+
+    /// The same section with Rayleigh damping coefficients `alpha` (mass) and `beta`
+    /// (stiffness).
+    pub fn with_damping(mut self, alpha: f64, beta: f64) -> Self {
+        self.damping_mass = alpha;
+        self.damping_stiffness = beta;
+        self
     }
 }
 
@@ -653,6 +669,23 @@ impl Model {
                     "section",
                     "the sectional stiffness must be symmetric positive definite".into(),
                 ));
+            }
+            for (what, v) in [
+                ("mass-proportional damping", b.section.damping_mass),
+                (
+                    "stiffness-proportional damping",
+                    b.section.damping_stiffness,
+                ),
+            ] {
+                if v.is_nan() || v < 0.0 {
+                    return Err(bad(
+                        "beam",
+                        i,
+                        &b.name,
+                        "section",
+                        format!("{what} must be >= 0, got {v}"),
+                    ));
+                }
             }
             if b.section.mass_per_length.is_nan() || b.section.mass_per_length <= 0.0 {
                 return Err(bad(
