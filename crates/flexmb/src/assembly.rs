@@ -47,6 +47,9 @@ pub struct Scaling {
     pub regularization: f64,
     /// Factor on the velocity-level rows of the stabilized formulation (`1/gamma'`).
     pub velocity_scale: f64,
+    /// Nodal viscous damping `alpha D v` with `D` the nodal masses and inertias
+    /// ([`crate::Data::nodal_mass`]) [1/s]: used by pseudo-dynamic static analysis.
+    pub nodal_damping: f64,
 }
 
 fn gather(data: &Data, slots: [Option<NodeId>; 2], ground: &[NodeState; 2]) -> [NodeState; 2] {
@@ -93,6 +96,14 @@ pub fn assemble(
         }
         if matrix {
             pos = scatter_blocks(&mut data.values, pos, dofs, &s);
+        }
+    }
+    if sc.nodal_damping > 0.0 {
+        for (i, node) in data.nodes.iter().enumerate() {
+            for k in 0..6 {
+                data.residual[6 * i + k] +=
+                    sc.row_scale * sc.nodal_damping * data.nodal_mass[i][k] * node.v[k];
+            }
         }
     }
     let needs_h = sc.constraint_rhs == ConstraintRhs::Acceleration;
@@ -189,8 +200,8 @@ pub fn assemble(
     if matrix {
         // Diagonal entries come last in the pattern, one per unknown.
         let n = layout.n_unknowns();
-        for v in &mut data.values[pos..pos + n_dofs] {
-            *v = 0.0;
+        for (k, v) in data.values[pos..pos + n_dofs].iter_mut().enumerate() {
+            *v = sc.coef.c * sc.nodal_damping * data.nodal_mass[k / 6][k % 6];
         }
         for v in &mut data.values[pos + n_dofs..pos + n] {
             *v = -sc.regularization;

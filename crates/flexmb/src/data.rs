@@ -169,6 +169,9 @@ pub struct Data {
     pub nodes: Vec<NodeState>,
     /// Constraint values `Phi` (`n_rows`).
     pub phi: Vec<f64>,
+    /// Diagonal nodal masses and inertias (`n_nodes`, 6 each: the body and lumped beam
+    /// masses on the translations, the mean of their inertias on the rotations).
+    pub nodal_mass: Vec<flexmb_lie::Vec6>,
     /// Rows of `B` at the current iterate (`n_rows`, group coordinates).
     pub b_rows: Vec<crate::elements::Vec12>,
     /// Rows of `B(q_n)` at the start of the step (`n_rows`; stabilized formulation).
@@ -197,6 +200,7 @@ impl Data {
                 })
                 .collect(),
             phi: vec![0.0; layout.n_rows],
+            nodal_mass: nodal_mass(model),
             b_rows: vec![crate::elements::Vec12::zeros(); layout.n_rows],
             b_start: vec![crate::elements::Vec12::zeros(); layout.n_rows],
             pattern,
@@ -283,4 +287,29 @@ pub fn active_slots(slots: [Option<usize>; 2]) -> impl Iterator<Item = (usize, u
         .into_iter()
         .enumerate()
         .filter_map(|(k, d)| d.map(|d| (k, d)))
+}
+
+/// Diagonal nodal masses: bodies (mass, and the mean principal inertia about the node) and
+/// the lumped halves of beam elements.
+fn nodal_mass(model: &Model) -> Vec<Vec6> {
+    let mut out = vec![Vec6::zeros(); model.nodes.len()];
+    let mut add = |node: NodeId, m: f64, j: f64| {
+        let v = &mut out[node.0];
+        for k in 0..3 {
+            v[k] += m;
+            v[3 + k] += j;
+        }
+    };
+    for b in &model.bodies {
+        let j_o = b.inertia.trace() / 3.0 + b.mass * b.com.norm_squared() * 2.0 / 3.0;
+        add(b.node, b.mass, j_o);
+    }
+    for b in &model.beams {
+        let half = 0.5 * b.length;
+        let j = b.section.rotary_inertia.trace() / 3.0 * half;
+        for node in b.nodes {
+            add(node, b.section.mass_per_length * half, j);
+        }
+    }
+    out
 }

@@ -442,3 +442,30 @@ fn distributed_load_on_a_cantilever_matches_beam_theory() {
     println!("distributed load: relative tip errors {errors:?}");
     assert!(errors.iter().all(|e| *e < 1e-6), "{errors:?}");
 }
+
+/// The pseudo-dynamic method (damped dynamic run with the load ramped) settles on the same
+/// static state as load control: the 45-degree bend at P = 600, with critical damping of the
+/// first mode (omega_1 about 0.5 rad/s, so alpha = 1/s) and a 30 s ramp.
+#[test]
+fn pseudo_dynamic_settles_on_the_static_solution() {
+    let control = common::run_static("bend_45.toml", &[]);
+    let relaxed = common::run_static(
+        "bend_45.toml",
+        &[
+            "solver.method=\"pseudo_dynamic\"",
+            "solver.pseudo_time=30.0",
+            "solver.pseudo_damping=1.0",
+            "solver.increment=0.01",
+        ],
+    );
+    assert!(relaxed.warnings.is_empty(), "{:?}", relaxed.warnings);
+    assert!((relaxed.rows.last().unwrap().0 - 600.0).abs() < 1e-9);
+    for c in ["tip_x", "tip_y", "tip_z"] {
+        assert!(
+            (relaxed.last(c) - control.last(c)).abs() < 1e-5,
+            "{c}: {} vs {}",
+            relaxed.last(c),
+            control.last(c)
+        );
+    }
+}

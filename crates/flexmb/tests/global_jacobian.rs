@@ -87,6 +87,7 @@ fn assembled_stiffness_matches_finite_differences_of_the_residual() {
         load_factor: 1.0,
         regularization: 0.0,
         velocity_scale: 1.0,
+        nodal_damping: 0.0,
     };
     residual(&m, &mut data, &q0, &dq, &lambda, &sc, true);
     let mut dense = vec![vec![0.0; nu]; nu];

@@ -255,6 +255,8 @@ const SOLVER_STATIC_KEYS: &[&str] = &[
     "max_steps",
     "target_iterations",
     "adaptive",
+    "pseudo_time",
+    "pseudo_damping",
 ];
 
 fn read_solver(t: &Table<'_>) -> Result<Analysis> {
@@ -363,11 +365,25 @@ fn read_static(t: &Table<'_>) -> Result<StaticSettings> {
             ),
         ));
     }
-    if let Some(m) = t.opt_choice("method", &["load_control", "arc_length"])? {
+    if let Some(m) = t.opt_choice("method", &["load_control", "arc_length", "pseudo_dynamic"])? {
         s.method = match m {
             "arc_length" => StaticMethod::ArcLength,
+            "pseudo_dynamic" => StaticMethod::PseudoDynamic,
             _ => StaticMethod::LoadControl,
         };
+    }
+    for key in ["pseudo_time", "pseudo_damping"] {
+        if let Some(f) = t.field(key) {
+            if s.method != StaticMethod::PseudoDynamic {
+                return Err(t.key_name_err(key, "only allowed with method = \"pseudo_dynamic\""));
+            }
+            let v = positive(&f)?;
+            if key == "pseudo_time" {
+                s.pseudo_time = v;
+            } else {
+                s.pseudo_damping = v;
+            }
+        }
     }
     if let Some(f) = t.field("arc_length") {
         if s.method != StaticMethod::ArcLength {

@@ -110,9 +110,27 @@ pub struct DynamicSettings {
     pub newton: NewtonSettings,
     pub formulation: Formulation,
     pub scheme: Scheme,
+    /// Nodal viscous damping `alpha D v` [1/s] (0: none); for pseudo-dynamic statics.
+    pub nodal_damping: f64,
+    /// Loads and gravity grow linearly from 0 over this time and then stay [s] (0: applied
+    /// at once).
+    pub load_ramp: f64,
+    /// Factor on loads and gravity (1 in a dynamic analysis; the target load factor of a
+    /// pseudo-dynamic static analysis).
+    pub load_scale: f64,
 }
 
 impl DynamicSettings {
+    /// Factor on loads and gravity at time `t` (the ramp, if any).
+    pub fn load_factor_at(&self, t: f64) -> f64 {
+        let ramp = if self.load_ramp > 0.0 {
+            (t / self.load_ramp).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        self.load_scale * ramp
+    }
+
     /// Whether the stabilized index-2 formulation is used.
     pub fn stabilized(&self) -> bool {
         match self.formulation {
@@ -135,6 +153,9 @@ impl DynamicSettings {
             newton: NewtonSettings::default(),
             formulation: Formulation::Auto,
             scheme: Scheme::GeneralizedAlpha,
+            nodal_damping: 0.0,
+            load_ramp: 0.0,
+            load_scale: 1.0,
         }
     }
 }
@@ -214,7 +235,7 @@ impl<'m> Simulation<'m> {
         let model_error = |e: LinearError| SolveError::Model(e.to_string());
         let mut data = Data::new(model, layout.clone()).map_err(model_error)?;
         let mut state = State::initial(model, n_rows);
-        initial_accelerations(model, &mut data, &mut state)?;
+        initial_accelerations(model, &mut data, &mut state, settings.load_factor_at(0.0))?;
         if settings.stabilized() {
             let mut stabilized = layout;
             stabilized.stabilized = true;
@@ -357,13 +378,14 @@ impl<'m> Simulation<'m> {
                 k: scale,
             },
             constraint_rhs: ConstraintRhs::Position,
-            load_factor: 1.0,
+            load_factor: self.settings.load_factor_at(self.saved.t + h),
             regularization: if self.regularized_steps > 0 {
                 self.regularization
             } else {
                 0.0
             },
             velocity_scale: 1.0 / gp,
+            nodal_damping: self.settings.nodal_damping,
         };
         let stabilized = self.data.layout.stabilized;
         if stabilized {

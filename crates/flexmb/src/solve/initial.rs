@@ -139,6 +139,7 @@ pub fn initial_accelerations(
     model: &Model,
     data: &mut Data,
     state: &mut State,
+    load_factor: f64,
 ) -> Result<(), SolveError> {
     load_nodes(state, data);
     for n in data.nodes.iter_mut() {
@@ -149,9 +150,10 @@ pub fn initial_accelerations(
         row_scale: 1.0,
         coef: Coefficients::MASS,
         constraint_rhs: ConstraintRhs::Position,
-        load_factor: 1.0,
+        load_factor,
         regularization: 0.0,
         velocity_scale: 1.0,
+        nodal_damping: 0.0,
     };
     assemble(model, data, state.t, &zeros, &sc, false);
     if let Some((row, v)) = worst(&data.phi) {

@@ -33,6 +33,10 @@ pub enum StaticMethod {
     LoadControl,
     /// Arc-length continuation (Crisfield), passes limit points.
     ArcLength,
+    /// Pseudo-dynamic (dynamic relaxation): the loads are ramped over a pseudo time in a
+    /// heavily damped dynamic analysis (nodal viscous damping, rho_inf = 0); the inertia
+    /// regularizes singular or ill-conditioned tangents (mechanisms, buckling).
+    PseudoDynamic,
 }
 
 /// Settings of a static analysis.
@@ -50,6 +54,11 @@ pub struct StaticSettings {
     /// Arc length of the first step (arc-length method) [m, rad]; later steps adapt between
     /// 1e-6 and 4 times this value.
     pub arc_length: f64,
+    /// Pseudo-dynamic method: pseudo time of the load ramp [s] (the analysis runs twice as
+    /// long, the second half at full load to settle); steps of `initial_increment` times it.
+    pub pseudo_time: f64,
+    /// Pseudo-dynamic method: nodal viscous damping `alpha` [1/s].
+    pub pseudo_damping: f64,
     /// Most load steps (load control: reaching it is a failure; arc-length: the path is
     /// followed for at most this many steps, a normal end).
     pub max_steps: usize,
@@ -74,6 +83,8 @@ impl StaticSettings {
             max_steps: 10_000,
             target_iterations: 6,
             adaptive: true,
+            pseudo_time: 1.0,
+            pseudo_damping: 20.0,
             newton: NewtonSettings {
                 rtol: 1e-8,
                 atol: 1e-10,
@@ -183,6 +194,7 @@ impl<'m> Statics<'m> {
             load_factor: lambda,
             regularization: 0.0,
             velocity_scale: 1.0,
+            nodal_damping: 0.0,
         }
     }
 
@@ -208,6 +220,7 @@ impl<'m> Statics<'m> {
         match self.settings.method {
             StaticMethod::LoadControl => self.run_load_control(output)?,
             StaticMethod::ArcLength => self.run_arc_length(output)?,
+            StaticMethod::PseudoDynamic => self.run_pseudo_dynamic(output)?,
         }
         Ok(self.stats)
     }
@@ -593,5 +606,53 @@ impl<'m> Statics<'m> {
             }
         }
         Err(("no convergence".into(), None))
+    }
+
+    /// Pseudo-dynamic solution: a damped dynamic run with the loads ramped from 0 to the final
+    /// load factor over `pseudo_time`, then held for as long again to settle. The states at
+    /// the steps are reported as load steps once the run is over.
+    fn run_pseudo_dynamic(
+        &mut self,
+        output: &mut dyn FnMut(&Statics) -> Result<(), String>,
+    ) -> Result<(), SolveError> {
+        let s = self.settings;
+        let t_ramp = s.pseudo_time;
+        let mut d = super::DynamicSettings::new(2.0 * t_ramp, s.initial_increment * t_ramp);
+        d.rho_inf = 0.0;
+        d.nodal_damping = s.pseudo_damping;
+        d.load_ramp = t_ramp;
+        d.load_scale = s.load_factor;
+        d.newton.rtol = s.newton.rtol;
+        d.newton.atol = s.newton.atol;
+        d.newton.max_iterations = s.newton.max_iterations;
+        let mut sim = super::Simulation::new(self.model, d)?;
+        let mut states: Vec<(f64, State)> = Vec::new();
+        sim.run(&mut |sim| {
+            states.push((d.load_factor_at(sim.state.t), sim.state.clone()));
+            Ok(())
+        })?;
+        self.stats.steps += sim.stats.steps;
+        self.stats.newton_iterations += sim.stats.newton_iterations;
+        self.stats.rejected_steps += sim.stats.rejected_steps;
+        self.stats.factorizations += sim.stats.factorizations;
+        let last = states
+            .last()
+            .map(|(_, st)| st.v.iter().fold(0.0f64, |m, v| m.max(v.norm())))
+            .unwrap_or(0.0);
+        if last > 1e-6 {
+            self.warnings.push(format!(
+                "pseudo-dynamic analysis: largest nodal velocity {last:.3e} at the end; increase pseudo_time or pseudo_damping for a settled static state"
+            ));
+        }
+        for (lambda, mut state) in states.into_iter().skip(1) {
+            for v in state.v.iter_mut() {
+                *v = Vec6::zeros();
+            }
+            self.state = state;
+            self.load_factor = lambda;
+            load_nodes(&self.state, &mut self.data);
+            output(self).map_err(SolveError::Output)?;
+        }
+        Ok(())
     }
 }
