@@ -480,12 +480,14 @@ def run_path(model, ds, stop_v=None, pmax_stop=None, nmax=20000, verbose=True):
 def analyse(model, cont, path, vtargets):
     iv = model.v_index()
     sgn = -1.0   # v = const - z[iv] for both models
-    limP = refine_events(cont, path, lambda z: z[-1], dqfun=lambda t: t[-1])
+    limP = refine_events(cont, path, lambda z: z[-1], dqfun=lambda t: t[-1], targets=(0.0,))
     limv = refine_events(cont, path, lambda z: model.uvP(z)[1], dqfun=lambda t: sgn * t[iv],
                          targets=vtargets)
-    return ([model.uvP(e[2]) for e in limP],
+    zeroP = [model.uvP(e[2]) for e in limP if e[0] == "cross" and model.uvP(e[2])[1] > 1.0]
+    return ([model.uvP(e[2]) for e in limP if e[0] == "extremum"],
             [model.uvP(e[2]) for e in limv if e[0] == "extremum"],
-            [(e[1],) + tuple(model.uvP(e[2])) for e in limv if e[0] == "cross"])
+            [(e[1],) + tuple(model.uvP(e[2])) for e in limv if e[0] == "cross"],
+            zeroP)
 
 
 def first_limit(model, ds):
@@ -537,7 +539,7 @@ def run_shooting(args, ds, vt, results):
         m = Shooting(nsteps=nst)
         t0 = time.time()
         cont, path = run_path(m, ds, stop_v=None, pmax_stop=PSTOP, nmax=4000)
-        limP, limv, cross = analyse(m, cont, path, vt)
+        limP, limv, cross, zeroP = analyse(m, cont, path, vt)
         # initial slope
         z0, t0v = path[0]
         dvdP = -t0v[m.v_index()] / t0v[-1]
@@ -552,6 +554,9 @@ def run_shooting(args, ds, vt, results):
             print("     v extremum  v = %.8f  u = %.8f  P = %.10f" % (v, u, P))
         for (tg, u, v, P) in cross:
             print("     v = %5.1f   P = %.10f  u = %.8f" % (tg, P, u))
+        for (u, v, P) in zeroP:
+            print("     P = 0 crossing  v = %.8f  u = %.8f" % (v, u))
+        print("     end of trace    P = %.6f  u = %.6f  v = %.6f" % (m.uvP(path[-1][0])[2], m.uvP(path[-1][0])[0], m.uvP(path[-1][0])[1]))
     best = steps_list[-1]
     m = shoot[best]["model"]
     path = shoot[best]["path"]
@@ -579,7 +584,7 @@ def run_shooting(args, ds, vt, results):
     for name, kw in [("Timoshenko GA=21600 kN", dict(ga=GA_TIM)), ("inextensible", dict(ea=None))]:
         mv = Shooting(nsteps=48 if args.quick else 96, **kw)
         cont, pth = run_path(mv, ds, pmax_stop=PSTOP, nmax=4000, verbose=False)
-        limP, limv, cross = analyse(mv, cont, pth, vt)
+        limP, limv, cross, zeroP = analyse(mv, cont, pth, vt)
         var[name] = dict(limP=limP, limv=limv, cross=cross)
         print("   %s:" % name)
         for (u, v, P) in limP:
@@ -602,7 +607,7 @@ def run_fe(args, ds, vt, results):
             t0 = time.time()
             if nel <= 160:
                 cont, pth = run_path(mf, ds, pmax_stop=PSTOP, nmax=4000, verbose=False)
-                limP, limv, cross = analyse(mf, cont, pth, vt)
+                limP, limv, cross, zeroP = analyse(mf, cont, pth, vt)
             else:
                 (u, v, P), cont, pth = first_limit(mf, ds)
                 limP, limv, cross = [(u, v, P)], [], []
