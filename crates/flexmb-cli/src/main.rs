@@ -82,11 +82,19 @@ fn run(cli: Cli) -> Result<i32> {
                     "error: {}",
                     summary.error.as_deref().unwrap_or("the analysis failed")
                 );
-                eprintln!(
-                    "results up to t = {:.6} s are in {}",
-                    summary.t_reached,
-                    out.display()
-                );
+                if summary.analysis == "static" {
+                    eprintln!(
+                        "results up to load factor {:.6e} are in {}",
+                        summary.t_reached,
+                        out.display()
+                    );
+                } else {
+                    eprintln!(
+                        "results up to t = {:.6} s are in {}",
+                        summary.t_reached,
+                        out.display()
+                    );
+                }
                 return Ok(1);
             }
             println!(

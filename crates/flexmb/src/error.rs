@@ -34,6 +34,15 @@ pub enum SolveError {
         reason: String,
         worst_equation: String,
     },
+    #[error("static analysis failed at load step {step}, load factor {load_factor:.6e} (last increment tried {increment:.3e}, {rejected} rejected steps): {reason}; worst equation: {worst_equation}")]
+    StaticFailed {
+        step: usize,
+        load_factor: f64,
+        increment: f64,
+        rejected: usize,
+        reason: String,
+        worst_equation: String,
+    },
     #[error("output error: {0}")]
     Output(String),
 }

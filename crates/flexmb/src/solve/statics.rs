@@ -280,15 +280,12 @@ impl<'m> Statics<'m> {
     }
 
     fn failure(&self, reason: String, worst: Option<usize>, inc: f64) -> SolveError {
-        SolveError::NewtonFailed {
+        SolveError::StaticFailed {
             step: self.stats.steps + 1,
-            t: self.load_factor,
-            h: inc,
-            reductions: self.stats.rejected_steps,
-            reason: format!(
-                "static analysis at load factor {:.6e}: {reason}",
-                self.load_factor
-            ),
+            load_factor: self.load_factor,
+            increment: inc,
+            rejected: self.stats.rejected_steps,
+            reason,
             worst_equation: worst
                 .map(|i| self.data.layout.describe_unknown(self.model, i))
                 .unwrap_or_else(|| "unknown".into()),
@@ -324,7 +321,7 @@ impl<'m> Statics<'m> {
                     LinearError::Singular { column } => column,
                     _ => None,
                 };
-                return Err((format!("singular tangent matrix ({e}): a mechanism, or a limit point (use arc-length)"), col));
+                return Err((format!("singular tangent matrix ({e}): a mechanism (try method = \"pseudo_dynamic\") or a limit point (try method = \"arc_length\")"), col));
             }
             let dx = &mut self.data.correction;
             for (d, r) in dx.iter_mut().zip(&self.data.residual) {
