@@ -28,6 +28,11 @@
 //! (`H(x, y) = d(T^-1(x) y)/dx`, obtained from `G` by `H_ij = y . G(x, e_i)_{:,j}`);
 //! mass-proportional forces `alpha M v` on the lumped nodal masses.
 //!
+//! The interpolation is the SE(3) geodesic between the two end frames (the paper's
+//! two-node interpolation); a higher-order element needs another interpolation and is not
+//! provided. Refinement is by more elements (the strain is exact for constant curvature, as
+//! in the roll-up, and converges at second order otherwise).
+//!
 //! Inertia is lumped: each node carries half the element's mass `rho A L / 2` and rotary
 //! inertia `J L / 2` as a rigid body at the node (SE(3) form of [`super::rigid_body`]),
 //! including gravity. Beams need SE(3) nodes: on R3xSO(3) the model is rejected with a clear
