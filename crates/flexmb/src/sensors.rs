@@ -27,7 +27,7 @@ fn pair(nodes: &[NodeState], slots: [Option<crate::model::NodeId>; 2]) -> [NodeS
     ]
 }
 
-/// Kinetic and potential energy of the whole model [J].
+/// Kinetic and potential energy of the whole model \[J\].
 pub fn energies(model: &Model, state: &State) -> (f64, f64) {
     let nodes = node_states(state);
     let ctx = Context {

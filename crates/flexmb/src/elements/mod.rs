@@ -140,11 +140,11 @@ pub trait ElementKernel {
     ) -> bool {
         false
     }
-    /// Kinetic energy [J].
+    /// Kinetic energy \[J\].
     fn kinetic_energy(&self, _ctx: &Context, _nodes: &[NodeState; 2]) -> f64 {
         0.0
     }
-    /// Potential energy [J] (gravity, elastic).
+    /// Potential energy \[J\] (gravity, elastic).
     fn potential_energy(&self, _ctx: &Context, _nodes: &[NodeState; 2]) -> f64 {
         0.0
     }

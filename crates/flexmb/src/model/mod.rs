@@ -40,9 +40,9 @@ pub struct Node {
 pub struct RigidBody {
     pub name: String,
     pub node: NodeId,
-    /// Mass m [kg], > 0.
+    /// Mass m \[kg\], > 0.
     pub mass: f64,
-    /// Centre of mass X in the node frame [m].
+    /// Centre of mass X in the node frame \[m\].
     pub com: Vec3,
     /// Inertia tensor J_c about the centre of mass, node axes [kg m^2], symmetric positive definite.
     pub inertia: Mat3,
@@ -114,7 +114,7 @@ pub enum LoadFrame {
 pub struct Load {
     pub name: String,
     pub node: NodeId,
-    /// Force at the node origin [N].
+    /// Force at the node origin \[N\].
     pub force: Vec3,
     /// Torque [N m].
     pub torque: Vec3,
@@ -129,15 +129,15 @@ pub struct SpringDamper {
     pub name: String,
     pub node_a: Option<NodeId>,
     pub node_b: Option<NodeId>,
-    /// Attachment point on A, in the frame of node A (inertial if A is the ground) [m].
+    /// Attachment point on A, in the frame of node A (inertial if A is the ground) \[m\].
     pub point_a: Vec3,
-    /// Attachment point on B, in the frame of node B (inertial if B is the ground) [m].
+    /// Attachment point on B, in the frame of node B (inertial if B is the ground) \[m\].
     pub point_b: Vec3,
     /// Stiffness k [N/m], >= 0.
     pub stiffness: f64,
     /// Damping c [N s/m], >= 0.
     pub damping: f64,
-    /// Rest length l0 [m], >= 0.
+    /// Rest length l0 \[m\], >= 0.
     pub rest_length: f64,
 }
 
@@ -157,7 +157,7 @@ pub struct BeamSection {
     /// Rayleigh damping, mass-proportional coefficient alpha [1/s]: nodal forces
     /// `alpha M v` (this also damps rigid motion, as Rayleigh damping does).
     pub damping_mass: f64,
-    /// Rayleigh damping, stiffness-proportional coefficient beta [s]: stress resultants
+    /// Rayleigh damping, stiffness-proportional coefficient beta \[s\]: stress resultants
     /// `beta C depsilon/dt` (objective: no force under rigid motion).
     pub damping_stiffness: f64,
 }
@@ -202,7 +202,7 @@ pub struct Beam {
     /// Relative motion of the end frames in the reference configuration,
     /// `d_0 = log(H_a0^-1 H_b0)` (translation, rotation).
     pub d0: flexmb_lie::Vec6,
-    /// Reference length [m] (length of the element's axis, `|translation of d_0|` for a
+    /// Reference length \[m\] (length of the element's axis, `|translation of d_0|` for a
     /// straight element).
     pub length: f64,
 }
@@ -217,7 +217,7 @@ pub enum SensorFrame {
 /// What a sensor measures; each sensor gives one column of `sensors.csv`.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SensorKind {
-    /// Position component of a point fixed on a node (point in the node frame) [m].
+    /// Position component of a point fixed on a node (point in the node frame) \[m\].
     Position {
         node: NodeId,
         point: Vec3,
@@ -240,11 +240,11 @@ pub enum SensorKind {
         frame: SensorFrame,
         component: usize,
     },
-    /// Revolute/prismatic/cylindrical joint coordinate (unwrapped angle [rad] or slide [m]).
+    /// Revolute/prismatic/cylindrical joint coordinate (unwrapped angle \[rad\] or slide \[m\]).
     JointCoordinate {
         joint: JointId,
     },
-    /// Force exerted by the joint on its node B, inertial frame [N].
+    /// Force exerted by the joint on its node B, inertial frame \[N\].
     JointForce {
         joint: JointId,
         component: usize,
@@ -265,7 +265,7 @@ pub enum SensorKind {
         beam: usize,
         component: usize,
     },
-    /// Stress resultant of a beam element (0..6: axial force, shear forces 2 and 3 [N],
+    /// Stress resultant of a beam element (0..6: axial force, shear forces 2 and 3 \[N\],
     /// torque, bending moments 2 and 3 [N m]), section frame.
     BeamStress {
         beam: usize,
@@ -758,7 +758,7 @@ pub fn box_inertia(m: f64, a: &Vec3) -> Mat3 {
     ))
 }
 
-/// Rotation from a rotation vector (axis times angle [rad]).
+/// Rotation from a rotation vector (axis times angle \[rad\]).
 pub fn rotation_from_vector(v: &Vec3) -> Mat3 {
     so3::exp(v)
 }

@@ -70,7 +70,7 @@ pub struct Summary {
     pub analysis: String,
     pub group: String,
     pub t_end: f64,
-    /// Time reached by the last completed step [s].
+    /// Time reached by the last completed step \[s\].
     pub t_reached: f64,
     pub steps: usize,
     pub newton_iterations: usize,
@@ -78,9 +78,9 @@ pub struct Summary {
     pub factorizations: usize,
     pub outputs: usize,
     pub newton_iterations_per_step: f64,
-    /// Wall time of the whole run including output [s].
+    /// Wall time of the whole run including output \[s\].
     pub wall_seconds: f64,
-    /// Wall time spent in the solver only [s].
+    /// Wall time spent in the solver only \[s\].
     pub solve_seconds: f64,
     pub unknowns: usize,
     pub linear_solver: String,

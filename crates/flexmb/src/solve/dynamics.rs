@@ -97,22 +97,22 @@ impl Scheme {
 /// Settings of a dynamic analysis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DynamicSettings {
-    /// Final time [s].
+    /// Final time \[s\].
     pub t_end: f64,
-    /// Nominal step size [s].
+    /// Nominal step size \[s\].
     pub h: f64,
     /// Spectral radius at infinity, in `[0, 1]`.
     pub rho_inf: f64,
-    /// Time between outputs [s]; 0 for every step.
+    /// Time between outputs \[s\]; 0 for every step.
     pub output_interval: f64,
-    /// Smallest step size tried before giving up [s].
+    /// Smallest step size tried before giving up \[s\].
     pub h_min: f64,
     pub newton: NewtonSettings,
     pub formulation: Formulation,
     pub scheme: Scheme,
     /// Nodal viscous damping `alpha D v` [1/s] (0: none); for pseudo-dynamic statics.
     pub nodal_damping: f64,
-    /// Loads and gravity grow linearly from 0 over this time and then stay [s] (0: applied
+    /// Loads and gravity grow linearly from 0 over this time and then stay \[s\] (0: applied
     /// at once).
     pub load_ramp: f64,
     /// Factor on loads and gravity (1 in a dynamic analysis; the target load factor of a

@@ -54,7 +54,7 @@ pub struct StaticSettings {
     /// Arc length of the first step (arc-length method) [m, rad]; later steps adapt between
     /// 1e-6 and 4 times this value.
     pub arc_length: f64,
-    /// Pseudo-dynamic method: pseudo time of the load ramp [s] (the analysis runs twice as
+    /// Pseudo-dynamic method: pseudo time of the load ramp \[s\] (the analysis runs twice as
     /// long, the second half at full load to settle); steps of `initial_increment` times it.
     pub pseudo_time: f64,
     /// Pseudo-dynamic method: nodal viscous damping `alpha` [1/s].
