@@ -22,6 +22,80 @@ pub fn run(
     }
 }
 
+/// Summary of a run that is starting.
+fn starting(
+    model: &crate::Model,
+    analysis: &str,
+    t_end: f64,
+    out_dir: &Path,
+) -> std::io::Result<Summary> {
+    let summary = Summary {
+        status: "running".into(),
+        title: model.title.clone(),
+        analysis: analysis.into(),
+        group: model.group.name().into(),
+        t_end,
+        ..Default::default()
+    };
+    summary.write(&out_dir.join("summary.json"))?;
+    Ok(summary)
+}
+
+/// Records a run that could not start (model or initial conditions rejected).
+fn not_started(
+    mut summary: Summary,
+    error: &crate::SolveError,
+    start: Instant,
+    out_dir: &Path,
+) -> std::io::Result<Summary> {
+    summary.status = "failed".into();
+    summary.error = Some(error.to_string());
+    summary.wall_seconds = start.elapsed().as_secs_f64();
+    summary.write(&out_dir.join("summary.json"))?;
+    Ok(summary)
+}
+
+/// Work counts, timings and status of a finished run.
+struct Finished {
+    steps: usize,
+    newton_iterations: usize,
+    rejected_steps: usize,
+    factorizations: usize,
+    outputs: usize,
+    reached: f64,
+    warnings: Vec<String>,
+}
+
+fn finished(
+    mut summary: Summary,
+    f: Finished,
+    result: Result<(), crate::SolveError>,
+    start: Instant,
+    output_seconds: f64,
+    out_dir: &Path,
+) -> std::io::Result<Summary> {
+    let wall = start.elapsed().as_secs_f64();
+    summary.steps = f.steps;
+    summary.newton_iterations = f.newton_iterations;
+    summary.rejected_steps = f.rejected_steps;
+    summary.factorizations = f.factorizations;
+    summary.outputs = f.outputs;
+    summary.newton_iterations_per_step = f.newton_iterations as f64 / f.steps.max(1) as f64;
+    summary.t_reached = f.reached;
+    summary.warnings = f.warnings;
+    summary.wall_seconds = wall;
+    summary.solve_seconds = (wall - output_seconds).max(0.0);
+    match result {
+        Ok(()) => summary.status = "ok".into(),
+        Err(e) => {
+            summary.status = "failed".into();
+            summary.error = Some(e.to_string());
+        }
+    }
+    summary.write(&out_dir.join("summary.json"))?;
+    Ok(summary)
+}
+
 /// Static analysis: `sensors.csv` has the load factor in its first column.
 fn run_static(
     file: &ModelFile,
@@ -31,33 +105,17 @@ fn run_static(
 ) -> std::io::Result<Summary> {
     let start = Instant::now();
     let model = &file.model;
-    let mut summary = Summary {
-        status: "running".into(),
-        title: model.title.clone(),
-        analysis: "static".into(),
-        group: model.group.name().into(),
-        t_end: settings.load_factor,
-        ..Default::default()
-    };
-    let summary_path = out_dir.join("summary.json");
-    summary.write(&summary_path)?;
+    let mut summary = starting(model, "static", settings.load_factor, out_dir)?;
     let names = SensorEvaluator::names(model);
     let mut csv =
         CsvWriter::create_with_first_column(&out_dir.join("sensors.csv"), "load_factor", &names)?;
     let mut shape = ShapeWriter::create(out_dir, "load_factor", model)?;
     let mut statics = match Statics::new(model, *settings) {
         Ok(s) => s,
-        Err(e) => {
-            summary.status = "failed".into();
-            summary.error = Some(e.to_string());
-            summary.wall_seconds = start.elapsed().as_secs_f64();
-            summary.write(&summary_path)?;
-            return Ok(summary);
-        }
+        Err(e) => return not_started(summary, &e, start, out_dir),
     };
     summary.unknowns = statics.data.layout.n_unknowns();
     summary.linear_solver = format!("{:?}", statics.data.solver.backend()).to_lowercase();
-    summary.warnings = statics.warnings.clone();
     let mut sensors = SensorEvaluator::new(model);
     let mut output_seconds = 0.0;
     let target = settings.load_factor;
@@ -73,27 +131,24 @@ fn run_static(
         output_seconds += t0.elapsed().as_secs_f64();
         Ok(())
     });
-    let wall = start.elapsed().as_secs_f64();
-    summary.steps = statics.stats.steps;
-    summary.newton_iterations = statics.stats.newton_iterations;
-    summary.rejected_steps = statics.stats.rejected_steps;
-    summary.factorizations = statics.stats.factorizations;
-    summary.outputs = statics.stats.steps + 1;
-    summary.newton_iterations_per_step =
-        statics.stats.newton_iterations as f64 / statics.stats.steps.max(1) as f64;
-    summary.t_reached = statics.load_factor;
-    summary.warnings = statics.warnings.clone();
-    summary.wall_seconds = wall;
-    summary.solve_seconds = (wall - output_seconds).max(0.0);
-    match result {
-        Ok(_) => summary.status = "ok".into(),
-        Err(e) => {
-            summary.status = "failed".into();
-            summary.error = Some(e.to_string());
-        }
-    }
-    summary.write(&summary_path)?;
-    Ok(summary)
+    let stats = statics.stats;
+    let f = Finished {
+        steps: stats.steps,
+        newton_iterations: stats.newton_iterations,
+        rejected_steps: stats.rejected_steps,
+        factorizations: stats.factorizations,
+        outputs: stats.steps + 1,
+        reached: statics.load_factor,
+        warnings: statics.warnings.clone(),
+    };
+    finished(
+        summary,
+        f,
+        result.map(|_| ()),
+        start,
+        output_seconds,
+        out_dir,
+    )
 }
 
 /// Dynamic analysis: `sensors.csv` has the time in its first column.
@@ -105,32 +160,16 @@ fn run_dynamic(
 ) -> std::io::Result<Summary> {
     let start = Instant::now();
     let model = &file.model;
-    let mut summary = Summary {
-        status: "running".into(),
-        title: model.title.clone(),
-        analysis: "dynamic".into(),
-        group: model.group.name().into(),
-        t_end: settings.t_end,
-        ..Default::default()
-    };
-    let summary_path = out_dir.join("summary.json");
-    summary.write(&summary_path)?;
+    let mut summary = starting(model, "dynamic", settings.t_end, out_dir)?;
     let names = SensorEvaluator::names(model);
     let mut csv = CsvWriter::create(&out_dir.join("sensors.csv"), &names)?;
     let mut shape = ShapeWriter::create(out_dir, "time", model)?;
     let mut sim = match Simulation::new(model, *settings) {
         Ok(sim) => sim,
-        Err(e) => {
-            summary.status = "failed".into();
-            summary.error = Some(e.to_string());
-            summary.wall_seconds = start.elapsed().as_secs_f64();
-            summary.write(&summary_path)?;
-            return Ok(summary);
-        }
+        Err(e) => return not_started(summary, &e, start, out_dir),
     };
     summary.unknowns = sim.data.layout.n_unknowns();
     summary.linear_solver = format!("{:?}", sim.data.solver.backend()).to_lowercase();
-    summary.warnings = sim.warnings.clone();
     let mut sensors = SensorEvaluator::new(model);
     let mut output_seconds = 0.0;
     let t_end = settings.t_end;
@@ -146,24 +185,21 @@ fn run_dynamic(
         output_seconds += t0.elapsed().as_secs_f64();
         Ok(())
     });
-    let wall = start.elapsed().as_secs_f64();
-    let stats = sim.stats;
-    summary.steps = stats.steps;
-    summary.newton_iterations = stats.newton_iterations;
-    summary.rejected_steps = stats.rejected_steps;
-    summary.factorizations = sim.data.solver.factorizations();
-    summary.outputs = stats.outputs;
-    summary.newton_iterations_per_step = stats.newton_iterations as f64 / stats.steps.max(1) as f64;
-    summary.t_reached = sim.state.t;
-    summary.wall_seconds = wall;
-    summary.solve_seconds = (wall - output_seconds).max(0.0);
-    match result {
-        Ok(_) => summary.status = "ok".into(),
-        Err(e) => {
-            summary.status = "failed".into();
-            summary.error = Some(e.to_string());
-        }
-    }
-    summary.write(&summary_path)?;
-    Ok(summary)
+    let f = Finished {
+        steps: sim.stats.steps,
+        newton_iterations: sim.stats.newton_iterations,
+        rejected_steps: sim.stats.rejected_steps,
+        factorizations: sim.data.solver.factorizations(),
+        outputs: sim.stats.outputs,
+        reached: sim.state.t,
+        warnings: sim.warnings.clone(),
+    };
+    finished(
+        summary,
+        f,
+        result.map(|_| ()),
+        start,
+        output_seconds,
+        out_dir,
+    )
 }

@@ -303,14 +303,7 @@ impl<'m> Statics<'m> {
         let newton = self.settings.newton;
         let mut previous = f64::INFINITY;
         for iteration in 1..=newton.max_iterations {
-            for i in 0..n {
-                let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
-                let node = &mut self.data.nodes[i];
-                node.q = group.integrate(&q0[i], &inc);
-                node.v = Vec6::zeros();
-                node.vdot = Vec6::zeros();
-                node.t = group.tangent(&inc);
-            }
+            self.set_configuration(&q0, &dq);
             self.assemble(lambda, true);
             if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
                 return Err(("non-finite residual".into(), Some(i)));
