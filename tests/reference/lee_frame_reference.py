@@ -41,7 +41,7 @@ Usage:  python3 lee_frame_reference.py            (everything; writes lee_frame_
         python3 lee_frame_reference.py --quick    (shooting only, coarse)
 """
 import argparse
-import json
+
 import math
 import os
 import sys
@@ -124,8 +124,9 @@ def refine_events(cont, path, qfun, dqfun=None, targets=()):
     """Locate along a traced path
        * extrema of the scalar q (zeros of dq/ds, dqfun(t) gives dq/ds from the tangent);
        * crossings q(z) = target for each target.
-    Each returned item: (kind, target, z).  Refinement by Brent in the step from the
-    previous path point (re-corrected from it with the same predictor)."""
+    Each returned item: (kind, target, z, key) with key = k + s/ds (position along the path, k the
+    path index).  Refinement by Brent in the step from the previous path point (re-corrected
+    from it with the same predictor)."""
     out = []
     for k in range(len(path) - 1):
         z0, t0 = path[k]
@@ -136,15 +137,15 @@ def refine_events(cont, path, qfun, dqfun=None, targets=()):
             if a * b < 0:
                 f = lambda s: dqfun(cont.point(z0, t0, s)[1])
                 s = brentq(f, 0.0, ds_full, xtol=1e-13 * abs(ds_full), rtol=1e-15)
-                out.append(("extremum", None, cont.point(z0, t0, s)[0]))
+                out.append(("extremum", None, cont.point(z0, t0, s)[0], k + s / ds_full))
         for tg in targets:
             a, b = qfun(z0) - tg, qfun(z1) - tg
             if a == 0.0:
-                out.append(("cross", tg, z0))
+                out.append(("cross", tg, z0, float(k)))
             elif a * b < 0:
                 f = lambda s: qfun(cont.point(z0, t0, s)[0]) - tg
                 s = brentq(f, 0.0, ds_full, xtol=1e-13 * abs(ds_full), rtol=1e-15)
-                out.append(("cross", tg, cont.point(z0, t0, s)[0]))
+                out.append(("cross", tg, cont.point(z0, t0, s)[0], k + s / ds_full))
     return out
 
 
@@ -484,6 +485,9 @@ def analyse(model, cont, path, vtargets):
     limv = refine_events(cont, path, lambda z: model.uvP(z)[1], dqfun=lambda t: sgn * t[iv],
                          targets=vtargets)
     zeroP = [model.uvP(e[2]) for e in limP if e[0] == "cross" and model.uvP(e[2])[1] > 1.0]
+    # all special points with their position along the path (for the CSV)
+    analyse.events = [(e[3], model.uvP(e[2])) for e in limP + limv
+                      if not (e[0] == "cross" and model.uvP(e[2])[1] <= 1.0)]
     return ([model.uvP(e[2]) for e in limP if e[0] == "extremum"],
             [model.uvP(e[2]) for e in limv if e[0] == "extremum"],
             [(e[1],) + tuple(model.uvP(e[2])) for e in limv if e[0] == "cross"],
@@ -545,7 +549,7 @@ def run_shooting(args, ds, vt, results):
         dvdP = -t0v[m.v_index()] / t0v[-1]
         dudP = t0v[6 * m.LOADSEG] / t0v[-1]
         shoot[nst] = dict(limP=limP, limv=limv, cross=cross, path=path, model=m,
-                          dvdP0=dvdP, dudP0=dudP)
+                          dvdP0=dvdP, dudP0=dudP, events=list(analyse.events))
         print("   RK4 steps/segment %d (h=%.4f cm): %.1f s" % (nst, m.h, time.time() - t0))
         print("     initial du/dP = %.10e dv/dP = %.10e" % (dudP, dvdP))
         for (u, v, P) in limP:
@@ -563,14 +567,18 @@ def run_shooting(args, ds, vt, results):
     # write CSV: every k-th point, ~200 rows, up to v max region / P = 60
     pts = np.array([m.uvP(z) for z, _ in path])
     stride = max(1, len(pts) // 200)
-    sel = pts[::stride]
+    rows = [(float(k), tuple(pts[k])) for k in range(0, len(pts), stride)]
     if (len(pts) - 1) % stride:
-        sel = np.vstack([sel, pts[-1]])
+        rows.append((float(len(pts) - 1), tuple(pts[-1])))
+    # insert the exact special points (load limits, v extrema, v = 10..90 and P = 0 crossings)
+    rows += shoot[best]["events"]
+    rows.sort(key=lambda r: r[0])
     with open(os.path.join(HERE, "lee_frame_reference.csv"), "w") as f:
         f.write("v,u,P\n")
-        for u, v, P in sel:
+        for _, (u, v, P) in rows:
             f.write("%.8f,%.8f,%.8f\n" % (v, u, P))
-    print("   wrote lee_frame_reference.csv (%d rows)" % len(sel))
+    print("   wrote lee_frame_reference.csv (%d rows, path order, incl. %d special points)"
+          % (len(rows), len(shoot[best]["events"])))
     print("   comparison with Leahu-Aluas & Abed-Meraim (2011) Table 11 (nearest path point in (u,v)):")
     print("       u_lit    v_lit   P_lit  | dist(u,v)  P_here   P_here-P_lit")
     for (ul, vl, Pl, dist, Ph) in compare_literature(pts):
