@@ -44,7 +44,11 @@ c12 = np.array([0, 0, L2 * FACB / 3., L2 * FACB / 6.])
 c21 = np.array([L2 * FACB / PI, -L2 * FACB * 0.5 / PI, 0, 0])
 
 
+VARIANT = dict(nonlinear=False, MQ=MQ)
+
+
 def accel(t, p, v):
+    MQ = VARIANT['MQ']
     q = p[3:]; qd = v[3:]
     cp1, sp1 = np.cos(p[0]), np.sin(p[0])
     cp2, sp2 = np.cos(p[1]), np.sin(p[1])
@@ -81,6 +85,13 @@ def accel(t, p, v):
              - 2 * V2 * QDTMQQ - RHO * QDTBQQD - RHO * GRAV * (cp2 * c1q - sp2 * c2q))
     F[3:] = (V2 * V2 * MQQ + RHO * (V2 * V2 * c12 + L1 * V1 * V1 * (c12_ * c1 + s12_ * c2) + 2 * V2 * BQQD)
              - RHO * GRAV * (sp2 * c1 + cp2 * c2)) - KQQ
+    if VARIANT['nonlinear']:          # ipar(1) = 1 of crank.f: nonlinear stiffness term
+        fk = 0.5 * EE * BB * HH / L2**2 * PI**2
+        fb = 80.0 / (PI**2 * 9.0)
+        F[3] -= fk * (q[0] * q[3] - fb * q[1] * (-4 * q[2] + 2 * q[3]))
+        F[4] -= fk * (4 * q[1] * q[3] - fb * q[0] * (-4 * q[2] + 2 * q[3]))
+        F[5] -= fk * 4.0 * fb * q[0] * q[1]
+        F[6] -= fk * (0.5 * q[0]**2 + 2 * q[1]**2 - 2 * fb * q[0] * q[1])
     # acceleration constraint: GP w + g = 0
     g = np.array([-L1 * sp1 * V1 * V1 - (L2 + QKU) * sp2 * V2 * V2 + 2 * V2 * cp2 * QDKU,
                   L1 * cp1 * V1 * V1 + (L2 + QKU) * cp2 * V2 * V2 + 2 * V2 * sp2 * QDKU,
@@ -113,6 +124,18 @@ yref = np.array([0.1500000000000104e+02, -0.3311734988256260e+00, 0.169737332842
                  -0.8363313279112129e-05, 0.1500000000000000e+03, 0.6025346755138369e+02,
                  -0.8753116326670527e+01, -0.3005541400289738e-01, -0.5500431812571696e-02,
                  0.4974111734266989e-03, 0.1105560003626645e-02])
+
+def history(t_out, nonlinear=False, consistent_axial_mass=False, rtol=1e-11):
+    """Time history (x3, q1) of the 4-mode model, optionally with the ipar(1)=1 nonlinear
+    stiffness and/or the consistent quadratic axial mass rho A L/15 [8 1; 1 2]."""
+    MQc = MQ.copy()
+    if consistent_axial_mass:
+        MQc[2:, 2:] /= 15.0
+    VARIANT['nonlinear'] = nonlinear; VARIANT['MQ'] = MQc
+    sol = solve_ivp(rhs, (0, t_out[-1]), y0, method="DOP853", rtol=rtol, atol=rtol * 1e-3, t_eval=t_out)
+    VARIANT['nonlinear'] = False; VARIANT['MQ'] = MQ
+    return sol.y[2], sol.y[3]
+
 
 if __name__ == "__main__":
     w0, lam0 = accel(0.0, y0[:7], y0[7:])
