@@ -55,7 +55,7 @@ impl Layout {
             joint_row_start.push(n_rows);
             n_rows += r.len();
         }
-        Self {
+        let mut layout = Self {
             n_nodes: model.nodes.len(),
             n_dofs: 6 * model.nodes.len(),
             joint_rows,
@@ -66,12 +66,13 @@ impl Layout {
             stabilized: false,
             node_rows: Vec::new(),
             elements: ElementRef::all(model),
-        }
-        .with_node_rows(model)
+        };
+        layout.rebuild_node_rows(model);
+        layout
     }
 
     /// Recomputes [`Layout::node_rows`] from the active rows.
-    fn with_node_rows(mut self, model: &Model) -> Self {
+    fn rebuild_node_rows(&mut self, model: &Model) {
         let mut node_rows = vec![Vec::new(); self.n_nodes];
         for (j, joint) in model.joints.iter().enumerate() {
             for r in 0..self.joint_rows[j].len() {
@@ -87,7 +88,6 @@ impl Layout {
             }
         }
         self.node_rows = node_rows;
-        self
     }
 
     /// Total Newton unknowns.
@@ -112,8 +112,7 @@ impl Layout {
             }
         }
         self.n_active = k;
-        let layout = std::mem::replace(self, Layout::new(model));
-        *self = layout.with_node_rows(model);
+        self.rebuild_node_rows(model);
     }
 
     /// Global dof offset of a node slot.

@@ -22,6 +22,44 @@ pub fn run(
     }
 }
 
+/// The files written at every output step (sensors, deformed shape, beam results) and the
+/// time spent writing them.
+struct Outputs<'m> {
+    model: &'m crate::Model,
+    sensors: SensorEvaluator,
+    csv: CsvWriter,
+    shape: ShapeWriter,
+    seconds: f64,
+}
+
+impl<'m> Outputs<'m> {
+    /// Creates the files; `first` names the first column (`time` or `load_factor`).
+    fn create(out_dir: &Path, first: &str, model: &'m crate::Model) -> std::io::Result<Self> {
+        let names = SensorEvaluator::names(model);
+        Ok(Self {
+            model,
+            sensors: SensorEvaluator::new(model),
+            csv: CsvWriter::create_with_first_column(&out_dir.join("sensors.csv"), first, &names)?,
+            shape: ShapeWriter::create(out_dir, first, model)?,
+            seconds: 0.0,
+        })
+    }
+
+    /// Appends the rows of one output step (flushed).
+    fn write(&mut self, x: f64, data: &crate::Data, state: &crate::State) -> Result<(), String> {
+        let t0 = Instant::now();
+        let values = self.sensors.evaluate(self.model, data, state);
+        self.csv
+            .row(x, &values)
+            .map_err(|e| format!("writing {}: {e}", self.csv.path().display()))?;
+        self.shape
+            .write(x, self.model, state)
+            .map_err(|e| format!("writing nodes.csv: {e}"))?;
+        self.seconds += t0.elapsed().as_secs_f64();
+        Ok(())
+    }
+}
+
 /// Summary of a run that is starting.
 fn starting(
     model: &crate::Model,
@@ -106,31 +144,20 @@ fn run_static(
     let start = Instant::now();
     let model = &file.model;
     let mut summary = starting(model, "static", settings.load_factor, out_dir)?;
-    let names = SensorEvaluator::names(model);
-    let mut csv =
-        CsvWriter::create_with_first_column(&out_dir.join("sensors.csv"), "load_factor", &names)?;
-    let mut shape = ShapeWriter::create(out_dir, "load_factor", model)?;
     let mut statics = match Statics::new(model, *settings) {
         Ok(s) => s,
         Err(e) => return not_started(summary, &e, start, out_dir),
     };
     summary.unknowns = statics.data.layout.n_unknowns();
     summary.linear_solver = format!("{:?}", statics.data.solver.backend()).to_lowercase();
-    let mut sensors = SensorEvaluator::new(model);
-    let mut output_seconds = 0.0;
+    let mut outputs = Outputs::create(out_dir, "load_factor", model)?;
     let target = settings.load_factor;
     let result = statics.run(&mut |s| {
-        let t0 = Instant::now();
-        let values = sensors.evaluate(s.model, &s.data, &s.state);
-        csv.row(s.load_factor, &values)
-            .map_err(|e| format!("writing {}: {e}", csv.path().display()))?;
-        shape
-            .write(s.load_factor, s.model, &s.state)
-            .map_err(|e| format!("writing nodes.csv: {e}"))?;
+        outputs.write(s.load_factor, &s.data, &s.state)?;
         progress(s.load_factor, target);
-        output_seconds += t0.elapsed().as_secs_f64();
         Ok(())
     });
+    let output_seconds = outputs.seconds;
     let stats = statics.stats;
     let f = Finished {
         steps: stats.steps,
@@ -161,30 +188,20 @@ fn run_dynamic(
     let start = Instant::now();
     let model = &file.model;
     let mut summary = starting(model, "dynamic", settings.t_end, out_dir)?;
-    let names = SensorEvaluator::names(model);
-    let mut csv = CsvWriter::create(&out_dir.join("sensors.csv"), &names)?;
-    let mut shape = ShapeWriter::create(out_dir, "time", model)?;
     let mut sim = match Simulation::new(model, *settings) {
         Ok(sim) => sim,
         Err(e) => return not_started(summary, &e, start, out_dir),
     };
     summary.unknowns = sim.data.layout.n_unknowns();
     summary.linear_solver = format!("{:?}", sim.data.solver.backend()).to_lowercase();
-    let mut sensors = SensorEvaluator::new(model);
-    let mut output_seconds = 0.0;
+    let mut outputs = Outputs::create(out_dir, "time", model)?;
     let t_end = settings.t_end;
     let result = sim.run(&mut |s| {
-        let t0 = Instant::now();
-        let values = sensors.evaluate(s.model, &s.data, &s.state);
-        csv.row(s.state.t, &values)
-            .map_err(|e| format!("writing {}: {e}", csv.path().display()))?;
-        shape
-            .write(s.state.t, s.model, &s.state)
-            .map_err(|e| format!("writing nodes.csv: {e}"))?;
+        outputs.write(s.state.t, &s.data, &s.state)?;
         progress(s.state.t, t_end);
-        output_seconds += t0.elapsed().as_secs_f64();
         Ok(())
     });
+    let output_seconds = outputs.seconds;
     let f = Finished {
         steps: sim.stats.steps,
         newton_iterations: sim.stats.newton_iterations,

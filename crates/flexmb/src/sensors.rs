@@ -5,7 +5,7 @@ use crate::elements::{Context, ElementKernel, ElementRef, NodeState};
 use crate::joints;
 use crate::model::{Model, SensorFrame, SensorKind};
 use crate::state::State;
-use flexmb_lie::{Group, Mat6, Vec6};
+use flexmb_lie::Mat6;
 
 /// Node kinematics of a state (tangent operators identity).
 pub fn node_states(state: &State) -> Vec<NodeState> {
@@ -124,8 +124,8 @@ impl SensorEvaluator {
                     let start = data.layout.joint_row_start[joint.0];
                     let n = data.layout.joint_rows[joint.0].len();
                     let (f, m) = joints::reaction_on_b(
-                        model,
                         j,
+                        &data.layout.joint_rows[joint.0],
                         &pair(&nodes, [j.node_a, j.node_b]),
                         &state.lambda[start..start + n],
                         state.t,
@@ -163,16 +163,6 @@ impl SensorEvaluator {
         out
     }
 }
-
-/// Inertial velocity of a node's origin (for tests and tools).
-pub fn origin_velocity(group: Group, q: &flexmb_lie::Frame, v: &Vec6) -> flexmb_lie::Vec3 {
-    let u = v.fixed_rows::<3>(0).into_owned();
-    match group {
-        Group::R3xSO3 => u,
-        Group::SE3 => q.r * u,
-    }
-}
-
 /// Largest `|Phi|` over the active constraint rows at `state`.
 pub fn constraint_violation(model: &Model, data: &Data, state: &State, nodes: &[NodeState]) -> f64 {
     let zeros = [0.0; joints::MAX_ROWS];

@@ -52,7 +52,9 @@ pub fn to_group(
                 if let Some(c) = c_p {
                     *s += c * coef.c;
                 }
-                apply_tangent(nodes, active, s, coef, k_p);
+                if let Some(k) = k_p {
+                    apply_tangent_full(nodes, active, s, coef, k);
+                }
             }
         }
         Group::SE3 => {
@@ -94,23 +96,9 @@ pub fn to_group(
                     k += p.transpose() * c * dv;
                 }
                 *s += k * coef.k;
-                let kk = k;
-                apply_tangent_full(nodes, active, s, coef, &kk);
+                apply_tangent_full(nodes, active, s, coef, &k);
             }
         }
-    }
-}
-
-/// Replaces the `c.k K` part of `s` by `c.k K T` (R3xSO(3) path, K given in group coordinates).
-fn apply_tangent(
-    nodes: &[NodeState; 2],
-    active: [bool; 2],
-    s: &mut Mat12,
-    coef: &Coefficients,
-    k: Option<&Mat12>,
-) {
-    if let Some(k) = k {
-        apply_tangent_full(nodes, active, s, coef, k);
     }
 }
 

@@ -23,7 +23,7 @@
 pub mod primitives;
 
 use crate::elements::{Mat12, NodeState, Parameter, Vec12};
-use crate::model::{Joint, JointKind, Model, NodeId};
+use crate::model::{Joint, JointKind, NodeId};
 use flexmb_lie::{so3::hat, Frame, Group, Vec3};
 use primitives::{dot1, dot1_into, dot2, dot2_into, Primitive};
 
@@ -258,19 +258,18 @@ pub fn coordinate_is_angle(joint: &Joint) -> bool {
 /// from the multipliers `lambda` of its rows: `(f, m) = -B_b^T lambda` converted to physical
 /// coordinates.
 pub fn reaction_on_b(
-    model: &Model,
     joint: &Joint,
+    rows: &[Row],
     nodes: &[NodeState; 2],
     lambda: &[f64],
     t: f64,
 ) -> (Vec3, Vec3) {
     let (fa, fb) = node_frames(joint, nodes);
     let mut gp = Vec12::zeros();
-    for (row, l) in rows(joint).into_iter().zip(lambda) {
-        let (p, ..) = evaluate_physical(joint, row, &fa, &fb, t);
+    for (row, l) in rows.iter().zip(lambda) {
+        let (p, ..) = evaluate_physical(joint, *row, &fa, &fb, t);
         gp += p.g * *l;
     }
-    let _ = model;
     let force = -gp.fixed_rows::<3>(6).into_owned();
     let moment_node = -(fb.r * gp.fixed_rows::<3>(9).into_owned());
     let point = fb.point(&joint.frame_b.x);

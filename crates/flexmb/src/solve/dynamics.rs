@@ -645,15 +645,12 @@ impl<'m> Simulation<'m> {
         total.clear();
         total.extend_from_slice(dq);
         if self.data.layout.stabilized {
-            for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
-                let Some(k) = slot else { continue };
-                let (j, _) = super::initial::locate_row(&self.data.layout, row);
-                let joint = &self.model.joints[j];
-                for (s, node) in [joint.node_a, joint.node_b].into_iter().enumerate() {
-                    if let Some(n) = node {
-                        for i in 0..6 {
-                            total[6 * n.0 + i] += self.data.b_start[row][6 * s + i] * self.zeta[*k];
-                        }
+            let layout = &self.data.layout;
+            for (n, rows) in layout.node_rows.iter().enumerate() {
+                for &(row, slot) in rows {
+                    let zeta = self.zeta[layout.row_unknown[row].expect("active row")];
+                    for i in 0..6 {
+                        total[6 * n + i] += self.data.b_start[row][6 * slot + i] * zeta;
                     }
                 }
             }

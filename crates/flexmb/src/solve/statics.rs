@@ -308,14 +308,7 @@ impl<'m> Statics<'m> {
             if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
                 return Err(("non-finite residual".into(), Some(i)));
             }
-            self.stats.factorizations += 1;
-            if let Err(e) = self.data.solver.factorize(&self.data.values) {
-                let col = match e {
-                    LinearError::Singular { column } => column,
-                    _ => None,
-                };
-                return Err((format!("singular tangent matrix ({e}): a mechanism (try method = \"pseudo_dynamic\") or a limit point (try method = \"arc_length\")"), col));
-            }
+            self.factorize()?;
             let dx = &mut self.data.correction;
             for (d, r) in dx.iter_mut().zip(&self.data.residual) {
                 *d = -r;
@@ -433,6 +426,22 @@ impl<'m> Statics<'m> {
         Ok(())
     }
 
+    /// Numeric factorization of the tangent matrix in the data, with the diagnosis of a
+    /// singular one.
+    fn factorize(&mut self) -> Result<(), Failure> {
+        self.stats.factorizations += 1;
+        self.data.solver.factorize(&self.data.values).map_err(|e| {
+            let col = match e {
+                LinearError::Singular { column } => column,
+                _ => None,
+            };
+            (
+                format!("singular tangent matrix ({e}): a mechanism (try method = \"pseudo_dynamic\") or a limit point (try method = \"arc_length\")"),
+                col,
+            )
+        })
+    }
+
     /// Puts `q = q_0 exp(dq)` (and the tangent operators) into the data.
     fn set_configuration(&mut self, q0: &[flexmb_lie::Frame], dq: &[f64]) {
         let group = self.model.group;
@@ -498,14 +507,7 @@ impl<'m> Statics<'m> {
             if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
                 return Err(("non-finite residual".into(), Some(i)));
             }
-            self.stats.factorizations += 1;
-            if let Err(e) = self.data.solver.factorize(&self.data.values) {
-                let col = match e {
-                    LinearError::Singular { column } => column,
-                    _ => None,
-                };
-                return Err((format!("singular tangent matrix ({e})"), col));
-            }
+            self.factorize()?;
             // x_b = S^-1 (-dR/dlambda): the response to a unit load increment.
             for (x, v) in xb.iter_mut().zip(&f) {
                 *x = -v;
