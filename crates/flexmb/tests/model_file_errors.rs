@@ -3,7 +3,7 @@
 
 use flexmb::input::{parse_model_str, read_model_file, Analysis, InputError, ModelFile};
 use flexmb::model::{
-    box_inertia, frame_from_axis, rotation_from_vector, JointKind, Model, NodeId, Sensor,
+    box_inertia, frame_from_axis, rotation_from_vector, BeamMass, JointKind, Model, NodeId, Sensor,
     SensorKind, SpringDamper, TimeFunction,
 };
 use flexmb::solve::{StaticMethod, StaticSettings};
@@ -920,6 +920,40 @@ fn beams_are_meshed() {
 }
 
 #[test]
+fn beam_initial_velocity_is_a_rigid_motion() {
+    // v(p) = velocity + angular_velocity x (p - start) on every generated node, angular
+    // velocity in the node (section) frame; mass_matrix reaches the elements.
+    let text = BEAMS.replacen(
+        "elements = 2\n",
+        "elements = 2\nvelocity = [1.0, 0.0, 0.5]\nangular_velocity = [0.0, 0.0, 3.0]\nmass_matrix = \"consistent\"\n",
+        1,
+    );
+    let file = parse_model_str(&text, "beams.toml", &[]).unwrap_or_else(|e| panic!("{e}"));
+    let m = &file.model;
+    let node = |name: &str| &m.nodes[m.node_id(name).unwrap().0];
+    // b starts at the existing node a.4 = (4, 0, 0), which keeps its own (zero) velocity
+    assert_eq!(node("a.4").velocity, Vec3::zeros());
+    for (name, y) in [("b.1", 1.0), ("b.2", 2.0)] {
+        let n = node(name);
+        let expected =
+            Vec3::new(1.0, 0.0, 0.5) + Vec3::new(0.0, 0.0, 3.0).cross(&Vec3::new(0.0, y, 0.0));
+        assert!(
+            (n.velocity - expected).norm() < 1e-14,
+            "{name}: {}",
+            n.velocity
+        );
+        assert!((n.frame.r * n.angular_velocity - Vec3::new(0.0, 0.0, 3.0)).norm() < 1e-14);
+    }
+    let kinds: Vec<BeamMass> = m.beams.iter().map(|b| b.mass_kind).collect();
+    assert_eq!(kinds[3], BeamMass::Lumped);
+    assert_eq!(kinds[4], BeamMass::Consistent);
+    assert_eq!(kinds[5], BeamMass::Consistent);
+    let coupling = |e: usize| m.beams[e].mass.fixed_view::<6, 6>(0, 6).norm();
+    assert!(coupling(4) > 0.1, "the consistent mass couples the nodes");
+    assert_eq!(coupling(3), 0.0);
+}
+
+#[test]
 fn beam_end_node_and_negative_arc() {
     // An arc turning clockwise, ending at an existing node; a beam between two nodes.
     let text = BEAMS
@@ -994,6 +1028,13 @@ fn beam_errors_name_their_field() {
         &e,
         &["field 'beam[1].end'", "must differ from the start point"],
     );
+    let e = beams_with("elements = 4", "elements = 4\nmass_matrix = \"diagonal\"");
+    assert_contains(
+        &e,
+        &["field 'beam[0].mass_matrix'", "\"lumped\", \"consistent\""],
+    );
+    let e = beams_with("elements = 4", "elements = 4\nvelocity = [1, 2]");
+    assert_contains(&e, &["field 'beam[0].velocity'"]);
     let e = beams_with("elements = 4", "elements = 0");
     assert_contains(&e, &["field 'beam[0].elements'", "between 1 and"]);
     let e = beams_with("angle_deg = 90.0", "angle_deg = 400.0");

@@ -5,8 +5,8 @@
 use flexmb::elements::{Coefficients, Context, ElementKernel, Mat12, NodeState, Parameter, Vec12};
 use flexmb::joints;
 use flexmb::model::{
-    Beam, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, RigidBody, SpringDamper,
-    TimeFunction,
+    Beam, BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, RigidBody,
+    SpringDamper, TimeFunction,
 };
 use flexmb_lie::{Frame, Group, Mat3, Mat6, Vec3, Vec6};
 
@@ -421,7 +421,12 @@ fn beam_tangents_match_finite_differences() {
         damping_mass: 0.7,
         damping_stiffness: 0.03,
     };
-    for (offsets, curved) in [(false, false), (true, false), (true, true)] {
+    for (offsets, curved, mass_kind) in [
+        (false, false, BeamMass::Consistent),
+        (true, false, BeamMass::Lumped),
+        (true, true, BeamMass::Consistent),
+        (true, true, BeamMass::Lumped),
+    ] {
         // Reference: a straight (or curved) element of length ~1.3 with arbitrary offsets.
         let d0 = if curved {
             Vec6::new(1.3, 0.0, 0.0, 0.1, 0.2, 0.5)
@@ -435,15 +440,16 @@ fn beam_tangents_match_finite_differences() {
                 Mat3::identity()
             }
         };
-        let beam = Beam {
-            name: "b".into(),
-            nodes: [NodeId(0), NodeId(1)],
-            section: section.clone(),
-            offset_a: o(offsets, &mut rng),
-            offset_b: o(offsets, &mut rng),
+        let offset_a = o(offsets, &mut rng);
+        let offset_b = o(offsets, &mut rng);
+        let beam = Beam::new(
+            "b",
+            [NodeId(0), NodeId(1)],
+            section.clone(),
+            [offset_a, offset_b],
             d0,
-            length: flexmb::elements::beam::arc_length(&d0),
-        };
+            mass_kind,
+        );
         // Deformed configurations: node b near a exp(d0), with large rotations of the whole.
         for _ in 0..3 {
             let mut nodes = [rng.node(Group::SE3), rng.node(Group::SE3)];
@@ -466,15 +472,14 @@ fn beam_tangent_is_invariant_under_rigid_motion() {
     model.add_node("b", Frame::identity());
     let section = BeamSection::diagonal([1e3, 4e2, 5e2, 30.0, 40.0, 60.0], 1.0, [0.1, 0.05, 0.05]);
     let d0 = Vec6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    let beam = Beam {
-        name: "b".into(),
-        nodes: [NodeId(0), NodeId(1)],
+    let beam = Beam::new(
+        "b",
+        [NodeId(0), NodeId(1)],
         section,
-        offset_a: Mat3::identity(),
-        offset_b: Mat3::identity(),
+        [Mat3::identity(); 2],
         d0,
-        length: 1.0,
-    };
+        BeamMass::Consistent,
+    );
     let ctx = Context {
         model: &model,
         group: Group::SE3,
@@ -504,4 +509,82 @@ fn beam_tangent_is_invariant_under_rigid_motion() {
     let (r1, k1) = stiffness(&moved);
     assert!((r0 - r1).norm() < 1e-9 * r0.norm());
     assert!((k0 - k1).norm() < 1e-9 * k0.norm());
+}
+
+#[test]
+fn consistent_beam_mass_is_exact_for_rigid_motions() {
+    // Kinetic energy of a straight element moving rigidly, against the integral of
+    // 1/2 rho A |pdot(s)|^2 + 1/2 omega^T J omega over the axis (Simpson, 2000 intervals).
+    let mut rng = Lcg(21);
+    let model = Model::new(Group::SE3);
+    let ctx = Context {
+        model: &model,
+        group: Group::SE3,
+        t: 0.0,
+        gravity_scale: 1.0,
+        load_scale: 1.0,
+    };
+    let mut section = BeamSection::diagonal([1e3; 6], 2.5, [0.3, 0.2, 0.1]);
+    section.rotary_inertia[(1, 2)] = 0.03;
+    section.rotary_inertia[(2, 1)] = 0.03;
+    let length = 1.7;
+    let d0 = Vec6::new(length, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let offsets = [
+        flexmb_lie::so3::exp(&rng.v3(1.0)),
+        flexmb_lie::so3::exp(&rng.v3(1.0)),
+    ];
+    for kind in [BeamMass::Consistent, BeamMass::Lumped] {
+        let beam = Beam::new(
+            "b",
+            [NodeId(0), NodeId(1)],
+            section.clone(),
+            offsets,
+            d0,
+            kind,
+        );
+        for translation_only in [false, true] {
+            let ha = flexmb_lie::se3::exp(&rng.v6(1.0));
+            let sa = ha.compose(&Frame::new(Vec3::zeros(), offsets[0]));
+            let sb = sa.compose(&flexmb_lie::se3::exp(&d0));
+            let hb = Frame::new(sb.x, sb.r * offsets[1].transpose());
+            let mut eta_a = rng.v6(2.0);
+            if translation_only {
+                eta_a.fixed_rows_mut::<3>(3).fill(0.0);
+            }
+            let eta_b = flexmb_lie::se3::big_ad(&hb.inverse().compose(&ha)) * eta_a;
+            let mut nodes = [NodeState::ground(ha), NodeState::ground(hb)];
+            nodes[0].v = eta_a;
+            nodes[1].v = eta_b;
+            let energy = beam.kinetic_energy(&ctx, &nodes);
+
+            let xdot = ha.r * eta_a.fixed_rows::<3>(0);
+            let omega = ha.r * eta_a.fixed_rows::<3>(3);
+            let n = 2000;
+            let mut translational = 0.0;
+            for i in 0..=n {
+                let s = length * i as f64 / n as f64;
+                let p = sa.r * Vec3::new(s, 0.0, 0.0);
+                let pdot = xdot + omega.cross(&p);
+                let w = if i == 0 || i == n {
+                    1.0
+                } else if i % 2 == 1 {
+                    4.0
+                } else {
+                    2.0
+                };
+                translational += w * pdot.norm_squared();
+            }
+            translational *= length / (3.0 * n as f64);
+            let omega_sec = sa.r.transpose() * omega;
+            let exact = 0.5 * section.mass_per_length * translational
+                + 0.5 * length * omega_sec.dot(&(section.rotary_inertia * omega_sec));
+            let error = (energy - exact).abs() / exact;
+            if kind == BeamMass::Consistent || translation_only {
+                assert!(error < 1e-10, "{kind:?}: {energy} against {exact}");
+            } else {
+                // lumping drops the rotation of the mass about the element's middle
+                assert!(error > 1e-3, "{kind:?}: {energy} against {exact}");
+            }
+        }
+    }
 }

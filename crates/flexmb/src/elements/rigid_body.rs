@@ -30,6 +30,17 @@ use super::{Coefficients, Context, ElementKernel, Mat12, NodeState, Parameter, V
 use crate::model::{NodeId, RigidBody};
 use flexmb_lie::{se3, so3::hat, split, Group, Mat3, Mat6, Vec3, Vec6};
 
+/// `Q(p) = d(ad(v)^T p)/dv` at fixed momentum `p = (f, mu)`:
+/// `[[0, tilde(f)], [tilde(f), tilde(mu)]]` (SE(3), translation first).
+pub(crate) fn momentum_jacobian(p: &Vec6) -> Mat6 {
+    let (f, mu) = split(p);
+    let mut q = Mat6::zeros();
+    q.fixed_view_mut::<3, 3>(0, 3).copy_from(&hat(&f));
+    q.fixed_view_mut::<3, 3>(3, 0).copy_from(&hat(&f));
+    q.fixed_view_mut::<3, 3>(3, 3).copy_from(&hat(&mu));
+    q
+}
+
 impl RigidBody {
     /// Mass matrix about the node, SE(3) form (constant).
     pub fn mass_matrix_se3(&self) -> Mat6 {
@@ -79,12 +90,7 @@ impl RigidBody {
         let xt = hat(&self.com);
         let fg = flexmb_lie::join(&wg, &(xt * wg));
         let r = mm * n.vdot - adt * p - fg;
-        let (f, mu) = split(&p);
-        let mut q = Mat6::zeros();
-        q.fixed_view_mut::<3, 3>(0, 3).copy_from(&hat(&f));
-        q.fixed_view_mut::<3, 3>(3, 0).copy_from(&hat(&f));
-        q.fixed_view_mut::<3, 3>(3, 3).copy_from(&hat(&mu));
-        let c = -(adt * mm + q);
+        let c = -(adt * mm + momentum_jacobian(&p));
         let mut k = Mat6::zeros();
         let wgt = hat(&wg);
         k.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-wgt));

@@ -3,7 +3,7 @@
 
 use super::build::{nonzero_vec3, positive, read_name, require_node, Origin, Origins};
 use super::reader::{describe, name_list, suggestion, Field, Result, Table};
-use crate::model::{BeamSection, Model, NodeId};
+use crate::model::{BeamMass, BeamSection, Model, NodeId};
 use flexmb_lie::{so3, Frame, Mat3, Mat6, Vec3};
 use std::collections::HashMap;
 use toml::de::DeValue;
@@ -19,6 +19,9 @@ const BEAM_KEYS: &[&str] = &[
     "orientation",
     "section",
     "damping",
+    "velocity",
+    "angular_velocity",
+    "mass_matrix",
 ];
 
 /// Most elements of one `[[beam]]`.
@@ -261,6 +264,18 @@ pub(super) fn read_beams(
             }
         }
 
+        let mass_kind = match t.field("mass_matrix") {
+            Some(f) => match f.choice(&["lumped", "consistent"])? {
+                "consistent" => BeamMass::Consistent,
+                _ => BeamMass::Lumped,
+            },
+            None => BeamMass::default(),
+        };
+
+        // Initial velocity: a rigid-body field v(p) = v_start + omega x (p - start).
+        let v_start = t.opt_vec3("velocity")?.unwrap_or_else(Vec3::zeros);
+        let omega = t.opt_vec3("angular_velocity")?.unwrap_or_else(Vec3::zeros);
+
         // Nodes.
         let origin = Origin::of(&t);
         let frames: Vec<Mat3> = (0..=n)
@@ -288,7 +303,10 @@ pub(super) fn read_beams(
             }
             node_names.insert(node_name.clone(), t.path.clone());
             let p = axis.point(i as f64 / n as f64);
-            ids.push(model.add_node(&node_name, Frame::new(p, *frame)));
+            let id = model.add_node(&node_name, Frame::new(p, *frame));
+            model.nodes[id.0].velocity = v_start + omega.cross(&(p - start));
+            model.nodes[id.0].angular_velocity = frame.transpose() * omega;
+            ids.push(id);
             let key = if t.has("arc") { "arc" } else { "end" };
             origins.nodes.push(
                 origin
@@ -302,12 +320,16 @@ pub(super) fn read_beams(
         let key = if t.has("arc") { "arc" } else { "end" };
         for i in 0..n {
             let element = format!("{name}[{i}]");
-            model.add_beam(
+            let e = model.add_beam(
                 &element,
                 [ids[i], ids[i + 1]],
                 section.clone(),
                 [frames[i], frames[i + 1]],
             );
+            if mass_kind != BeamMass::default() {
+                model.beams[e].mass_kind = mass_kind;
+                model.beams[e].update_mass();
+            }
             origins.beams.push(
                 origin
                     .clone()

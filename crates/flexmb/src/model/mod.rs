@@ -205,6 +205,57 @@ pub struct Beam {
     /// Reference length \[m\] (length of the element's axis, `|translation of d_0|` for a
     /// straight element).
     pub length: f64,
+    /// How the inertia is distributed over the nodes.
+    pub mass_kind: BeamMass,
+    /// Element mass matrix in the nodes' body velocities `[v_a; v_b]` (12 x 12, constant),
+    /// computed from `section`, `d0`, `length`, the offsets and `mass_kind` by [`Beam::new`]
+    /// (call [`Beam::update_mass`] after changing any of them).
+    pub mass: crate::elements::Mat12,
+}
+
+/// Distribution of a beam element's inertia (see [`crate::elements::beam`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BeamMass {
+    /// Half of the element's mass and rotary inertia on each node, no coupling (the
+    /// default: the most robust at large time steps, block-diagonal).
+    #[default]
+    Lumped,
+    /// From the element's velocity interpolation, exact for rigid motions of the reference
+    /// shape; couples the two nodes.
+    Consistent,
+}
+
+impl Beam {
+    /// A beam element between `nodes` whose section frames at the ends are the node frames
+    /// rotated by `offset_a`, `offset_b`, with reference relative motion `d0`; the length and
+    /// the mass matrix follow.
+    pub fn new(
+        name: &str,
+        nodes: [NodeId; 2],
+        section: BeamSection,
+        [offset_a, offset_b]: [Mat3; 2],
+        d0: flexmb_lie::Vec6,
+        mass_kind: BeamMass,
+    ) -> Self {
+        let mut beam = Self {
+            name: name.to_string(),
+            nodes,
+            section,
+            offset_a,
+            offset_b,
+            d0,
+            length: crate::elements::beam::arc_length(&d0),
+            mass_kind,
+            mass: crate::elements::Mat12::zeros(),
+        };
+        beam.update_mass();
+        beam
+    }
+
+    /// Recomputes [`Beam::mass`] from the section, the geometry and `mass_kind`.
+    pub fn update_mass(&mut self) {
+        self.mass = crate::elements::beam::mass_matrix(self);
+    }
 }
 
 /// Frame in which a vector sensor reports its components.
@@ -339,16 +390,14 @@ impl Model {
         let ha = Frame::new(na.x, frames[0]);
         let hb = Frame::new(nb.x, frames[1]);
         let d0 = flexmb_lie::se3::log(&ha.inverse().compose(&hb));
-        let length = crate::elements::beam::arc_length(&d0);
-        self.beams.push(Beam {
-            name: name.to_string(),
+        self.beams.push(Beam::new(
+            name,
             nodes,
             section,
-            offset_a,
-            offset_b,
+            [offset_a, offset_b],
             d0,
-            length,
-        });
+            BeamMass::default(),
+        ));
         self.beams.len() - 1
     }
 

@@ -223,6 +223,10 @@ struct Previous {
 /// Steps that keep the regularization after a singular matrix or a rejected step.
 const REGULARIZED_STEPS: usize = 20;
 
+/// A step that needed more iterations than this with a reused matrix has the matrix rebuilt
+/// at the next step (full Newton typically needs 2 to 3).
+const STALE_ITERATIONS: usize = 3;
+
 impl<'m> Simulation<'m> {
     /// Validates the model, builds the data and computes consistent initial conditions.
     pub fn new(model: &'m Model, settings: DynamicSettings) -> Result<Self, SolveError> {
@@ -516,8 +520,13 @@ impl<'m> Simulation<'m> {
         }
         self.increments = dq;
         match result {
-            Ok(_) => {
+            Ok(iterations) => {
                 self.jacobian_age += 1;
+                if self.used_stale_matrix && iterations > STALE_ITERATIONS {
+                    // The reused matrix has drifted from the current one: rebuild it for the
+                    // next step rather than pay extra iterations at every step.
+                    self.jacobian_age = newton.max_jacobian_age;
+                }
                 self.previous.h = h;
                 self.previous.vdot.clone_from(&self.saved.vdot);
                 self.previous.lambda.clone_from(&self.saved.lambda);
