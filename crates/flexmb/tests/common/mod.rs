@@ -75,7 +75,14 @@ pub fn try_run(name: &str, overrides: &[&str]) -> Result<History, SolveError> {
     let Analysis::Dynamic(settings) = file.analysis else {
         panic!("{name} is not a dynamic analysis")
     };
-    let model = &file.model;
+    run_model(&file.model, settings)
+}
+
+/// Runs a model built or modified in Rust.
+pub fn run_model(
+    model: &flexmb::model::Model,
+    settings: flexmb::DynamicSettings,
+) -> Result<History, SolveError> {
     let mut sim = Simulation::new(model, settings)?;
     let mut sensors = SensorEvaluator::new(model);
     let mut rows = Vec::new();
