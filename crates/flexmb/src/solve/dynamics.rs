@@ -29,7 +29,7 @@
 
 use super::generalized_alpha::GaParameters;
 use super::initial::{initial_accelerations, load_nodes, prepare_layout};
-use super::linear::LinearError;
+use super::linear::{Backend, LinearError};
 use super::newton::{weighted_norm, NewtonSettings};
 use crate::assembly::{assemble, ConstraintRhs, Scaling};
 use crate::data::Data;
@@ -223,8 +223,8 @@ struct Previous {
 /// Steps that keep the regularization after a singular matrix or a rejected step.
 const REGULARIZED_STEPS: usize = 20;
 
-/// A step that needed more iterations than this with a reused matrix has the matrix rebuilt
-/// at the next step (full Newton typically needs 2 to 3).
+/// A step that needed more iterations than this with a reused dense matrix has the matrix
+/// rebuilt at the next step (full Newton typically needs 2 to 3).
 const STALE_ITERATIONS: usize = 3;
 
 impl<'m> Simulation<'m> {
@@ -522,9 +522,14 @@ impl<'m> Simulation<'m> {
         match result {
             Ok(iterations) => {
                 self.jacobian_age += 1;
-                if self.used_stale_matrix && iterations > STALE_ITERATIONS {
-                    // The reused matrix has drifted from the current one: rebuild it for the
-                    // next step rather than pay extra iterations at every step.
+                if self.used_stale_matrix
+                    && iterations > STALE_ITERATIONS
+                    && self.data.solver.backend() == Backend::Dense
+                {
+                    // The reused matrix has drifted from the current one: a small (dense)
+                    // matrix is cheaper to rebuild for the next step than extra iterations
+                    // at every step. A large sparse factorization costs several iterations,
+                    // so it waits for the contraction test.
                     self.jacobian_age = newton.max_jacobian_age;
                 }
                 self.previous.h = h;
