@@ -260,7 +260,7 @@ impl<'m> Statics<'m> {
                     if s.adaptive {
                         if c.iterations <= s.target_iterations / 2 {
                             inc = (inc * 1.5).min(s.max_increment);
-                        } else if c.iterations > s.target_iterations {
+                        } else if 2 * c.iterations > 3 * s.target_iterations {
                             inc *= 0.7;
                         }
                     }
