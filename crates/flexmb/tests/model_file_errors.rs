@@ -948,7 +948,7 @@ fn beam_initial_velocity_is_a_rigid_motion() {
     assert_eq!(kinds[3], BeamMass::Lumped);
     assert_eq!(kinds[4], BeamMass::Consistent);
     assert_eq!(kinds[5], BeamMass::Consistent);
-    let coupling = |e: usize| m.beams[e].mass.fixed_view::<6, 6>(0, 6).norm();
+    let coupling = |e: usize| m.beams[e].mass().fixed_view::<6, 6>(0, 6).norm();
     assert!(coupling(4) > 0.1, "the consistent mass couples the nodes");
     assert_eq!(coupling(3), 0.0);
 }
@@ -967,6 +967,21 @@ fn beam_end_node_and_negative_arc() {
             "\n[[beam]]\nname = \"tie\"\nstart_node = \"b.2\"\nend = [0.0, -10.0, 0.0]\nend_node = \"rim\"\nelements = 1\norientation = [0, 0, 1]\nsection = { E = 1e9, G = 4e8, A = 1e-3, I2 = 1e-6, I3 = 1e-6, J = 2e-6, rho = 1000, k2 = 0.8, k3 = 0.9 }\n\n[[joint]]",
         );
     let file = parse_model_str(&text, "beams.toml", &[]).unwrap_or_else(|e| panic!("{e}"));
+    // The tie creates no node: an initial velocity field on it would do nothing.
+    let e = parse_model_str(
+        &text.replace(
+            "end_node = \"rim\"\nelements = 1\n",
+            "end_node = \"rim\"\nelements = 1\nvelocity = [1, 0, 0]\n",
+        ),
+        "beams.toml",
+        &[],
+    )
+    .unwrap_err()
+    .to_string();
+    assert_contains(
+        &e,
+        &["field 'beam[3].velocity' (beam 'tie')", "creates no node"],
+    );
     let m = &file.model;
     let rim = m.node_id("rim").unwrap();
     assert_eq!(m.node_id("ring.3"), None);
@@ -1326,4 +1341,16 @@ fn distributed_beam_load_is_lumped_to_the_beam_nodes() {
         e.contains("beam_load.toml:15:") && e.contains("nope"),
         "{e}"
     );
+}
+
+#[test]
+fn a_stale_beam_mass_matrix_is_reported() {
+    let file = parse_model_str(BEAMS, "beams.toml", &[]).unwrap();
+    let mut model = file.model;
+    model.validate().expect("valid as read");
+    model.beams[2].section.mass_per_length *= 2.0;
+    let e = model.validate().unwrap_err().to_string();
+    assert!(e.contains("a[2]") && e.contains("update_mass"), "{e}");
+    model.beams[2].update_mass();
+    model.validate().expect("valid after update_mass");
 }

@@ -26,44 +26,45 @@
 //! `sigma_d = beta C (P v) / L` (`P v` is the rate of `d`), giving `f_d = P^T sigma_d`,
 //! `C_t = beta P^T C P / L` and, in `K_t`, the derivatives of `P` at fixed `v`
 //! (`H(x, y) = d(T^-1(x) y)/dx`, obtained from `G` by `H_ij = y . G(x, e_i)_{:,j}`);
-//! mass-proportional forces `alpha M v` on the lumped nodal masses.
+//! mass-proportional forces `alpha M v` with the element's mass matrix `M` (below).
 //!
 //! The interpolation is the SE(3) geodesic between the two end frames (the paper's
 //! two-node interpolation); a higher-order element needs another interpolation and is not
 //! provided. Refinement is by more elements (the strain is exact for constant curvature, as
 //! in the roll-up, and converges at second order otherwise).
 //!
-//! **Inertia.** The section velocity (body frame of the reference section frame
-//! `H_0(s) = H_a0 exp(xi d_0)`, `xi = s / L`) is interpolated from the nodal velocities,
+//! **Inertia.** The element's configuration field is `H(xi) = H_a exp(xi d)`, `xi = s / L`
+//! (section frames). Its body velocity follows from `d/dt exp(x) = exp(x) tilde(T(x) xdot)`
+//! and `ddot = P [v_a; v_b]`:
 //!
 //! ```text
-//! eta(xi) = (1 - xi) Ad(exp(-xi d_0)) A_a v_a + xi Ad(exp((1 - xi) d_0)) A_b v_b = N(xi) [v_a; v_b],
+//! eta(xi) = Ad(exp(-xi d)) A_a v_a + xi T(xi d) ddot
+//!         = [ (Ad(exp(-xi d)) - xi T(xi d) T^-1(-d)) A_a ,  xi T(xi d) T^-1(d) A_b ] [v_a; v_b]
+//!         = N(xi; d) [v_a; v_b],
 //! ```
 //!
-//! which is exact for every rigid motion of the reference shape (then
-//! `A_b v_b = Ad(exp(-d_0)) A_a v_a` and `eta = Ad(exp(-xi d_0)) A_a v_a`). The kinetic energy
-//! `T = 1/2 v^T M v`, `M = L int_0^1 N^T M_s N dxi`, `M_s = blockdiag(rho A I, J)` (5-point
-//! Gauss; exact for straight elements), is a left-invariant metric on the two nodes, so the
-//! Euler-Poincaré equations give the inertia forces and their tangents
+//! which gives `v_a` at `xi = 0`, `v_b` at `xi = 1` (`T(d) T^-1(-d) = Ad(exp(-d))`) and the
+//! rigid velocity field for every rigid motion (`ddot = 0`). The consistent mass matrix is
+//! `M = L int_0^1 N^T M_s N dxi`, `M_s = blockdiag(rho A I, J)`, with `N` evaluated at the
+//! reference `d_0` (5-point Gauss; exact for straight elements): the kinetic energy is then
+//! exact for rigid motions of the reference shape and for the element's small deformations
+//! about it, and `M` is constant like a rigid body's on SE(3) (Brüls & Cardona 2010,
+//! Sect. 5.2), the error of freezing `d` at `d_0` being of the order of the element's
+//! strains and change of curvature times `L`. `T = 1/2 v^T M v` is a left-invariant metric
+//! on the two nodes, so the Euler-Poincaré equations give the inertia forces and tangents
 //!
 //! ```text
 //! f_ine = M vdot - [ ad(v_a)^T p_a ; ad(v_b)^T p_b ],   p = M v,
 //! C_t   = -blockdiag(ad(v_a)^T, ad(v_b)^T) M - blockdiag(Q(p_a), Q(p_b)),   K_t = 0,
 //! ```
 //!
-//! with `Q` of [`super::rigid_body`] (this is the rigid body's Eq. with a coupled mass matrix).
-//! The interpolation ignores the deformation of the element in the velocity field (an
-//! `O(strain + curvature change x L)` relative error of `T`, which vanishes under mesh
-//! refinement), which keeps `M` constant like a rigid body's: the same choice as the SE(3)
-//! formulation of rigid bodies (Brüls & Cardona 2010, Sect. 5.2).
+//! with `Q` of [`super::rigid_body`] (the rigid body's equations with a coupled mass matrix).
 //!
 //! The default ([`crate::model::BeamMass`]) is the lumped mass: half of the element's mass
-//! and rotary inertia on each node (block-diagonal `M`, the same equations). Measured on
-//! the benchmarks (BENCHMARKS.md): the consistent mass changes the error of the flexible
-//! slider-crank's deflection by 5 % only (3.27 % against 3.45 % of the peak with 16
-//! elements; the two-node element's stiffness dominates), while its higher top frequencies
-//! make Newton fail more often at large steps (the right-angle cantilever at h = 0.25 with
-//! rho_inf = 0.9 stops at t = 29 s with it and runs with the lumped mass).
+//! and rotary inertia on each node (block-diagonal `M`, the same equations). For this
+//! element the choice hardly matters for accuracy: the first bending frequency of a
+//! pinned-pinned rod with 16 elements is 0.16 % too high with either mass (the element's
+//! stiffness dominates; BENCHMARKS.md, slider-crank), and the lumped mass is cheaper.
 //!
 //! Gravity acts on half of the element's mass at each node (exact resultant; the moments
 //! differ by `O(L^2)`), on both mass models. Mass-proportional damping uses the same `M`.
@@ -118,12 +119,14 @@ pub fn mass_matrix(beam: &Beam) -> Mat12 {
                 .copy_from(&(ab.transpose() * ms * ab * (0.5 * l)));
         }
         BeamMass::Consistent => {
+            let d0 = &beam.d0;
+            let (pa, pb) = (se3::tangent_inv(&(-d0)), se3::tangent_inv(d0));
             for (xi, w) in GAUSS5 {
+                let t = se3::tangent(&(xi * d0)) * xi;
                 let mut n = SMatrix::<f64, 6, 12>::zeros();
                 n.fixed_view_mut::<6, 6>(0, 0)
-                    .copy_from(&(se3::big_ad(&se3::exp(&(-xi * beam.d0))) * aa * (1.0 - xi)));
-                n.fixed_view_mut::<6, 6>(0, 6)
-                    .copy_from(&(se3::big_ad(&se3::exp(&((1.0 - xi) * beam.d0))) * ab * xi));
+                    .copy_from(&((se3::big_ad(&se3::exp(&(-xi * d0))) - t * pa) * aa));
+                n.fixed_view_mut::<6, 6>(0, 6).copy_from(&(t * pb * ab));
                 m += n.transpose() * ms * n * (w * l);
             }
             // symmetric up to round-off; make it exactly so

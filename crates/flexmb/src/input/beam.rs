@@ -264,17 +264,25 @@ pub(super) fn read_beams(
             }
         }
 
-        let mass_kind = match t.field("mass_matrix") {
-            Some(f) => match f.choice(&["lumped", "consistent"])? {
-                "consistent" => BeamMass::Consistent,
-                _ => BeamMass::Lumped,
-            },
+        let mass_kind = match t.opt_choice("mass_matrix", &["lumped", "consistent"])? {
             None => BeamMass::default(),
+            Some("lumped") => BeamMass::Lumped,
+            Some(_) => BeamMass::Consistent,
         };
 
         // Initial velocity: a rigid-body field v(p) = v_start + omega x (p - start).
         let v_start = t.opt_vec3("velocity")?.unwrap_or_else(Vec3::zeros);
         let omega = t.opt_vec3("angular_velocity")?.unwrap_or_else(Vec3::zeros);
+        if n == 1 && start_node.is_some() && end_node.is_some() {
+            for key in ["velocity", "angular_velocity"] {
+                if t.has(key) {
+                    return Err(t.key_name_err(
+                        key,
+                        "this beam creates no node (one element between start_node and end_node): give the initial velocities on those nodes",
+                    ));
+                }
+            }
+        }
 
         // Nodes.
         let origin = Origin::of(&t);
@@ -320,16 +328,13 @@ pub(super) fn read_beams(
         let key = if t.has("arc") { "arc" } else { "end" };
         for i in 0..n {
             let element = format!("{name}[{i}]");
-            let e = model.add_beam(
+            model.add_beam_with_mass(
                 &element,
                 [ids[i], ids[i + 1]],
                 section.clone(),
                 [frames[i], frames[i + 1]],
+                mass_kind,
             );
-            if mass_kind != BeamMass::default() {
-                model.beams[e].mass_kind = mass_kind;
-                model.beams[e].update_mass();
-            }
             origins.beams.push(
                 origin
                     .clone()

@@ -209,19 +209,20 @@ pub struct Beam {
     pub mass_kind: BeamMass,
     /// Element mass matrix in the nodes' body velocities `[v_a; v_b]` (12 x 12, constant),
     /// computed from `section`, `d0`, `length`, the offsets and `mass_kind` by [`Beam::new`]
-    /// (call [`Beam::update_mass`] after changing any of them).
-    pub mass: crate::elements::Mat12,
+    /// (call [`Beam::update_mass`] after changing any of them; [`Model::validate`] reports a
+    /// stale one).
+    pub(crate) mass: crate::elements::Mat12,
 }
 
 /// Distribution of a beam element's inertia (see [`crate::elements::beam`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BeamMass {
     /// Half of the element's mass and rotary inertia on each node, no coupling (the
-    /// default: the most robust at large time steps, block-diagonal).
+    /// default: block-diagonal, cheaper, as accurate for this element).
     #[default]
     Lumped,
-    /// From the element's velocity interpolation, exact for rigid motions of the reference
-    /// shape; couples the two nodes.
+    /// The mass matrix of the element's own interpolation: exact kinetic energy for rigid
+    /// motions and small deformations of the reference shape; couples the two nodes.
     Consistent,
 }
 
@@ -252,9 +253,14 @@ impl Beam {
         beam
     }
 
-    /// Recomputes [`Beam::mass`] from the section, the geometry and `mass_kind`.
+    /// Recomputes the mass matrix from the section, the geometry and `mass_kind`.
     pub fn update_mass(&mut self) {
         self.mass = crate::elements::beam::mass_matrix(self);
+    }
+
+    /// The element mass matrix in the nodes' body velocities `[v_a; v_b]`.
+    pub fn mass(&self) -> &crate::elements::Mat12 {
+        &self.mass
     }
 }
 
@@ -376,13 +382,26 @@ impl Model {
     }
 
     /// Adds a beam element between two nodes, with the section frames at both ends given as
-    /// rotations in the inertial frame at t = 0 (x along the element axis); returns its index.
+    /// rotations in the inertial frame at t = 0 (x along the element axis) and the default
+    /// (lumped) mass; returns its index.
     pub fn add_beam(
         &mut self,
         name: &str,
         nodes: [NodeId; 2],
         section: BeamSection,
         frames: [Mat3; 2],
+    ) -> usize {
+        self.add_beam_with_mass(name, nodes, section, frames, BeamMass::default())
+    }
+
+    /// [`Model::add_beam`] with a choice of mass matrix.
+    pub fn add_beam_with_mass(
+        &mut self,
+        name: &str,
+        nodes: [NodeId; 2],
+        section: BeamSection,
+        frames: [Mat3; 2],
+        mass_kind: BeamMass,
     ) -> usize {
         let (na, nb) = (&self.nodes[nodes[0].0].frame, &self.nodes[nodes[1].0].frame);
         let offset_a = na.r.transpose() * frames[0];
@@ -396,7 +415,7 @@ impl Model {
             section,
             [offset_a, offset_b],
             d0,
-            BeamMass::default(),
+            mass_kind,
         ));
         self.beams.len() - 1
     }
@@ -756,6 +775,16 @@ impl Model {
                     &b.name,
                     "section",
                     "the sectional rotary inertia must be symmetric positive definite".into(),
+                ));
+            }
+            let fresh = crate::elements::beam::mass_matrix(b);
+            if (fresh - b.mass).norm() > 1e-12 * fresh.norm() {
+                return Err(bad(
+                    "beam",
+                    i,
+                    &b.name,
+                    "section",
+                    "the element's mass matrix is out of date: call Beam::update_mass after changing its section, geometry or mass_kind".into(),
                 ));
             }
         }

@@ -23,8 +23,10 @@
 //! The step reads as a checklist: `predict`, then repeat { `update_configuration`,
 //! `assemble` (residual and iteration matrix), `factorize`, `solve`, `correct`, check the
 //! weighted norm } until converged, then `update_algorithmic_acceleration`. A failed step is
-//! retried with a quarter of the step size down to `h_min`; the run then stops with a
-//! diagnosis (step, time, the worst equation and its node or joint). The output callback is
+//! retried first with a fresh iteration matrix if it used a reused one, then with a quarter
+//! of the step size down to `h_min`; the run stops with a diagnosis (step, time, the worst
+//! equation and its node or joint) below `h_min` or when step reductions keep coming back
+//! (more than 100 plus one per 10 accepted steps). The output callback is
 //! called at every output time, so what was computed is never lost.
 
 use super::generalized_alpha::GaParameters;
@@ -333,7 +335,8 @@ impl<'m> Simulation<'m> {
                     reductions += 1;
                     // Give up when the step can no longer shrink, or when rejections keep
                     // coming back after the step size recovers (an unstable solution).
-                    let thrashing = self.stats.rejected_steps > 100 + self.stats.steps / 10;
+                    // (Retries with a fresh matrix above do not count: they do not reduce h.)
+                    let thrashing = reductions > 100 + self.stats.steps / 10;
                     if h < s.h_min || thrashing {
                         let worst = failure
                             .worst_unknown
@@ -366,7 +369,9 @@ impl<'m> Simulation<'m> {
     /// Newton's iteration matrix is reused across iterations and steps while the iteration
     /// contracts fast (a chord method: the converged solution is the same, each iteration is
     /// cheaper); it is rebuilt when `h` or the regularization changes, when the contraction
-    /// rate exceeds [`NewtonSettings::max_contraction`], or when the iteration diverges.
+    /// rate exceeds [`NewtonSettings::max_contraction`], when the iteration diverges, after
+    /// [`NewtonSettings::max_jacobian_age`] steps, and, for dense (small) systems, at the next
+    /// step after a step that needed more than 3 iterations with it.
     fn step(&mut self, h: f64) -> Result<usize, StepFailure> {
         self.saved.clone_from(&self.state);
         let p = self.params;
@@ -420,6 +425,8 @@ impl<'m> Simulation<'m> {
             reason: "no iteration".into(),
             worst_unknown: None,
         });
+        // Iteration at which the matrix was last rebuilt in this step (0: a reused matrix).
+        let mut last_factorization = 0;
         for iteration in 1..=newton.max_iterations {
             let fresh = refresh || fresh_only;
             self.used_stale_matrix |= !fresh;
@@ -448,6 +455,7 @@ impl<'m> Simulation<'m> {
                 }
                 self.jacobian = Some((h, sc.regularization));
                 self.jacobian_age = 0;
+                last_factorization = iteration;
                 refresh = false;
             }
             if let Err(failure) = self.solve() {
@@ -522,8 +530,8 @@ impl<'m> Simulation<'m> {
         match result {
             Ok(iterations) => {
                 self.jacobian_age += 1;
-                if self.used_stale_matrix
-                    && iterations > STALE_ITERATIONS
+                // Iterations done with the matrix the next step would reuse.
+                if iterations - last_factorization.saturating_sub(1) > STALE_ITERATIONS
                     && self.data.solver.backend() == Backend::Dense
                 {
                     // The reused matrix has drifted from the current one: a small (dense)
