@@ -329,13 +329,7 @@ fn joint_gradients_and_their_derivatives_match_finite_differences() {
 fn parameter_derivatives_match_finite_differences() {
     let mut rng = Lcg(5);
     for model in models() {
-        let ctx = Context {
-            model: &model,
-            group: model.group,
-            t: 0.0,
-            gravity_scale: 1.0,
-            load_scale: 1.0,
-        };
+        let ctx = context(&model);
         let nodes = [rng.node(model.group), rng.node(model.group)];
         let body = RigidBody {
             name: "b".into(),
@@ -480,13 +474,7 @@ fn beam_tangent_is_invariant_under_rigid_motion() {
         d0,
         BeamMass::Consistent,
     );
-    let ctx = Context {
-        model: &model,
-        group: Group::SE3,
-        t: 0.0,
-        gravity_scale: 1.0,
-        load_scale: 1.0,
-    };
+    let ctx = context(&model);
     let stiffness = |nodes: &[NodeState; 2]| {
         let mut r = Vec12::zeros();
         let mut s = Mat12::zeros();
@@ -511,22 +499,60 @@ fn beam_tangent_is_invariant_under_rigid_motion() {
     assert!((k0 - k1).norm() < 1e-9 * k0.norm());
 }
 
-#[test]
-fn consistent_beam_mass_is_exact_for_rigid_motions() {
-    // Kinetic energy of a straight element moving rigidly, against the integral of
-    // 1/2 rho A |pdot(s)|^2 + 1/2 omega^T J omega over the axis (Simpson, 2000 intervals).
-    let mut rng = Lcg(21);
-    let model = Model::new(Group::SE3);
-    let ctx = Context {
-        model: &model,
-        group: Group::SE3,
+/// Context at t = 0, gravity and loads at full scale.
+fn context(model: &Model) -> Context<'_> {
+    Context {
+        model,
+        group: model.group,
         t: 0.0,
         gravity_scale: 1.0,
         load_scale: 1.0,
-    };
+    }
+}
+
+/// Simpson's rule for `f` on [0, 1] with `n` (even) intervals.
+fn simpson(n: usize, f: impl Fn(f64) -> f64) -> f64 {
+    let sum: f64 = (0..=n)
+        .map(|i| {
+            let w = if i == 0 || i == n {
+                1.0
+            } else if i % 2 == 1 {
+                4.0
+            } else {
+                2.0
+            };
+            w * f(i as f64 / n as f64)
+        })
+        .sum();
+    sum / (3.0 * n as f64)
+}
+
+/// A section with a coupled (non-diagonal) rotary inertia.
+fn massive_section() -> BeamSection {
     let mut section = BeamSection::diagonal([1e3; 6], 2.5, [0.3, 0.2, 0.1]);
     section.rotary_inertia[(1, 2)] = 0.03;
     section.rotary_inertia[(2, 1)] = 0.03;
+    section
+}
+
+/// Node frames of an element in its reference relative position `d0` from a random frame
+/// of node a; also the section frame at a.
+fn reference_placement(d0: &Vec6, offsets: &[Mat3; 2], rng: &mut Lcg) -> (Frame, Frame, Frame) {
+    let ha = flexmb_lie::se3::exp(&rng.v6(1.0));
+    let sa = ha.compose(&Frame::new(Vec3::zeros(), offsets[0]));
+    let sb = sa.compose(&flexmb_lie::se3::exp(d0));
+    (ha, Frame::new(sb.x, sb.r * offsets[1].transpose()), sa)
+}
+
+#[test]
+fn beam_mass_is_exact_for_rigid_motions() {
+    // Kinetic energy of a straight element moving rigidly, against the integral of
+    // 1/2 rho A |pdot(s)|^2 + 1/2 omega^T J omega over the axis (Simpson, 2000 intervals):
+    // exact with the consistent mass, and with the lumped mass for translations only.
+    let mut rng = Lcg(21);
+    let model = Model::new(Group::SE3);
+    let ctx = context(&model);
+    let section = massive_section();
     let length = 1.7;
     let d0 = Vec6::new(length, 0.0, 0.0, 0.0, 0.0, 0.0);
     let offsets = [
@@ -543,38 +569,22 @@ fn consistent_beam_mass_is_exact_for_rigid_motions() {
             kind,
         );
         for translation_only in [false, true] {
-            let ha = flexmb_lie::se3::exp(&rng.v6(1.0));
-            let sa = ha.compose(&Frame::new(Vec3::zeros(), offsets[0]));
-            let sb = sa.compose(&flexmb_lie::se3::exp(&d0));
-            let hb = Frame::new(sb.x, sb.r * offsets[1].transpose());
+            let (ha, hb, sa) = reference_placement(&d0, &offsets, &mut rng);
             let mut eta_a = rng.v6(2.0);
             if translation_only {
                 eta_a.fixed_rows_mut::<3>(3).fill(0.0);
             }
-            let eta_b = flexmb_lie::se3::big_ad(&hb.inverse().compose(&ha)) * eta_a;
             let mut nodes = [NodeState::ground(ha), NodeState::ground(hb)];
             nodes[0].v = eta_a;
-            nodes[1].v = eta_b;
+            nodes[1].v = flexmb_lie::se3::big_ad(&hb.inverse().compose(&ha)) * eta_a;
             let energy = beam.kinetic_energy(&ctx, &nodes);
 
             let xdot = ha.r * eta_a.fixed_rows::<3>(0);
             let omega = ha.r * eta_a.fixed_rows::<3>(3);
-            let n = 2000;
-            let mut translational = 0.0;
-            for i in 0..=n {
-                let s = length * i as f64 / n as f64;
-                let p = sa.r * Vec3::new(s, 0.0, 0.0);
-                let pdot = xdot + omega.cross(&p);
-                let w = if i == 0 || i == n {
-                    1.0
-                } else if i % 2 == 1 {
-                    4.0
-                } else {
-                    2.0
-                };
-                translational += w * pdot.norm_squared();
-            }
-            translational *= length / (3.0 * n as f64);
+            let translational = length
+                * simpson(2000, |xi| {
+                    (xdot + omega.cross(&(sa.r * Vec3::new(xi * length, 0.0, 0.0)))).norm_squared()
+                });
             let omega_sec = sa.r.transpose() * omega;
             let exact = 0.5 * section.mass_per_length * translational
                 + 0.5 * length * omega_sec.dot(&(section.rotary_inertia * omega_sec));
@@ -597,24 +607,13 @@ fn consistent_beam_mass_is_the_kinetic_energy_of_the_interpolation() {
     // position, arbitrary (non-rigid) velocities, straight and curved elements with offsets.
     let mut rng = Lcg(33);
     let model = Model::new(Group::SE3);
-    let ctx = Context {
-        model: &model,
-        group: Group::SE3,
-        t: 0.0,
-        gravity_scale: 1.0,
-        load_scale: 1.0,
-    };
-    let mut section = BeamSection::diagonal([1e3; 6], 2.5, [0.3, 0.2, 0.1]);
-    section.rotary_inertia[(0, 1)] = 0.02;
-    section.rotary_inertia[(1, 0)] = 0.02;
-    let ms = {
-        let mut m = Mat6::zeros();
-        m.fixed_view_mut::<3, 3>(0, 0)
-            .copy_from(&(Mat3::identity() * section.mass_per_length));
-        m.fixed_view_mut::<3, 3>(3, 3)
-            .copy_from(&section.rotary_inertia);
-        m
-    };
+    let ctx = context(&model);
+    let section = massive_section();
+    let mut ms = Mat6::zeros();
+    ms.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(Mat3::identity() * section.mass_per_length));
+    ms.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&section.rotary_inertia);
     for d0 in [
         Vec6::new(1.3, 0.0, 0.0, 0.0, 0.0, 0.0),
         Vec6::new(1.3, 0.0, 0.0, 0.1, 0.2, 0.5),
@@ -631,10 +630,7 @@ fn consistent_beam_mass_is_the_kinetic_energy_of_the_interpolation() {
             d0,
             BeamMass::Consistent,
         );
-        let ha = flexmb_lie::se3::exp(&rng.v6(1.0));
-        let sa = ha.compose(&Frame::new(Vec3::zeros(), offsets[0]));
-        let sb = sa.compose(&flexmb_lie::se3::exp(&d0));
-        let hb = Frame::new(sb.x, sb.r * offsets[1].transpose());
+        let (ha, hb, _) = reference_placement(&d0, &offsets, &mut rng);
         let (va, vb) = (rng.v6(2.0), rng.v6(2.0));
         let mut nodes = [NodeState::ground(ha), NodeState::ground(hb)];
         nodes[0].v = va;
@@ -651,24 +647,16 @@ fn consistent_beam_mass_is_the_kinetic_energy_of_the_interpolation() {
             let d = flexmb_lie::se3::log(&a.inverse().compose(&b));
             a.compose(&flexmb_lie::se3::exp(&(d * xi)))
         };
-        let (n, eps) = (200, 1e-5);
-        let mut integral = 0.0;
-        for i in 0..=n {
-            let xi = i as f64 / n as f64;
-            let h0 = field(0.0, xi).inverse();
-            let eta = (flexmb_lie::se3::log(&h0.compose(&field(eps, xi)))
-                - flexmb_lie::se3::log(&h0.compose(&field(-eps, xi))))
-                / (2.0 * eps);
-            let w = if i == 0 || i == n {
-                1.0
-            } else if i % 2 == 1 {
-                4.0
-            } else {
-                2.0
-            };
-            integral += w * eta.dot(&(ms * eta));
-        }
-        let exact = 0.5 * beam.length * integral / (3.0 * n as f64);
+        let eps = 1e-5;
+        let exact = 0.5
+            * beam.length
+            * simpson(200, |xi| {
+                let h0 = field(0.0, xi).inverse();
+                let eta = (flexmb_lie::se3::log(&h0.compose(&field(eps, xi)))
+                    - flexmb_lie::se3::log(&h0.compose(&field(-eps, xi))))
+                    / (2.0 * eps);
+                eta.dot(&(ms * eta))
+            });
         let error = (energy - exact).abs() / exact;
         assert!(
             error < 1e-7,

@@ -24,7 +24,7 @@ use crate::elements::Coefficients;
 use crate::error::SolveError;
 use crate::model::Model;
 use crate::state::State;
-use flexmb_lie::{Mat6, Vec6};
+use flexmb_lie::Vec6;
 
 /// How the load factor is controlled.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -295,9 +295,7 @@ impl<'m> Statics<'m> {
     /// Newton at a fixed load factor (load control). On success the state holds the
     /// converged configuration; returns the iterations.
     fn solve_at(&mut self, lambda: f64) -> Result<Converged, Failure> {
-        let n = self.data.layout.n_nodes;
         let nd = self.data.layout.n_dofs;
-        let group = self.model.group;
         let q0 = self.state.q.clone();
         let mut dq = vec![0.0; nd];
         let newton = self.settings.newton;
@@ -329,17 +327,7 @@ impl<'m> Statics<'m> {
             self.stats.newton_iterations += 1;
             let (err, worst) = weighted_norm(&dx[..nd], &dq, &|_| newton.atol, newton.rtol);
             if err <= 1.0 {
-                for i in 0..n {
-                    let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
-                    let mut q = group.integrate(&q0[i], &inc);
-                    q.orthonormalize();
-                    self.state.q[i] = q;
-                }
-                self.state.t = lambda;
-                load_nodes(&self.state, &mut self.data);
-                for node in self.data.nodes.iter_mut() {
-                    node.t = Mat6::identity();
-                }
+                self.accept(&q0, &dq, lambda);
                 return Ok(Converged {
                     iterations: iteration,
                 });
@@ -442,6 +430,18 @@ impl<'m> Statics<'m> {
         })
     }
 
+    /// Takes the converged configuration `q = q_0 exp(dq)` at load factor `lambda` into the
+    /// state and the data.
+    fn accept(&mut self, q0: &[flexmb_lie::Frame], dq: &[f64], lambda: f64) {
+        let group = self.model.group;
+        for (i, q) in self.state.q.iter_mut().enumerate() {
+            *q = group.integrate(&q0[i], &Vec6::from_column_slice(&dq[6 * i..6 * i + 6]));
+            q.orthonormalize();
+        }
+        self.state.t = lambda;
+        load_nodes(&self.state, &mut self.data);
+    }
+
     /// Puts `q = q_0 exp(dq)` (and the tangent operators) into the data.
     fn set_configuration(&mut self, q0: &[flexmb_lie::Frame], dq: &[f64]) {
         let group = self.model.group;
@@ -454,31 +454,22 @@ impl<'m> Statics<'m> {
         }
     }
 
-    /// `dR/dlambda` of the scaled system at the configuration in the data: the applied loads
-    /// and gravity (linear in lambda) on the equilibrium rows, `Phi_t` (driven joints, with
-    /// time = lambda) on the constraint rows.
-    fn load_derivative(&mut self, lambda: f64) -> Vec<f64> {
-        let nd = self.data.layout.n_dofs;
-        self.assemble(1.0, false);
-        let r1 = self.data.residual.clone();
-        self.assemble(0.0, false);
-        let mut out: Vec<f64> = r1
+    /// Assembles the residual and the iteration matrix at `lambda` and returns `dR/dlambda`
+    /// of the scaled system at the configuration in the data: applied loads (`lambda f(t)`
+    /// with `t = lambda`), gravity and driven joints (`Phi_t`). The residual is affine in
+    /// nothing else, and the internal forces cancel exactly in the forward difference
+    /// `(R(lambda + delta) - R(lambda)) / delta`, `delta = sqrt(eps) max(1, |lambda|)`, which
+    /// costs one residual assembly and holds for any load function.
+    fn assemble_with_load_derivative(&mut self, lambda: f64) -> Vec<f64> {
+        let delta = f64::EPSILON.sqrt() * lambda.abs().max(1.0);
+        self.assemble(lambda + delta, false);
+        let ahead = self.data.residual.clone();
+        self.assemble(lambda, true);
+        ahead
             .iter()
             .zip(&self.data.residual)
-            .map(|(a, b)| a - b)
-            .collect();
-        let mut sc = self.scaling(lambda);
-        sc.constraint_rhs = ConstraintRhs::Velocity;
-        assemble(
-            self.model,
-            &mut self.data,
-            lambda,
-            &self.state.lambda,
-            &sc,
-            false,
-        );
-        out[nd..].copy_from_slice(&self.data.residual[nd..]);
-        out
+            .map(|(a, r)| (a - r) / delta)
+            .collect()
     }
 
     /// One arc-length step (Crisfield's cylindrical constraint `|dq| = dl`); returns the
@@ -489,10 +480,8 @@ impl<'m> Statics<'m> {
         previous: Option<&(Vec<f64>, f64)>,
         direction: f64,
     ) -> Result<ArcStep, Failure> {
-        let n = self.data.layout.n_nodes;
         let nd = self.data.layout.n_dofs;
         let nu = self.data.layout.n_unknowns();
-        let group = self.model.group;
         let q0 = self.state.q.clone();
         let lambda0 = self.load_factor;
         let newton = self.settings.newton;
@@ -502,8 +491,7 @@ impl<'m> Statics<'m> {
         for iteration in 0..=newton.max_iterations {
             let lambda = lambda0 + dlambda;
             self.set_configuration(&q0, &dq);
-            let f = self.load_derivative(lambda);
-            self.assemble(lambda, true);
+            let f = self.assemble_with_load_derivative(lambda);
             if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
                 return Err(("non-finite residual".into(), Some(i)));
             }
@@ -576,14 +564,7 @@ impl<'m> Statics<'m> {
             self.stats.newton_iterations += 1;
             let (err, worst) = weighted_norm(&correction, &dq, &|_| newton.atol, newton.rtol);
             if err <= 1.0 && dmu.abs() <= newton.rtol * dlambda.abs().max(1e-12) + newton.atol {
-                for i in 0..n {
-                    let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
-                    let mut q = group.integrate(&q0[i], &inc);
-                    q.orthonormalize();
-                    self.state.q[i] = q;
-                }
-                self.state.t = lambda0 + dlambda;
-                load_nodes(&self.state, &mut self.data);
+                self.accept(&q0, &dq, lambda0 + dlambda);
                 return Ok(ArcStep {
                     dq,
                     dlambda,
