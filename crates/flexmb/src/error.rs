@@ -45,4 +45,8 @@ pub enum SolveError {
     },
     #[error("output error: {0}")]
     Output(String),
+    /// The run was stopped from outside (a signal) through the solver's interrupt flag; the
+    /// results up to `reached` (time or load factor) are complete.
+    #[error("interrupted at {reached:.6e}")]
+    Interrupted { reached: f64 },
 }

@@ -40,6 +40,8 @@ use crate::error::SolveError;
 use crate::model::Model;
 use crate::state::State;
 use flexmb_lie::Vec6;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 /// Which form of the constraints the integrator imposes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -190,6 +192,9 @@ pub struct Simulation<'m> {
     pub stats: Stats,
     /// Notes for the user (e.g. redundant constraints removed).
     pub warnings: Vec<String>,
+    /// Checked before every step: when it is set, [`Simulation::run`] returns
+    /// [`SolveError::Interrupted`] with every completed output step already delivered.
+    pub interrupt: Option<Arc<AtomicBool>>,
     /// State at the start of the current step (restored when a step is rejected).
     saved: State,
     /// Size of the constraint-block regularization when it is on (see [`Scaling`]).
@@ -257,6 +262,7 @@ impl<'m> Simulation<'m> {
             settings,
             stats: Stats::default(),
             warnings,
+            interrupt: None,
             regularization: 1e-9 / mass_scale(model),
             regularized_steps: 0,
             jacobian: None,
@@ -290,6 +296,11 @@ impl<'m> Simulation<'m> {
         let mut successes = 0usize;
         let mut reductions = 0usize;
         while self.state.t < s.t_end - eps {
+            if interrupted(&self.interrupt) {
+                return Err(SolveError::Interrupted {
+                    reached: self.state.t,
+                });
+            }
             let target = if out_dt > 0.0 {
                 (k_out as f64 * out_dt).min(s.t_end)
             } else {
@@ -697,6 +708,11 @@ impl<'m> Simulation<'m> {
         }
         load_nodes(&self.state, &mut self.data);
     }
+}
+
+/// Whether an interrupt flag is set.
+pub(crate) fn interrupted(flag: &Option<Arc<AtomicBool>>) -> bool {
+    flag.as_ref().is_some_and(|f| f.load(Ordering::Relaxed))
 }
 
 /// Largest nodal mass of the model [kg] (1 if there is none): the scale of the

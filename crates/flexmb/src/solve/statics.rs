@@ -25,6 +25,8 @@ use crate::error::SolveError;
 use crate::model::Model;
 use crate::state::State;
 use flexmb_lie::Vec6;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 
 /// How the load factor is controlled.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -123,6 +125,9 @@ pub struct Statics<'m> {
     pub load_factor: f64,
     pub stats: StaticStats,
     pub warnings: Vec<String>,
+    /// Checked before every load step (and every step of a pseudo-dynamic run): when it is
+    /// set, [`Statics::run`] returns [`SolveError::Interrupted`].
+    pub interrupt: Option<Arc<AtomicBool>>,
     /// Scale of the equilibrium rows (`1 / max diag K_t` at the start).
     row_scale: f64,
 }
@@ -164,6 +169,7 @@ impl<'m> Statics<'m> {
             load_factor: 0.0,
             stats: StaticStats::default(),
             warnings,
+            interrupt: None,
             row_scale: 1.0,
         };
         // Row scale from the stiffness at the start.
@@ -234,6 +240,7 @@ impl<'m> Statics<'m> {
         let target = s.load_factor;
         let eps = 1e-12 * target.abs().max(1.0);
         while (target - self.load_factor).abs() > eps {
+            self.check_interrupt()?;
             if self.stats.steps >= s.max_steps {
                 return Err(self.failure(
                     "the maximum number of load steps was reached".into(),
@@ -275,6 +282,15 @@ impl<'m> Statics<'m> {
                     }
                 }
             }
+        }
+        Ok(())
+    }
+
+    fn check_interrupt(&self) -> Result<(), SolveError> {
+        if super::dynamics::interrupted(&self.interrupt) {
+            return Err(SolveError::Interrupted {
+                reached: self.load_factor,
+            });
         }
         Ok(())
     }
@@ -360,6 +376,7 @@ impl<'m> Statics<'m> {
         // Direction of the previous converged increment (dq, dlambda), for the predictor's sign.
         let mut previous: Option<(Vec<f64>, f64)> = None;
         while (target - self.load_factor) * target.signum() > 1e-12 * target.abs().max(1.0) {
+            self.check_interrupt()?;
             if self.stats.steps >= s.max_steps {
                 // A path is followed for a number of steps: this is a normal end.
                 self.warnings.push(format!(
@@ -582,8 +599,9 @@ impl<'m> Statics<'m> {
     }
 
     /// Pseudo-dynamic solution: a damped dynamic run with the loads ramped from 0 to the final
-    /// load factor over `pseudo_time`, then held for as long again to settle. The states at
-    /// the steps are reported as load steps once the run is over.
+    /// load factor over `pseudo_time`, then held for as long again to settle. Each step is
+    /// reported as a load step as soon as it is computed, so a run that fails or is
+    /// interrupted keeps every completed step.
     fn run_pseudo_dynamic(
         &mut self,
         output: &mut dyn FnMut(&Statics) -> Result<(), String>,
@@ -599,32 +617,38 @@ impl<'m> Statics<'m> {
         d.newton.atol = s.newton.atol;
         d.newton.max_iterations = s.newton.max_iterations;
         let mut sim = super::Simulation::new(self.model, d)?;
-        let mut states: Vec<(f64, State)> = Vec::new();
-        sim.run(&mut |sim| {
-            states.push((d.load_factor_at(sim.state.t), sim.state.clone()));
-            Ok(())
-        })?;
+        sim.interrupt.clone_from(&self.interrupt);
+        let mut last_speed = 0.0f64;
+        let result = sim.run(&mut |sim| {
+            if sim.state.t == 0.0 {
+                return Ok(()); // the start was reported by `run`
+            }
+            last_speed = sim.state.v.iter().fold(0.0f64, |m, v| m.max(v.norm()));
+            self.state.clone_from(&sim.state);
+            for v in self.state.v.iter_mut() {
+                *v = Vec6::zeros();
+            }
+            self.load_factor = d.load_factor_at(sim.state.t);
+            load_nodes(&self.state, &mut self.data);
+            output(self)
+        });
         self.stats.steps += sim.stats.steps;
         self.stats.newton_iterations += sim.stats.newton_iterations;
         self.stats.rejected_steps += sim.stats.rejected_steps;
         self.stats.factorizations += sim.stats.factorizations;
-        let last = states
-            .last()
-            .map(|(_, st)| st.v.iter().fold(0.0f64, |m, v| m.max(v.norm())))
-            .unwrap_or(0.0);
-        if last > 1e-6 {
-            self.warnings.push(format!(
-                "pseudo-dynamic analysis: largest nodal velocity {last:.3e} at the end; increase pseudo_time or pseudo_damping for a settled static state"
-            ));
-        }
-        for (lambda, mut state) in states.into_iter().skip(1) {
-            for v in state.v.iter_mut() {
-                *v = Vec6::zeros();
+        match result {
+            Err(SolveError::Interrupted { .. }) => {
+                return Err(SolveError::Interrupted {
+                    reached: self.load_factor,
+                })
             }
-            self.state = state;
-            self.load_factor = lambda;
-            load_nodes(&self.state, &mut self.data);
-            output(self).map_err(SolveError::Output)?;
+            Err(e) => return Err(e),
+            Ok(_) => {}
+        }
+        if last_speed > 1e-6 {
+            self.warnings.push(format!(
+                "pseudo-dynamic analysis: largest nodal velocity {last_speed:.3e} at the end; increase pseudo_time or pseudo_damping for a settled static state"
+            ));
         }
         Ok(())
     }
