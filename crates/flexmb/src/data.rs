@@ -160,6 +160,11 @@ pub struct Data {
     pub pattern: Vec<(usize, usize)>,
     /// Values aligned with `pattern`.
     pub values: Vec<f64>,
+    /// `(unknown, index in values)` of every pattern entry on the diagonal.
+    pub diagonal_slots: Vec<(usize, usize)>,
+    /// Diagonal of the last assembled iteration matrix (`n_unknowns`; filled on demand
+    /// from `values`).
+    pub diagonal: Vec<f64>,
     /// Residual of the Newton system (`n_unknowns`).
     pub residual: Vec<f64>,
     /// Newton correction (`n_unknowns`).
@@ -184,8 +189,16 @@ impl Data {
         let pattern = build_pattern(model, &layout);
         let n = layout.n_unknowns();
         let solver = LinearSolver::new(n, &pattern)?;
+        let diagonal_slots = pattern
+            .iter()
+            .enumerate()
+            .filter(|(_, (i, j))| i == j)
+            .map(|(k, &(i, _))| (i, k))
+            .collect();
         Ok(Self {
             values: vec![0.0; pattern.len()],
+            diagonal_slots,
+            diagonal: vec![0.0; n],
             residual: vec![0.0; n],
             correction: vec![0.0; n],
             nodes: model

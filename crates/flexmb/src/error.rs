@@ -43,6 +43,8 @@ pub enum SolveError {
         reason: String,
         worst_equation: String,
     },
+    #[error("the step size {h:.3e} s is below the resolution of the time t = {t:.6e} s (t + h == t): the run cannot advance")]
+    StepUnderflow { t: f64, h: f64 },
     #[error("output error: {0}")]
     Output(String),
     /// The run was stopped from outside (a signal) through the solver's interrupt flag; the

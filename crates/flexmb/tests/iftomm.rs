@@ -36,7 +36,17 @@ fn four_bar_reference(n: f64, t_end: f64, dt_out: f64) -> Vec<(f64, f64)> {
 fn four_bar_follows_reference_through_its_singular_positions() {
     let run = run("four_bar.toml", &[]);
     // Over-constrained planar loops: redundant rows found and removed (3 per loop).
-    assert_eq!(run.warnings.len(), 6, "{:?}", run.warnings);
+    let redundant = run.warnings.iter().filter(|w| w.contains("redundant"));
+    assert_eq!(redundant.count(), 6, "{:?}", run.warnings);
+    // The mechanism passes its singular positions, where the multipliers are not
+    // determined: the run says so.
+    assert!(
+        run.warnings
+            .iter()
+            .any(|w| w.contains("singular configurations")),
+        "{:?}",
+        run.warnings
+    );
     let reference = four_bar_reference(2.0, 10.0, 0.01);
     // Published end point (benchmarks.md A02): B0(10 s) = (0.3284581115, 0.9445185382).
     let last = reference.last().expect("rows").1;

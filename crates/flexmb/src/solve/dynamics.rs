@@ -31,8 +31,8 @@
 
 use super::generalized_alpha::GaParameters;
 use super::initial::{initial_accelerations, load_nodes, prepare_layout};
-use super::linear::{Backend, LinearError};
-use super::newton::{weighted_norm, NewtonSettings};
+use super::linear::{Backend, LinearError, LinearSolver};
+use super::newton::{weighted_norm, Convergence, NewtonSettings, Verdict, Verification};
 use crate::assembly::{assemble, ConstraintRhs, Scaling};
 use crate::data::Data;
 use crate::elements::Coefficients;
@@ -122,6 +122,10 @@ pub struct DynamicSettings {
     /// Factor on loads and gravity (1 in a dynamic analysis; the target load factor of a
     /// pseudo-dynamic static analysis).
     pub load_scale: f64,
+    /// Re-check every accepted step with a freshly built matrix and record the largest
+    /// estimated error ([`Simulation::verification`]); costs one more factorization per
+    /// step.
+    pub verify: bool,
 }
 
 impl DynamicSettings {
@@ -160,6 +164,7 @@ impl DynamicSettings {
             nodal_damping: 0.0,
             load_ramp: 0.0,
             load_scale: 1.0,
+            verify: false,
         }
     }
 }
@@ -173,6 +178,9 @@ pub struct Stats {
     pub factorizations: usize,
     pub max_iterations_in_a_step: usize,
     pub outputs: usize,
+    /// Steps accepted at a singular configuration (regularized constraint block) with the
+    /// configuration converged and the multipliers not determined by the equations.
+    pub undetermined_multipliers: usize,
 }
 
 /// Why a step failed (before step-size reduction decides what to do).
@@ -195,6 +203,12 @@ pub struct Simulation<'m> {
     /// Checked before every step: when it is set, [`Simulation::run`] returns
     /// [`SolveError::Interrupted`] with every completed output step already delivered.
     pub interrupt: Option<Arc<AtomicBool>>,
+    /// What [`DynamicSettings::verify`] found (`None` when it is off).
+    pub verification: Option<Verification>,
+    /// The second factorization of `verify`.
+    verify_solver: Option<LinearSolver>,
+    /// Round-off floor of the scaled multipliers' tolerance (`n_active`).
+    mu_floor: Vec<f64>,
     /// State at the start of the current step (restored when a step is rejected).
     saved: State,
     /// Size of the constraint-block regularization when it is on (see [`Scaling`]).
@@ -217,6 +231,35 @@ pub struct Simulation<'m> {
     used_stale_matrix: bool,
     /// Rebuild the iteration matrix at every iteration of the next step.
     fresh_only: bool,
+}
+
+/// Weighted norms of one Newton correction ([`super::newton::weighted_norm`]).
+struct CorrectionNorms {
+    q: f64,
+    worst_q: usize,
+    mu: f64,
+    worst_mu: usize,
+    zeta: f64,
+}
+
+impl CorrectionNorms {
+    fn all(&self) -> f64 {
+        self.q.max(self.mu).max(self.zeta)
+    }
+
+    /// Configuration and stabilization unknowns (not the multipliers).
+    fn configuration(&self) -> f64 {
+        self.q.max(self.zeta)
+    }
+
+    /// The unknown with the largest weighted correction.
+    fn worst(&self) -> usize {
+        if self.q >= self.mu {
+            self.worst_q
+        } else {
+            self.worst_mu
+        }
+    }
 }
 
 /// Start of the previous accepted step (`h = 0` when there is none).
@@ -263,6 +306,9 @@ impl<'m> Simulation<'m> {
             stats: Stats::default(),
             warnings,
             interrupt: None,
+            verification: None,
+            verify_solver: None,
+            mu_floor: Vec::new(),
             regularization: 1e-9 / mass_scale(model),
             regularized_steps: 0,
             jacobian: None,
@@ -282,20 +328,32 @@ impl<'m> Simulation<'m> {
         &mut self,
         output: &mut dyn FnMut(&Simulation) -> Result<(), String>,
     ) -> Result<Stats, SolveError> {
+        let result = self.run_steps(output);
+        if self.stats.undetermined_multipliers > 0 {
+            self.warnings.push(format!(
+                "{} steps passed singular configurations (a rank-deficient constraint matrix, e.g. a dead point): positions and velocities are converged there, the multipliers (joint reactions) are not determined by the equations at those steps",
+                self.stats.undetermined_multipliers
+            ));
+        }
+        result
+    }
+
+    fn run_steps(
+        &mut self,
+        output: &mut dyn FnMut(&Simulation) -> Result<(), String>,
+    ) -> Result<Stats, SolveError> {
         let s = self.settings;
-        let eps = 1e-9 * s.h;
-        let out_dt = if s.output_interval > 0.0 {
-            s.output_interval
-        } else {
-            0.0
-        };
+        let out_dt = s.output_interval;
         output(self).map_err(SolveError::Output)?;
         self.stats.outputs += 1;
         let mut k_out = 1usize;
         let mut h = s.h;
         let mut successes = 0usize;
         let mut reductions = 0usize;
-        while self.state.t < s.t_end - eps {
+        // Time and count of the steps of size `h` taken since `h` last changed: step ends are
+        // `anchor + k h`, free of the round-off that summing `t += h` accumulates.
+        let mut anchor = (0.0, 0usize);
+        while self.state.t < s.t_end {
             if interrupted(&self.interrupt) {
                 return Err(SolveError::Interrupted {
                     reached: self.state.t,
@@ -306,21 +364,29 @@ impl<'m> Simulation<'m> {
             } else {
                 s.t_end
             };
-            let mut h_try = h.min(target - self.state.t);
-            if target - (self.state.t + h_try) < eps {
-                h_try = target - self.state.t;
+            let regular = anchor.0 + (anchor.1 + 1) as f64 * h;
+            let t_new = step_end(self.state.t, regular, target, h);
+            if t_new <= self.state.t {
+                return Err(SolveError::StepUnderflow { t: self.state.t, h });
             }
-            match self.step(h_try) {
+            let h_try = t_new - self.state.t;
+            match self.step(t_new) {
                 Ok(iterations) => {
                     self.stats.steps += 1;
                     self.stats.max_iterations_in_a_step =
                         self.stats.max_iterations_in_a_step.max(iterations);
                     successes += 1;
+                    anchor = if t_new == regular {
+                        (anchor.0, anchor.1 + 1)
+                    } else {
+                        (t_new, 0)
+                    };
                     if h < s.h && successes >= 4 {
                         h = (2.0 * h).min(s.h);
                         successes = 0;
+                        anchor = (t_new, 0);
                     }
-                    let reached = (self.state.t - target).abs() <= eps;
+                    let reached = self.state.t == target;
                     if out_dt == 0.0 || reached {
                         output(self).map_err(SolveError::Output)?;
                         self.stats.outputs += 1;
@@ -343,6 +409,7 @@ impl<'m> Simulation<'m> {
                     self.state = self.saved.clone();
                     successes = 0;
                     h = h_try * 0.25;
+                    anchor = (self.state.t, 0);
                     reductions += 1;
                     // Give up when the step can no longer shrink, or when rejections keep
                     // coming back after the step size recovers (an unstable solution).
@@ -375,7 +442,7 @@ impl<'m> Simulation<'m> {
         Ok(self.stats)
     }
 
-    /// One generalized-alpha step of size `h`; returns the Newton iterations used.
+    /// One generalized-alpha step to `t_new`; returns the Newton iterations used.
     ///
     /// Newton's iteration matrix is reused across iterations and steps while the iteration
     /// contracts fast (a chord method: the converged solution is the same, each iteration is
@@ -383,10 +450,10 @@ impl<'m> Simulation<'m> {
     /// rate exceeds [`NewtonSettings::max_contraction`], when the iteration diverges, after
     /// [`NewtonSettings::max_jacobian_age`] steps, and, for dense (small) systems, at the next
     /// step after a step that needed more than 3 iterations with it.
-    fn step(&mut self, h: f64) -> Result<usize, StepFailure> {
+    fn step(&mut self, t_new: f64) -> Result<usize, StepFailure> {
         self.saved.clone_from(&self.state);
+        let h = t_new - self.saved.t;
         let p = self.params;
-        let nd = self.data.layout.n_dofs;
         let bp = p.beta_prime(h);
         let gp = p.gamma_prime(h);
         let scale = 1.0 / bp;
@@ -398,7 +465,7 @@ impl<'m> Simulation<'m> {
                 k: scale,
             },
             constraint_rhs: ConstraintRhs::Position,
-            load_factor: self.settings.load_factor_at(self.saved.t + h),
+            load_factor: self.settings.load_factor_at(t_new),
             regularization: if self.regularized_steps > 0 {
                 self.regularization
             } else {
@@ -415,14 +482,15 @@ impl<'m> Simulation<'m> {
             self.zeta.resize(self.data.layout.n_active, 0.0);
         }
         self.regularized_steps = self.regularized_steps.saturating_sub(1);
-        let t_new = self.saved.t + h;
         let mut dq = std::mem::take(&mut self.increments);
         self.predict(h, &mut dq);
         self.state.t = t_new;
-        let max_mu = self.saved.lambda.iter().fold(0.0f64, |m, l| m.max(l.abs())) * scale;
+        let max_mu = self.force_scale() * scale;
         let newton = self.settings.newton;
-        let mut previous = f64::INFINITY;
-        let mut previous_mu = f64::INFINITY;
+        let mut convergence = Convergence::default();
+        // Of the configuration (and stabilization) unknowns alone: at a singular configuration
+        // (regularized matrix) the multipliers are not determined.
+        let mut configuration = Convergence::default();
         let same_matrix = self
             .jacobian
             .is_some_and(|(hj, reg)| (hj - h).abs() <= 1e-6 * h && reg == sc.regularization);
@@ -459,6 +527,9 @@ impl<'m> Simulation<'m> {
                 });
                 break;
             }
+            if iteration == 1 {
+                self.update_multiplier_floor();
+            }
             if fresh {
                 if let Err(failure) = self.factorize(&mut sc) {
                     result = Err(failure);
@@ -474,52 +545,49 @@ impl<'m> Simulation<'m> {
                 break;
             }
             self.correct(&mut dq, gp, bp, scale);
-            let e_zeta = if stabilized {
-                let na = self.data.layout.n_active;
-                let dz = &self.data.correction[nd + na..];
-                for (z, d) in self.zeta.iter_mut().zip(dz) {
-                    *z += d;
-                }
-                weighted_norm(dz, &self.zeta, &|_| newton.atol, newton.rtol).0
-            } else {
-                0.0
-            };
-            // weighted norms of the corrections: increments, then multipliers relative to
-            // the largest multiplier of the previous step
-            let dx = &self.data.correction;
-            let (e_q, worst_q) = weighted_norm(&dx[..nd], &dq, &|_| newton.atol, newton.rtol);
-            let mut e_mu = 0.0;
-            let mut worst_mu = 0;
-            if self.data.layout.n_active > 0 && max_mu > 0.0 {
-                let mu_atol = newton.rtol * max_mu;
-                let mu = &dx[nd..nd + self.data.layout.n_active];
-                let (e, w) = weighted_norm(mu, mu, &|_| mu_atol, 0.0);
-                e_mu = e;
-                worst_mu = nd + w;
-            }
-            let err = e_q.max(e_mu).max(e_zeta);
+            let norms = self.correction_norms(&dq, max_mu);
+            let err = norms.all();
             self.stats.newton_iterations += 1;
-            // The multipliers of a badly scaled mechanism can stall at their round-off floor
-            // once the configuration has converged: accept when they stop decreasing.
-            let multipliers_stalled =
-                iteration >= 2 && e_q.max(e_zeta) <= 1.0 && e_mu > 0.5 * previous_mu;
-            if err <= 1.0 || multipliers_stalled {
-                let total = self.total_increments(&dq);
-                self.finish_step(&total);
-                self.total = total;
-                result = Ok(iteration);
-                break;
+            // The matrix is the exact Jacobian at this iterate only when it was just built,
+            // without regularization, and for index 3 (the stabilized rows omit the
+            // O(h) derivative of B(q) v with respect to q).
+            let exact = fresh && sc.regularization == 0.0 && !stabilized;
+            let verdict = convergence.update(&[norms.q, norms.mu, norms.zeta], exact);
+            let configuration_converged = matches!(
+                configuration.update(&[norms.q, norms.zeta], exact),
+                Verdict::Converged { .. }
+            );
+            let undetermined = sc.regularization > 0.0 && configuration_converged;
+            if undetermined && matches!(verdict, Verdict::Continue { .. }) {
+                self.stats.undetermined_multipliers += 1;
             }
-            let worst = if e_q >= e_mu { worst_q } else { worst_mu };
-            let contraction = err / previous;
-            if iteration >= 2 && contraction > newton.max_contraction {
+            let theta = match verdict {
+                Verdict::Converged { .. } => Ok(()),
+                Verdict::Continue { .. } if undetermined => Ok(()),
+                Verdict::Continue { theta } => Err(theta),
+            };
+            let theta = match theta {
+                Ok(()) => {
+                    let total = self.total_increments(&dq);
+                    self.finish_step(&total);
+                    self.total = total;
+                    if self.settings.verify {
+                        self.verify_step(&dq, &sc, max_mu, undetermined);
+                    }
+                    result = Ok(iteration);
+                    break;
+                }
+                Err(theta) => theta,
+            };
+            let worst = norms.worst();
+            if let Some(theta) = theta.filter(|&t| t > newton.max_contraction) {
                 if !fresh {
                     // A stale matrix converges too slowly: rebuild it and go on.
                     refresh = true;
-                } else if iteration >= 3 && contraction > 1.0 {
+                } else if iteration >= 3 && theta > 1.0 {
                     result = Err(StepFailure {
                         reason: format!(
-                            "Newton diverging (weighted correction {err:.3e} after {previous:.3e})"
+                            "Newton diverging (weighted correction {err:.3e}, contraction rate {theta:.3})"
                         ),
                         worst_unknown: Some(worst),
                     });
@@ -534,8 +602,6 @@ impl<'m> Simulation<'m> {
                     worst_unknown: Some(worst),
                 });
             }
-            previous = err;
-            previous_mu = e_mu;
         }
         self.increments = dq;
         match result {
@@ -652,10 +718,17 @@ impl<'m> Simulation<'m> {
         }
     }
 
-    /// `dq += dx`, `v += gamma' dx`, `vdot += beta' dx`, `lambda += dmu / s`.
+    /// `dq += dx`, `v += gamma' dx`, `vdot += beta' dx`, `lambda += dmu / s`, and
+    /// `zeta += dzeta` in the stabilized formulation.
     fn correct(&mut self, dq: &mut [f64], gp: f64, bp: f64, scale: f64) {
         let dx = &self.data.correction;
         let nd = self.data.layout.n_dofs;
+        if self.data.layout.stabilized {
+            let na = self.data.layout.n_active;
+            for (z, d) in self.zeta.iter_mut().zip(&dx[nd + na..]) {
+                *z += d;
+            }
+        }
         for i in 0..self.data.layout.n_nodes {
             let d = Vec6::from_column_slice(&dx[6 * i..6 * i + 6]);
             for k in 0..6 {
@@ -669,6 +742,142 @@ impl<'m> Simulation<'m> {
                 self.state.lambda[row] += dx[nd + k] / scale;
             }
         }
+    }
+
+    /// Force scale of the multipliers' tolerance at the start of the step: the largest
+    /// multiplier and the largest nodal force `m (|vdot| + |g|)` (or moment `J |vdot|`). A
+    /// joint carrying no load yet (multipliers near zero) is then judged against the forces
+    /// of the system instead of against round-off.
+    fn force_scale(&self) -> f64 {
+        let g = self.model.gravity.norm() * self.settings.load_factor_at(self.saved.t);
+        let nodal = self
+            .saved
+            .vdot
+            .iter()
+            .zip(&self.data.nodal_mass)
+            .map(|(a, m)| {
+                let translation = m[0] * (a.fixed_rows::<3>(0).norm() + g);
+                translation.max(m[3] * a.fixed_rows::<3>(3).norm())
+            })
+            .fold(0.0, f64::max);
+        let lambda = self.saved.lambda.iter().fold(0.0f64, |m, l| m.max(l.abs()));
+        lambda.max(nodal)
+    }
+
+    /// Round-off floor of each active scaled multiplier, `1000 eps L D_k` (`L` the size of
+    /// the model, `D_k` the largest diagonal entry of the last assembled iteration matrix
+    /// on the dofs of the row's nodes: mass, damping and stiffness, scaled): the size of the
+    /// round-off in the equilibrium rows that the multiplier balances. It matters only where
+    /// every force of the model is near zero (a mechanism starting from rest without
+    /// gravity), and keeps the test from asking for a multiplier below round-off.
+    fn update_multiplier_floor(&mut self) {
+        let length = self.saved.q.iter().fold(1e-3f64, |m, q| m.max(q.x.norm()));
+        let roundoff = 1e3 * f64::EPSILON * length;
+        let data = &mut self.data;
+        data.diagonal.fill(0.0);
+        for &(i, slot) in &data.diagonal_slots {
+            data.diagonal[i] += data.values[slot];
+        }
+        let layout = &data.layout;
+        self.mu_floor.clear();
+        self.mu_floor.resize(layout.n_active, 0.0);
+        for (j, joint) in self.model.joints.iter().enumerate() {
+            let start = layout.joint_row_start[j];
+            let mut d = 0.0f64;
+            for n in [joint.node_a, joint.node_b].into_iter().flatten() {
+                d = data.diagonal[6 * n.0..6 * n.0 + 6]
+                    .iter()
+                    .fold(d, |m, v| m.max(v.abs()));
+            }
+            for r in 0..layout.joint_rows[j].len() {
+                if let Some(k) = layout.row_unknown[start + r] {
+                    self.mu_floor[k] = roundoff * d;
+                }
+            }
+        }
+    }
+
+    /// Weighted norms of the Newton correction in `data.correction` (after it was applied):
+    /// increments relative to `dq`; multipliers with the tolerance `rtol max_mu + floor_k`
+    /// (`max_mu` the scaled [`Self::force_scale`], `floor` from
+    /// [`Self::update_multiplier_floor`]); stabilization unknowns relative to `zeta`.
+    fn correction_norms(&self, dq: &[f64], max_mu: f64) -> CorrectionNorms {
+        let newton = &self.settings.newton;
+        let layout = &self.data.layout;
+        let (nd, na) = (layout.n_dofs, layout.n_active);
+        let dx = &self.data.correction;
+        let (q, worst_q) = weighted_norm(&dx[..nd], dq, &|_| newton.atol, newton.rtol);
+        let (mut mu, mut worst_mu) = (0.0, nd);
+        if na > 0 {
+            let relative = newton.rtol * max_mu;
+            let dmu = &dx[nd..nd + na];
+            let (e, w) = weighted_norm(dmu, dmu, &|k| relative + self.mu_floor[k], 0.0);
+            (mu, worst_mu) = (e, nd + w);
+        }
+        let zeta = if layout.stabilized {
+            weighted_norm(&dx[nd + na..], &self.zeta, &|_| newton.atol, newton.rtol).0
+        } else {
+            0.0
+        };
+        CorrectionNorms {
+            q,
+            worst_q,
+            mu,
+            worst_mu,
+            zeta,
+        }
+    }
+
+    /// `--verify`: a Newton correction from the accepted iterate with a freshly built and
+    /// factorized matrix (a second factorization, so a reused one is kept) estimates the
+    /// error left in the step, in units of the tolerance. Records the largest.
+    fn verify_step(&mut self, dq: &[f64], sc: &Scaling, max_mu: f64, undetermined: bool) {
+        let total = self.total_increments(dq);
+        self.update_configuration(&total, true);
+        self.total = total;
+        assemble(
+            self.model,
+            &mut self.data,
+            self.state.t,
+            &self.state.lambda,
+            sc,
+            true,
+        );
+        if self.verify_solver.is_none() {
+            let n = self.data.layout.n_unknowns();
+            self.verify_solver = LinearSolver::new(n, &self.data.pattern).ok();
+        }
+        let factorized = match &mut self.verify_solver {
+            Some(solver) => solver.factorize(&self.data.values).is_ok(),
+            None => false,
+        };
+        // A singular matrix at the accepted point gives no estimate (the step itself was
+        // accepted with the regularization): recorded as NaN.
+        let mut error = (f64::NAN, None);
+        if let (true, Some(solver)) = (factorized, &mut self.verify_solver) {
+            let dx = &mut self.data.correction;
+            for (d, r) in dx.iter_mut().zip(&self.data.residual) {
+                *d = -r;
+            }
+            solver.solve_in_place(dx);
+            let norms = self.correction_norms(dq, max_mu);
+            let e = if undetermined {
+                norms.configuration()
+            } else {
+                norms.all()
+            };
+            error = (e, Some(norms.worst()));
+        }
+        let (model, layout) = (self.model, &self.data.layout);
+        self.verification
+            .get_or_insert_with(Verification::default)
+            .record(error.0, self.state.t, || {
+                error
+                    .1
+                    .map(|i| layout.describe_unknown(model, i))
+                    .unwrap_or_default()
+            });
+        load_nodes(&self.state, &mut self.data);
     }
 
     /// `dq + B(q_n)^T zeta` in the stabilized formulation, `dq` otherwise. Returns a copy
@@ -710,6 +919,22 @@ impl<'m> Simulation<'m> {
     }
 }
 
+/// End of the next step from `t` toward `target` (an output time or the end) with the
+/// nominal step `h`: `regular` (`t + h` computed without accumulated round-off), except
+/// that the last steps end exactly on `target` and none is shorter than `h / 2` unless the
+/// whole interval is: a remainder below `h / 2` is shared with the step before it (two equal
+/// steps), and a remainder within round-off of `h` is taken whole.
+fn step_end(t: f64, regular: f64, target: f64, h: f64) -> f64 {
+    let remaining = target - t;
+    if remaining <= h * (1.0 + 1e-9) {
+        target
+    } else if remaining < 1.5 * h {
+        t + 0.5 * remaining
+    } else {
+        regular
+    }
+}
+
 /// Whether an interrupt flag is set.
 pub(crate) fn interrupted(flag: &Option<Arc<AtomicBool>>) -> bool {
     flag.as_ref().is_some_and(|f| f.load(Ordering::Relaxed))
@@ -731,19 +956,94 @@ fn mass_scale(model: &Model) -> f64 {
     }
 }
 
+/// Rejects settings that cannot run: every derived quantity (`beta'`, `gamma'`, `h_min`) must
+/// be finite and non-zero, so that no loop of the run can stall on an underflow.
 fn check_settings(s: &DynamicSettings) -> Result<(), SolveError> {
-    let bad = |f: &str, m: &str| Err(SolveError::Model(format!("solver field '{f}': {m}")));
+    let bad = |f: &str, m: String| Err(SolveError::Model(format!("solver field '{f}': {m}")));
     if !(s.h > 0.0 && s.h.is_finite()) {
-        return bad("h", "must be positive");
+        return bad("h", format!("must be positive and finite, got {:e}", s.h));
     }
     if !(s.t_end > 0.0 && s.t_end.is_finite()) {
-        return bad("t_end", "must be positive");
+        return bad(
+            "t_end",
+            format!("must be positive and finite, got {:e}", s.t_end),
+        );
     }
     if !(0.0..=1.0).contains(&s.rho_inf) {
-        return bad("rho_inf", "must be in [0, 1]");
+        return bad("rho_inf", format!("must be in [0, 1], got {:e}", s.rho_inf));
     }
-    if s.output_interval < 0.0 {
-        return bad("output_interval", "must be >= 0");
+    if !(s.output_interval >= 0.0 && s.output_interval.is_finite()) {
+        return bad(
+            "output_interval",
+            format!("must be >= 0 and finite, got {:e}", s.output_interval),
+        );
+    }
+    let p = s.scheme.parameters(s.rho_inf);
+    let derived = [
+        p.beta_prime(s.h),
+        p.gamma_prime(s.h),
+        1.0 / p.beta_prime(s.h),
+    ];
+    if derived.iter().any(|d| !d.is_normal()) {
+        return bad("h", format!("{:e} s is too small: 1/h^2 overflows", s.h));
+    }
+    if !(s.h_min.is_normal() && s.h_min > 0.0 && s.h_min <= s.h) {
+        return bad(
+            "h_min",
+            format!(
+                "must be a positive normal number not above h, got {:e}",
+                s.h_min
+            ),
+        );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::step_end;
+
+    /// Steps from 0 to `t_end` with the rule of [`step_end`], as the run loop takes them.
+    fn steps(t_end: f64, h: f64) -> Vec<f64> {
+        let (mut t, mut anchor, mut out) = (0.0, (0.0, 0usize), vec![]);
+        while t < t_end {
+            let regular = anchor.0 + (anchor.1 + 1) as f64 * h;
+            let t_new = step_end(t, regular, t_end, h);
+            anchor = if t_new == regular {
+                (anchor.0, anchor.1 + 1)
+            } else {
+                (t_new, 0)
+            };
+            out.push(t_new - t);
+            t = t_new;
+        }
+        assert_eq!(t, t_end, "the last step ends exactly on the end time");
+        out
+    }
+
+    /// The pendulum reproducer of the trust issue: 12 000 steps of 1.25e-4 s to 1.5 s took a
+    /// 12 001st step of a few 1e-16 s. No step may be shorter than h / 2.
+    #[test]
+    fn no_sliver_step_at_the_end() {
+        let s = steps(1.5, 1.25e-4);
+        assert_eq!(s.len(), 12_000);
+        for (t_end, h) in [
+            (1.0, 0.3),
+            (1.0, 0.4),
+            (10.0, 1e-3),
+            (0.1, 1e-5),
+            (1.0, 0.7),
+        ] {
+            let s = steps(t_end, h);
+            let shortest = s.iter().cloned().fold(f64::INFINITY, f64::min);
+            let longest = s.iter().cloned().fold(0.0, f64::max);
+            assert!(
+                shortest >= 0.5 * h * (1.0 - 1e-9),
+                "{t_end} {h}: {shortest}"
+            );
+            assert!(longest <= h * (1.0 + 1e-9), "{t_end} {h}: {longest}");
+        }
+        // A whole interval shorter than h is one step.
+        assert_eq!(steps(0.1, 0.3), vec![0.1]);
+    }
 }

@@ -11,5 +11,5 @@ pub mod statics;
 pub use dynamics::{DynamicSettings, Formulation, Scheme, Simulation, Stats};
 pub use generalized_alpha::GaParameters;
 pub use initial::{initial_accelerations, prepare_layout};
-pub use newton::NewtonSettings;
+pub use newton::{NewtonSettings, Verification};
 pub use statics::{StaticMethod, StaticSettings, StaticStats, Statics};

@@ -17,7 +17,7 @@
 
 use super::initial::{load_nodes, prepare_layout};
 use super::linear::LinearError;
-use super::newton::{weighted_norm, NewtonSettings};
+use super::newton::{weighted_norm, NewtonSettings, Verification};
 use crate::assembly::{assemble, ConstraintRhs, Scaling};
 use crate::data::Data;
 use crate::elements::Coefficients;
@@ -27,6 +27,9 @@ use crate::state::State;
 use flexmb_lie::Vec6;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
+
+/// Smallest arc length tried, relative to the first one.
+const ARC_LENGTH_MIN: f64 = 1e-6;
 
 /// How the load factor is controlled.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,6 +73,9 @@ pub struct StaticSettings {
     /// `initial_increment`, and a failed step stops the analysis.
     pub adaptive: bool,
     pub newton: NewtonSettings,
+    /// Re-check every converged load step with a Newton correction from the accepted
+    /// configuration and record the largest estimated error ([`Statics::verification`]).
+    pub verify: bool,
 }
 
 impl StaticSettings {
@@ -85,6 +91,7 @@ impl StaticSettings {
             max_steps: 10_000,
             target_iterations: 6,
             adaptive: true,
+            verify: false,
             pseudo_time: 1.0,
             pseudo_damping: 20.0,
             newton: NewtonSettings {
@@ -128,6 +135,8 @@ pub struct Statics<'m> {
     /// Checked before every load step (and every step of a pseudo-dynamic run): when it is
     /// set, [`Statics::run`] returns [`SolveError::Interrupted`].
     pub interrupt: Option<Arc<AtomicBool>>,
+    /// What [`StaticSettings::verify`] found (`None` when it is off).
+    pub verification: Option<Verification>,
     /// Scale of the equilibrium rows (`1 / max diag K_t` at the start).
     row_scale: f64,
 }
@@ -153,6 +162,7 @@ impl<'m> Statics<'m> {
         model
             .validate()
             .map_err(|e| SolveError::Model(e.to_string()))?;
+        check_settings(&settings)?;
         let (layout, warnings) = prepare_layout(model);
         let n_rows = layout.n_rows;
         let mut data = Data::new(model, layout).map_err(|e| SolveError::Model(e.to_string()))?;
@@ -170,6 +180,7 @@ impl<'m> Statics<'m> {
             stats: StaticStats::default(),
             warnings,
             interrupt: None,
+            verification: None,
             row_scale: 1.0,
         };
         // Row scale from the stiffness at the start.
@@ -371,7 +382,7 @@ impl<'m> Statics<'m> {
         let s = self.settings;
         let target = s.load_factor;
         let mut dl = s.arc_length;
-        let dl_min = s.arc_length * 1e-6;
+        let dl_min = s.arc_length * ARC_LENGTH_MIN;
         let dl_max = s.arc_length * 4.0;
         // Direction of the previous converged increment (dq, dlambda), for the predictor's sign.
         let mut previous: Option<(Vec<f64>, f64)> = None;
@@ -457,6 +468,38 @@ impl<'m> Statics<'m> {
         }
         self.state.t = lambda;
         load_nodes(&self.state, &mut self.data);
+        if self.settings.verify {
+            self.verify_step(dq, lambda);
+        }
+    }
+
+    /// `verify`: the Newton correction at the accepted configuration and load factor (fresh
+    /// matrix) in units of the tolerance, weighted like the step's increments `dq`.
+    fn verify_step(&mut self, dq: &[f64], lambda: f64) {
+        self.assemble(lambda, true);
+        let error = match self.data.solver.factorize(&self.data.values) {
+            Ok(()) => {
+                let dx = &mut self.data.correction;
+                for (d, r) in dx.iter_mut().zip(&self.data.residual) {
+                    *d = -r;
+                }
+                self.data.solver.solve_in_place(dx);
+                let newton = &self.settings.newton;
+                let nd = self.data.layout.n_dofs;
+                let (e, worst) = weighted_norm(&dx[..nd], dq, &|_| newton.atol, newton.rtol);
+                (e, Some(worst))
+            }
+            Err(_) => (f64::NAN, None),
+        };
+        let (model, layout) = (self.model, &self.data.layout);
+        self.verification
+            .get_or_insert_with(Verification::default)
+            .record(error.0, lambda, || {
+                error
+                    .1
+                    .map(|i| layout.describe_unknown(model, i))
+                    .unwrap_or_default()
+            });
     }
 
     /// Puts `q = q_0 exp(dq)` (and the tangent operators) into the data.
@@ -616,6 +659,7 @@ impl<'m> Statics<'m> {
         d.newton.rtol = s.newton.rtol;
         d.newton.atol = s.newton.atol;
         d.newton.max_iterations = s.newton.max_iterations;
+        d.verify = s.verify;
         let mut sim = super::Simulation::new(self.model, d)?;
         sim.interrupt.clone_from(&self.interrupt);
         let mut last_speed = 0.0f64;
@@ -636,6 +680,7 @@ impl<'m> Statics<'m> {
         self.stats.newton_iterations += sim.stats.newton_iterations;
         self.stats.rejected_steps += sim.stats.rejected_steps;
         self.stats.factorizations += sim.stats.factorizations;
+        self.verification.clone_from(&sim.verification);
         match result {
             Err(SolveError::Interrupted { .. }) => {
                 return Err(SolveError::Interrupted {
@@ -652,4 +697,45 @@ impl<'m> Statics<'m> {
         }
         Ok(())
     }
+}
+
+/// Rejects settings that cannot run: every increment and its smallest allowed value must be
+/// finite and non-zero, so that no loop can stall on an underflow (a halved increment
+/// always falls below its positive minimum after finitely many halvings).
+fn check_settings(s: &StaticSettings) -> Result<(), SolveError> {
+    let bad = |f: &str, v: f64| {
+        Err(SolveError::Model(format!(
+            "solver field '{f}': must be a positive normal number (and the derived minimum too), got {v:e}"
+        )))
+    };
+    if !(s.load_factor.is_finite() && s.load_factor != 0.0) {
+        return Err(SolveError::Model(format!(
+            "solver field 'load_factor': must be finite and non-zero, got {:e}",
+            s.load_factor
+        )));
+    }
+    let positive = |v: f64| v.is_normal() && v > 0.0;
+    for (f, v) in [
+        ("initial_increment", s.initial_increment),
+        ("min_increment", s.min_increment),
+        ("max_increment", s.max_increment),
+        ("arc_length", s.arc_length),
+        ("pseudo_time", s.pseudo_time),
+    ] {
+        if !positive(v) {
+            return bad(f, v);
+        }
+    }
+    if !positive(s.arc_length * ARC_LENGTH_MIN) {
+        return bad("arc_length", s.arc_length);
+    }
+    if !(s.pseudo_damping >= 0.0 && s.pseudo_damping.is_finite()) {
+        return bad("pseudo_damping", s.pseudo_damping);
+    }
+    if s.max_steps == 0 {
+        return Err(SolveError::Model(
+            "solver field 'max_steps': must be at least 1".into(),
+        ));
+    }
+    Ok(())
 }
