@@ -1,21 +1,56 @@
 //! `flexmb`: run multibody models from the command line.
 //!
 //! ```text
-//! flexmb run MODEL.toml --out DIR [--set key.path=value ...]
+//! flexmb run MODEL.toml --out DIR [--set key.path=value ...] [--quiet]
 //! flexmb check MODEL.toml [--set ...]
 //! ```
+//!
+//! Contract (README.md, "The `flexmb` command" and "Outputs"): one exit code per class of
+//! outcome ([`exit`]), one message per cause on stderr, the result files of
+//! [`flexmb::output`] in the output directory.
 
-use anyhow::{Context, Result};
+mod console;
+mod signals;
+
 use clap::{Parser, Subcommand};
+use console::{say, tell};
+use flexmb::output::{ErrorKind, OutputDir, Status, Summary};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+/// Exit codes, one per class of outcome.
+mod exit {
+    /// The command did what was asked.
+    pub const OK: i32 = 0;
+    /// The analysis ran and failed (a step could not converge); results up to the failure
+    /// are kept.
+    pub const ANALYSIS_FAILED: i32 = 1;
+    /// The model is invalid: the model file, or a check before the first step (settings,
+    /// initial conditions, initial mass matrix). The same for `check` and `run`.
+    pub const INVALID_MODEL: i32 = 2;
+    /// The results could not be written (the output directory or a result file).
+    pub const OUTPUT_FAILED: i32 = 3;
+    /// The command line is wrong (sysexits' EX_USAGE).
+    pub const USAGE: i32 = 64;
+}
+
+/// The exit codes as `flexmb --help` lists them.
+const EXIT_CODES_HELP: &str = "\
+Exit codes:
+  0    success
+  1    the analysis failed (results up to the failure are kept)
+  2    the model is invalid (model file, settings or initial conditions)
+  3    the results could not be written (output directory or files)
+  64   wrong command line
+  128+n  stopped by signal n: 130 SIGINT, 143 SIGTERM, 129 SIGHUP (summary status \"interrupted\")";
 
 #[derive(Parser)]
 #[command(
     name = "flexmb",
     version,
-    about = "Flexible multibody dynamics on Lie groups"
+    about = "Flexible multibody dynamics on Lie groups",
+    after_help = EXIT_CODES_HELP
 )]
 struct Cli {
     #[command(subcommand)]
@@ -24,7 +59,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run the analysis a model file declares; write sensors.csv and summary.json into DIR.
+    /// Run the analysis a model file declares; write sensors.csv, nodes.csv, beams.csv and
+    /// summary.json into DIR (result files of an earlier run there are removed first).
     Run {
         /// Model file (TOML, see docs/model-format.md).
         model: PathBuf,
@@ -47,57 +83,97 @@ enum Command {
 }
 
 fn main() {
-    let cli = Cli::parse();
-    let code = match run(cli) {
-        Ok(code) => code,
+    let code = match Cli::try_parse() {
+        Ok(cli) => match cli.command {
+            Command::Run {
+                model,
+                out,
+                set,
+                quiet,
+            } => run(&model, &out, &set, quiet),
+            Command::Check { model, set } => check(&model, &set),
+        },
         Err(e) => {
-            eprintln!("error: {e:#}");
-            2
+            // Help and version go to stdout and succeed; a closed stdout loses them.
+            let _ = e.print();
+            if e.use_stderr() {
+                exit::USAGE
+            } else {
+                exit::OK
+            }
         }
     };
     std::process::exit(code);
 }
 
-fn run(cli: Cli) -> Result<i32> {
-    match cli.command {
-        Command::Run {
-            model,
-            out,
-            set,
-            quiet,
-        } => {
-            let file = flexmb::input::read_model_file(&model, &set)?;
-            let bar = progress_bar(quiet);
-            let summary = flexmb::driver::run(&file, &out, &mut |t, t_end| {
-                bar.set_position((1000.0 * t / t_end).round() as u64);
-                bar.set_message(format!("t = {t:.4} s"));
-            })
-            .with_context(|| format!("writing results into {}", out.display()))?;
-            bar.finish_and_clear();
-            for w in &summary.warnings {
-                eprintln!("warning: {w}");
-            }
-            if summary.status != "ok" {
-                eprintln!(
-                    "error: {}",
-                    summary.error.as_deref().unwrap_or("the analysis failed")
-                );
-                if summary.analysis == "static" {
-                    eprintln!(
-                        "results up to load factor {:.6e} are in {}",
-                        summary.t_reached,
-                        out.display()
-                    );
-                } else {
-                    eprintln!(
-                        "results up to t = {:.6} s are in {}",
-                        summary.t_reached,
-                        out.display()
-                    );
+/// `flexmb run`: takes over the output directory, reads the model and runs it.
+fn run(model: &Path, out: &Path, set: &[String], quiet: bool) -> i32 {
+    let interrupt = match signals::Interrupt::install() {
+        Ok(i) => Some(i),
+        Err(e) => {
+            tell(format_args!(
+                "warning: cannot handle signals ({e}): a signal ends the run without a summary"
+            ));
+            None
+        }
+    };
+    // From here on summary.json describes this run.
+    let dir = match OutputDir::prepare(out).and_then(|dir| {
+        dir.write_summary(&Summary::default())?;
+        Ok(dir)
+    }) {
+        Ok(dir) => dir,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::OUTPUT_FAILED;
+        }
+    };
+    let file = match flexmb::input::read_model_file(model, set) {
+        Ok(file) => file,
+        Err(e) => {
+            // The error's message includes its cause: print it alone, not its source chain.
+            tell(format_args!("error: {e}"));
+            let mut summary = Summary::default();
+            summary.fail(ErrorKind::Model, e.to_string());
+            return match dir.write_summary(&summary) {
+                Ok(()) => exit::INVALID_MODEL,
+                Err(w) => {
+                    tell(format_args!("error: {w}"));
+                    exit::OUTPUT_FAILED
                 }
-                return Ok(1);
-            }
-            println!(
+            };
+        }
+    };
+    let bar = progress_bar(quiet);
+    let result = flexmb::driver::run(
+        &file,
+        &dir,
+        &mut |t, t_end| {
+            bar.set_position((1000.0 * t / t_end).round() as u64);
+            bar.set_message(format!("t = {t:.4} s"));
+        },
+        interrupt.as_ref().map(|i| i.flag()),
+    );
+    bar.finish_and_clear();
+    let summary = match result {
+        Ok(summary) => summary,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::OUTPUT_FAILED;
+        }
+    };
+    for w in &summary.warnings {
+        tell(format_args!("warning: {w}"));
+    }
+    let reached = if summary.analysis == "static" {
+        format!("load factor {}", summary.t_reached)
+    } else {
+        format!("t = {} s", summary.t_reached)
+    };
+    let error = summary.error.as_deref().unwrap_or("the analysis failed");
+    match (summary.status, summary.error_kind) {
+        (Status::Ok, _) => {
+            say(format_args!(
                 "{}: {} steps, {:.2} Newton iterations/step, {} rejected, {:.3} s ({:.3} s solving); results in {}",
                 if summary.title.is_empty() { model.display().to_string() } else { summary.title.clone() },
                 summary.steps,
@@ -106,40 +182,80 @@ fn run(cli: Cli) -> Result<i32> {
                 summary.wall_seconds,
                 summary.solve_seconds,
                 out.display()
-            );
-            Ok(0)
+            ));
+            exit::OK
         }
-        Command::Check { model, set } => {
-            let file = flexmb::input::read_model_file(&model, &set)?;
-            let (unknowns, warnings) = match &file.analysis {
-                flexmb::input::Analysis::Dynamic(settings) => {
-                    let sim = flexmb::Simulation::new(&file.model, *settings)
-                        .map_err(|e| anyhow::anyhow!("{}: {e}", model.display()))?;
-                    (sim.data.layout.n_unknowns(), sim.warnings)
-                }
-                flexmb::input::Analysis::Static(settings) => {
-                    let s = flexmb::solve::Statics::new(&file.model, *settings)
-                        .map_err(|e| anyhow::anyhow!("{}: {e}", model.display()))?;
-                    (s.data.layout.n_unknowns(), s.warnings)
-                }
-            };
-            for w in &warnings {
-                eprintln!("warning: {w}");
-            }
-            println!(
-                "{}: {} nodes, {} bodies, {} beam elements, {} joints, {} unknowns: ok",
-                model.display(),
-                file.model.nodes.len(),
-                file.model.bodies.len(),
-                file.model.beams.len(),
-                file.model.joints.len(),
-                unknowns
-            );
-            Ok(0)
+        (Status::Interrupted, _) => {
+            let signal = interrupt.map_or(signals::SIGINT, |i| i.received());
+            tell(format_args!(
+                "interrupted by {}: results up to {reached} are in {}",
+                signals::name(signal),
+                out.display()
+            ));
+            signals::exit_code(signal)
+        }
+        (_, Some(ErrorKind::Model)) => {
+            tell(format_args!("error: {}: {error}", model.display()));
+            exit::INVALID_MODEL
+        }
+        (_, Some(ErrorKind::Output)) => {
+            tell(format_args!("error: {error}"));
+            exit::OUTPUT_FAILED
+        }
+        _ => {
+            tell(format_args!("error: {error}"));
+            tell(format_args!(
+                "results up to {reached} are in {}",
+                out.display()
+            ));
+            exit::ANALYSIS_FAILED
         }
     }
 }
 
+/// `flexmb check`: reads the model and builds its solver (the checks a run makes before its
+/// first step), without writing anything.
+fn check(model: &Path, set: &[String]) -> i32 {
+    let file = match flexmb::input::read_model_file(model, set) {
+        Ok(file) => file,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::INVALID_MODEL;
+        }
+    };
+    let built = match &file.analysis {
+        flexmb::input::Analysis::Dynamic(settings) => {
+            flexmb::Simulation::new(&file.model, *settings)
+                .map(|sim| (sim.data.layout.n_unknowns(), sim.warnings))
+        }
+        flexmb::input::Analysis::Static(settings) => {
+            flexmb::solve::Statics::new(&file.model, *settings)
+                .map(|s| (s.data.layout.n_unknowns(), s.warnings))
+        }
+    };
+    let (unknowns, warnings) = match built {
+        Ok(built) => built,
+        Err(e) => {
+            tell(format_args!("error: {}: {e}", model.display()));
+            return exit::INVALID_MODEL;
+        }
+    };
+    for w in &warnings {
+        tell(format_args!("warning: {w}"));
+    }
+    say(format_args!(
+        "{}: {} nodes, {} bodies, {} beam elements, {} joints, {} unknowns: ok",
+        model.display(),
+        file.model.nodes.len(),
+        file.model.bodies.len(),
+        file.model.beams.len(),
+        file.model.joints.len(),
+        unknowns
+    ));
+    exit::OK
+}
+
+/// A progress bar on stderr when it is a terminal; hidden otherwise or with `--quiet`.
 fn progress_bar(quiet: bool) -> ProgressBar {
     if quiet || !std::io::stderr().is_terminal() {
         return ProgressBar::with_draw_target(Some(1000), ProgressDrawTarget::hidden());

@@ -1,31 +1,12 @@
 //! The `flexmb` command-line contract (README.md): `flexmb run MODEL --out DIR [--set ...]`
 //! writes `sensors.csv` (header `time,<sensor names>`, rows as the run goes) and
-//! `summary.json`; a failed run keeps its rows, says why and exits non-zero; a bad model
-//! file is reported with file, line and field.
+//! `summary.json`; a failed run keeps its rows, says why and exits 1; a bad model file is
+//! reported with file, line and field. Exit codes, signals, broken pipes and the output
+//! directory have their own test files.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
-fn flexmb() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_flexmb"))
-}
-
-fn repo(path: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../..")
-        .join(path)
-}
-
-fn out_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("flexmb-cli-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
-}
-
-fn summary(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary.json"))
-        .expect("json")
-}
+use common::{flexmb, out_dir, repo, summary};
 
 #[test]
 fn run_writes_sensors_and_summary() {
@@ -54,7 +35,8 @@ fn run_writes_sensors_and_summary() {
     );
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len(), 11, "t = 0, 0.01, ..., 0.1");
-    assert!(rows[10].starts_with("1.000000000000e-1,"));
+    // The time column in its shortest exact form.
+    assert!(rows[10].starts_with("0.1,"), "{}", rows[10]);
     // The deformed shape: one row per node and output step.
     let nodes = std::fs::read_to_string(out.join("nodes.csv")).expect("nodes.csv");
     assert_eq!(nodes.lines().next(), Some("time,node,x,y,z,qw,qx,qy,qz"));
@@ -81,11 +63,12 @@ fn failed_run_keeps_its_rows_and_says_why() {
         .arg(&out)
         .output()
         .expect("runs");
-    assert!(!result.status.success());
+    assert_eq!(result.status.code(), Some(1), "the analysis failed");
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(stderr.contains("Newton failed at step"), "{stderr}");
     let s = summary(&out);
     assert_eq!(s["status"], "failed");
+    assert_eq!(s["error_kind"], "analysis");
     let error = s["error"].as_str().unwrap();
     let t: f64 = error
         .split("t = ")
@@ -106,6 +89,11 @@ fn failed_run_keeps_its_rows_and_says_why() {
     let csv = std::fs::read_to_string(out.join("sensors.csv")).expect("csv");
     // t = 0, 0.01, ..., 0.05 were completed before the blow-up.
     assert_eq!(csv.lines().count(), 1 + 6, "{csv}");
+    assert_eq!(s["outputs"], 6);
+    assert!(
+        s["steps"].as_u64().unwrap() >= 50,
+        "the counts of the work done"
+    );
 }
 
 #[test]
@@ -127,6 +115,11 @@ fn bad_model_file_names_file_line_and_field() {
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(stderr.contains("bad.toml:10:"), "{stderr}");
     assert!(stderr.contains("mass"), "{stderr}");
+    // The output directory describes the rejected run.
+    let s = summary(&dir.join("out"));
+    assert_eq!(s["status"], "failed");
+    assert_eq!(s["error_kind"], "model");
+    assert!(s["error"].as_str().unwrap().contains("bad.toml:10:"), "{s}");
 }
 
 #[test]

@@ -1,222 +1,311 @@
 //! The run of a model file into an output directory: what `flexmb run` does.
+//!
+//! Contract: [`run`] writes `summary.json` with status `running` before anything else, then
+//! the result files of [`crate::output`] step by step, and finally the summary with the
+//! outcome: `ok`; `failed` with `error_kind` `model` (rejected before the first step:
+//! invalid settings, inconsistent initial conditions, singular initial mass matrix; no CSV
+//! file is written), `analysis` (a step could not converge; the rows up to it are kept) or
+//! `output` (a result file could not be written); or `interrupted` (the interrupt flag was
+//! set; every completed output step is kept). The counts (`steps`, `t_reached`, ...) are
+//! those of the work done, whatever the outcome.
+//!
+//! The directory must have been taken over by [`OutputDir::prepare`] (which removes the
+//! results of an earlier run).
 
 use crate::input::{Analysis, ModelFile};
-use crate::output::{CsvWriter, ShapeWriter, Summary};
+use crate::output::{
+    CsvWriter, ErrorKind, OutputDir, OutputError, ShapeWriter, Status, Summary, SENSORS_FILE,
+};
 use crate::sensors::SensorEvaluator;
-use crate::solve::{Simulation, StaticSettings, Statics};
-use std::path::Path;
+use crate::solve::{DynamicSettings, Simulation, StaticSettings, Statics};
+use crate::SolveError;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 use std::time::Instant;
 
-/// Runs the analysis a model file declares, writing `sensors.csv` and `summary.json` into
-/// `out_dir` (created if needed). `progress(t, t_end)` is called at every output.
-/// Returns the summary; `status` is "ok" or "failed" (the error then says why).
+/// Runs the analysis a model file declares into `out`. `progress(t, t_end)` is called at
+/// every output step; `interrupt`, when set (e.g. by a signal handler), stops the run before
+/// its next step with status `interrupted`.
+///
+/// Returns the summary that was written. `Err` only when a result file could not be written
+/// and the summary could not record it either; when the summary could record it, the
+/// summary says `failed` with `error_kind` `output`.
 pub fn run(
     file: &ModelFile,
-    out_dir: &Path,
+    out: &OutputDir,
     progress: &mut dyn FnMut(f64, f64),
-) -> std::io::Result<Summary> {
-    std::fs::create_dir_all(out_dir)?;
-    match &file.analysis {
-        Analysis::Dynamic(settings) => run_dynamic(file, settings, out_dir, progress),
-        Analysis::Static(settings) => run_static(file, settings, out_dir, progress),
-    }
-}
-
-/// The files written at every output step (sensors, deformed shape, beam results) and the
-/// time spent writing them.
-struct Outputs<'m> {
-    model: &'m crate::Model,
-    sensors: SensorEvaluator,
-    csv: CsvWriter,
-    shape: ShapeWriter,
-    seconds: f64,
-}
-
-impl<'m> Outputs<'m> {
-    /// Creates the files; `first` names the first column (`time` or `load_factor`).
-    fn create(out_dir: &Path, first: &str, model: &'m crate::Model) -> std::io::Result<Self> {
-        let names = SensorEvaluator::names(model);
-        Ok(Self {
-            model,
-            sensors: SensorEvaluator::new(model),
-            csv: CsvWriter::create_with_first_column(&out_dir.join("sensors.csv"), first, &names)?,
-            shape: ShapeWriter::create(out_dir, first, model)?,
-            seconds: 0.0,
-        })
-    }
-
-    /// Appends the rows of one output step (flushed).
-    fn write(&mut self, x: f64, data: &crate::Data, state: &crate::State) -> Result<(), String> {
-        let t0 = Instant::now();
-        let values = self.sensors.evaluate(self.model, data, state);
-        self.csv
-            .row(x, &values)
-            .map_err(|e| format!("writing {}: {e}", self.csv.path().display()))?;
-        self.shape
-            .write(x, self.model, state)
-            .map_err(|e| format!("writing nodes.csv: {e}"))?;
-        self.seconds += t0.elapsed().as_secs_f64();
-        Ok(())
-    }
-}
-
-/// Summary of a run that is starting.
-fn starting(
-    model: &crate::Model,
-    analysis: &str,
-    t_end: f64,
-    out_dir: &Path,
-) -> std::io::Result<Summary> {
-    let summary = Summary {
-        status: "running".into(),
+    interrupt: Option<Arc<AtomicBool>>,
+) -> Result<Summary, OutputError> {
+    let start = Instant::now();
+    let model = &file.model;
+    let (analysis, t_end) = match &file.analysis {
+        Analysis::Dynamic(s) => ("dynamic", s.t_end),
+        Analysis::Static(s) => ("static", s.load_factor),
+    };
+    let mut summary = Summary {
+        status: Status::Running,
         title: model.title.clone(),
         analysis: analysis.into(),
         group: model.group.name().into(),
         t_end,
         ..Default::default()
     };
-    summary.write(&out_dir.join("summary.json"))?;
-    Ok(summary)
+    out.write_summary(&summary)?;
+    let ended = match &file.analysis {
+        Analysis::Dynamic(settings) => run_dynamic(model, settings, out, progress, interrupt),
+        Analysis::Static(settings) => run_static(model, settings, out, progress, interrupt),
+    };
+    let output_seconds = ended.output_seconds;
+    let output_error = ended.record(&mut summary);
+    let wall = start.elapsed().as_secs_f64();
+    summary.wall_seconds = wall;
+    summary.solve_seconds = (wall - output_seconds).max(0.0);
+    match (output_error, out.write_summary(&summary)) {
+        // The summary could not record the output error (a full disk): report the cause.
+        (Some(first), Err(_)) => Err(first),
+        (None, Err(e)) => Err(e),
+        (_, Ok(())) => Ok(summary),
+    }
 }
 
-/// Records a run that could not start (model or initial conditions rejected).
-fn not_started(
-    mut summary: Summary,
-    error: &crate::SolveError,
-    start: Instant,
-    out_dir: &Path,
-) -> std::io::Result<Summary> {
-    summary.status = "failed".into();
-    summary.error = Some(error.to_string());
-    summary.wall_seconds = start.elapsed().as_secs_f64();
-    summary.write(&out_dir.join("summary.json"))?;
-    Ok(summary)
+/// How an analysis ended: its work counts and the error that stopped it, if any.
+struct Ended {
+    work: Work,
+    outcome: Outcome,
+    /// Time spent writing result files \[s\].
+    output_seconds: f64,
 }
 
-/// Work counts, timings and status of a finished run.
-struct Finished {
+/// Work counts and notes of a run (zero for a run rejected before the first step).
+#[derive(Default)]
+struct Work {
     steps: usize,
     newton_iterations: usize,
     rejected_steps: usize,
     factorizations: usize,
     outputs: usize,
     reached: f64,
+    unknowns: usize,
+    linear_solver: String,
     warnings: Vec<String>,
 }
 
-fn finished(
-    mut summary: Summary,
-    f: Finished,
-    result: Result<(), crate::SolveError>,
-    start: Instant,
-    output_seconds: f64,
-    out_dir: &Path,
-) -> std::io::Result<Summary> {
-    let wall = start.elapsed().as_secs_f64();
-    summary.steps = f.steps;
-    summary.newton_iterations = f.newton_iterations;
-    summary.rejected_steps = f.rejected_steps;
-    summary.factorizations = f.factorizations;
-    summary.outputs = f.outputs;
-    summary.newton_iterations_per_step = f.newton_iterations as f64 / f.steps.max(1) as f64;
-    summary.t_reached = f.reached;
-    summary.warnings = f.warnings;
-    summary.wall_seconds = wall;
-    summary.solve_seconds = (wall - output_seconds).max(0.0);
-    match result {
-        Ok(()) => summary.status = "ok".into(),
-        Err(e) => {
-            summary.status = "failed".into();
-            summary.error = Some(e.to_string());
+/// How a run ended (the status of its summary).
+enum Outcome {
+    Completed,
+    Interrupted,
+    Failed(ErrorKind, String),
+    /// A result file could not be written; the error is kept for the caller.
+    Output(OutputError),
+}
+
+impl Ended {
+    /// A run rejected before its first step.
+    fn rejected(e: SolveError) -> Self {
+        Self {
+            work: Work::default(),
+            outcome: Outcome::Failed(ErrorKind::Model, e.to_string()),
+            output_seconds: 0.0,
         }
     }
-    summary.write(&out_dir.join("summary.json"))?;
-    Ok(summary)
+
+    /// The outcome of a run that started: a write error seen by the output callback takes
+    /// precedence over the solver's report of it.
+    fn of_run(
+        work: Work,
+        result: Result<(), SolveError>,
+        outputs: Option<Outputs>,
+        output_error: Option<OutputError>,
+    ) -> Self {
+        let output_seconds = outputs.as_ref().map_or(0.0, |o| o.seconds);
+        let outcome = match (output_error, result) {
+            (Some(e), _) => Outcome::Output(e),
+            (None, Ok(())) => Outcome::Completed,
+            (None, Err(SolveError::Interrupted { .. })) => Outcome::Interrupted,
+            (None, Err(e)) => Outcome::Failed(ErrorKind::Analysis, e.to_string()),
+        };
+        Self {
+            work,
+            outcome,
+            output_seconds,
+        }
+    }
+
+    /// Writes the counts and the outcome into the summary; returns the output error, if any.
+    fn record(self, summary: &mut Summary) -> Option<OutputError> {
+        let w = self.work;
+        summary.steps = w.steps;
+        summary.newton_iterations = w.newton_iterations;
+        summary.rejected_steps = w.rejected_steps;
+        summary.factorizations = w.factorizations;
+        summary.outputs = w.outputs;
+        summary.newton_iterations_per_step = w.newton_iterations as f64 / w.steps.max(1) as f64;
+        summary.t_reached = w.reached;
+        summary.unknowns = w.unknowns;
+        summary.linear_solver = w.linear_solver;
+        summary.warnings = w.warnings;
+        match self.outcome {
+            Outcome::Completed => {
+                summary.status = Status::Ok;
+                None
+            }
+            Outcome::Interrupted => {
+                summary.status = Status::Interrupted;
+                None
+            }
+            Outcome::Failed(kind, message) => {
+                summary.fail(kind, message);
+                None
+            }
+            Outcome::Output(e) => {
+                summary.fail(ErrorKind::Output, e.to_string());
+                Some(e)
+            }
+        }
+    }
+}
+
+/// The files written at every output step (sensors, deformed shape, beam results), the
+/// output steps written and the time spent writing them.
+struct Outputs<'m> {
+    model: &'m crate::Model,
+    sensors: SensorEvaluator,
+    csv: CsvWriter,
+    shape: ShapeWriter,
+    rows: usize,
+    seconds: f64,
+}
+
+impl<'m> Outputs<'m> {
+    /// Creates the files; `first` names the first column (`time` or `load_factor`).
+    fn create(out: &OutputDir, first: &str, model: &'m crate::Model) -> Result<Self, OutputError> {
+        let names = SensorEvaluator::names(model);
+        Ok(Self {
+            model,
+            sensors: SensorEvaluator::new(model),
+            csv: CsvWriter::create(&out.file(SENSORS_FILE), first, &names)?,
+            shape: ShapeWriter::create(out, first, model)?,
+            rows: 0,
+            seconds: 0.0,
+        })
+    }
+
+    /// Appends the rows of one output step.
+    fn write(
+        &mut self,
+        x: f64,
+        data: &crate::Data,
+        state: &crate::State,
+    ) -> Result<(), OutputError> {
+        let t0 = Instant::now();
+        let values = self.sensors.evaluate(self.model, data, state);
+        self.csv.row(x, &values)?;
+        self.shape.write(x, self.model, state)?;
+        self.rows += 1;
+        self.seconds += t0.elapsed().as_secs_f64();
+        Ok(())
+    }
+}
+
+/// The output callback's side of a run: writes a step and keeps the first write error (the
+/// solver only sees its message and stops).
+fn deliver(
+    outputs: &mut Outputs,
+    error: &mut Option<OutputError>,
+    x: f64,
+    data: &crate::Data,
+    state: &crate::State,
+) -> Result<(), String> {
+    outputs.write(x, data, state).map_err(|e| {
+        let message = e.to_string();
+        *error = Some(e);
+        message
+    })
 }
 
 /// Static analysis: `sensors.csv` has the load factor in its first column.
 fn run_static(
-    file: &ModelFile,
+    model: &crate::Model,
     settings: &StaticSettings,
-    out_dir: &Path,
+    out: &OutputDir,
     progress: &mut dyn FnMut(f64, f64),
-) -> std::io::Result<Summary> {
-    let start = Instant::now();
-    let model = &file.model;
-    let mut summary = starting(model, "static", settings.load_factor, out_dir)?;
+    interrupt: Option<Arc<AtomicBool>>,
+) -> Ended {
     let mut statics = match Statics::new(model, *settings) {
         Ok(s) => s,
-        Err(e) => return not_started(summary, &e, start, out_dir),
+        Err(e) => return Ended::rejected(e),
     };
-    summary.unknowns = statics.data.layout.n_unknowns();
-    summary.linear_solver = format!("{:?}", statics.data.solver.backend()).to_lowercase();
-    let mut outputs = Outputs::create(out_dir, "load_factor", model)?;
+    statics.interrupt = interrupt;
     let target = settings.load_factor;
-    let result = statics.run(&mut |s| {
-        outputs.write(s.load_factor, &s.data, &s.state)?;
-        progress(s.load_factor, target);
-        Ok(())
-    });
-    let output_seconds = outputs.seconds;
+    let mut error = None;
+    let (result, outputs) = match Outputs::create(out, "load_factor", model) {
+        Ok(mut outputs) => {
+            let result = statics.run(&mut |s| {
+                deliver(&mut outputs, &mut error, s.load_factor, &s.data, &s.state)?;
+                progress(s.load_factor, target);
+                Ok(())
+            });
+            (result.map(|_| ()), Some(outputs))
+        }
+        Err(e) => {
+            error = Some(e);
+            (Ok(()), None)
+        }
+    };
     let stats = statics.stats;
-    let f = Finished {
+    let work = Work {
         steps: stats.steps,
         newton_iterations: stats.newton_iterations,
         rejected_steps: stats.rejected_steps,
         factorizations: stats.factorizations,
-        outputs: stats.steps + 1,
+        outputs: outputs.as_ref().map_or(0, |o| o.rows),
         reached: statics.load_factor,
+        unknowns: statics.data.layout.n_unknowns(),
+        linear_solver: format!("{:?}", statics.data.solver.backend()).to_lowercase(),
         warnings: statics.warnings.clone(),
     };
-    finished(
-        summary,
-        f,
-        result.map(|_| ()),
-        start,
-        output_seconds,
-        out_dir,
-    )
+    Ended::of_run(work, result, outputs, error)
 }
 
 /// Dynamic analysis: `sensors.csv` has the time in its first column.
 fn run_dynamic(
-    file: &ModelFile,
-    settings: &crate::solve::DynamicSettings,
-    out_dir: &Path,
+    model: &crate::Model,
+    settings: &DynamicSettings,
+    out: &OutputDir,
     progress: &mut dyn FnMut(f64, f64),
-) -> std::io::Result<Summary> {
-    let start = Instant::now();
-    let model = &file.model;
-    let mut summary = starting(model, "dynamic", settings.t_end, out_dir)?;
+    interrupt: Option<Arc<AtomicBool>>,
+) -> Ended {
     let mut sim = match Simulation::new(model, *settings) {
         Ok(sim) => sim,
-        Err(e) => return not_started(summary, &e, start, out_dir),
+        Err(e) => return Ended::rejected(e),
     };
-    summary.unknowns = sim.data.layout.n_unknowns();
-    summary.linear_solver = format!("{:?}", sim.data.solver.backend()).to_lowercase();
-    let mut outputs = Outputs::create(out_dir, "time", model)?;
+    sim.interrupt = interrupt;
     let t_end = settings.t_end;
-    let result = sim.run(&mut |s| {
-        outputs.write(s.state.t, &s.data, &s.state)?;
-        progress(s.state.t, t_end);
-        Ok(())
-    });
-    let output_seconds = outputs.seconds;
-    let f = Finished {
+    let mut error = None;
+    let (result, outputs) = match Outputs::create(out, "time", model) {
+        Ok(mut outputs) => {
+            let result = sim.run(&mut |s| {
+                deliver(&mut outputs, &mut error, s.state.t, &s.data, &s.state)?;
+                progress(s.state.t, t_end);
+                Ok(())
+            });
+            (result.map(|_| ()), Some(outputs))
+        }
+        Err(e) => {
+            error = Some(e);
+            (Ok(()), None)
+        }
+    };
+    let work = Work {
         steps: sim.stats.steps,
         newton_iterations: sim.stats.newton_iterations,
         rejected_steps: sim.stats.rejected_steps,
         factorizations: sim.data.solver.factorizations(),
-        outputs: sim.stats.outputs,
+        outputs: outputs.as_ref().map_or(0, |o| o.rows),
         reached: sim.state.t,
+        unknowns: sim.data.layout.n_unknowns(),
+        linear_solver: format!("{:?}", sim.data.solver.backend()).to_lowercase(),
         warnings: sim.warnings.clone(),
     };
-    finished(
-        summary,
-        f,
-        result.map(|_| ()),
-        start,
-        output_seconds,
-        out_dir,
-    )
+    Ended::of_run(work, result, outputs, error)
 }

@@ -1,81 +1,297 @@
-//! Results on disk: `sensors.csv` (written row by row as the run goes) and `summary.json`.
+//! Results on disk: the files of one run in its output directory.
 //!
-//! Contract (stable, documented in README.md):
-//! * `sensors.csv`: header `time,<sensor names>`, one row per output step, flushed as it is
-//!   written, so a run that fails or is killed keeps every completed output step;
-//! * `nodes.csv`: the deformed shape, one row per node and output step:
-//!   `time,node,x,y,z,qw,qx,qy,qz` (position and unit quaternion of every node);
-//! * `beams.csv` (models with beams): `time,element,<6 strains>,<6 stress resultants>` per
-//!   beam element and output step;
-//! * `summary.json`: at least `status` ("running" while the run goes, then "ok" or "failed"),
-//!   `steps`, `newton_iterations`, `rejected_steps`, `wall_seconds`; a failed run also has
-//!   `error` (the diagnosis).
+//! Contract (stable, documented in README.md, section "Outputs"):
+//! * A run owns the files named in [`RESULT_FILES`] (and the temporary file of the summary)
+//!   in its output directory: [`OutputDir::prepare`] removes them when the run starts, so
+//!   every result file in the directory afterwards was written by this run. Other files are
+//!   left alone.
+//! * `sensors.csv`: header `time,<sensor names>` (`load_factor` for a static analysis), one
+//!   row per output step; `nodes.csv`: `time,node,x,y,z,qw,qx,qy,qz` for every node at every
+//!   output step; `beams.csv` (models with beams): `time,element,<6 strains>,<6 stress
+//!   resultants>` per beam element and output step. The rows of one output step go to the
+//!   operating system in one write per file before the run goes on, so a run that fails or is
+//!   interrupted keeps every completed output step.
+//! * Numbers in the CSV files are written in the shortest form that reads back to the same
+//!   `f64` bit for bit (plain decimals for magnitudes in `[1e-5, 1e16)` and zero, scientific
+//!   notation such as `1.7976931348623157e308` otherwise); a non-finite value would be written
+//!   `NaN`, `inf` or `-inf`.
+//! * `summary.json` is replaced atomically (written to a temporary file in the same
+//!   directory, synced, then renamed over the old one): a reader, a kill or a full disk never
+//!   leaves a partial summary. Its `status` is [`Status`]: `running` from the start, then
+//!   `ok`, `failed` (with `error_kind` and `error`) or `interrupted`.
 
 use serde::Serialize;
+use std::fmt::Write as _;
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-/// Streams sensor rows to a CSV file.
-pub struct CsvWriter {
-    out: BufWriter<File>,
+/// The summary of the run.
+pub const SUMMARY_FILE: &str = "summary.json";
+/// Sensor values, one row per output step.
+pub const SENSORS_FILE: &str = "sensors.csv";
+/// Position and orientation of every node, per output step.
+pub const NODES_FILE: &str = "nodes.csv";
+/// Strains and stress resultants of every beam element, per output step.
+pub const BEAMS_FILE: &str = "beams.csv";
+/// Every result file a run may write. A run removes all of them from its output directory
+/// when it starts.
+pub const RESULT_FILES: [&str; 4] = [SUMMARY_FILE, SENSORS_FILE, NODES_FILE, BEAMS_FILE];
+/// Where a new summary is written before it is renamed over [`SUMMARY_FILE`].
+const SUMMARY_TEMP_FILE: &str = ".summary.json.tmp";
+
+/// Why the results could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// The output path exists and is not a directory.
+    #[error("{}: not a directory", path.display())]
+    NotADirectory { path: PathBuf },
+    /// A file system operation on `path` failed; `action` says which, e.g. "cannot write".
+    #[error("{}: {action}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        action: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl OutputError {
+    fn io<'a>(path: &'a Path, action: &'static str) -> impl FnOnce(std::io::Error) -> Self + 'a {
+        move |source| OutputError::Io {
+            path: path.to_path_buf(),
+            action,
+            source,
+        }
+    }
+}
+
+/// The output directory of a run, taken over by [`OutputDir::prepare`].
+#[derive(Clone, Debug)]
+pub struct OutputDir {
     path: PathBuf,
 }
 
-impl CsvWriter {
-    /// Creates the file and writes the header `time,<names>`.
-    pub fn create(path: &Path, names: &[String]) -> std::io::Result<Self> {
-        Self::create_with_first_column(path, "time", names)
-    }
-
-    /// Creates the file and writes the header `<first>,<names>`.
-    pub fn create_with_first_column(
-        path: &Path,
-        first: &str,
-        names: &[String],
-    ) -> std::io::Result<Self> {
-        let mut out = BufWriter::new(File::create(path)?);
-        write!(out, "{first}")?;
-        for n in names {
-            write!(out, ",{n}")?;
+impl OutputDir {
+    /// Creates the directory (and its parents) if needed and removes the result files of an
+    /// earlier run ([`RESULT_FILES`] and the summary's temporary file); other files stay.
+    pub fn prepare(path: &Path) -> Result<Self, OutputError> {
+        if path.exists() && !path.is_dir() {
+            return Err(OutputError::NotADirectory {
+                path: path.to_path_buf(),
+            });
         }
-        writeln!(out)?;
-        out.flush()?;
-        Ok(Self {
-            out,
+        std::fs::create_dir_all(path)
+            .map_err(OutputError::io(path, "cannot create the output directory"))?;
+        let dir = Self {
             path: path.to_path_buf(),
-        })
-    }
-
-    /// Appends one row and flushes it to the operating system.
-    pub fn row(&mut self, t: f64, values: &[f64]) -> std::io::Result<()> {
-        write!(self.out, "{t:.12e}")?;
-        for v in values {
-            write!(self.out, ",{v:.15e}")?;
+        };
+        for name in RESULT_FILES.iter().chain([&SUMMARY_TEMP_FILE]) {
+            let file = dir.file(name);
+            match std::fs::remove_file(&file) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(OutputError::io(&file, "cannot remove the earlier result")(
+                        e,
+                    ))
+                }
+                _ => {}
+            }
         }
-        writeln!(self.out)?;
-        self.out.flush()
+        Ok(dir)
     }
 
     pub fn path(&self) -> &Path {
         &self.path
     }
+
+    /// Path of the file `name` in the directory.
+    pub fn file(&self, name: &str) -> PathBuf {
+        self.path.join(name)
+    }
+
+    /// Replaces `summary.json` atomically: the JSON goes to a temporary file in the same
+    /// directory, is synced to the disk and renamed over the old summary (the directory is
+    /// then synced too), so `summary.json` is always either the old or the new summary.
+    pub fn write_summary(&self, summary: &Summary) -> Result<(), OutputError> {
+        let temp = self.file(SUMMARY_TEMP_FILE);
+        let target = self.file(SUMMARY_FILE);
+        let mut text = serde_json::to_string_pretty(summary)
+            .expect("a summary (strings, numbers, lists) always serializes");
+        text.push('\n');
+        let written = File::create(&temp)
+            .and_then(|mut f| {
+                f.write_all(text.as_bytes())?;
+                f.sync_all()
+            })
+            .map_err(OutputError::io(&temp, "cannot write"));
+        if let Err(e) = written {
+            let _ = std::fs::remove_file(&temp);
+            return Err(e);
+        }
+        std::fs::rename(&temp, &target).map_err(OutputError::io(&target, "cannot replace"))?;
+        // The rename is durable once the directory is synced. Only some platforms can open a
+        // directory for syncing, and the summary is complete without it: errors are ignored.
+        if let Ok(dir) = File::open(&self.path) {
+            let _ = dir.sync_all();
+        }
+        Ok(())
+    }
+}
+
+/// Appends `x` to `out` in the shortest decimal form that parses back to the same bits:
+/// plain for zero and magnitudes in `[1e-5, 1e16)`, scientific otherwise; `NaN`, `inf` and
+/// `-inf` for non-finite values.
+pub fn push_number(out: &mut String, x: f64) {
+    let magnitude = x.abs();
+    // `{}` and `{:e}` without a precision both print the shortest round-trip digits.
+    let plain = magnitude == 0.0 || (1e-5..1e16).contains(&magnitude) || !x.is_finite();
+    let result = if plain {
+        write!(out, "{x}")
+    } else {
+        write!(out, "{x:e}")
+    };
+    result.expect("writing into a String cannot fail");
+}
+
+/// A CSV file written one output step at a time: the rows of a step are collected in memory
+/// and handed to the operating system in one write by [`CsvFile::commit`]. A write that
+/// fails part way (a full disk) is cut back, so the file ends with the last complete step.
+struct CsvFile {
+    file: File,
+    path: PathBuf,
+    pending: String,
+    /// Bytes of the complete steps written.
+    len: u64,
+}
+
+impl CsvFile {
+    /// Creates the file and writes the header line.
+    fn create(path: PathBuf, header: &str) -> Result<Self, OutputError> {
+        let file = File::create(&path).map_err(OutputError::io(&path, "cannot create"))?;
+        let mut csv = Self {
+            file,
+            path,
+            pending: String::new(),
+            len: 0,
+        };
+        csv.pending.push_str(header);
+        csv.pending.push('\n');
+        csv.commit()?;
+        Ok(csv)
+    }
+
+    /// Starts a row with the number in the first column and, if given, a label.
+    fn start_row(&mut self, first: f64, label: Option<&str>) {
+        push_number(&mut self.pending, first);
+        if let Some(label) = label {
+            self.pending.push(',');
+            self.pending.push_str(label);
+        }
+    }
+
+    /// Appends one number to the row.
+    fn field(&mut self, x: f64) {
+        self.pending.push(',');
+        push_number(&mut self.pending, x);
+    }
+
+    fn end_row(&mut self) {
+        self.pending.push('\n');
+    }
+
+    /// Writes the pending rows in one write; after a failed write, removes what part of it
+    /// reached the file (best effort: the write error is the one reported).
+    fn commit(&mut self) -> Result<(), OutputError> {
+        let result = self.file.write_all(self.pending.as_bytes());
+        match result {
+            Ok(()) => self.len += self.pending.len() as u64,
+            Err(_) => {
+                let _ = self.file.set_len(self.len);
+            }
+        }
+        self.pending.clear();
+        result.map_err(OutputError::io(&self.path, "cannot write"))
+    }
+}
+
+/// Streams sensor rows to `sensors.csv`.
+pub struct CsvWriter {
+    csv: CsvFile,
+}
+
+impl CsvWriter {
+    /// Creates the file and writes the header `<first>,<names>`; `first` names the first
+    /// column (`time` or `load_factor`).
+    pub fn create(path: &Path, first: &str, names: &[String]) -> Result<Self, OutputError> {
+        let mut header = first.to_string();
+        for n in names {
+            header.push(',');
+            header.push_str(n);
+        }
+        Ok(Self {
+            csv: CsvFile::create(path.to_path_buf(), &header)?,
+        })
+    }
+
+    /// Appends one row and hands it to the operating system.
+    pub fn row(&mut self, t: f64, values: &[f64]) -> Result<(), OutputError> {
+        self.csv.start_row(t, None);
+        for &v in values {
+            self.csv.field(v);
+        }
+        self.csv.end_row();
+        self.csv.commit()
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.csv.path
+    }
+}
+
+/// Where a run stands, `status` in `summary.json`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Status {
+    /// The run started and has not ended (or was killed without a chance to say so).
+    #[default]
+    Running,
+    /// The analysis reached its end.
+    Ok,
+    /// The run stopped on an error; `error_kind` and `error` say which and why.
+    Failed,
+    /// The run was stopped from outside (a signal); results up to `t_reached` are complete.
+    Interrupted,
+}
+
+/// What kind of error stopped a failed run, `error_kind` in `summary.json`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ErrorKind {
+    /// The model file or the model was rejected before the first step (nothing was solved).
+    Model,
+    /// The analysis failed (Newton or a static step could not converge).
+    Analysis,
+    /// A result file could not be written.
+    Output,
 }
 
 /// What `summary.json` holds.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Summary {
-    pub status: String,
+    pub status: Status,
     pub title: String,
+    /// `dynamic` or `static`.
     pub analysis: String,
     pub group: String,
+    /// End time \[s\] (dynamic) or final load factor (static).
     pub t_end: f64,
-    /// Time reached by the last completed step \[s\].
+    /// Time \[s\] (or load factor) reached by the last completed step.
     pub t_reached: f64,
     pub steps: usize,
     pub newton_iterations: usize,
     pub rejected_steps: usize,
     pub factorizations: usize,
+    /// Output steps written (rows of `sensors.csv`).
     pub outputs: usize,
     pub newton_iterations_per_step: f64,
     /// Wall time of the whole run including output \[s\].
@@ -87,73 +303,291 @@ pub struct Summary {
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
+    pub error_kind: Option<ErrorKind>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
 }
 
 impl Summary {
-    /// Writes the summary as pretty JSON.
-    pub fn write(&self, path: &Path) -> std::io::Result<()> {
-        let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
-        std::fs::write(path, text + "\n")
+    /// Marks the summary failed with the kind and message of the error.
+    pub fn fail(&mut self, kind: ErrorKind, error: String) {
+        self.status = Status::Failed;
+        self.error_kind = Some(kind);
+        self.error = Some(error);
     }
 }
 
-/// Streams the deformed shape (every node) and the beam element strains and stress
-/// resultants of every output step.
+/// Column names of `beams.csv` after `time,element`: strains, then stress resultants.
+const BEAM_COLUMNS: &str = "axial_strain,shear_strain_2,shear_strain_3,torsion,curvature_2,curvature_3,axial_force,shear_force_2,shear_force_3,torque,bending_moment_2,bending_moment_3";
+
+/// Streams the deformed shape (`nodes.csv`, every node) and the beam element strains and
+/// stress resultants (`beams.csv`) of every output step.
 pub struct ShapeWriter {
-    nodes: BufWriter<File>,
-    beams: Option<BufWriter<File>>,
+    nodes: CsvFile,
+    beams: Option<CsvFile>,
 }
 
 impl ShapeWriter {
     /// Creates `nodes.csv` (and `beams.csv` if the model has beams) in `dir`; the first column
     /// is named `first` (`time` or `load_factor`).
-    pub fn create(dir: &Path, first: &str, model: &crate::Model) -> std::io::Result<Self> {
-        let mut nodes = BufWriter::new(File::create(dir.join("nodes.csv"))?);
-        writeln!(nodes, "{first},node,x,y,z,qw,qx,qy,qz")?;
-        nodes.flush()?;
+    pub fn create(dir: &OutputDir, first: &str, model: &crate::Model) -> Result<Self, OutputError> {
+        let nodes = CsvFile::create(
+            dir.file(NODES_FILE),
+            &format!("{first},node,x,y,z,qw,qx,qy,qz"),
+        )?;
         let beams = if model.beams.is_empty() {
             None
         } else {
-            let mut b = BufWriter::new(File::create(dir.join("beams.csv"))?);
-            writeln!(
-                b,
-                "{first},element,axial_strain,shear_strain_2,shear_strain_3,torsion,curvature_2,curvature_3,axial_force,shear_force_2,shear_force_3,torque,bending_moment_2,bending_moment_3"
-            )?;
-            b.flush()?;
-            Some(b)
+            Some(CsvFile::create(
+                dir.file(BEAMS_FILE),
+                &format!("{first},element,{BEAM_COLUMNS}"),
+            )?)
         };
         Ok(Self { nodes, beams })
     }
 
-    /// Appends the rows of one output step and flushes them.
+    /// Appends the rows of one output step, one write per file.
     pub fn write(
         &mut self,
         t: f64,
         model: &crate::Model,
         state: &crate::State,
-    ) -> std::io::Result<()> {
+    ) -> Result<(), OutputError> {
         for (node, q) in model.nodes.iter().zip(&state.q) {
-            let quat = q.quaternion();
-            writeln!(
-                self.nodes,
-                "{t:.12e},{},{:.15e},{:.15e},{:.15e},{:.15e},{:.15e},{:.15e},{:.15e}",
-                node.name, q.x.x, q.x.y, q.x.z, quat[0], quat[1], quat[2], quat[3]
-            )?;
+            self.nodes.start_row(t, Some(&node.name));
+            for x in [q.x.x, q.x.y, q.x.z].into_iter().chain(q.quaternion()) {
+                self.nodes.field(x);
+            }
+            self.nodes.end_row();
         }
-        self.nodes.flush()?;
-        if let Some(out) = self.beams.as_mut() {
+        self.nodes.commit()?;
+        if let Some(beams) = self.beams.as_mut() {
             let nodes = crate::sensors::node_states(state);
             for b in &model.beams {
                 let st = b.state(&[nodes[b.nodes[0].0], nodes[b.nodes[1].0]]);
-                write!(out, "{t:.12e},{}", b.name)?;
-                for v in st.strain.iter().chain(st.stress.iter()) {
-                    write!(out, ",{v:.15e}")?;
+                beams.start_row(t, Some(&b.name));
+                for &v in st.strain.iter().chain(st.stress.iter()) {
+                    beams.field(v);
                 }
-                writeln!(out)?;
+                beams.end_row();
             }
-            out.flush()?;
+            beams.commit()?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("flexmb-output-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    /// Values at the edges of `f64`: extremes, subnormals, signed zero, values with 17
+    /// significant digits, the plain/scientific switch points and non-finite values.
+    fn hard_values() -> Vec<f64> {
+        let mut v = vec![
+            f64::MAX,
+            f64::MIN,
+            f64::MIN_POSITIVE,
+            -f64::MIN_POSITIVE,
+            f64::MIN_POSITIVE / 3.0, // subnormal
+            5e-324,                  // smallest subnormal
+            -5e-324,
+            0.0,
+            -0.0,
+            1.0 / 3.0,
+            -2.0 / 3.0,
+            0.1,
+            0.1 + 0.2,
+            1e-5,
+            1e-5 * (1.0 - f64::EPSILON),
+            1e16,
+            1e16 * (1.0 - f64::EPSILON),
+            std::f64::consts::PI * 1e300,
+            1.0 + f64::EPSILON,
+            123_456_789.123_456_79,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        // Pseudo-random bit patterns (a fixed linear congruential sequence) over all exponents.
+        let mut bits = 0x2545_f491_4f6c_dd1d_u64;
+        for _ in 0..2000 {
+            bits = bits
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            v.push(f64::from_bits(bits));
+        }
+        v
+    }
+
+    fn same(a: f64, b: f64) -> bool {
+        a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+    }
+
+    #[test]
+    fn numbers_read_back_bit_identical() {
+        for x in hard_values() {
+            let mut s = String::new();
+            push_number(&mut s, x);
+            let back: f64 = s.parse().unwrap_or_else(|e| panic!("{s}: {e}"));
+            assert!(same(x, back), "{x:e} written as {s} reads back as {back:e}");
+        }
+    }
+
+    #[test]
+    fn numbers_are_plain_in_the_usual_range_and_scientific_outside() {
+        let show = |x: f64| {
+            let mut s = String::new();
+            push_number(&mut s, x);
+            s
+        };
+        assert_eq!(show(0.1), "0.1");
+        assert_eq!(show(-0.0), "-0");
+        assert_eq!(show(1e-5), "0.00001");
+        assert_eq!(show(9.9e-6), "9.9e-6");
+        assert_eq!(show(1e16), "1e16");
+        assert_eq!(show(f64::MAX), "1.7976931348623157e308");
+        assert_eq!(show(5e-324), "5e-324");
+        assert_eq!(show(f64::NAN), "NaN");
+        assert_eq!(show(f64::NEG_INFINITY), "-inf");
+    }
+
+    #[test]
+    fn sensor_rows_read_back_bit_identical() {
+        let dir = temp_dir("rows");
+        let out = OutputDir::prepare(&dir).unwrap();
+        let values = hard_values();
+        let names: Vec<String> = (0..values.len()).map(|i| format!("s{i}")).collect();
+        let mut csv = CsvWriter::create(&out.file(SENSORS_FILE), "time", &names).unwrap();
+        // Each row: a time taken from the list and every value, rotated by the row number.
+        for row in 0..5 {
+            let mut rotated = values.clone();
+            rotated.rotate_left(row);
+            csv.row(values[row], &rotated).unwrap();
+        }
+        let text = std::fs::read_to_string(out.file(SENSORS_FILE)).unwrap();
+        let mut lines = text.lines();
+        assert_eq!(
+            lines.next().unwrap().split(',').count(),
+            1 + values.len(),
+            "header"
+        );
+        let mut rows = 0;
+        for (row, line) in lines.enumerate() {
+            let fields: Vec<f64> = line.split(',').map(|f| f.parse().unwrap()).collect();
+            assert!(same(fields[0], values[row]));
+            let mut rotated = values.clone();
+            rotated.rotate_left(row);
+            assert_eq!(fields.len(), 1 + rotated.len());
+            for (got, want) in fields[1..].iter().zip(&rotated) {
+                assert!(same(*got, *want), "{got:e} != {want:e}");
+            }
+            rows += 1;
+        }
+        assert_eq!(rows, 5);
+    }
+
+    #[test]
+    fn labelled_rows_read_back_bit_identical() {
+        // The row layout of nodes.csv and beams.csv: number, label, numbers.
+        let dir = temp_dir("labelled");
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(NODES_FILE);
+        let mut csv = CsvFile::create(path.clone(), "time,node,x").unwrap();
+        let values = hard_values();
+        for (i, pair) in values.chunks(2).enumerate() {
+            csv.start_row(pair[0], Some(&format!("n{i}")));
+            csv.field(pair[pair.len() - 1]);
+            csv.end_row();
+        }
+        csv.commit().unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let rows: Vec<&str> = text.lines().skip(1).collect();
+        assert_eq!(rows.len(), values.len().div_ceil(2));
+        for ((i, line), pair) in rows.iter().enumerate().zip(values.chunks(2)) {
+            let fields: Vec<&str> = line.split(',').collect();
+            assert_eq!(fields[1], format!("n{i}"));
+            assert!(same(fields[0].parse().unwrap(), pair[0]));
+            assert!(same(fields[2].parse().unwrap(), pair[pair.len() - 1]));
+        }
+    }
+
+    #[test]
+    fn prepare_removes_earlier_results_and_keeps_other_files() {
+        let dir = temp_dir("prepare");
+        std::fs::create_dir_all(&dir).unwrap();
+        for name in RESULT_FILES
+            .iter()
+            .chain([&SUMMARY_TEMP_FILE, &"notes.txt"])
+        {
+            std::fs::write(dir.join(name), "earlier").unwrap();
+        }
+        OutputDir::prepare(&dir).unwrap();
+        let mut left: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["notes.txt"]);
+        assert_eq!(
+            std::fs::read_to_string(dir.join("notes.txt")).unwrap(),
+            "earlier"
+        );
+    }
+
+    #[test]
+    fn prepare_refuses_a_file_and_creates_missing_directories() {
+        let dir = temp_dir("not-dir");
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("plain");
+        std::fs::write(&file, "").unwrap();
+        let err = OutputDir::prepare(&file).unwrap_err();
+        assert!(matches!(err, OutputError::NotADirectory { .. }), "{err}");
+        assert!(err.to_string().ends_with("plain: not a directory"), "{err}");
+        assert!(OutputDir::prepare(&dir.join("a/b"))
+            .unwrap()
+            .path()
+            .is_dir());
+    }
+
+    #[test]
+    fn summary_is_replaced_whole_or_not_at_all() {
+        let dir = temp_dir("summary");
+        let out = OutputDir::prepare(&dir).unwrap();
+        let mut summary = Summary {
+            title: "first".into(),
+            ..Default::default()
+        };
+        out.write_summary(&summary).unwrap();
+        let first = std::fs::read_to_string(out.file(SUMMARY_FILE)).unwrap();
+        assert!(first.contains("\"status\": \"running\""), "{first}");
+        assert!(
+            !out.file(SUMMARY_TEMP_FILE).exists(),
+            "no temporary file left"
+        );
+        // The temporary file cannot be created (a directory is in its place): the write fails
+        // and the earlier summary is untouched, never truncated.
+        std::fs::create_dir(out.file(SUMMARY_TEMP_FILE)).unwrap();
+        summary.fail(ErrorKind::Analysis, "why".into());
+        let err = out.write_summary(&summary).unwrap_err();
+        assert!(err.to_string().contains(SUMMARY_TEMP_FILE), "{err}");
+        assert_eq!(
+            std::fs::read_to_string(out.file(SUMMARY_FILE)).unwrap(),
+            first
+        );
+        std::fs::remove_dir(out.file(SUMMARY_TEMP_FILE)).unwrap();
+        out.write_summary(&summary).unwrap();
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.file(SUMMARY_FILE)).unwrap())
+                .unwrap();
+        assert_eq!(json["status"], "failed");
+        assert_eq!(json["error_kind"], "analysis");
+        assert_eq!(json["error"], "why");
     }
 }

@@ -1,0 +1,214 @@
+//! One exit code per class of outcome (README.md, "Exit status"), and one message per cause:
+//! 0 success, 1 failed analysis (tests/cli.rs), 2 invalid model (the same for `check` and
+//! `run`), 3 results that cannot be written, 64 a wrong command line; signals in
+//! tests/signals.rs.
+
+mod common;
+
+use common::{flexmb, out_dir, repo, rows, summary};
+use std::path::Path;
+use std::process::Output;
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn run_pendulum(out: &Path) -> Output {
+    flexmb()
+        .args([
+            "run",
+            repo("examples/pendulum.toml").to_str().unwrap(),
+            "--out",
+        ])
+        .arg(out)
+        .args(["--set", "solver.t_end=0.05"])
+        .output()
+        .expect("runs")
+}
+
+#[test]
+fn usage_errors_exit_64_and_help_exits_0() {
+    let missing = flexmb().arg("run").output().unwrap();
+    assert_eq!(missing.status.code(), Some(64), "{}", stderr(&missing));
+    assert!(stderr(&missing).contains("<MODEL>"), "{}", stderr(&missing));
+    let unknown = flexmb().args(["check", "--frobnicate"]).output().unwrap();
+    assert_eq!(unknown.status.code(), Some(64));
+    let help = flexmb().arg("--help").output().unwrap();
+    assert_eq!(help.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&help.stdout);
+    for code in ["0 ", "1 ", "2 ", "3 ", "64 ", "128+n", "130 SIGINT"] {
+        assert!(text.contains(code), "--help lists exit code {code}: {text}");
+    }
+    assert_eq!(
+        flexmb().arg("--version").output().unwrap().status.code(),
+        Some(0)
+    );
+}
+
+#[test]
+fn inconsistent_initial_velocity_exits_2_from_check_and_run() {
+    let model = repo("crates/flexmb-cli/tests/data/inconsistent.toml");
+    let velocity = "body.bob.velocity=[0.0, 1.0, 0.0]";
+    let check = flexmb()
+        .args(["check", model.to_str().unwrap(), "--set", velocity])
+        .output()
+        .unwrap();
+    let out = out_dir("inconsistent-run");
+    let run = flexmb()
+        .args(["run", model.to_str().unwrap(), "--set", velocity, "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(check.status.code(), Some(2), "{}", stderr(&check));
+    assert_eq!(run.status.code(), Some(2), "{}", stderr(&run));
+    assert_eq!(stderr(&check), stderr(&run), "the same message");
+    assert_eq!(stderr(&run).lines().count(), 1, "{}", stderr(&run));
+    let s = summary(&out);
+    assert_eq!(s["status"], "failed");
+    assert_eq!(s["error_kind"], "model");
+    assert!(!out.join("sensors.csv").exists(), "nothing was solved");
+}
+
+#[test]
+fn unreadable_model_file_exits_2_and_states_its_cause_once() {
+    let out = out_dir("no-model");
+    let result = flexmb()
+        .args(["run", "no/such/model.toml", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(result.status.code(), Some(2));
+    let err = stderr(&result);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("no/such/model.toml: cannot read the model file"),
+        "{err}"
+    );
+    let os_cause = "No such file or directory";
+    assert_eq!(
+        err.matches(os_cause).count(),
+        1,
+        "cause printed once: {err}"
+    );
+    let check = flexmb()
+        .args(["check", "no/such/model.toml"])
+        .output()
+        .unwrap();
+    assert_eq!(check.status.code(), Some(2));
+    assert_eq!(
+        stderr(&check).matches(os_cause).count(),
+        1,
+        "{}",
+        stderr(&check)
+    );
+    let s = summary(&out);
+    assert_eq!(s["error_kind"], "model");
+}
+
+#[test]
+fn output_path_that_is_a_file_exits_3_not_a_directory() {
+    let dir = out_dir("out-is-file");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("results");
+    std::fs::write(&file, "mine").unwrap();
+    let result = run_pendulum(&file);
+    assert_eq!(result.status.code(), Some(3));
+    let err = stderr(&result);
+    assert_eq!(
+        err.trim(),
+        format!("error: {}: not a directory", file.display())
+    );
+    assert_eq!(
+        std::fs::read_to_string(&file).unwrap(),
+        "mine",
+        "the file is untouched"
+    );
+}
+
+#[test]
+fn earlier_result_that_cannot_be_removed_exits_3() {
+    let out = out_dir("unremovable");
+    // A directory where the run's sensors.csv goes.
+    std::fs::create_dir_all(out.join("sensors.csv/keep")).unwrap();
+    let result = run_pendulum(&out);
+    assert_eq!(result.status.code(), Some(3));
+    let err = stderr(&result);
+    assert!(
+        err.contains("sensors.csv: cannot remove the earlier result"),
+        "{err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+}
+
+/// Runs the pendulum with the size of every file the process writes limited to `blocks`
+/// 512-byte blocks (`ulimit -f` of sh, SIGXFSZ ignored so that writes past it fail with
+/// EFBIG like on a full disk).
+#[cfg(unix)]
+fn run_with_file_size_limit(out: &Path, blocks: u32) -> Output {
+    std::process::Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "trap '' XFSZ; ulimit -f {blocks} || exit 99; exec \"$0\" \"$@\""
+        ))
+        .arg(env!("CARGO_BIN_EXE_flexmb"))
+        .args([
+            "run",
+            repo("examples/pendulum.toml").to_str().unwrap(),
+            "--out",
+        ])
+        .arg(out)
+        .args(["--set", "solver.t_end=0.05"])
+        .output()
+        .expect("sh runs")
+}
+
+#[cfg(unix)]
+#[test]
+fn full_disk_exits_3_keeps_complete_rows_and_says_so_in_the_summary() {
+    let out = out_dir("fsize");
+    let result = run_with_file_size_limit(&out, 4);
+    assert_eq!(result.status.code(), Some(3), "{}", stderr(&result));
+    let err = stderr(&result);
+    assert!(err.contains("sensors.csv: cannot write"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    let s = summary(&out);
+    assert_eq!(s["status"], "failed");
+    assert_eq!(s["error_kind"], "output");
+    // Every row is complete (a partly written step is cut back), and the summary counts the
+    // steps written to every file.
+    let rows = rows(&out.join("sensors.csv"));
+    assert!(!rows.is_empty());
+    assert!(rows.iter().all(|r| r.len() == 7), "{rows:?}");
+    assert!(std::fs::read_to_string(out.join("sensors.csv"))
+        .unwrap()
+        .ends_with('\n'));
+    assert_eq!(s["outputs"].as_u64().unwrap() as usize, rows.len());
+}
+
+#[cfg(unix)]
+#[test]
+fn summary_that_cannot_be_written_is_never_left_partial() {
+    // One block (512 bytes) fits the summary written at the start but not the final one,
+    // whose error message names this long directory: the final write fails and the earlier
+    // summary stays whole (a truncating write would leave 512 bytes of broken JSON).
+    let out = out_dir(&format!("fsize-summary-{}", "long-name-".repeat(12)));
+    let result = run_with_file_size_limit(&out, 1);
+    assert_eq!(result.status.code(), Some(3), "{}", stderr(&result));
+    let err = stderr(&result);
+    assert!(
+        err.contains("sensors.csv: cannot write"),
+        "the cause: {err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+    let s = summary(&out); // parses
+    assert_eq!(s["status"], "running");
+    assert_eq!(s["title"], "Simple pendulum (IFToMM A01)");
+    let entries: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    assert!(
+        !entries.iter().any(|e| e.ends_with(".tmp")),
+        "no temporary file left: {entries:?}"
+    );
+}

@@ -1,0 +1,179 @@
+//! A run owns its output directory's result files (README.md, "Outputs"): it removes those
+//! of an earlier run when it starts and leaves other files alone, so a run repeated into the
+//! same directory gives the same files whatever ran there before.
+
+mod common;
+
+use common::{flexmb, out_dir, repo, send_signal, start_long_run, summary, wait_for};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// `flexmb run MODEL --out DIR [--set ...]`; returns the exit code.
+fn run(model: &str, dir: &Path, set: &[&str]) -> i32 {
+    let mut c = flexmb();
+    c.args(["run", repo(model).to_str().unwrap(), "--out"])
+        .arg(dir)
+        .arg("--quiet");
+    for s in set {
+        c.args(["--set", s]);
+    }
+    c.output().expect("runs").status.code().expect("exit code")
+}
+
+/// Every file of a directory by name; `summary.json` without its timings.
+fn snapshot(dir: &Path) -> BTreeMap<String, String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let name = e.unwrap().file_name().into_string().unwrap();
+            let mut text = std::fs::read_to_string(dir.join(&name)).unwrap();
+            if name == "summary.json" {
+                let mut s = summary(dir);
+                let fields = s.as_object_mut().unwrap();
+                assert!(fields.remove("wall_seconds").is_some());
+                assert!(fields.remove("solve_seconds").is_some());
+                text = s.to_string();
+            }
+            (name, text)
+        })
+        .collect()
+}
+
+const PENDULUM: &str = "examples/pendulum.toml";
+const ROLL_UP: &str = "examples/roll_up.toml";
+const SHORT: &[&str] = &["solver.t_end=0.03"];
+
+#[test]
+fn a_failed_run_leaves_no_rows_of_an_earlier_run() {
+    let dir = out_dir("stale-rows");
+    assert_eq!(run(PENDULUM, &dir, SHORT), 0);
+    assert_eq!(common::line_count(&dir.join("sensors.csv")), 1 + 31);
+    let code = run(
+        "crates/flexmb-cli/tests/data/inconsistent.toml",
+        &dir,
+        &["body.bob.velocity=[0.0, 1.0, 0.0]"],
+    );
+    assert_eq!(code, 2);
+    assert_eq!(summary(&dir)["error_kind"], "model");
+    for gone in ["sensors.csv", "nodes.csv"] {
+        assert!(
+            !dir.join(gone).exists(),
+            "{gone} of the earlier run is left"
+        );
+    }
+}
+
+#[test]
+fn a_rigid_run_after_a_beam_run_leaves_no_beams_csv_and_keeps_other_files() {
+    let dir = out_dir("stale-beams");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("notes.txt"), "my notes").unwrap();
+    assert_eq!(run(ROLL_UP, &dir, &[]), 0);
+    assert!(dir.join("beams.csv").exists());
+    assert_eq!(run(PENDULUM, &dir, SHORT), 0);
+    assert!(!dir.join("beams.csv").exists());
+    assert_eq!(
+        std::fs::read_to_string(dir.join("notes.txt")).unwrap(),
+        "my notes"
+    );
+}
+
+/// Something that may have run into a directory before.
+#[derive(Clone, Copy, Debug)]
+enum Earlier {
+    /// The same model, longer.
+    LongerPendulum,
+    /// A beam model (writes beams.csv), completed.
+    BeamsOk,
+    /// A beam model whose static analysis fails.
+    BeamsFailed,
+    /// A run stopped by SIGINT.
+    Interrupted,
+    /// A run killed by SIGKILL (summary left `running`, rows written so far).
+    Killed,
+    /// A model rejected before its first step.
+    Rejected,
+    /// A model file that cannot be read.
+    Unreadable,
+}
+
+impl Earlier {
+    const ALL: [Earlier; 7] = [
+        Earlier::LongerPendulum,
+        Earlier::BeamsOk,
+        Earlier::BeamsFailed,
+        Earlier::Interrupted,
+        Earlier::Killed,
+        Earlier::Rejected,
+        Earlier::Unreadable,
+    ];
+
+    fn run_into(self, dir: &Path) {
+        let code = match self {
+            Earlier::LongerPendulum => run(PENDULUM, dir, &["solver.t_end=0.06"]),
+            Earlier::BeamsOk => run(ROLL_UP, dir, &[]),
+            Earlier::BeamsFailed => run(ROLL_UP, dir, &["solver.max_iterations=1"]),
+            Earlier::Interrupted | Earlier::Killed => {
+                let mut child = start_long_run(dir, 3);
+                let signal = if matches!(self, Earlier::Killed) {
+                    "KILL"
+                } else {
+                    "INT"
+                };
+                send_signal(&child, signal);
+                wait_for(&mut child).code().unwrap_or(-1)
+            }
+            Earlier::Rejected => run(
+                "crates/flexmb-cli/tests/data/inconsistent.toml",
+                dir,
+                &["body.bob.velocity=[0.0, 1.0, 0.0]"],
+            ),
+            Earlier::Unreadable => run("no/such/model.toml", dir, &[]),
+        };
+        let expected = match self {
+            Earlier::LongerPendulum | Earlier::BeamsOk => 0,
+            Earlier::BeamsFailed => 1,
+            Earlier::Rejected | Earlier::Unreadable => 2,
+            Earlier::Interrupted => 130,
+            Earlier::Killed => -1,
+        };
+        assert_eq!(code, expected, "{self:?}");
+    }
+}
+
+/// Runs `model` into a fresh directory and into directories where each earlier run (one
+/// each, then all of them in turn) left its files; every result is the fresh one.
+fn repeated_runs_give_identical_files(name: &str, model: &str, set: &[&str]) {
+    let fresh_dir = out_dir(&format!("{name}-fresh"));
+    assert_eq!(run(model, &fresh_dir, set), 0);
+    let fresh = snapshot(&fresh_dir);
+    assert!(fresh.contains_key("sensors.csv") && fresh.contains_key("summary.json"));
+    // The same directory again.
+    assert_eq!(run(model, &fresh_dir, set), 0);
+    assert_eq!(
+        snapshot(&fresh_dir),
+        fresh,
+        "run repeated into its own directory"
+    );
+    let mut sequences: Vec<Vec<Earlier>> = Earlier::ALL.iter().map(|e| vec![*e]).collect();
+    sequences.push(Earlier::ALL.to_vec());
+    sequences.push(Earlier::ALL.iter().rev().copied().collect());
+    for (i, earlier) in sequences.iter().enumerate() {
+        let dir = out_dir(&format!("{name}-after-{i}"));
+        for e in earlier {
+            e.run_into(&dir);
+        }
+        assert_eq!(run(model, &dir, set), 0);
+        assert_eq!(snapshot(&dir), fresh, "after {earlier:?}");
+    }
+}
+
+#[test]
+fn rigid_run_repeated_into_a_used_directory_gives_identical_files() {
+    repeated_runs_give_identical_files("same-pendulum", PENDULUM, SHORT);
+}
+
+#[test]
+fn beam_run_repeated_into_a_used_directory_gives_identical_files() {
+    repeated_runs_give_identical_files("same-roll-up", ROLL_UP, &[]);
+}
