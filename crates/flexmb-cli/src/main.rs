@@ -1,7 +1,7 @@
 //! `flexmb`: run multibody models from the command line.
 //!
 //! ```text
-//! flexmb run MODEL.toml --out DIR [--set key.path=value ...] [--quiet]
+//! flexmb run MODEL.toml --out DIR [--set key.path=value ...] [--quiet] [--verify]
 //! flexmb check MODEL.toml [--set ...]
 //! ```
 //!
@@ -73,6 +73,11 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Re-check every accepted step with a freshly built iteration matrix and report the
+        /// largest estimated error (in units of the Newton tolerance) in summary.json; costs
+        /// one more factorization per step.
+        #[arg(long)]
+        verify: bool,
     },
     /// Read and check a model file (syntax, references, physics, initial conditions).
     Check {
@@ -90,7 +95,8 @@ fn main() {
                 out,
                 set,
                 quiet,
-            } => run(&model, &out, &set, quiet),
+                verify,
+            } => run(&model, &out, &set, quiet, verify),
             Command::Check { model, set } => check(&model, &set),
         },
         Err(e) => {
@@ -107,7 +113,7 @@ fn main() {
 }
 
 /// `flexmb run`: takes over the output directory, reads the model and runs it.
-fn run(model: &Path, out: &Path, set: &[String], quiet: bool) -> i32 {
+fn run(model: &Path, out: &Path, set: &[String], quiet: bool, verify: bool) -> i32 {
     let interrupt = match signals::Interrupt::install() {
         Ok(i) => Some(i),
         Err(e) => {
@@ -128,7 +134,7 @@ fn run(model: &Path, out: &Path, set: &[String], quiet: bool) -> i32 {
             return exit::OUTPUT_FAILED;
         }
     };
-    let file = match flexmb::input::read_model_file(model, set) {
+    let mut file = match flexmb::input::read_model_file(model, set) {
         Ok(file) => file,
         Err(e) => {
             // The error's message includes its cause: print it alone, not its source chain.
@@ -144,6 +150,10 @@ fn run(model: &Path, out: &Path, set: &[String], quiet: bool) -> i32 {
             };
         }
     };
+    match &mut file.analysis {
+        flexmb::input::Analysis::Dynamic(s) => s.verify = verify,
+        flexmb::input::Analysis::Static(s) => s.verify = verify,
+    }
     let bar = progress_bar(quiet);
     let result = flexmb::driver::run(
         &file,
@@ -183,6 +193,12 @@ fn run(model: &Path, out: &Path, set: &[String], quiet: bool) -> i32 {
                 summary.solve_seconds,
                 out.display()
             ));
+            if let Some(v) = &summary.verify {
+                say(format_args!(
+                    "verify: {} steps re-checked with a fresh matrix; largest estimated error {:.3e} of the Newton tolerance at {}",
+                    v.steps, v.max_error, v.t
+                ));
+            }
             exit::OK
         }
         (Status::Interrupted, _) => {

@@ -88,6 +88,7 @@ struct Work {
     unknowns: usize,
     linear_solver: String,
     warnings: Vec<String>,
+    verify: Option<crate::solve::Verification>,
 }
 
 /// How a run ended (the status of its summary).
@@ -144,6 +145,7 @@ impl Ended {
         summary.unknowns = w.unknowns;
         summary.linear_solver = w.linear_solver;
         summary.warnings = w.warnings;
+        summary.verify = w.verify;
         match self.outcome {
             Outcome::Completed => {
                 summary.status = Status::Ok;
@@ -263,6 +265,7 @@ fn run_static(
         unknowns: statics.data.layout.n_unknowns(),
         linear_solver: format!("{:?}", statics.data.solver.backend()).to_lowercase(),
         warnings: statics.warnings.clone(),
+        verify: statics.verification.clone(),
     };
     Ended::of_run(work, result, outputs, error)
 }
@@ -306,6 +309,7 @@ fn run_dynamic(
         unknowns: sim.data.layout.n_unknowns(),
         linear_solver: format!("{:?}", sim.data.solver.backend()).to_lowercase(),
         warnings: sim.warnings.clone(),
+        verify: sim.verification.clone(),
     };
     Ended::of_run(work, result, outputs, error)
 }

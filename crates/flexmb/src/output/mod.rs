@@ -302,6 +302,9 @@ pub struct Summary {
     pub linear_solver: String,
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// What `--verify` found: every accepted step re-checked with a fresh matrix.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub verify: Option<crate::solve::Verification>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error_kind: Option<ErrorKind>,
     #[serde(skip_serializing_if = "Option::is_none")]

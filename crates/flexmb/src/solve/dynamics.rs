@@ -335,6 +335,9 @@ impl<'m> Simulation<'m> {
                 self.stats.undetermined_multipliers
             ));
         }
+        if let Some(w) = self.verification.as_ref().and_then(Verification::warning) {
+            self.warnings.push(w);
+        }
         result
     }
 

@@ -164,7 +164,7 @@ impl Convergence {
 /// What the verify mode of an analysis found: every accepted step re-checked by a Newton
 /// correction from the accepted iterate with a freshly built matrix, whose weighted norm
 /// estimates the error left in the step in units of the tolerance (at most 1: within it).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct Verification {
     /// Steps checked.
     pub steps: usize,
@@ -177,6 +177,17 @@ pub struct Verification {
 }
 
 impl Verification {
+    /// A warning for the user when a step was accepted outside the tolerance (or could not be
+    /// checked); `None` when every step passed.
+    pub fn warning(&self) -> Option<String> {
+        (!(self.max_error <= 1.0)).then(|| {
+            format!(
+                "verify: a step was accepted with an estimated error of {:.3e} times the Newton tolerance at {:.6e} (worst equation: {}); {} steps checked",
+                self.max_error, self.t, self.worst_equation, self.steps
+            )
+        })
+    }
+
     /// Records the check of one step: its estimated error (NaN when no estimate could be
     /// made), where it is, and the equation (evaluated only if the step is the worst so far).
     pub fn record(&mut self, error: f64, at: f64, worst_equation: impl FnOnce() -> String) {

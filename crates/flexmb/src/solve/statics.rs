@@ -234,12 +234,15 @@ impl<'m> Statics<'m> {
         output: &mut dyn FnMut(&Statics) -> Result<(), String>,
     ) -> Result<StaticStats, SolveError> {
         output(self).map_err(SolveError::Output)?;
-        match self.settings.method {
-            StaticMethod::LoadControl => self.run_load_control(output)?,
-            StaticMethod::ArcLength => self.run_arc_length(output)?,
-            StaticMethod::PseudoDynamic => self.run_pseudo_dynamic(output)?,
+        let result = match self.settings.method {
+            StaticMethod::LoadControl => self.run_load_control(output),
+            StaticMethod::ArcLength => self.run_arc_length(output),
+            StaticMethod::PseudoDynamic => self.run_pseudo_dynamic(output),
+        };
+        if let Some(w) = self.verification.as_ref().and_then(Verification::warning) {
+            self.warnings.push(w);
         }
-        Ok(self.stats)
+        result.map(|()| self.stats)
     }
 
     fn run_load_control(
