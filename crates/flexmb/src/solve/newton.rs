@@ -180,7 +180,7 @@ impl Verification {
     /// A warning for the user when a step was accepted outside the tolerance (or could not be
     /// checked); `None` when every step passed.
     pub fn warning(&self) -> Option<String> {
-        (!(self.max_error <= 1.0)).then(|| {
+        (self.max_error.is_nan() || self.max_error > 1.0).then(|| {
             format!(
                 "verify: a step was accepted with an estimated error of {:.3e} times the Newton tolerance at {:.6e} (worst equation: {}); {} steps checked",
                 self.max_error, self.t, self.worst_equation, self.steps
