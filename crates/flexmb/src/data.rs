@@ -136,18 +136,16 @@ impl Layout {
         } else {
             (i - self.n_dofs, "constraint")
         };
-        for (j, start) in self.joint_row_start.iter().enumerate() {
-            for (r, row) in self.joint_rows[j].iter().enumerate() {
-                if self.row_unknown[start + r] == Some(k) {
-                    return format!(
-                        "{what} row {} ({:?}) of joint '{}' ({})",
-                        r + 1,
-                        row,
-                        model.joints[j].name,
-                        model.joints[j].kind.name()
-                    );
-                }
-            }
+        if let Some(row) = self.row_unknown.iter().position(|&u| u == Some(k)) {
+            let what = if what == "constraint" {
+                ""
+            } else {
+                "velocity-level constraint of "
+            };
+            return format!(
+                "{what}{}",
+                crate::solve::initial::describe_row(model, self, row)
+            );
         }
         format!("unknown {i}")
     }

@@ -40,6 +40,22 @@ pub enum Row {
     DriveSlide,
 }
 
+impl Row {
+    /// What the row holds, in the joint's words (axes of joint frame A).
+    pub fn describe(&self) -> String {
+        const AXIS: [&str; 3] = ["x", "y", "z"];
+        match *self {
+            Row::Dot2 { a } => format!("translation along the joint's {} axis", AXIS[a]),
+            Row::Dot1 { a, b } if a == b => {
+                format!("the two {} axes kept perpendicular", AXIS[a])
+            }
+            Row::Dot1 { a, b } => format!("rotation about the joint's {} axis", AXIS[3 - a - b]),
+            Row::DriveAngle => "the driven rotation".into(),
+            Row::DriveSlide => "the driven translation".into(),
+        }
+    }
+}
+
 /// The constraint rows of a joint.
 pub fn rows(joint: &Joint) -> Vec<Row> {
     use Row::*;

@@ -30,11 +30,11 @@
 //! called at every output time, so what was computed is never lost.
 
 use super::generalized_alpha::GaParameters;
-use super::initial::{initial_accelerations, load_nodes, prepare_layout};
+use super::initial::{self, initial_accelerations, load_nodes, prepare_layout};
 use super::linear::{Backend, LinearError, LinearSolver};
 use super::newton::{weighted_norm, Convergence, NewtonSettings, Verdict, Verification};
 use crate::assembly::{assemble, ConstraintRhs, Scaling};
-use crate::data::Data;
+use crate::data::{Data, Layout};
 use crate::elements::Coefficients;
 use crate::error::SolveError;
 use crate::model::Model;
@@ -181,6 +181,8 @@ pub struct Stats {
     /// Steps accepted at a singular configuration (regularized constraint block) with the
     /// configuration converged and the multipliers not determined by the equations.
     pub undetermined_multipliers: usize,
+    /// Times the redundant constraint rows were chosen again as the mechanism moved.
+    pub reselections: usize,
 }
 
 /// Why a step failed (before step-size reduction decides what to do).
@@ -209,6 +211,11 @@ pub struct Simulation<'m> {
     verify_solver: Option<LinearSolver>,
     /// Round-off floor of the scaled multipliers' tolerance (`n_active`).
     mu_floor: Vec<f64>,
+    /// Smallest relative pivot of the first factorization after the redundant rows were
+    /// chosen (see [`Self::watch_redundant_rows`]).
+    pivot_reference: Option<f64>,
+    /// Time of the first re-selection of redundant rows.
+    first_reselection: f64,
     /// State at the start of the current step (restored when a step is rejected).
     saved: State,
     /// Size of the constraint-block regularization when it is on (see [`Scaling`]).
@@ -309,6 +316,8 @@ impl<'m> Simulation<'m> {
             verification: None,
             verify_solver: None,
             mu_floor: Vec::new(),
+            pivot_reference: None,
+            first_reselection: 0.0,
             regularization: 1e-9 / mass_scale(model),
             regularized_steps: 0,
             jacobian: None,
@@ -333,6 +342,12 @@ impl<'m> Simulation<'m> {
             self.warnings.push(format!(
                 "{} steps passed singular configurations (a rank-deficient constraint matrix, e.g. a dead point): positions and velocities are converged there, the multipliers (joint reactions) are not determined by the equations at those steps",
                 self.stats.undetermined_multipliers
+            ));
+        }
+        if self.stats.reselections > 0 {
+            self.warnings.push(format!(
+                "the redundant constraint rows were chosen again {} times as the mechanism moved (first at t = {:.6e} s), where the rows kept came close to losing rank",
+                self.stats.reselections, self.first_reselection
             ));
         }
         if let Some(w) = self.verification.as_ref().and_then(Verification::warning) {
@@ -378,6 +393,7 @@ impl<'m> Simulation<'m> {
                     self.stats.steps += 1;
                     self.stats.max_iterations_in_a_step =
                         self.stats.max_iterations_in_a_step.max(iterations);
+                    self.watch_redundant_rows();
                     successes += 1;
                     anchor = if t_new == regular {
                         (anchor.0, anchor.1 + 1)
@@ -408,8 +424,12 @@ impl<'m> Simulation<'m> {
                         self.fresh_only = true;
                         continue;
                     }
-                    self.regularized_steps = REGULARIZED_STEPS;
                     self.state = self.saved.clone();
+                    if self.reselect_redundant_rows() {
+                        // The rows kept as independent had lost rank: retry with new ones.
+                        continue;
+                    }
+                    self.regularized_steps = REGULARIZED_STEPS;
                     successes = 0;
                     h = h_try * 0.25;
                     anchor = (self.state.t, 0);
@@ -443,6 +463,63 @@ impl<'m> Simulation<'m> {
             }
         }
         Ok(self.stats)
+    }
+
+    /// After an accepted step of a model with redundant constraint rows: when the smallest
+    /// relative pivot of the iteration matrix has fallen a hundredfold since the rows were
+    /// chosen, the kept rows may be losing rank; they are chosen again at the current
+    /// configuration ([`initial::reselect_redundant_rows`]). A genuine singular
+    /// configuration (a dead point) triggers the check too and keeps its rows.
+    fn watch_redundant_rows(&mut self) {
+        let layout = &self.data.layout;
+        if layout.n_active == layout.n_rows {
+            return;
+        }
+        let Some(pivot) = self.data.solver.min_pivot_ratio() else {
+            return;
+        };
+        match self.pivot_reference {
+            None => self.pivot_reference = Some(pivot),
+            Some(reference) if pivot < 1e-2 * reference => {
+                self.reselect_redundant_rows();
+                self.pivot_reference = None;
+            }
+            Some(_) => {}
+        }
+    }
+
+    /// Chooses the redundant constraint rows again at the current configuration; when they
+    /// change, rebuilds the data for the new rows (the multipliers of the rows removed now
+    /// are zero; the total constraint force, hence the motion, does not depend on which
+    /// rows carry it) and returns `true`.
+    fn reselect_redundant_rows(&mut self) -> bool {
+        let model = self.model;
+        let Some(redundant) =
+            initial::reselect_redundant_rows(model, &self.data.layout, &self.state.q)
+        else {
+            return false;
+        };
+        let mut layout = Layout::new(model);
+        layout.stabilized = self.data.layout.stabilized;
+        layout.deactivate_rows(model, &redundant);
+        let Ok(data) = Data::new(model, layout) else {
+            return false;
+        };
+        self.data = data;
+        load_nodes(&self.state, &mut self.data);
+        for &row in &redundant {
+            self.state.lambda[row] = 0.0;
+        }
+        self.saved.clone_from(&self.state);
+        self.jacobian = None;
+        self.previous.h = 0.0;
+        self.verify_solver = None;
+        self.pivot_reference = None;
+        self.stats.reselections += 1;
+        if self.stats.reselections == 1 {
+            self.first_reselection = self.state.t;
+        }
+        true
     }
 
     /// One generalized-alpha step to `t_new`; returns the Newton iterations used.

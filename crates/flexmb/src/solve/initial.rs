@@ -17,7 +17,7 @@ use crate::error::SolveError;
 use crate::joints;
 use crate::model::Model;
 use crate::state::State;
-use flexmb_lie::Mat6;
+use flexmb_lie::{Frame, Mat6};
 use nalgebra::DMatrix;
 
 /// Position-level tolerance of the initial configuration [m, or dimensionless for angles].
@@ -51,20 +51,13 @@ fn has_closed_loop(model: &Model) -> bool {
     false
 }
 
-/// Dense constraint matrix `B(q)` (`n_rows x n_dofs`) at the model's initial configuration.
-fn constraint_matrix(model: &Model, layout: &Layout) -> DMatrix<f64> {
+/// Dense constraint matrix `B(q)` (`n_rows x n_dofs`) at the node configurations `q`.
+fn constraint_matrix(model: &Model, layout: &Layout, q: &[Frame]) -> DMatrix<f64> {
     let mut b = DMatrix::zeros(layout.n_rows, layout.n_dofs);
-    let nodes: Vec<NodeState> = model
-        .nodes
-        .iter()
-        .map(|n| NodeState::ground(n.frame))
-        .collect();
+    let ground = NodeState::ground(Default::default());
     for (j, joint) in model.joints.iter().enumerate() {
         let slots = [joint.node_a, joint.node_b];
-        let pair = [
-            slots[0].map_or(NodeState::ground(Default::default()), |n| nodes[n.0]),
-            slots[1].map_or(NodeState::ground(Default::default()), |n| nodes[n.0]),
-        ];
+        let pair = slots.map(|s| s.map_or(ground, |n| NodeState::ground(q[n.0])));
         for (r, row) in layout.joint_rows[j].iter().enumerate() {
             let rv = joints::evaluate_row(model.group, joint, *row, &pair, 0.0);
             for (k, slot) in slots.iter().enumerate() {
@@ -79,6 +72,25 @@ fn constraint_matrix(model: &Model, layout: &Layout) -> DMatrix<f64> {
     b
 }
 
+/// The constraint rows ordered from the most to the least independent by a QR factorization
+/// with column pivoting of `B(q)^T` (Businger & Golub 1965), and the numerical rank of `B`.
+fn row_order(model: &Model, layout: &Layout, q: &[Frame]) -> (Vec<usize>, usize) {
+    let b = constraint_matrix(model, layout, q);
+    let qr = b.transpose().col_piv_qr();
+    let r = qr.r();
+    let k = r.nrows().min(r.ncols());
+    let scale = (0..k).map(|i| r[(i, i)].abs()).fold(0.0, f64::max);
+    let rank = (0..k)
+        .take_while(|&i| r[(i, i)].abs() > RANK_TOLERANCE * scale)
+        .count();
+    let mut order = DMatrix::from_fn(1, layout.n_rows, |_, j| j as f64);
+    qr.p().permute_columns(&mut order);
+    (
+        (0..layout.n_rows).map(|i| order[(0, i)] as usize).collect(),
+        rank,
+    )
+}
+
 /// Layout of the unknowns with redundant constraint rows removed; also returns a warning
 /// per removed row.
 pub fn prepare_layout(model: &Model) -> (Layout, Vec<String>) {
@@ -87,35 +99,58 @@ pub fn prepare_layout(model: &Model) -> (Layout, Vec<String>) {
     if layout.n_rows == 0 || !has_closed_loop(model) {
         return (layout, warnings);
     }
-    let b = constraint_matrix(model, &layout);
-    let qr = b.transpose().col_piv_qr();
-    let r = qr.r();
-    let k = r.nrows().min(r.ncols());
-    let scale = (0..k).map(|i| r[(i, i)].abs()).fold(0.0, f64::max);
-    let rank = (0..k)
-        .take_while(|&i| r[(i, i)].abs() > RANK_TOLERANCE * scale)
-        .count();
+    let q0: Vec<Frame> = model.nodes.iter().map(|n| n.frame).collect();
+    let (order, rank) = row_order(model, &layout, &q0);
     if rank == layout.n_rows {
         return (layout, warnings);
     }
-    // Order of the rows after pivoting: the first `rank` are independent.
-    let mut order = DMatrix::from_fn(1, layout.n_rows, |_, j| j as f64);
-    qr.p().permute_columns(&mut order);
-    let redundant: Vec<usize> = (rank..layout.n_rows)
-        .map(|i| order[(0, i)] as usize)
-        .collect();
-    for &row in &redundant {
-        let (j, r) = locate_row(&layout, row);
+    // The first `rank` rows of the pivot order are independent.
+    let redundant = &order[rank..];
+    for &row in redundant {
         warnings.push(format!(
-            "joint '{}' ({}): constraint row {} ({:?}) is redundant and was removed; its reaction is carried by the other joints of the loop",
-            model.joints[j].name,
-            model.joints[j].kind.name(),
-            r + 1,
-            layout.joint_rows[j][r]
+            "{} is redundant and was removed; its reaction is carried by the other joints of the loop",
+            describe_row(model, &layout, row)
         ));
     }
-    layout.deactivate_rows(model, &redundant);
+    layout.deactivate_rows(model, redundant);
     (layout, warnings)
+}
+
+/// Which rows to remove as redundant at the configuration `q`, keeping their number: the
+/// last of the pivot order of [`row_order`]; `None` when that is the set removed already.
+///
+/// The rows found redundant at the start are independent of the others at the start only:
+/// as a closed loop moves, the self-stress of the loop (the left null vector of `B`) can
+/// lose its component along a removed row, and the kept rows then lose rank although `B`
+/// does not (the Bricard mechanism at the lowest point of P3 when each rod's node sits at
+/// its first joint). Choosing the rows again at the current configuration keeps the kept
+/// rows a well-conditioned basis for the whole motion.
+pub fn reselect_redundant_rows(model: &Model, layout: &Layout, q: &[Frame]) -> Option<Vec<usize>> {
+    let count = layout.n_rows - layout.n_active;
+    if count == 0 {
+        return None;
+    }
+    let (order, _) = row_order(model, layout, q);
+    let mut redundant = order[layout.n_rows - count..].to_vec();
+    redundant.sort_unstable();
+    let current: Vec<usize> = (0..layout.n_rows)
+        .filter(|&r| layout.row_unknown[r].is_none())
+        .collect();
+    (redundant != current).then_some(redundant)
+}
+
+/// A constraint row in the words of its joint, e.g. "revolute joint 'P5', row 3
+/// (translation along the joint's z axis)".
+pub fn describe_row(model: &Model, layout: &Layout, row: usize) -> String {
+    let (j, r) = locate_row(layout, row);
+    let joint = &model.joints[j];
+    format!(
+        "{} joint '{}', row {} ({})",
+        joint.kind.name(),
+        joint.name,
+        r + 1,
+        layout.joint_rows[j][r].describe()
+    )
 }
 
 /// `(joint, row within joint)` of a global row index.
@@ -158,13 +193,9 @@ pub fn initial_accelerations(
     assemble(model, data, state.t, &zeros, &sc, false);
     if let Some((row, v)) = worst(&data.phi) {
         if v > POSITION_TOLERANCE {
-            let (j, r) = locate_row(&data.layout, row);
             return Err(SolveError::InconsistentInitialConditions(format!(
-                "joint '{}' ({}) is violated by {v:.3e} in its row {} ({:?}) at t = {}: the initial positions/orientations of its nodes do not satisfy it (tolerance {POSITION_TOLERANCE:e})",
-                model.joints[j].name,
-                model.joints[j].kind.name(),
-                r + 1,
-                data.layout.joint_rows[j][r],
+                "{} is violated by {v:.3e} at t = {}: the initial positions/orientations of its nodes do not satisfy it (tolerance {POSITION_TOLERANCE:e})",
+                describe_row(model, &data.layout, row),
                 state.t
             )));
         }
