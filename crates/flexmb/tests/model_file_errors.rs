@@ -1025,7 +1025,10 @@ fn beam_errors_name_their_field() {
     assert_contains(&e, &["field 'beam[1].section.nu'", "either G or nu"]);
     // A stiffness matrix that is symmetric but not positive definite: Model::validate, at the
     // section's line, naming the element.
-    let e = beams_with("[[1e6, 0, 0,", "[[-1e6, 0, 0,");
+    let e = beams_with(
+        "[[1e6, 0, 0, 0, 0, 0], [0, 1e6,",
+        "[[1e6, 2e6, 0, 0, 0, 0], [2e6, 1e6,",
+    );
     assert_contains(
         &e,
         &[

@@ -1,9 +1,12 @@
 //! `[[beam]]`: meshing of straight and circular beams into nodes and two-node beam elements,
 //! and the cross-section forms.
 
-use super::build::{nonzero_vec3, positive, read_name, require_node, Origin, Origins};
-use super::reader::{describe, name_list, suggestion, Field, Result, Table};
-use crate::model::{BeamMass, BeamSection, Model, NodeId};
+use super::build::{
+    nonzero_vec3, physical, physical_or_zero, point, read_name, require_node, Origin, Origins,
+};
+use super::reader::{describe, name_list, out_of_range, suggestion, Field, Result, Table, QUOTED};
+use crate::model::limits::{within, MAX_ITEMS, MAX_KINEMATIC, MAX_PHYSICAL, MIN_PHYSICAL};
+use crate::model::{clip, BeamMass, BeamSection, Model, NodeId};
 use flexmb_lie::{so3, Frame, Mat3, Mat6, Vec3};
 use std::collections::HashMap;
 use toml::de::DeValue;
@@ -155,7 +158,7 @@ pub(super) fn read_beams(
                     "give either start (a point) or start_node (an existing node), not both",
                 ))
             }
-            (Some(f), None) => (f.vec3()?, None),
+            (Some(f), None) => (point(&f)?, None),
             (None, Some(f)) => {
                 let id = require_node(model, &f)?;
                 (model.nodes[id.0].frame.x, Some(id))
@@ -174,6 +177,11 @@ pub(super) fn read_beams(
             return Err(ef.err(format!("must be between 1 and {MAX_ELEMENTS}, got {n}")));
         }
         let n = n as usize;
+        if model.nodes.len() + n > MAX_ITEMS || model.beams.len() + n > MAX_ITEMS {
+            return Err(ef.err(format!(
+                "the model would have more than {MAX_ITEMS} nodes or beam elements (the limit of a model's size)"
+            )));
+        }
 
         // Axis line.
         let axis = match (t.field("end"), t.field("arc")) {
@@ -190,7 +198,7 @@ pub(super) fn read_beams(
                 ))
             }
             (Some(f), None) => {
-                let end = f.vec3()?;
+                let end = point(&f)?;
                 let axis = Axis::Straight { start, end };
                 let length = axis.length();
                 if !(length > 0.0 && length.is_finite()) {
@@ -255,11 +263,7 @@ pub(super) fn read_beams(
                 ("stiffness", &mut section.damping_stiffness),
             ] {
                 if let Some(v) = d.field(key) {
-                    let x = v.f64()?;
-                    if x < 0.0 {
-                        return Err(v.err(format!("must be >= 0, got {x}")));
-                    }
-                    *slot = x;
+                    *slot = physical_or_zero(&v)?;
                 }
             }
         }
@@ -271,8 +275,12 @@ pub(super) fn read_beams(
         };
 
         // Initial velocity: a rigid-body field v(p) = v_start + omega x (p - start).
-        let v_start = t.opt_vec3("velocity")?.unwrap_or_else(Vec3::zeros);
-        let omega = t.opt_vec3("angular_velocity")?.unwrap_or_else(Vec3::zeros);
+        let kinematic = |key| {
+            t.field(key)
+                .map_or(Ok(Vec3::zeros()), |f| f.vec3_within(MAX_KINEMATIC))
+        };
+        let v_start = kinematic("velocity")?;
+        let omega = kinematic("angular_velocity")?;
         if n == 1 && start_node.is_some() && end_node.is_some() {
             for key in ["velocity", "angular_velocity"] {
                 if t.has(key) {
@@ -326,6 +334,8 @@ pub(super) fn read_beams(
 
         // Elements.
         let key = if t.has("arc") { "arc" } else { "end" };
+        let first = model.beams.len();
+        origins.beam_elements.insert(name.clone(), first..first + n);
         for i in 0..n {
             let element = format!("{name}[{i}]");
             model.add_beam_with_mass(
@@ -365,7 +375,7 @@ fn read_arc(f: &Field<'_>, start: Vec3, n: usize) -> Result<Axis> {
     let t = f.table()?;
     t.check_keys(&["center", "axis", "angle_deg"])?;
     let cf = t.req("center")?;
-    let center = cf.vec3()?;
+    let center = point(&cf)?;
     let axis = nonzero_vec3(&t.req("axis")?)?.normalize();
     let af = t.req("angle_deg")?;
     let angle_deg = af.f64()?;
@@ -441,7 +451,7 @@ fn read_section(f: &Field<'_>) -> Result<BeamSection> {
         ));
     }
     t.check_keys(keys)?;
-    let num = |k: &str| positive(&t.req(k)?);
+    let num = |k: &str| physical(&t.req(k)?);
     let section = match form {
         "sectional properties" => BeamSection::diagonal(
             [
@@ -461,7 +471,7 @@ fn read_section(f: &Field<'_>) -> Result<BeamSection> {
                 (Some(_), Some(_)) => {
                     return Err(t.key_name_err("nu", "give either G or nu, not both"))
                 }
-                (Some(g), None) => positive(&g)?,
+                (Some(g), None) => physical(&g)?,
                 (None, Some(nf)) => {
                     let nu = nf.f64()?;
                     if !(nu > -1.0 && nu <= 0.5) {
@@ -476,12 +486,12 @@ fn read_section(f: &Field<'_>) -> Result<BeamSection> {
             let (a, i2, i3, j, rho) = (num("A")?, num("I2")?, num("I3")?, num("J")?, num("rho")?);
             let k2 = t
                 .field("k2")
-                .map(|f| positive(&f))
+                .map(|f| physical(&f))
                 .transpose()?
                 .unwrap_or(1.0);
             let k3 = t
                 .field("k3")
-                .map(|f| positive(&f))
+                .map(|f| physical(&f))
                 .transpose()?
                 .unwrap_or(1.0);
             BeamSection::diagonal(
@@ -498,17 +508,28 @@ fn read_section(f: &Field<'_>) -> Result<BeamSection> {
             damping_stiffness: 0.0,
         },
     };
-    let finite = section
-        .stiffness
-        .iter()
-        .all(|c| c.is_finite() && c.abs() < 1e150)
-        && section
-            .rotary_inertia
-            .iter()
-            .all(|c| c.is_finite() && c.abs() < 1e150)
-        && section.mass_per_length < 1e150;
-    if !finite {
-        return Err(f.err("has values that are not finite or exceed 1e150"));
+    // Entries of the matrices, and products of material and geometry, in range.
+    let c = &section.stiffness;
+    let j = &section.rotary_inertia;
+    let entries = c.iter().chain(j.iter());
+    if let Some(v) = entries
+        .copied()
+        .find(|v| !within(v.abs(), 0.0, MAX_PHYSICAL))
+    {
+        return Err(f.err(format!(
+            "has a sectional value {v:e}: {}",
+            out_of_range(v, -MAX_PHYSICAL, MAX_PHYSICAL)
+        )));
+    }
+    let diagonal = (0..6)
+        .map(|k| c[(k, k)])
+        .chain((0..3).map(|k| j[(k, k)]))
+        .chain([section.mass_per_length]);
+    if let Some(v) = diagonal.into_iter().find(|v| *v < MIN_PHYSICAL) {
+        return Err(f.err(format!(
+            "has a sectional stiffness, mass or rotary inertia of {v:e}: {}",
+            out_of_range(v, MIN_PHYSICAL, MAX_PHYSICAL)
+        )));
     }
     Ok(section)
 }
@@ -564,33 +585,32 @@ fn read_rotary_inertia(f: &Field<'_>) -> Result<Mat3> {
     }
 }
 
-/// The index in `Model::beams` of the element named by `f` (`"leg[3]"`).
-pub(super) fn require_element(model: &Model, f: &Field<'_>) -> Result<usize> {
+/// The index in `Model::beams` of the element named by `f` (`"leg[3]"`): element `i` of the
+/// beam of that name, found through `origins.beam_elements`.
+pub(super) fn require_element(model: &Model, origins: &Origins, f: &Field<'_>) -> Result<usize> {
     let name = f.str()?;
-    if let Some(i) = model.beams.iter().position(|b| b.name == name) {
-        return Ok(i);
+    let element = name
+        .strip_suffix(']')
+        .and_then(|r| r.rsplit_once('['))
+        .and_then(|(beam, i)| Some((origins.beam_elements.get(beam)?, i.parse::<usize>().ok()?)))
+        .filter(|(range, i)| *i < range.len())
+        .map(|(range, i)| range.start + i)
+        .filter(|&k| model.beams.get(k).is_some_and(|b| b.name == name));
+    if let Some(k) = element {
+        return Ok(k);
     }
-    let names = || model.beams.iter().map(|b| b.name.as_str());
-    let prefix = format!("{name}[");
-    let of_beam = model
-        .beams
-        .iter()
-        .filter(|b| {
-            b.name
-                .strip_prefix(&prefix)
-                .and_then(|r| r.strip_suffix(']'))
-                .is_some_and(|i| i.parse::<usize>().is_ok())
-        })
-        .count();
-    if of_beam > 0 {
+    let shown = clip(name, QUOTED);
+    if let Some(range) = origins.beam_elements.get(name) {
+        let of_beam = range.len();
         return Err(f.err(format!(
-            "'{name}' is a [[beam]] of {of_beam} element{}; name one of its elements, '{name}[0]' to '{name}[{}]'",
+            "'{shown}' is a [[beam]] of {of_beam} element{}; name one of its elements, '{shown}[0]' to '{shown}[{}]'",
             if of_beam == 1 { "" } else { "s" },
             of_beam - 1
         )));
     }
+    let names = || model.beams.iter().map(|b| b.name.as_str());
     Err(f.err(format!(
-        "unknown beam element '{name}'{} (beam elements: {})",
+        "unknown beam element '{shown}'{} (beam elements: {})",
         suggestion(name, names()),
         name_list(names(), 12)
     )))

@@ -2,12 +2,15 @@
 //! analysis settings, and maps [`Model::validate`] errors back to the file.
 
 use super::error::{InputError, ItemLabel};
-use super::reader::{name_list, suggestion, Field, Result, Source, Span, Table, Value};
+use super::reader::{name_list, suggestion, Field, Result, Source, Span, Table, Value, QUOTED};
 use super::{Analysis, ModelFile};
 use crate::error::ModelError;
+use crate::model::limits::{
+    within, MAX_ANGLE, MAX_KINEMATIC, MAX_PHYSICAL, MAX_STEPS, MAX_TIME, MIN_PHYSICAL, MIN_STEP,
+};
 use crate::model::{
-    box_inertia, frame_from_axis, rotation_from_vector, JointKind, Load, LoadFrame, Model, NodeId,
-    Sensor, SensorFrame, SensorKind, SpringDamper, TimeFunction,
+    box_inertia, clip, frame_from_axis, rotation_from_vector, JointKind, Load, LoadFrame, Model,
+    NodeId, Sensor, SensorFrame, SensorKind, SpringDamper, TimeFunction,
 };
 use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
 use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
@@ -85,6 +88,8 @@ impl Origin {
 
 #[derive(Default)]
 pub(super) struct Origins {
+    /// The `[model]` table.
+    model: Option<Origin>,
     pub nodes: Vec<Origin>,
     bodies: Vec<Origin>,
     joints: Vec<Origin>,
@@ -93,6 +98,8 @@ pub(super) struct Origins {
     /// One per element of `Model::beams`.
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
+    /// The elements of each `[[beam]]` (indices in `Model::beams`), by the beam's name.
+    pub beam_elements: HashMap<String, std::ops::Range<usize>>,
 }
 
 pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
@@ -125,11 +132,17 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     };
     let mut model = Model::new(group);
     model.title = title;
-    model.gravity = mt.opt_vec3("gravity")?.unwrap_or_else(Vec3::zeros);
+    model.gravity = match mt.field("gravity") {
+        Some(f) => f.vec3_within(MAX_KINEMATIC)?,
+        None => Vec3::zeros(),
+    };
 
     let analysis = read_solver(&top.req("solver")?.table()?)?;
 
-    let mut origins = Origins::default();
+    let mut origins = Origins {
+        model: Some(Origin::of(&mt)),
+        ..Origins::default()
+    };
     // Beams are meshed after the nodes of [[node]] and [[body]] exist (a beam may start at
     // them) and before the bodies are attached (a body may sit on a beam node).
     read_nodes_and_bodies(
@@ -158,14 +171,17 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
     let message = match e {
         ModelError::Invalid { message, .. } => message,
     };
+    let model_origin = origins.model.as_slice();
     let list = match item.table {
+        "model" => model_origin,
         "node" => &origins.nodes,
         "body" => &origins.bodies,
         "joint" => &origins.joints,
         "load" => &origins.loads,
         "spring" => &origins.springs,
         "beam" => &origins.beams,
-        _ => &origins.sensors,
+        "sensor" => &origins.sensors,
+        _ => &[],
     };
     match list.get(item.index) {
         Some(o) => {
@@ -199,31 +215,52 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
     }
 }
 
-pub(super) fn positive(f: &Field<'_>) -> Result<f64> {
+/// A positive physical constant (mass, section property, ...) in
+/// `[MIN_PHYSICAL, MAX_PHYSICAL]`.
+pub(super) fn physical(f: &Field<'_>) -> Result<f64> {
     let v = f.f64()?;
-    if v > 0.0 {
-        Ok(v)
-    } else {
-        Err(f.err(format!("must be positive, got {v}")))
+    if v <= 0.0 {
+        return Err(f.err(format!("must be positive, got {v}")));
     }
+    f.f64_in(MIN_PHYSICAL, MAX_PHYSICAL)
 }
 
-pub(super) fn non_negative(f: &Field<'_>) -> Result<f64> {
+/// A constant that may be 0 (stiffness or damping of a spring, damping of a beam), at most
+/// `MAX_PHYSICAL`.
+pub(super) fn physical_or_zero(f: &Field<'_>) -> Result<f64> {
     let v = f.f64()?;
-    if v >= 0.0 {
-        Ok(v)
-    } else {
-        Err(f.err(format!("must be >= 0, got {v}")))
+    if v < 0.0 {
+        return Err(f.err(format!("must be >= 0, got {v}")));
     }
+    f.f64_in(0.0, MAX_PHYSICAL)
 }
 
+/// A direction: any length from 1e-12 to the coordinate range.
 pub(super) fn nonzero_vec3(f: &Field<'_>) -> Result<Vec3> {
-    let v = f.vec3()?;
-    if v.norm() > 1e-12 && v.norm().is_finite() {
+    let v = f.vec3_within(MAX_KINEMATIC)?;
+    if v.norm() > 1e-12 {
         Ok(v)
     } else {
-        Err(f.err("must be a non-zero vector"))
+        Err(f.err("must be a non-zero vector (length above 1e-12)"))
     }
+}
+
+/// A position or point in the coordinate range.
+pub(super) fn point(f: &Field<'_>) -> Result<Vec3> {
+    f.vec3_within(MAX_KINEMATIC)
+}
+
+fn opt_point(t: &Table<'_>, key: &str) -> Result<Option<Vec3>> {
+    t.field(key).map(|f| point(&f)).transpose()
+}
+
+/// The key among `keys` (in order of preference) to blame for a value derived from them: the
+/// first one a `--set` gave, else the first one in the file, else the first.
+fn blame<'k>(t: &Table<'_>, keys: &[&'k str]) -> &'k str {
+    keys.iter()
+        .find(|k| t.has(k) && t.src.set_by(&t.child_path(k)).is_some())
+        .or_else(|| keys.iter().find(|k| t.has(k)))
+        .unwrap_or(&keys[0])
 }
 
 /// Keys of `[solver]` common to both analyses (the Newton settings).
@@ -296,10 +333,10 @@ fn read_solver(t: &Table<'_>) -> Result<Analysis> {
 /// The Newton keys shared by both analyses, over the analysis' defaults.
 fn read_newton(t: &Table<'_>, mut n: NewtonSettings) -> Result<NewtonSettings> {
     if let Some(f) = t.field("rtol") {
-        n.rtol = positive(&f)?;
+        n.rtol = f.f64_in(MIN_PHYSICAL, 1.0)?;
     }
     if let Some(f) = t.field("atol") {
-        n.atol = positive(&f)?;
+        n.atol = f.f64_in(MIN_PHYSICAL, MAX_PHYSICAL)?;
     }
     if let Some(f) = t.field("max_iterations") {
         let v = f.int()?;
@@ -327,15 +364,32 @@ fn read_static(t: &Table<'_>) -> Result<StaticSettings> {
         if s.load_factor == 0.0 {
             return Err(f.err("must not be 0 (the final load factor)"));
         }
+        if !within(s.load_factor.abs(), MIN_STEP, f64::INFINITY) {
+            f.f64_in(MIN_STEP, MAX_TIME)?;
+        }
+        f.f64_in(-MAX_TIME, MAX_TIME)?;
     }
+    // Increments are steps in the load factor, which plays the role of time.
     if let Some(f) = t.field("increment") {
-        s.initial_increment = positive(&f)?;
+        s.initial_increment = positive_step(&f)?;
     }
     if let Some(f) = t.field("min_increment") {
-        s.min_increment = positive(&f)?;
+        s.min_increment = positive_step(&f)?;
     }
     if let Some(f) = t.field("max_increment") {
-        s.max_increment = positive(&f)?;
+        s.max_increment = positive_step(&f)?;
+    }
+    // The load factor must advance by the smallest increment: 1e-12 of it at least.
+    let floor = MIN_STEP * s.load_factor.abs().max(1.0);
+    if s.min_increment < floor {
+        let key = blame(t, &["min_increment", "load_factor"]);
+        return Err(t.key_err(
+            key,
+            format!(
+                "min_increment = {:e} is below 1e-12 times the load factor {} ({floor:e}): the load factor would not advance; raise min_increment",
+                s.min_increment, s.load_factor
+            ),
+        ));
     }
     if s.min_increment > s.max_increment {
         let key = if t.has("min_increment") {
@@ -377,19 +431,33 @@ fn read_static(t: &Table<'_>) -> Result<StaticSettings> {
             if s.method != StaticMethod::PseudoDynamic {
                 return Err(t.key_name_err(key, "only allowed with method = \"pseudo_dynamic\""));
             }
-            let v = positive(&f)?;
             if key == "pseudo_time" {
-                s.pseudo_time = v;
+                s.pseudo_time = positive_step(&f)?;
             } else {
-                s.pseudo_damping = v;
+                s.pseudo_damping = f.f64_in(MIN_PHYSICAL, MAX_KINEMATIC)?;
             }
+        }
+    }
+    if s.method == StaticMethod::PseudoDynamic {
+        // The pseudo-dynamic run takes steps of increment x pseudo_time over 2 pseudo_time.
+        let h = s.initial_increment * s.pseudo_time;
+        let steps = 2.0 / s.initial_increment;
+        if !within(h, MIN_STEP, MAX_TIME) || steps > MAX_STEPS {
+            let key = blame(t, &["increment", "pseudo_time"]);
+            return Err(t.key_err(
+                key,
+                format!(
+                    "the pseudo-dynamic step increment x pseudo_time = {h:e} s over 2 pseudo_time ({steps:e} steps) must be at least {MIN_STEP:e} s and make at most {MAX_STEPS:e} steps"
+                ),
+            ));
         }
     }
     if let Some(f) = t.field("arc_length") {
         if s.method != StaticMethod::ArcLength {
             return Err(t.key_name_err("arc_length", "only allowed with method = \"arc_length\""));
         }
-        s.arc_length = positive(&f)?;
+        // Its minimum, 1e-6 of it, stays a meaningful length (>= 1e-15).
+        s.arc_length = f.f64_in(1e-9, MAX_KINEMATIC)?;
     }
     if let Some(f) = t.field("max_steps") {
         s.max_steps = count(&f, 100_000_000)?;
@@ -404,8 +472,17 @@ fn read_static(t: &Table<'_>) -> Result<StaticSettings> {
 }
 
 fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
-    let t_end = positive(&t.req("t_end")?)?;
-    let h = positive(&t.req("h")?)?;
+    let t_end = positive_step(&t.req("t_end")?)?;
+    let h = positive_step(&t.req("h")?)?;
+    if t_end / h > MAX_STEPS {
+        return Err(t.key_err(
+            blame(t, &["h", "t_end"]),
+            format!(
+                "t_end / h = {:e} steps exceeds {MAX_STEPS:e} (t_end = {t_end:e}, h = {h:e}): beyond it t + h loses the precision of the step; increase h or reduce t_end",
+                t_end / h
+            ),
+        ));
+    }
     let mut s = DynamicSettings::new(t_end, h);
     if let Some(f) = t.field("rho_inf") {
         s.rho_inf = f.f64()?;
@@ -414,13 +491,31 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
         }
     }
     if let Some(f) = t.field("output_interval") {
-        s.output_interval = non_negative(&f)?;
+        let v = f.f64()?;
+        if v != 0.0 {
+            s.output_interval = positive_step(&f)?;
+            if t_end / v > MAX_STEPS {
+                return Err(t.key_err(
+                    blame(t, &["output_interval", "t_end"]),
+                    format!(
+                        "t_end / output_interval = {:e} outputs exceeds {MAX_STEPS:e}: give 0 (every step) or a longer interval",
+                        t_end / v
+                    ),
+                ));
+            }
+        } else {
+            s.output_interval = 0.0;
+        }
     }
     if let Some(f) = t.field("h_min") {
-        s.h_min = positive(&f)?;
-        if s.h_min > h {
-            return Err(f.err(format!("must not exceed h = {h}, got {}", s.h_min)));
-        }
+        // Below 1e-12 h, steps would not advance the time within rounding.
+        s.h_min = f.f64_in(MIN_STEP * h, h).map_err(|_| {
+            f.err(format!(
+                "must be between 1e-12 h = {:e} and h = {h:e}, got {:e}",
+                MIN_STEP * h,
+                f.f64().unwrap_or(f64::NAN)
+            ))
+        })?;
     }
     if let Some(f) = t.field("formulation") {
         s.formulation = match f.choice(&["auto", "index3", "index2"])? {
@@ -452,8 +547,14 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
             s.scheme = crate::solve::Scheme::Hht { alpha };
         }
         Some("newmark") => {
-            let beta = t.opt_f64("newmark_beta")?.unwrap_or(0.25);
-            let gamma = t.opt_f64("newmark_gamma")?.unwrap_or(0.5);
+            let beta = match t.field("newmark_beta") {
+                Some(f) => f.f64_in(0.0, 100.0)?,
+                None => 0.25,
+            };
+            let gamma = match t.field("newmark_gamma") {
+                Some(f) => f.f64_in(0.0, 10.0)?,
+                None => 0.5,
+            };
             if !(gamma >= 0.5 && beta >= 0.25 * (gamma + 0.5).powi(2) - 1e-12) {
                 let f = t
                     .field("newmark_beta")
@@ -471,7 +572,7 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
         s.newton.reuse_jacobian = f.bool()?;
     }
     if let Some(f) = t.field("max_contraction") {
-        s.newton.max_contraction = positive(&f)?;
+        s.newton.max_contraction = f.f64_in(MIN_PHYSICAL, 1.0)?;
         if s.newton.max_contraction >= 1.0 {
             return Err(f.err(format!("must be below 1, got {}", s.newton.max_contraction)));
         }
@@ -499,7 +600,8 @@ pub(super) fn read_name(
     }
     if let Some(first) = seen.get(name) {
         return Err(f.err(format!(
-            "duplicate {what} name '{name}' (already used by {first})"
+            "duplicate {what} name '{}' (already used by {first})",
+            clip(name, QUOTED)
         )));
     }
     seen.insert(name.to_string(), t.path.clone());
@@ -538,7 +640,17 @@ fn read_orientation(f: &Field<'_>) -> Result<Mat3> {
         None => Err(f.err(
             "give one of rotation_vector = [3], quaternion = [w, x, y, z], axis = [3] with angle_deg, matrix = [[3], [3], [3]]",
         )),
-        Some("rotation_vector") => Ok(rotation_from_vector(&t.req("rotation_vector")?.vec3()?)),
+        Some("rotation_vector") => {
+            let f = t.req("rotation_vector")?;
+            let v = f.vec3_within(MAX_ANGLE)?;
+            if v.norm() > MAX_ANGLE {
+                return Err(f.err(format!(
+                    "has an angle |v| = {:e} rad beyond {MAX_ANGLE:e}: a double no longer holds the orientation to 1e-10",
+                    v.norm()
+                )));
+            }
+            Ok(rotation_from_vector(&v))
+        }
         Some("quaternion") => {
             let q = t.req("quaternion")?;
             let v = q.numbers(4, "a quaternion [w, x, y, z] of 4 numbers")?;
@@ -550,7 +662,7 @@ fn read_orientation(f: &Field<'_>) -> Result<Mat3> {
         }
         Some("axis") => {
             let axis = nonzero_vec3(&t.req("axis")?)?;
-            let angle = t.req("angle_deg")?.f64()?;
+            let angle = t.req("angle_deg")?.f64_in(-MAX_ANGLE, MAX_ANGLE)?;
             Ok(rotation_from_vector(&(axis.normalize() * angle.to_radians())))
         }
         _ => {
@@ -569,14 +681,14 @@ fn read_orientation(f: &Field<'_>) -> Result<Mat3> {
 }
 
 fn read_node_init(t: &Table<'_>) -> Result<NodeInit> {
-    let position = t.opt_vec3("position")?.unwrap_or_else(Vec3::zeros);
+    let position = opt_point(t, "position")?.unwrap_or_else(Vec3::zeros);
     let r = match t.field("orientation") {
         Some(f) => read_orientation(&f)?,
         None => Mat3::identity(),
     };
-    let velocity = t.opt_vec3("velocity")?.unwrap_or_else(Vec3::zeros);
-    let inertial = t.opt_vec3("angular_velocity")?;
-    let body = t.opt_vec3("angular_velocity_body")?;
+    let velocity = opt_point(t, "velocity")?.unwrap_or_else(Vec3::zeros);
+    let inertial = opt_point(t, "angular_velocity")?;
+    let body = opt_point(t, "angular_velocity_body")?;
     let angular_velocity =
         match (inertial, body) {
             (Some(_), Some(_)) => return Err(t.key_err(
@@ -608,7 +720,7 @@ fn read_inertia(f: &Field<'_>, mass: f64) -> Result<Mat3> {
             let t = f.table()?;
             t.check_keys(&["box"])?;
             let b = t.req("box")?;
-            let sides = b.vec3()?;
+            let sides = b.vec3_within(MAX_KINEMATIC)?;
             if sides.iter().any(|&s| s < 0.0) {
                 return Err(b.err("side lengths must be >= 0"));
             }
@@ -639,9 +751,10 @@ fn read_inertia(f: &Field<'_>, mass: f64) -> Result<Mat3> {
             )))
         }
     };
-    // Bounded so that the eigenvalue checks of `Model::validate` stay in floating-point range.
-    if !inertia.iter().all(|c| c.abs() < 1e100) {
-        return Err(f.err("has values that are not finite or exceed 1e100"));
+    if let Some(c) = inertia.iter().find(|c| !within(c.abs(), 0.0, MAX_PHYSICAL)) {
+        return Err(f.err(format!(
+            "has a value {c:e} beyond {MAX_PHYSICAL:e} (see 'Ranges' in docs/model-format.md)"
+        )));
     }
     Ok(inertia)
 }
@@ -717,8 +830,8 @@ fn read_nodes_and_bodies(
             Some(id) => id,
             None => require_node(model, &t.req("node")?)?,
         };
-        let mass = t.req("mass")?.f64()?;
-        let com = t.opt_vec3("com")?.unwrap_or_else(Vec3::zeros);
+        let mass = physical(&t.req("mass")?)?;
+        let com = opt_point(t, "com")?.unwrap_or_else(Vec3::zeros);
         let inertia = read_inertia(&t.req("inertia")?, mass)?;
         model.add_body(name, node, mass, com, inertia);
         origins.bodies.push(Origin::of(t));
@@ -747,7 +860,8 @@ fn resolve_node(model: &Model, f: &Field<'_>, ground_ok: bool) -> Result<Option<
     model.node_id(name).map(Some).ok_or_else(|| {
         let names = || model.nodes.iter().map(|n| n.name.as_str());
         f.err(format!(
-            "unknown node '{name}'{} (nodes: {}{})",
+            "unknown node '{}'{} (nodes: {}{})",
+            clip(name, QUOTED),
             suggestion(name, names()),
             name_list(names(), 12),
             if ground_ok { ", or 'ground'" } else { "" }
@@ -770,21 +884,32 @@ fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
         _ => &["type", "omega", "duration"],
     };
     t.check_keys(keys)?;
-    let num = |k: &str| t.req(k)?.f64();
-    let num_or = |k: &str, d: f64| t.opt_f64(k).map(|v| v.unwrap_or(d));
+    // Values (a factor, or rad or m), times, rates and angles, each in its range.
+    let num = |k: &str| t.req(k)?.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL);
+    let num_or = |k: &str, d: f64| {
+        t.field(k)
+            .map_or(Ok(d), |f| f.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL))
+    };
+    let time = |k: &str| t.req(k)?.f64_in(-MAX_TIME, MAX_TIME);
     Ok(match kind {
         "constant" => TimeFunction::Constant {
             value: num("value")?,
         },
         "linear" => TimeFunction::Linear {
             slope: num("slope")?,
-            start: num_or("start", 0.0)?,
+            start: match t.field("start") {
+                Some(f) => f.f64_in(-MAX_TIME, MAX_TIME)?,
+                None => 0.0,
+            },
             offset: num_or("offset", 0.0)?,
         },
         "ramp" => {
-            let (t0, t1) = (num("t0")?, num("t1")?);
-            if t1 <= t0 {
-                return Err(t.key_err("t1", format!("must be greater than t0 = {t0}, got {t1}")));
+            let (t0, t1) = (time("t0")?, time("t1")?);
+            if t1 - t0 < MIN_STEP {
+                return Err(t.key_err(
+                    "t1",
+                    format!("must exceed t0 = {t0} by at least {MIN_STEP:e}, got {t1}"),
+                ));
             }
             TimeFunction::Ramp {
                 t0,
@@ -793,13 +918,16 @@ fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
             }
         }
         "step" => TimeFunction::Step {
-            t0: num("t0")?,
+            t0: time("t0")?,
             value: num("value")?,
         },
         "sine" => TimeFunction::Sine {
             amplitude: num("amplitude")?,
-            frequency: num("frequency")?,
-            phase: num_or("phase", 0.0)?,
+            frequency: t.req("frequency")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,
+            phase: match t.field("phase") {
+                Some(f) => f.f64_in(-MAX_ANGLE, MAX_ANGLE)?,
+                None => 0.0,
+            },
             offset: num_or("offset", 0.0)?,
         },
         "table" => {
@@ -812,10 +940,14 @@ fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
             for (i, v) in arr.iter().enumerate() {
                 let e = pf.elem(i, v);
                 let p = e.numbers(2, "a point [t, value]")?;
+                if let toml::de::DeValue::Array(tv) = v.get_ref() {
+                    e.elem(0, &tv[0]).f64_in(-MAX_TIME, MAX_TIME)?;
+                    e.elem(1, &tv[1]).f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?;
+                }
                 if let Some(&(prev, _)) = points.last() {
-                    if p[0] <= prev {
+                    if p[0] - prev < MIN_STEP {
                         return Err(e.err(format!(
-                            "times must be strictly increasing, got t = {} after t = {prev}",
+                            "times must be strictly increasing (by at least {MIN_STEP:e}), got t = {} after t = {prev}",
                             p[0]
                         )));
                     }
@@ -825,8 +957,8 @@ fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
             TimeFunction::Table { points }
         }
         _ => TimeFunction::SpinUp {
-            omega: num("omega")?,
-            duration: positive(&t.req("duration")?)?,
+            omega: t.req("omega")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,
+            duration: positive_step(&t.req("duration")?)?,
         },
     })
 }
@@ -868,7 +1000,7 @@ fn read_joints(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Res
             None => None,
         };
         let node_b = resolve_node(model, &t.req("node_b")?, true)?;
-        let position = t.req("position")?.vec3()?;
+        let position = point(&t.req("position")?)?;
         let (orientation, orientation_b) =
             if matches!(kind, JointKind::Fixed | JointKind::Spherical) {
                 let why = format!("for a {} joint", kind.name());
@@ -961,19 +1093,17 @@ fn read_loads(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
                 "with `beam`: a distributed load takes `torque_per_length`",
             )?;
             let beam_name = beam.str()?;
-            let prefix = format!("{beam_name}[");
-            let elements: Vec<usize> = model
-                .beams
-                .iter()
-                .enumerate()
-                .filter(|(_, b)| b.name.starts_with(&prefix))
-                .map(|(i, _)| i)
-                .collect();
-            if elements.is_empty() {
-                return Err(beam.err(format!("no [[beam]] named '{beam_name}'")));
-            }
-            let f = t.opt_vec3("force_per_length")?.unwrap_or_else(Vec3::zeros);
-            let m = t.opt_vec3("torque_per_length")?.unwrap_or_else(Vec3::zeros);
+            let Some(range) = origins.beam_elements.get(beam_name) else {
+                let names = || origins.beam_elements.keys().map(String::as_str);
+                return Err(beam.err(format!(
+                    "no [[beam]] named '{}'{}",
+                    clip(beam_name, QUOTED),
+                    suggestion(beam_name, names())
+                )));
+            };
+            let elements: Vec<usize> = range.clone().collect();
+            let f = opt_load(&t, "force_per_length")?;
+            let m = opt_load(&t, "torque_per_length")?;
             let added = model.add_beam_load(&name, &elements, f, m, frame, function);
             for _ in 0..added {
                 origins.loads.push(Origin::of(&t));
@@ -989,8 +1119,8 @@ fn read_loads(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
             "without `beam`: only a distributed load takes it",
         )?;
         let node = require_node(model, &t.req("node")?)?;
-        let force = t.opt_vec3("force")?.unwrap_or_else(Vec3::zeros);
-        let torque = t.opt_vec3("torque")?.unwrap_or_else(Vec3::zeros);
+        let force = opt_load(&t, "force")?;
+        let torque = opt_load(&t, "torque")?;
         model.loads.push(Load {
             name,
             node,
@@ -1002,6 +1132,21 @@ fn read_loads(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
         origins.loads.push(Origin::of(&t));
     }
     Ok(())
+}
+
+/// A force or torque (also per length), zero when absent.
+fn opt_load(t: &Table<'_>, key: &str) -> Result<Vec3> {
+    t.field(key)
+        .map_or(Ok(Vec3::zeros()), |f| f.vec3_within(MAX_PHYSICAL))
+}
+
+/// A positive time (or load factor step) in `[MIN_STEP, MAX_TIME]`.
+fn positive_step(f: &Field<'_>) -> Result<f64> {
+    let v = f.f64()?;
+    if v <= 0.0 {
+        return Err(f.err(format!("must be positive, got {v}")));
+    }
+    f.f64_in(MIN_STEP, MAX_TIME)
 }
 
 /// A point given in inertial coordinates at t = 0, in the frame of `node` (inertial for ground).
@@ -1031,15 +1176,21 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             None => None,
         };
         let node_b = resolve_node(model, &t.req("node_b")?, true)?;
-        let pa = t.req("point_a")?.vec3()?;
-        let pb = t.req("point_b")?.vec3()?;
-        let stiffness = non_negative(&t.req("stiffness")?)?;
+        let pa = point(&t.req("point_a")?)?;
+        let pb = point(&t.req("point_b")?)?;
+        let stiffness = physical_or_zero(&t.req("stiffness")?)?;
         let damping = match t.field("damping") {
-            Some(f) => non_negative(&f)?,
+            Some(f) => physical_or_zero(&f)?,
             None => 0.0,
         };
         let rest_length = match t.field("rest_length") {
-            Some(f) => non_negative(&f)?,
+            Some(f) => {
+                let v = f.f64()?;
+                if v < 0.0 {
+                    return Err(f.err(format!("must be >= 0, got {v}")));
+                }
+                f.f64_in(0.0, MAX_KINEMATIC)?
+            }
             None => (pa - pb).norm(),
         };
         model.springs.push(SpringDamper {
@@ -1081,12 +1232,6 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "beam",
         ])?;
         let name = read_name(&t, &mut names, "sensor")?;
-        if name.contains([',', '"', '\n', '\r']) {
-            return Err(t.key_err(
-                "name",
-                "must not contain commas, double quotes or line breaks (it names a CSV column)",
-            ));
-        }
         let ty = t.req("type")?.choice(&[
             "position",
             "velocity",
@@ -1128,7 +1273,8 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             model.joint_id(jname).ok_or_else(|| {
                 let names = || model.joints.iter().map(|j| j.name.as_str());
                 f.err(format!(
-                    "unknown joint '{jname}'{} (joints: {})",
+                    "unknown joint '{}'{} (joints: {})",
+                    clip(jname, QUOTED),
                     suggestion(jname, names()),
                     name_list(names(), 12)
                 ))
@@ -1137,7 +1283,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         let kind = match ty {
             "position" | "velocity" => {
                 let node = node()?;
-                let p = t.opt_vec3("point")?.unwrap_or(model.nodes[node.0].frame.x);
+                let p = opt_point(&t, "point")?.unwrap_or(model.nodes[node.0].frame.x);
                 let point = to_node_frame(model, Some(node), &p);
                 let component = component(XYZ)?;
                 if ty == "position" {
@@ -1193,11 +1339,11 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                 component: component(XYZ)?,
             },
             "beam_strain" => SensorKind::BeamStrain {
-                beam: super::beam::require_element(model, &t.req("beam")?)?,
+                beam: super::beam::require_element(model, origins, &t.req("beam")?)?,
                 component: component(BEAM)?,
             },
             "beam_stress" => SensorKind::BeamStress {
-                beam: super::beam::require_element(model, &t.req("beam")?)?,
+                beam: super::beam::require_element(model, origins, &t.req("beam")?)?,
                 component: component(BEAM)?,
             },
             "kinetic_energy" => SensorKind::KineticEnergy,

@@ -71,28 +71,112 @@ impl Analysis {
     }
 }
 
+/// Largest model file read, in bytes (256 MiB): a larger file, or a device such as
+/// `/dev/zero`, is an error before it fills the memory.
+pub const MAX_FILE_BYTES: usize = 256 << 20;
+
 /// Reads, overrides and checks a model file. Errors are reported with `path` as file name.
+///
+/// The file must be a regular file or a pipe (FIFO) of UTF-8 text of at most
+/// [`MAX_FILE_BYTES`]; it is read in pieces and rejected as soon as it exceeds the limit or
+/// contains a NUL byte. A FIFO is opened without waiting for a writer (without one, it
+/// reads as empty).
 pub fn read_model_file(path: &Path, overrides: &[String]) -> Result<ModelFile, InputError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| InputError::Io {
+    let text = read_limited(path).map_err(|source| InputError::Io {
         file: file.clone(),
         source,
     })?;
     parse_model_str(&text, &file, overrides)
 }
 
+/// The text of the file at `path`, read as [`read_model_file`] says.
+fn read_limited(path: &Path) -> std::io::Result<String> {
+    use std::io::{Error, ErrorKind, Read};
+    let invalid = |message: String| Error::new(ErrorKind::InvalidData, message);
+    let too_large = || {
+        invalid(format!(
+            "the file exceeds the limit of {MAX_FILE_BYTES} bytes (256 MiB)"
+        ))
+    };
+    let meta = std::fs::metadata(path)?;
+    let kind = meta.file_type();
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    if kind.is_dir() {
+        return Err(invalid("is a directory, not a model file".into()));
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+        if kind.is_char_device() || kind.is_block_device() || kind.is_socket() {
+            return Err(invalid(
+                "is a device or a socket, not a model file (give a regular file or a pipe)".into(),
+            ));
+        }
+        if kind.is_fifo() {
+            options.custom_flags(libc::O_NONBLOCK);
+        }
+    }
+    if kind.is_file() && meta.len() > MAX_FILE_BYTES as u64 {
+        return Err(too_large());
+    }
+    let mut reader = options.open(path)?;
+    let mut bytes = Vec::new();
+    let mut chunk = vec![0u8; 1 << 16];
+    loop {
+        let n = match reader.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(n) => n,
+            // A pipe whose writer has not written yet.
+            Err(e) if e.kind() == ErrorKind::WouldBlock => {
+                std::thread::sleep(std::time::Duration::from_millis(2));
+                continue;
+            }
+            Err(e) if e.kind() == ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        if let Some(at) = chunk[..n].iter().position(|&b| b == 0) {
+            return Err(invalid(format!(
+                "is not a text file (a NUL byte at byte {})",
+                bytes.len() + at
+            )));
+        }
+        if bytes.len() + n > MAX_FILE_BYTES {
+            return Err(too_large());
+        }
+        bytes.extend_from_slice(&chunk[..n]);
+    }
+    if bytes.is_empty() {
+        return Err(invalid("is empty".into()));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        invalid(format!(
+            "is not UTF-8 text (invalid byte at byte {})",
+            e.utf8_error().valid_up_to()
+        ))
+    })
+}
+
 /// Parses, overrides and checks the text of a model file; `file_name` is used in errors.
+/// A text longer than [`MAX_FILE_BYTES`] is an error.
 pub fn parse_model_str(
     source: &str,
     file_name: &str,
     overrides: &[String],
 ) -> Result<ModelFile, InputError> {
     let mut src = Source::new(file_name, source);
+    if source.len() > MAX_FILE_BYTES {
+        return Err(InputError::Syntax {
+            location: src.location(MAX_FILE_BYTES),
+            message: format!("the model exceeds the limit of {MAX_FILE_BYTES} bytes (256 MiB)"),
+        });
+    }
     let table = DeTable::parse(source).map_err(|e| {
         let at = e.span().map_or(0, |s| s.start);
         InputError::Syntax {
             location: src.location(at),
-            message: e.message().trim().to_string(),
+            message: crate::model::clip(e.message().trim(), reader::MESSAGE),
         }
     })?;
     let mut root: Value<'_> = Spanned::new(0..0, DeValue::Table(table.into_inner()));

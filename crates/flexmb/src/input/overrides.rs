@@ -5,7 +5,8 @@
 //! error message then names the override.
 
 use super::error::InputError;
-use super::reader::{describe, name_list, Source, Span, Value};
+use super::reader::{describe, name_list, Source, Span, Value, MESSAGE, PATH, QUOTED};
+use crate::model::clip;
 use std::borrow::Cow;
 use toml::de::{DeTable, DeValue};
 use toml::Spanned;
@@ -32,7 +33,8 @@ fn parse_value<'i>(raw: &'i str) -> Result<DeValue<'i>, String> {
     match DeValue::parse(raw) {
         Ok(v) => Ok(v.into_inner()),
         Err(e) if raw.starts_with(['[', '{', '"', '\'']) => Err(format!(
-            "'{raw}' is not a valid TOML value: {}",
+            "'{}' is not a valid TOML value: {}",
+            clip(raw, QUOTED),
             e.message()
         )),
         Err(_) => Ok(DeValue::String(Cow::Borrowed(raw))),
@@ -85,6 +87,7 @@ fn resolve_index(a: &[Value<'_>], seg: &str, path: &str) -> Result<usize, String
         return Ok(i);
     }
     let names: Vec<String> = a.iter().filter_map(name_of).collect();
+    let seg = clip(seg, QUOTED);
     Err(format!(
         "'{path}' has no item named '{seg}' (names: {}) and '{seg}' is not an index",
         name_list(names.iter().map(String::as_str), 10)
@@ -116,9 +119,9 @@ fn apply_one<'i>(
 ) -> Result<String, InputError> {
     let fail = |span: &Span, field: &str, message: String| InputError::Override {
         location: src.location(span.start),
-        text: text.to_string(),
-        field: field.to_string(),
-        message,
+        text: clip(text, PATH),
+        field: clip(field, PATH),
+        message: clip(&message, MESSAGE),
     };
     let Some((key, raw)) = text.split_once('=') else {
         let at = locate(root, text);

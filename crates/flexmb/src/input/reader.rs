@@ -1,6 +1,8 @@
 //! Typed access to the spanned TOML tree, with errors that carry file, line and field path.
 
 use super::error::{InputError, ItemLabel, Location};
+use crate::model::clip;
+use crate::model::limits::MAX_ITEMS;
 use flexmb_lie::{Mat3, Vec3};
 use std::ops::Range;
 use toml::de::{DeTable, DeValue};
@@ -9,6 +11,16 @@ use toml::Spanned;
 pub(crate) type Value<'i> = Spanned<DeValue<'i>>;
 pub(crate) type Span = Range<usize>;
 pub(crate) type Result<T> = std::result::Result<T, InputError>;
+
+/// Most characters of a name or value quoted in a message.
+pub(crate) const QUOTED: usize = 60;
+/// Most characters of a field path, or of an override, in an error.
+pub(crate) const PATH: usize = 200;
+/// Most characters of an error message: a 10 MB name or value is never echoed whole.
+pub(crate) const MESSAGE: usize = 1000;
+
+/// Where the ranges of numbers are documented, for messages.
+const RANGES: &str = "see 'Ranges' in docs/model-format.md";
 
 /// The text of the model file, for turning byte offsets into lines and columns.
 pub(crate) struct Source<'a> {
@@ -53,7 +65,7 @@ impl<'a> Source<'a> {
     }
 
     /// The override that set the value of `field` or of one of its parents, if any.
-    fn set_by(&self, field: &str) -> Option<String> {
+    pub fn set_by(&self, field: &str) -> Option<String> {
         self.set_by.iter().rev().find_map(|(path, text)| {
             let hit = field == path
                 || (field.starts_with(path.as_str())
@@ -69,17 +81,22 @@ impl<'a> Source<'a> {
         item: Option<&ItemLabel>,
         message: impl Into<String>,
     ) -> InputError {
-        let mut message = message.into();
+        let mut message = clip(&message.into(), MESSAGE);
         if let Some(text) = self.set_by(field) {
-            message.push_str(&format!(" (value set by --set '{text}')"));
+            message.push_str(&format!(" (value set by --set '{}')", clip(&text, PATH)));
         }
         InputError::Field {
             location: self.location(span.start),
-            field: field.to_string(),
+            field: clip(field, PATH),
             item: item.cloned(),
             message,
         }
     }
+}
+
+/// "must be between lo and hi, got v", with where the ranges are documented.
+pub(crate) fn out_of_range(v: f64, lo: f64, hi: f64) -> String {
+    format!("must be between {lo:e} and {hi:e} ({RANGES}), got {v:e}")
 }
 
 /// Short description of a value for "expected X, got Y" messages.
@@ -126,9 +143,16 @@ fn distance(a: &str, b: &str) -> usize {
     row[b.len()]
 }
 
-/// " (did you mean 'x'?)" when one of `candidates` is close to `word`.
+/// " (did you mean 'x'?)" when one of `candidates` is close to `word` (none for words or
+/// candidates longer than [`QUOTED`]: the edit distance costs the product of the lengths).
 pub(crate) fn suggestion<'c>(word: &str, candidates: impl IntoIterator<Item = &'c str>) -> String {
+    if word.len() > QUOTED {
+        return String::new();
+    }
     let score = |c: &str| {
+        if c.len() > QUOTED {
+            return None;
+        }
         let d = distance(word, c);
         let prefix =
             word.len() >= 3 && c.len() >= 3 && (c.starts_with(word) || word.starts_with(c));
@@ -142,7 +166,7 @@ pub(crate) fn suggestion<'c>(word: &str, candidates: impl IntoIterator<Item = &'
         .into_iter()
         .filter_map(|c| score(c).map(|d| (d, c)))
         .min_by_key(|&(d, _)| d)
-        .map(|(_, c)| format!(" (did you mean '{c}'?)"))
+        .map(|(_, c)| format!(" (did you mean '{}'?)", clip(c, QUOTED)))
         .unwrap_or_default()
 }
 
@@ -155,7 +179,7 @@ pub(crate) fn name_list<'n>(names: impl IntoIterator<Item = &'n str>, max: usize
     let mut s = names
         .iter()
         .take(max)
-        .map(|n| format!("'{n}'"))
+        .map(|n| format!("'{}'", clip(n, QUOTED)))
         .collect::<Vec<_>>()
         .join(", ");
     if names.len() > max {
@@ -206,6 +230,16 @@ impl<'a> Field<'a> {
         }
     }
 
+    /// A number in `[lo, hi]`.
+    pub fn f64_in(&self, lo: f64, hi: f64) -> Result<f64> {
+        let v = self.f64()?;
+        if v >= lo && v <= hi {
+            Ok(v)
+        } else {
+            Err(self.err(out_of_range(v, lo, hi)))
+        }
+    }
+
     pub fn int(&self) -> Result<i64> {
         match self.value.get_ref() {
             DeValue::Integer(i) => i64::from_str_radix(i.as_str(), i.radix())
@@ -241,7 +275,8 @@ impl<'a> Field<'a> {
         };
         allowed.iter().find(|a| **a == s).copied().ok_or_else(|| {
             self.err(format!(
-                "must be one of {list}, got \"{s}\"{}",
+                "must be one of {list}, got \"{}\"{}",
+                clip(s, QUOTED),
                 suggestion(s, allowed.iter().copied())
             ))
         })
@@ -278,6 +313,17 @@ impl<'a> Field<'a> {
     pub fn vec3(&self) -> Result<Vec3> {
         let v = self.numbers(3, "an array of 3 numbers [x, y, z]")?;
         Ok(Vec3::new(v[0], v[1], v[2]))
+    }
+
+    /// A vector whose components are at most `max` in magnitude (the error names the
+    /// component).
+    pub fn vec3_within(&self, max: f64) -> Result<Vec3> {
+        let v = self.vec3()?;
+        let bad = (0..3).find(|&i| v[i].abs() > max);
+        if let (Some(i), DeValue::Array(a)) = (bad, self.value.get_ref()) {
+            return Err(self.elem(i, &a[i]).err(out_of_range(v[i], -max, max)));
+        }
+        Ok(v)
     }
 
     /// A 3x3 matrix given by rows `[[a, b, c], [d, e, f], [g, h, i]]`.
@@ -378,7 +424,8 @@ impl<'a> Table<'a> {
                     &self.child_path(key),
                     self.item.as_ref(),
                     format!(
-                        "unknown key '{key}'{}; allowed keys here: {}",
+                        "unknown key '{}'{}; allowed keys here: {}",
+                        clip(key, QUOTED),
                         suggestion(key, allowed.iter().copied()),
                         allowed.join(", ")
                     ),
@@ -420,14 +467,6 @@ impl<'a> Table<'a> {
         }
     }
 
-    pub fn opt_f64(&self, key: &str) -> Result<Option<f64>> {
-        self.field(key).map(|f| f.f64()).transpose()
-    }
-
-    pub fn opt_vec3(&self, key: &str) -> Result<Option<Vec3>> {
-        self.field(key).map(|f| f.vec3()).transpose()
-    }
-
     pub fn opt_str(&self, key: &str) -> Result<Option<&'a str>> {
         self.field(key).map(|f| f.str()).transpose()
     }
@@ -452,6 +491,12 @@ impl<'a> Table<'a> {
                 )))
             }
         };
+        if arr.len() > MAX_ITEMS {
+            return Err(f.err(format!(
+                "has {} items; a model has at most {MAX_ITEMS} of a kind",
+                arr.len()
+            )));
+        }
         let mut out = Vec::with_capacity(arr.len());
         for (i, v) in arr.iter().enumerate() {
             let DeValue::Table(map) = v.get_ref() else {
@@ -463,7 +508,7 @@ impl<'a> Table<'a> {
             let item = match map.get("name").map(|n| n.get_ref()) {
                 Some(DeValue::String(name)) => Some(ItemLabel {
                     table: key,
-                    name: name.to_string(),
+                    name: clip(name, QUOTED),
                 }),
                 _ => None,
             };

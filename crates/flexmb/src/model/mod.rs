@@ -8,12 +8,16 @@
 //!
 //! Units are SI throughout (m, kg, s, N, rad) unless a model chooses consistent others.
 
+pub mod limits;
+mod names;
 mod time_function;
+mod validate;
 
 pub use time_function::TimeFunction;
+pub(crate) use validate::clip;
 
-use crate::error::ModelError;
 use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
+use names::NameIndex;
 
 /// Index of a node in [`Model::nodes`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -352,6 +356,9 @@ pub struct Model {
     pub springs: Vec<SpringDamper>,
     pub beams: Vec<Beam>,
     pub sensors: Vec<Sensor>,
+    /// Name -> index of the nodes and joints, kept by [`Model::add_node`] and
+    /// [`Model::add_joint`] (not part of the model's equality).
+    names: NameIndex,
 }
 
 /// Reference to one item of a model and one of its fields, for error messages.
@@ -378,6 +385,7 @@ impl Model {
             springs: Vec::new(),
             beams: Vec::new(),
             sensors: Vec::new(),
+            names: NameIndex::default(),
         }
     }
 
@@ -435,14 +443,17 @@ impl Model {
         frame: LoadFrame,
         function: TimeFunction,
     ) -> usize {
+        // Nodes in order of first appearance, with the length they carry.
         let mut share: Vec<(NodeId, f64)> = Vec::new();
+        let mut slot: std::collections::HashMap<NodeId, usize> = Default::default();
         for &e in elements {
             let b = &self.beams[e];
             for node in b.nodes {
-                match share.iter_mut().find(|(n, _)| *n == node) {
-                    Some(entry) => entry.1 += 0.5 * b.length,
-                    None => share.push((node, 0.5 * b.length)),
-                }
+                let k = *slot.entry(node).or_insert_with(|| {
+                    share.push((node, 0.0));
+                    share.len() - 1
+                });
+                share[k].1 += 0.5 * b.length;
             }
         }
         for (node, length) in &share {
@@ -499,6 +510,7 @@ impl Model {
 
     /// Adds a node at rest; returns its id.
     pub fn add_node(&mut self, name: &str, frame: Frame) -> NodeId {
+        self.names.add_node(name, self.nodes.len());
         self.nodes.push(Node {
             name: name.to_string(),
             frame,
@@ -547,258 +559,23 @@ impl Model {
             frame_b: local(node_b, &global_b),
             drive: None,
         };
+        self.names.add_joint(name, self.joints.len());
         self.joints.push(joint);
         JointId(self.joints.len() - 1)
     }
 
-    /// Finds a node by name.
+    /// Finds a node by name (the first of that name): a hash look-up for the nodes added by
+    /// [`Model::add_node`]; a scan when the name is not there (nodes pushed or renamed through
+    /// the public field).
     pub fn node_id(&self, name: &str) -> Option<NodeId> {
-        self.nodes.iter().position(|n| n.name == name).map(NodeId)
+        self.names.node(name, &self.nodes, |n| &n.name).map(NodeId)
     }
 
-    /// Finds a joint by name.
+    /// Finds a joint by name (the first of that name), like [`Model::node_id`].
     pub fn joint_id(&self, name: &str) -> Option<JointId> {
-        self.joints.iter().position(|j| j.name == name).map(JointId)
-    }
-
-    /// Checks the physical and referential consistency of the model.
-    pub fn validate(&self) -> Result<(), ModelError> {
-        let bad = |table, index: usize, name: &str, field, message: String| ModelError::Invalid {
-            item: ItemRef {
-                table,
-                index,
-                name: name.to_string(),
-                field,
-            },
-            message,
-        };
-        let n = self.nodes.len();
-        let check_node = |table, i: usize, name: &str, field, id: Option<NodeId>| match id {
-            Some(NodeId(k)) if k >= n => Err(bad(
-                table,
-                i,
-                name,
-                field,
-                format!("node index {k} does not exist"),
-            )),
-            _ => Ok(()),
-        };
-        let finite3 = |v: &Vec3| v.iter().all(|c| c.is_finite());
-        for (i, node) in self.nodes.iter().enumerate() {
-            let ortho = (node.frame.r.transpose() * node.frame.r - Mat3::identity()).norm();
-            if ortho > 1e-9 || node.frame.r.determinant() < 0.0 {
-                return Err(bad(
-                    "node",
-                    i,
-                    &node.name,
-                    "orientation",
-                    "is not a rotation".into(),
-                ));
-            }
-            if !finite3(&node.frame.x)
-                || !finite3(&node.velocity)
-                || !finite3(&node.angular_velocity)
-            {
-                return Err(bad(
-                    "node",
-                    i,
-                    &node.name,
-                    "position",
-                    "has non-finite values".into(),
-                ));
-            }
-        }
-        for (i, b) in self.bodies.iter().enumerate() {
-            check_node("body", i, &b.name, "node", Some(b.node))?;
-            if !(b.mass > 0.0 && b.mass.is_finite()) {
-                return Err(bad(
-                    "body",
-                    i,
-                    &b.name,
-                    "mass",
-                    format!("must be positive, got {}", b.mass),
-                ));
-            }
-            let sym = (b.inertia - b.inertia.transpose()).norm();
-            let eig = b.inertia.symmetric_eigenvalues();
-            if sym > 1e-9 * b.inertia.norm() || eig.iter().any(|&e| e.is_nan() || e <= 0.0) {
-                return Err(bad(
-                    "body",
-                    i,
-                    &b.name,
-                    "inertia",
-                    format!(
-                        "must be symmetric positive definite (eigenvalues {:.4e}, {:.4e}, {:.4e})",
-                        eig[0], eig[1], eig[2]
-                    ),
-                ));
-            }
-            // Triangle inequality of principal moments (a physical body's inertia).
-            let mut e = [eig[0], eig[1], eig[2]];
-            e.sort_by(f64::total_cmp);
-            if e[0] + e[1] < e[2] * (1.0 - 1e-9) {
-                return Err(bad(
-                    "body",
-                    i,
-                    &b.name,
-                    "inertia",
-                    format!(
-                        "principal moments {:.4e}, {:.4e}, {:.4e} violate the triangle inequality",
-                        e[0], e[1], e[2]
-                    ),
-                ));
-            }
-        }
-        for (i, j) in self.joints.iter().enumerate() {
-            check_node("joint", i, &j.name, "node_a", j.node_a)?;
-            check_node("joint", i, &j.name, "node_b", j.node_b)?;
-            if j.node_a.is_none() && j.node_b.is_none() {
-                return Err(bad(
-                    "joint",
-                    i,
-                    &j.name,
-                    "node_b",
-                    "a joint needs at least one node".into(),
-                ));
-            }
-            if j.node_a.is_some() && j.node_a == j.node_b {
-                return Err(bad(
-                    "joint",
-                    i,
-                    &j.name,
-                    "node_b",
-                    "joins a node to itself".into(),
-                ));
-            }
-            if j.drive.is_some() && !matches!(j.kind, JointKind::Revolute | JointKind::Prismatic) {
-                return Err(bad(
-                    "joint",
-                    i,
-                    &j.name,
-                    "drive",
-                    format!(
-                        "only revolute and prismatic joints can be driven, not {}",
-                        j.kind.name()
-                    ),
-                ));
-            }
-        }
-        for (i, l) in self.loads.iter().enumerate() {
-            check_node("load", i, &l.name, "node", Some(l.node))?;
-        }
-        for (i, s) in self.springs.iter().enumerate() {
-            check_node("spring", i, &s.name, "node_a", s.node_a)?;
-            check_node("spring", i, &s.name, "node_b", s.node_b)?;
-            for (field, v) in [
-                ("stiffness", s.stiffness),
-                ("damping", s.damping),
-                ("rest_length", s.rest_length),
-            ] {
-                if !(v >= 0.0 && v.is_finite()) {
-                    return Err(bad(
-                        "spring",
-                        i,
-                        &s.name,
-                        field,
-                        format!("must be >= 0, got {v}"),
-                    ));
-                }
-            }
-        }
-        for (i, b) in self.beams.iter().enumerate() {
-            for (field, id) in [("node_a", b.nodes[0]), ("node_b", b.nodes[1])] {
-                check_node("beam", i, &b.name, field, Some(id))?;
-            }
-            if self.group != Group::SE3 {
-                return Err(bad(
-                    "beam",
-                    i,
-                    &b.name,
-                    "group",
-                    "beams are formulated on SE(3): set the model's group to \"SE3\"".into(),
-                ));
-            }
-            if b.nodes[0] == b.nodes[1] || b.length.is_nan() || b.length <= 0.0 {
-                return Err(bad(
-                    "beam",
-                    i,
-                    &b.name,
-                    "length",
-                    format!("must be positive, got {}", b.length),
-                ));
-            }
-            let c = &b.section.stiffness;
-            let sym = (c - c.transpose()).norm();
-            if sym > 1e-9 * c.norm() || c.cholesky().is_none() {
-                return Err(bad(
-                    "beam",
-                    i,
-                    &b.name,
-                    "section",
-                    "the sectional stiffness must be symmetric positive definite".into(),
-                ));
-            }
-            for (what, v) in [
-                ("mass-proportional damping", b.section.damping_mass),
-                (
-                    "stiffness-proportional damping",
-                    b.section.damping_stiffness,
-                ),
-            ] {
-                if v.is_nan() || v < 0.0 {
-                    return Err(bad(
-                        "beam",
-                        i,
-                        &b.name,
-                        "section",
-                        format!("{what} must be >= 0, got {v}"),
-                    ));
-                }
-            }
-            if b.section.mass_per_length.is_nan() || b.section.mass_per_length <= 0.0 {
-                return Err(bad(
-                    "beam",
-                    i,
-                    &b.name,
-                    "section",
-                    format!(
-                        "mass per length must be positive, got {}",
-                        b.section.mass_per_length
-                    ),
-                ));
-            }
-            let j = &b.section.rotary_inertia;
-            if (j - j.transpose()).norm() > 1e-9 * j.norm() || j.cholesky().is_none() {
-                return Err(bad(
-                    "beam",
-                    i,
-                    &b.name,
-                    "section",
-                    "the sectional rotary inertia must be symmetric positive definite".into(),
-                ));
-            }
-            let fresh = crate::elements::beam::mass_matrix(b);
-            if (fresh - b.mass).norm() > 1e-12 * fresh.norm() {
-                return Err(bad(
-                    "beam",
-                    i,
-                    &b.name,
-                    "section",
-                    "the element's mass matrix is out of date: call Beam::update_mass after changing its section, geometry or mass_kind".into(),
-                ));
-            }
-        }
-        for (i, s) in self.sensors.iter().enumerate() {
-            let node = match &s.kind {
-                SensorKind::Position { node, .. }
-                | SensorKind::Velocity { node, .. }
-                | SensorKind::Quaternion { node, .. }
-                | SensorKind::AngularVelocity { node, .. } => Some(*node),
-                _ => None,
-            };
-            check_node("sensor", i, &s.name, "node", node)?;
-        }
-        Ok(())
+        self.names
+            .joint(name, &self.joints, |j| &j.name)
+            .map(JointId)
     }
 }
 

@@ -1,0 +1,547 @@
+//! `Model::validate`: references, physical data and ranges of every item, one pass over the
+//! model (linear in its size).
+//!
+//! Every number is checked finite and within [`super::limits`]; every error names the item
+//! (table, index, name) and the field, which the model-file front end maps back to a line.
+
+use super::limits::{
+    within, MAX_ANGLE, MAX_ITEMS, MAX_KINEMATIC, MAX_PHYSICAL, MAX_TIME, MIN_PHYSICAL,
+    MIN_RELATIVE_LENGTH, MIN_STEP,
+};
+use super::{ItemRef, JointKind, Model, NodeId, SensorKind, TimeFunction};
+use crate::error::ModelError;
+use flexmb_lie::{Frame, Group, Mat3, Vec3};
+use std::collections::HashMap;
+
+/// Most characters of a name or value quoted in an error message.
+const QUOTED: usize = 60;
+
+/// `text` cut to `max` characters, with an ellipsis (for names and values in messages).
+pub(crate) fn clip(text: &str, max: usize) -> String {
+    match text.char_indices().nth(max) {
+        None => text.to_string(),
+        Some((end, _)) => format!("{}...", &text[..end]),
+    }
+}
+
+/// Names of the CSV columns written before the sensors (`time`, or `load_factor` for a
+/// static analysis).
+const RESERVED_COLUMNS: [&str; 2] = ["time", "load_factor"];
+
+type Check = Result<(), String>;
+
+fn finite3(v: &Vec3, max: f64) -> Check {
+    match v.iter().find(|c| !within(c.abs(), 0.0, max)) {
+        None => Ok(()),
+        Some(c) if c.is_finite() => Err(format!(
+            "has a component {c:e} beyond the range +-{max:e} (see limits)"
+        )),
+        Some(c) => Err(format!("has a non-finite component ({c})")),
+    }
+}
+
+fn in_range(v: f64, lo: f64, hi: f64) -> Check {
+    if v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(format!("must be between {lo:e} and {hi:e}, got {v}"))
+    }
+}
+
+fn rotation(r: &Mat3) -> Check {
+    let ortho = (r.transpose() * r - Mat3::identity()).norm();
+    if ortho <= 1e-9 && r.determinant() > 0.0 {
+        Ok(())
+    } else {
+        Err(format!(
+            "is not a rotation matrix (|R^T R - I| = {ortho:.3e})"
+        ))
+    }
+}
+
+/// A frame fixed on a node: a rotation, and a position within twice the coordinate range
+/// (a point given in the frame of a node anywhere in the range).
+fn local_frame(f: &Frame) -> Check {
+    rotation(&f.r)?;
+    finite3(&f.x, 2.0 * MAX_KINEMATIC)
+}
+
+impl TimeFunction {
+    /// Finite parameters within the ranges, increasing times, and intervals of at least
+    /// [`MIN_STEP`] (so slopes stay finite).
+    pub fn check(&self) -> Result<(), String> {
+        let value = |name: &str, v: f64| {
+            in_range(v, -MAX_PHYSICAL, MAX_PHYSICAL).map_err(|m| format!("{name} {m}"))
+        };
+        let time = |name: &str, v: f64| {
+            in_range(v, -MAX_TIME, MAX_TIME).map_err(|m| format!("{name} {m}"))
+        };
+        match self {
+            TimeFunction::Constant { value: v } => value("value", *v),
+            TimeFunction::Linear {
+                slope,
+                start,
+                offset,
+            } => {
+                value("slope", *slope)?;
+                time("start", *start)?;
+                value("offset", *offset)
+            }
+            TimeFunction::Ramp { t0, t1, value: v } => {
+                time("t0", *t0)?;
+                time("t1", *t1)?;
+                value("value", *v)?;
+                if t1 - t0 < MIN_STEP {
+                    return Err(format!(
+                        "t1 = {t1} must exceed t0 = {t0} by at least {MIN_STEP:e}"
+                    ));
+                }
+                Ok(())
+            }
+            TimeFunction::Step { t0, value: v } => {
+                time("t0", *t0)?;
+                value("value", *v)
+            }
+            TimeFunction::Sine {
+                amplitude,
+                frequency,
+                phase,
+                offset,
+            } => {
+                value("amplitude", *amplitude)?;
+                in_range(*frequency, -MAX_KINEMATIC, MAX_KINEMATIC)
+                    .map_err(|m| format!("frequency {m}"))?;
+                in_range(*phase, -MAX_ANGLE, MAX_ANGLE).map_err(|m| format!("phase {m}"))?;
+                value("offset", *offset)
+            }
+            TimeFunction::Table { points } => {
+                if points.is_empty() {
+                    return Err("needs at least one [t, value] point".into());
+                }
+                for (i, &(t, v)) in points.iter().enumerate() {
+                    time(&format!("points[{i}] time"), t)?;
+                    value(&format!("points[{i}] value"), v)?;
+                    if i > 0 && t - points[i - 1].0 < MIN_STEP {
+                        return Err(format!(
+                            "times must increase by at least {MIN_STEP:e}, got t = {t} after t = {}",
+                            points[i - 1].0
+                        ));
+                    }
+                }
+                Ok(())
+            }
+            TimeFunction::SpinUp { omega, duration } => {
+                in_range(*omega, -MAX_KINEMATIC, MAX_KINEMATIC)
+                    .map_err(|m| format!("omega {m}"))?;
+                in_range(*duration, MIN_STEP, MAX_TIME).map_err(|m| format!("duration {m}"))
+            }
+        }
+    }
+}
+
+/// Length scale of the model: the diagonal of the box around its nodes' initial positions.
+fn extent(model: &Model) -> f64 {
+    let mut lo = Vec3::repeat(f64::INFINITY);
+    let mut hi = Vec3::repeat(f64::NEG_INFINITY);
+    for n in &model.nodes {
+        lo = lo.inf(&n.frame.x);
+        hi = hi.sup(&n.frame.x);
+    }
+    if model.nodes.is_empty() {
+        0.0
+    } else {
+        (hi - lo).norm()
+    }
+}
+
+/// Index of the first item whose name appeared before.
+fn first_duplicate<'n>(names: impl Iterator<Item = &'n str>) -> Option<(usize, usize)> {
+    let mut seen: HashMap<&str, usize> = HashMap::new();
+    for (i, name) in names.enumerate() {
+        if let Some(&first) = seen.get(name) {
+            return Some((first, i));
+        }
+        seen.insert(name, i);
+    }
+    None
+}
+
+impl Model {
+    /// Checks the references, the physical data and the ranges of every item (see
+    /// [`super::limits`]); the error names the item and the field.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let bad = |table, index: usize, name: &str, field, message: String| ModelError::Invalid {
+            item: ItemRef {
+                table,
+                index,
+                name: clip(name, QUOTED),
+                field,
+            },
+            message,
+        };
+        let n = self.nodes.len();
+        let check_node = |table, i: usize, name: &str, field, id: Option<NodeId>| match id {
+            Some(NodeId(k)) if k >= n => Err(bad(
+                table,
+                i,
+                name,
+                field,
+                format!("node index {k} does not exist"),
+            )),
+            _ => Ok(()),
+        };
+        if n > MAX_ITEMS || self.beams.len() > MAX_ITEMS {
+            return Err(bad(
+                "model",
+                0,
+                &self.title,
+                "size",
+                format!(
+                    "{n} nodes and {} beam elements: a model has at most {MAX_ITEMS} of each",
+                    self.beams.len()
+                ),
+            ));
+        }
+        finite3(&self.gravity, MAX_KINEMATIC)
+            .map_err(|m| bad("model", 0, &self.title, "gravity", m))?;
+
+        for (i, node) in self.nodes.iter().enumerate() {
+            let fail = |field, m| bad("node", i, &node.name, field, m);
+            rotation(&node.frame.r).map_err(|m| fail("orientation", m))?;
+            finite3(&node.frame.x, MAX_KINEMATIC).map_err(|m| fail("position", m))?;
+            finite3(&node.velocity, MAX_KINEMATIC).map_err(|m| fail("velocity", m))?;
+            finite3(&node.angular_velocity, MAX_KINEMATIC)
+                .map_err(|m| fail("angular_velocity", m))?;
+        }
+        if let Some((first, i)) = first_duplicate(self.nodes.iter().map(|x| x.name.as_str())) {
+            return Err(bad(
+                "node",
+                i,
+                &self.nodes[i].name,
+                "name",
+                format!("duplicate node name (also node #{})", first + 1),
+            ));
+        }
+
+        for (i, b) in self.bodies.iter().enumerate() {
+            let fail = |field, m| bad("body", i, &b.name, field, m);
+            check_node("body", i, &b.name, "node", Some(b.node))?;
+            in_range(b.mass, MIN_PHYSICAL, MAX_PHYSICAL).map_err(|m| fail("mass", m))?;
+            finite3(&b.com, MAX_KINEMATIC).map_err(|m| fail("com", m))?;
+            if !b.inertia.iter().all(|c| c.abs() <= MAX_PHYSICAL) {
+                return Err(fail(
+                    "inertia",
+                    format!("has values that are not finite or exceed {MAX_PHYSICAL:e}"),
+                ));
+            }
+            let sym = (b.inertia - b.inertia.transpose()).norm();
+            let eig = b.inertia.symmetric_eigenvalues();
+            if sym > 1e-9 * b.inertia.norm()
+                || eig.iter().any(|&e| !within(e, MIN_PHYSICAL, f64::INFINITY))
+            {
+                return Err(fail(
+                    "inertia",
+                    format!(
+                        "must be symmetric positive definite with principal moments of at least {MIN_PHYSICAL:e} (eigenvalues {:.4e}, {:.4e}, {:.4e})",
+                        eig[0], eig[1], eig[2]
+                    ),
+                ));
+            }
+            // Triangle inequality of principal moments (a physical body's inertia).
+            let mut e = [eig[0], eig[1], eig[2]];
+            e.sort_by(f64::total_cmp);
+            if e[0] + e[1] < e[2] * (1.0 - 1e-9) {
+                return Err(fail(
+                    "inertia",
+                    format!(
+                        "principal moments {:.4e}, {:.4e}, {:.4e} violate the triangle inequality",
+                        e[0], e[1], e[2]
+                    ),
+                ));
+            }
+        }
+
+        for (i, j) in self.joints.iter().enumerate() {
+            let fail = |field, m| bad("joint", i, &j.name, field, m);
+            check_node("joint", i, &j.name, "node_a", j.node_a)?;
+            check_node("joint", i, &j.name, "node_b", j.node_b)?;
+            if j.node_a.is_none() && j.node_b.is_none() {
+                return Err(fail("node_b", "a joint needs at least one node".into()));
+            }
+            if j.node_a.is_some() && j.node_a == j.node_b {
+                return Err(fail("node_b", "joins a node to itself".into()));
+            }
+            local_frame(&j.frame_a).map_err(|m| fail("position", format!("frame A {m}")))?;
+            local_frame(&j.frame_b).map_err(|m| fail("position", format!("frame B {m}")))?;
+            if let Some(drive) = &j.drive {
+                if !matches!(j.kind, JointKind::Revolute | JointKind::Prismatic) {
+                    return Err(fail(
+                        "drive",
+                        format!(
+                            "only revolute and prismatic joints can be driven, not {}",
+                            j.kind.name()
+                        ),
+                    ));
+                }
+                drive.check().map_err(|m| fail("drive", m))?;
+            }
+        }
+        if let Some((first, i)) = first_duplicate(self.joints.iter().map(|x| x.name.as_str())) {
+            return Err(bad(
+                "joint",
+                i,
+                &self.joints[i].name,
+                "name",
+                format!("duplicate joint name (also joint #{})", first + 1),
+            ));
+        }
+
+        for (i, l) in self.loads.iter().enumerate() {
+            let fail = |field, m| bad("load", i, &l.name, field, m);
+            check_node("load", i, &l.name, "node", Some(l.node))?;
+            finite3(&l.force, MAX_PHYSICAL).map_err(|m| fail("force", m))?;
+            finite3(&l.torque, MAX_PHYSICAL).map_err(|m| fail("torque", m))?;
+            l.function.check().map_err(|m| fail("function", m))?;
+        }
+
+        for (i, s) in self.springs.iter().enumerate() {
+            let fail = |field, m| bad("spring", i, &s.name, field, m);
+            check_node("spring", i, &s.name, "node_a", s.node_a)?;
+            check_node("spring", i, &s.name, "node_b", s.node_b)?;
+            match (s.node_a, s.node_b) {
+                (None, None) => {
+                    return Err(fail(
+                        "node_b",
+                        "joins the ground to the ground: give at least one node".into(),
+                    ))
+                }
+                (Some(a), Some(b)) if a == b => {
+                    return Err(fail(
+                        "node_b",
+                        format!(
+                            "joins node '{}' to itself: a spring acts between two different nodes (or a node and the ground)",
+                            clip(&self.nodes[a.0].name, QUOTED)
+                        ),
+                    ))
+                }
+                _ => {}
+            }
+            finite3(&s.point_a, 2.0 * MAX_KINEMATIC).map_err(|m| fail("point_a", m))?;
+            finite3(&s.point_b, 2.0 * MAX_KINEMATIC).map_err(|m| fail("point_b", m))?;
+            in_range(s.stiffness, 0.0, MAX_PHYSICAL).map_err(|m| fail("stiffness", m))?;
+            in_range(s.damping, 0.0, MAX_PHYSICAL).map_err(|m| fail("damping", m))?;
+            in_range(s.rest_length, 0.0, MAX_KINEMATIC).map_err(|m| fail("rest_length", m))?;
+            let world = |node: Option<NodeId>, p: &Vec3| match node {
+                Some(id) => self.nodes[id.0].frame.point(p),
+                None => *p,
+            };
+            let (pa, pb) = (world(s.node_a, &s.point_a), world(s.node_b, &s.point_b));
+            let gap = (pb - pa).norm();
+            let scale = s.rest_length.max(pa.norm()).max(pb.norm());
+            if s.rest_length > 0.0 && gap <= 1e-9 * scale {
+                return Err(fail(
+                    "rest_length",
+                    format!(
+                        "is {} but the end points coincide at t = 0 (distance {gap:.3e}): the direction of the spring force is undefined there; move an end point or set rest_length = 0",
+                        s.rest_length
+                    ),
+                ));
+            }
+        }
+
+        let model_extent = extent(self);
+        for (i, b) in self.beams.iter().enumerate() {
+            let fail = |field, m| bad("beam", i, &b.name, field, m);
+            for (field, id) in [("node_a", b.nodes[0]), ("node_b", b.nodes[1])] {
+                check_node("beam", i, &b.name, field, Some(id))?;
+            }
+            if self.group != Group::SE3 {
+                return Err(fail(
+                    "group",
+                    "beams are formulated on SE(3): set the model's group to \"SE3\"".into(),
+                ));
+            }
+            if b.nodes[0] == b.nodes[1] || !(b.length > 0.0 && b.length <= MAX_KINEMATIC) {
+                return Err(fail(
+                    "length",
+                    format!("must be positive, got {}", b.length),
+                ));
+            }
+            rotation(&b.offset_a).map_err(|m| fail("section", format!("offset A {m}")))?;
+            rotation(&b.offset_b).map_err(|m| fail("section", format!("offset B {m}")))?;
+            let c = &b.section.stiffness;
+            if !c.iter().all(|v| v.abs() <= MAX_PHYSICAL) {
+                return Err(fail(
+                    "section",
+                    format!("the sectional stiffness has values that are not finite or exceed {MAX_PHYSICAL:e}"),
+                ));
+            }
+            let sym = (c - c.transpose()).norm();
+            let diagonal_ok = (0..6).all(|k| c[(k, k)] >= MIN_PHYSICAL);
+            if sym > 1e-9 * c.norm() || !diagonal_ok || c.cholesky().is_none() {
+                return Err(fail(
+                    "section",
+                    format!("the sectional stiffness must be symmetric positive definite, with diagonal entries of at least {MIN_PHYSICAL:e}"),
+                ));
+            }
+            for (what, v) in [
+                ("mass-proportional damping", b.section.damping_mass),
+                (
+                    "stiffness-proportional damping",
+                    b.section.damping_stiffness,
+                ),
+            ] {
+                in_range(v, 0.0, MAX_PHYSICAL)
+                    .map_err(|m| fail("section", format!("{what} {m}")))?;
+            }
+            in_range(b.section.mass_per_length, MIN_PHYSICAL, MAX_PHYSICAL)
+                .map_err(|m| fail("section", format!("mass per length {m}")))?;
+            let j = &b.section.rotary_inertia;
+            let j_ok = j.iter().all(|v| v.abs() <= MAX_PHYSICAL)
+                && (0..3).all(|k| j[(k, k)] >= MIN_PHYSICAL);
+            if !j_ok || (j - j.transpose()).norm() > 1e-9 * j.norm() || j.cholesky().is_none() {
+                return Err(fail(
+                    "section",
+                    format!("the sectional rotary inertia must be symmetric positive definite, with entries between {MIN_PHYSICAL:e} and {MAX_PHYSICAL:e}"),
+                ));
+            }
+            // Degenerate elements: short against the model, or against their own section.
+            if b.length < MIN_RELATIVE_LENGTH * model_extent {
+                return Err(fail(
+                    "length",
+                    format!(
+                        "{:e} is below {MIN_RELATIVE_LENGTH:e} times the extent of the model ({model_extent:.4e}): a degenerate element",
+                        b.length
+                    ),
+                ));
+            }
+            let gyration = ((c[(3, 3)].max(c[(4, 4)]).max(c[(5, 5)])) / c[(0, 0)]).sqrt();
+            if b.length < MIN_RELATIVE_LENGTH * gyration {
+                return Err(fail(
+                    "length",
+                    format!(
+                        "{:e} is below {MIN_RELATIVE_LENGTH:e} times the radius of gyration of the section ({gyration:.4e} = sqrt of the largest of GJ, EI2, EI3 over EA): a degenerate element",
+                        b.length
+                    ),
+                ));
+            }
+            let fresh = crate::elements::beam::mass_matrix(b);
+            if (fresh - b.mass).norm() > 1e-12 * fresh.norm() {
+                return Err(fail(
+                    "section",
+                    "the element's mass matrix is out of date: call Beam::update_mass after changing its section, geometry or mass_kind".into(),
+                ));
+            }
+        }
+
+        for (i, s) in self.sensors.iter().enumerate() {
+            let fail = |field, m| bad("sensor", i, &s.name, field, m);
+            check_sensor_name(&s.name).map_err(|m| fail("name", m))?;
+            let (node, components) = match &s.kind {
+                SensorKind::Position {
+                    node,
+                    point,
+                    component,
+                }
+                | SensorKind::Velocity {
+                    node,
+                    point,
+                    component,
+                } => {
+                    finite3(point, 2.0 * MAX_KINEMATIC).map_err(|m| fail("point", m))?;
+                    (Some(*node), Some((*component, 3)))
+                }
+                SensorKind::Quaternion { node, component } => (Some(*node), Some((*component, 4))),
+                SensorKind::AngularVelocity {
+                    node, component, ..
+                } => (Some(*node), Some((*component, 3))),
+                SensorKind::JointCoordinate { joint }
+                | SensorKind::JointForce { joint, .. }
+                | SensorKind::JointTorque { joint, .. } => {
+                    let Some(j) = self.joints.get(joint.0) else {
+                        return Err(fail(
+                            "joint",
+                            format!("joint index {} does not exist", joint.0),
+                        ));
+                    };
+                    let coordinate = matches!(
+                        j.kind,
+                        JointKind::Revolute | JointKind::Prismatic | JointKind::Cylindrical
+                    );
+                    if matches!(s.kind, SensorKind::JointCoordinate { .. }) && !coordinate {
+                        return Err(fail(
+                            "joint",
+                            format!(
+                                "joint '{}' is {}; a joint coordinate exists for revolute, prismatic and cylindrical joints",
+                                clip(&j.name, QUOTED),
+                                j.kind.name()
+                            ),
+                        ));
+                    }
+                    match s.kind {
+                        SensorKind::JointForce { component, .. }
+                        | SensorKind::JointTorque { component, .. } => (None, Some((component, 3))),
+                        _ => (None, None),
+                    }
+                }
+                SensorKind::BeamStrain { beam, component }
+                | SensorKind::BeamStress { beam, component } => {
+                    if *beam >= self.beams.len() {
+                        return Err(fail(
+                            "beam",
+                            format!("beam element index {beam} does not exist"),
+                        ));
+                    }
+                    (None, Some((*component, 6)))
+                }
+                SensorKind::KineticEnergy
+                | SensorKind::PotentialEnergy
+                | SensorKind::TotalEnergy
+                | SensorKind::ConstraintViolation => (None, None),
+            };
+            check_node("sensor", i, &s.name, "node", node)?;
+            if let Some((c, count)) = components {
+                if c >= count {
+                    return Err(fail(
+                        "component",
+                        format!("component index {c} does not exist (0 to {})", count - 1),
+                    ));
+                }
+            }
+        }
+        if let Some((first, i)) = first_duplicate(self.sensors.iter().map(|x| x.name.as_str())) {
+            return Err(bad(
+                "sensor",
+                i,
+                &self.sensors[i].name,
+                "name",
+                format!(
+                    "duplicate sensor name (also sensor #{}): each names a column of sensors.csv",
+                    first + 1
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A sensor's name is the header of its column in `sensors.csv`: not empty, not the name of
+/// the first column, no CSV delimiters, quotes or control characters.
+fn check_sensor_name(name: &str) -> Check {
+    if name.trim().is_empty() {
+        return Err("must not be empty (it names a column of sensors.csv)".into());
+    }
+    if RESERVED_COLUMNS.contains(&name) {
+        return Err(format!(
+            "'{name}' is the name of the first column of sensors.csv ({}); choose another",
+            RESERVED_COLUMNS.join(" or ")
+        ));
+    }
+    if name.contains([',', '"']) || name.chars().any(char::is_control) {
+        return Err(
+            "must not contain commas, double quotes, line breaks or other control characters (it names a column of sensors.csv)"
+                .into(),
+        );
+    }
+    Ok(())
+}
