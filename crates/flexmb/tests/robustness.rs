@@ -91,3 +91,41 @@ fn stabilized_index2_converges_second_order() {
     let p = order(&hs, &errs);
     assert!((p - 2.0).abs() < 0.15, "order {p}, errors {errs:?}");
 }
+
+/// Scale invariance: the heavy top with mass and inertia multiplied by 1e7 (or 1e-7) moves
+/// exactly as the original (gravity is the only load) and its reaction scales with the
+/// mass. The consistent initial accelerations once reported such a heavy top as "a node
+/// without mass": their system is now scaled by the largest nodal mass.
+#[test]
+fn heavy_top_motion_does_not_depend_on_the_scale_of_its_mass() {
+    let overrides = [
+        "solver.t_end=0.2",
+        "solver.h=1e-3",
+        "solver.output_interval=0.1",
+    ];
+    let base = run("heavy_top.toml", &overrides);
+    for factor in [1e7, 1e-7] {
+        let mass = format!("body.top.mass={}", 15.0 * factor);
+        let inertia = format!(
+            "body.top.inertia=[{}, {}, {}]",
+            0.234375 * factor,
+            0.46875 * factor,
+            0.234375 * factor
+        );
+        let mut o = overrides.to_vec();
+        o.extend([mass.as_str(), inertia.as_str()]);
+        let scaled = run("heavy_top.toml", &o);
+        for s in ["com_x", "com_y", "com_z", "omega_1", "omega_2", "omega_3"] {
+            let (a, b) = (base.last(s), scaled.last(s));
+            assert!(
+                (a - b).abs() <= 1e-9 * a.abs().max(1.0),
+                "{factor}: {s} {a} vs {b}"
+            );
+        }
+        let (ra, rb) = (base.last("reaction_z"), scaled.last("reaction_z"));
+        assert!(
+            (rb / factor - ra).abs() <= 1e-6 * ra.abs(),
+            "{factor}: {ra} vs {rb}"
+        );
+    }
+}

@@ -30,7 +30,7 @@
 //! called at every output time, so what was computed is never lost.
 
 use super::generalized_alpha::GaParameters;
-use super::initial::{self, initial_accelerations, load_nodes, prepare_layout};
+use super::initial::{self, initial_accelerations, load_nodes, mass_scale, prepare_layout};
 use super::linear::{Backend, LinearError, LinearSolver};
 use super::newton::{weighted_norm, Convergence, NewtonSettings, Verdict, Verification};
 use crate::assembly::{assemble, ConstraintRhs, Scaling};
@@ -218,8 +218,11 @@ pub struct Simulation<'m> {
     first_reselection: f64,
     /// State at the start of the current step (restored when a step is rejected).
     saved: State,
-    /// Size of the constraint-block regularization when it is on (see [`Scaling`]).
+    /// Size of the constraint-block regularization when it is on (see [`Scaling`]), relative
+    /// to the mass block (normalized to O(1)).
     regularization: f64,
+    /// Largest nodal mass of the model \[kg\]: the equilibrium rows are divided by it.
+    mass: f64,
     /// Steps left with the regularization on (switched on by a singular matrix or a failure).
     regularized_steps: usize,
     /// `(h, regularization)` of the factorized iteration matrix, `None` if there is none.
@@ -318,7 +321,8 @@ impl<'m> Simulation<'m> {
             mu_floor: Vec::new(),
             pivot_reference: None,
             first_reselection: 0.0,
-            regularization: 1e-9 / mass_scale(model),
+            regularization: 1e-9,
+            mass: mass_scale(model),
             regularized_steps: 0,
             jacobian: None,
             jacobian_age: 0,
@@ -536,11 +540,13 @@ impl<'m> Simulation<'m> {
         let p = self.params;
         let bp = p.beta_prime(h);
         let gp = p.gamma_prime(h);
-        let scale = 1.0 / bp;
+        // Equilibrium rows times 1 / (beta' m) with m the largest nodal mass: the mass block
+        // is O(1) whatever h and the units of mass, like the constraint block.
+        let scale = 1.0 / (bp * self.mass);
         let mut sc = Scaling {
             row_scale: scale,
             coef: Coefficients {
-                m: 1.0,
+                m: 1.0 / self.mass,
                 c: gp * scale,
                 k: scale,
             },
@@ -1020,42 +1026,38 @@ pub(crate) fn interrupted(flag: &Option<Arc<AtomicBool>>) -> bool {
     flag.as_ref().is_some_and(|f| f.load(Ordering::Relaxed))
 }
 
-/// Largest nodal mass of the model [kg] (1 if there is none): the scale of the
-/// regularization of singular iteration matrices.
-fn mass_scale(model: &Model) -> f64 {
-    let bodies = model.bodies.iter().map(|b| b.mass);
-    let beams = model
-        .beams
-        .iter()
-        .map(|b| 0.5 * b.section.mass_per_length * b.length);
-    let m = bodies.chain(beams).fold(0.0, f64::max);
-    if m > 0.0 {
-        m
-    } else {
-        1.0
-    }
-}
-
-/// Rejects settings that cannot run: every derived quantity (`beta'`, `gamma'`, `h_min`) must
-/// be finite and non-zero, so that no loop of the run can stall on an underflow.
+/// Rejects settings that cannot run, with the ranges of the model file
+/// ([`crate::model::limits`]): every derived quantity (`beta'`, `gamma'`, `h_min`, the
+/// number of steps) must be finite, normal and bounded, so that no loop of the run can
+/// stall on an underflow or run for ever.
 fn check_settings(s: &DynamicSettings) -> Result<(), SolveError> {
+    use crate::model::limits::{within, MAX_STEPS, MAX_TIME, MIN_STEP};
     let bad = |f: &str, m: String| Err(SolveError::Model(format!("solver field '{f}': {m}")));
-    if !(s.h > 0.0 && s.h.is_finite()) {
-        return bad("h", format!("must be positive and finite, got {:e}", s.h));
+    for (field, v) in [("h", s.h), ("t_end", s.t_end)] {
+        if !within(v, MIN_STEP, MAX_TIME) {
+            return bad(
+                field,
+                format!("must be in [{MIN_STEP:e}, {MAX_TIME:e}] s, got {v:e}"),
+            );
+        }
     }
-    if !(s.t_end > 0.0 && s.t_end.is_finite()) {
+    if s.t_end / s.h > MAX_STEPS {
         return bad(
-            "t_end",
-            format!("must be positive and finite, got {:e}", s.t_end),
+            "h",
+            format!(
+                "t_end / h = {:e} steps is more than {MAX_STEPS:e}",
+                s.t_end / s.h
+            ),
         );
     }
-    if !(0.0..=1.0).contains(&s.rho_inf) {
+    if !within(s.rho_inf, 0.0, 1.0) {
         return bad("rho_inf", format!("must be in [0, 1], got {:e}", s.rho_inf));
     }
-    if !(s.output_interval >= 0.0 && s.output_interval.is_finite()) {
+    let out = s.output_interval;
+    if !(out == 0.0 || within(out, MIN_STEP, MAX_TIME) && s.t_end / out <= MAX_STEPS) {
         return bad(
             "output_interval",
-            format!("must be >= 0 and finite, got {:e}", s.output_interval),
+            format!("must be 0 or in [{MIN_STEP:e}, {MAX_TIME:e}] s with at most {MAX_STEPS:e} outputs, got {out:e}"),
         );
     }
     let p = s.scheme.parameters(s.rho_inf);
@@ -1065,15 +1067,15 @@ fn check_settings(s: &DynamicSettings) -> Result<(), SolveError> {
         1.0 / p.beta_prime(s.h),
     ];
     if derived.iter().any(|d| !d.is_normal()) {
-        return bad("h", format!("{:e} s is too small: 1/h^2 overflows", s.h));
+        return bad(
+            "h",
+            format!("{:e} s gives a non-finite beta' or gamma'", s.h),
+        );
     }
-    if !(s.h_min.is_normal() && s.h_min > 0.0 && s.h_min <= s.h) {
+    if !within(s.h_min, MIN_STEP * s.h, s.h) {
         return bad(
             "h_min",
-            format!(
-                "must be a positive normal number not above h, got {:e}",
-                s.h_min
-            ),
+            format!("must be in [1e-12 h, h], got {:e} (h = {:e})", s.h_min, s.h),
         );
     }
     Ok(())

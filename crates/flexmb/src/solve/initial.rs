@@ -16,6 +16,7 @@ use crate::elements::{Coefficients, NodeState};
 use crate::error::SolveError;
 use crate::joints;
 use crate::model::Model;
+use crate::solve::linear::LinearError;
 use crate::state::State;
 use flexmb_lie::{Frame, Mat6};
 use nalgebra::DMatrix;
@@ -181,9 +182,17 @@ pub fn initial_accelerations(
         n.vdot.fill(0.0);
     }
     let zeros = vec![0.0; data.layout.n_rows];
+    // Equilibrium rows divided by the largest nodal mass (multipliers solved for as
+    // `lambda / m`): mass and constraint blocks are then both O(1), and a model of heavy
+    // bodies is not mistaken for a singular one by the relative pivot test.
+    let s = 1.0 / mass_scale(model);
     let mut sc = Scaling {
-        row_scale: 1.0,
-        coef: Coefficients::MASS,
+        row_scale: s,
+        coef: Coefficients {
+            m: s,
+            c: 0.0,
+            k: 0.0,
+        },
         constraint_rhs: ConstraintRhs::Position,
         load_factor,
         regularization: 0.0,
@@ -213,18 +222,9 @@ pub fn initial_accelerations(
     }
     sc.constraint_rhs = ConstraintRhs::Acceleration;
     assemble(model, data, state.t, &zeros, &sc, true);
-    data.solver.factorize(&data.values).map_err(|e| {
-        let col = match e {
-            crate::solve::linear::LinearError::Singular { column: Some(c) } => {
-                format!("; near {}", data.layout.describe_unknown(model, c))
-            }
-            _ => String::new(),
-        };
-        SolveError::Model(format!(
-            "the mass/constraint matrix [M B^T; B 0] is singular at t = {}: a node without mass or constraint, or redundant constraints{col} ({e})",
-            state.t
-        ))
-    })?;
+    data.solver
+        .factorize(&data.values)
+        .map_err(|e| singular_mass_matrix(model, data, state.t, e))?;
     let mut x: Vec<f64> = data.residual.iter().map(|r| -r).collect();
     data.solver.solve_in_place(&mut x);
     if x.iter().any(|v| !v.is_finite()) {
@@ -238,10 +238,52 @@ pub fn initial_accelerations(
         state.a[i] = acc;
     }
     for (row, slot) in data.layout.row_unknown.iter().enumerate() {
-        state.lambda[row] = slot.map_or(0.0, |k| x[nd + k]);
+        state.lambda[row] = slot.map_or(0.0, |k| x[nd + k] / s);
     }
     load_nodes(state, data);
     Ok(())
+}
+
+/// The diagnosis of a singular `[M B^T; B 0]`: a node without mass is named only when the
+/// unknown blamed belongs to a node whose nodal mass or inertia is zero.
+fn singular_mass_matrix(model: &Model, data: &Data, t: f64, e: LinearError) -> SolveError {
+    let column = match e {
+        LinearError::Singular { column } => column,
+        LinearError::Factorization(_) => None,
+    };
+    let nd = data.layout.n_dofs;
+    let cause = match column {
+        Some(c) if c < nd && data.nodal_mass[c / 6][c % 6] == 0.0 => format!(
+            "node '{}' has no {} and nothing else determines its motion in {}",
+            model.nodes[c / 6].name,
+            if c % 6 < 3 { "mass" } else { "rotational inertia" },
+            data.layout.describe_unknown(model, c)
+        ),
+        Some(c) => format!(
+            "the motion of the model is not determined near {}: a node without mass, or constraints that are redundant or contradict each other there",
+            data.layout.describe_unknown(model, c)
+        ),
+        None => "no unknown can be blamed".into(),
+    };
+    SolveError::Model(format!(
+        "the mass/constraint matrix [M B^T; B 0] is singular at t = {t}: {cause} ({e})"
+    ))
+}
+
+/// Largest nodal mass of the model [kg] (1 if there is none): the scale of the mass block,
+/// for scaling the equations and for the regularization of singular iteration matrices.
+pub(crate) fn mass_scale(model: &Model) -> f64 {
+    let bodies = model.bodies.iter().map(|b| b.mass);
+    let beams = model
+        .beams
+        .iter()
+        .map(|b| 0.5 * b.section.mass_per_length * b.length);
+    let m = bodies.chain(beams).fold(0.0, f64::max);
+    if m > 0.0 {
+        m
+    } else {
+        1.0
+    }
 }
 
 fn worst(v: &[f64]) -> Option<(usize, f64)> {

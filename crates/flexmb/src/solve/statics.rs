@@ -702,43 +702,71 @@ impl<'m> Statics<'m> {
     }
 }
 
-/// Rejects settings that cannot run: every increment and its smallest allowed value must be
-/// finite and non-zero, so that no loop can stall on an underflow (a halved increment
-/// always falls below its positive minimum after finitely many halvings).
+/// Rejects settings that cannot run, with the ranges of the model file
+/// ([`crate::model::limits`]): every increment and its smallest allowed value must be
+/// finite and normal, so that no loop can stall on an underflow (a halved increment always
+/// falls below its positive minimum after finitely many halvings) and the load factor always
+/// advances.
 fn check_settings(s: &StaticSettings) -> Result<(), SolveError> {
-    let bad = |f: &str, v: f64| {
-        Err(SolveError::Model(format!(
-            "solver field '{f}': must be a positive normal number (and the derived minimum too), got {v:e}"
-        )))
-    };
-    if !(s.load_factor.is_finite() && s.load_factor != 0.0) {
-        return Err(SolveError::Model(format!(
-            "solver field 'load_factor': must be finite and non-zero, got {:e}",
-            s.load_factor
-        )));
+    use crate::model::limits::{within, MAX_STEPS, MAX_TIME, MIN_STEP};
+    let bad = |f: &str, m: String| Err(SolveError::Model(format!("solver field '{f}': {m}")));
+    if !(within(s.load_factor.abs(), MIN_STEP, MAX_TIME)) {
+        return bad(
+            "load_factor",
+            format!(
+                "must be non-zero and at most {MAX_TIME:e} in size, got {:e}",
+                s.load_factor
+            ),
+        );
     }
-    let positive = |v: f64| v.is_normal() && v > 0.0;
-    for (f, v) in [
+    let floor = MIN_STEP * s.load_factor.abs().max(1.0);
+    if !within(s.min_increment, floor, MAX_TIME) {
+        return bad(
+            "min_increment",
+            format!(
+                "must be at least {floor:e} (1e-12 max(1, |load_factor|)), got {:e}",
+                s.min_increment
+            ),
+        );
+    }
+    for (field, v) in [
         ("initial_increment", s.initial_increment),
-        ("min_increment", s.min_increment),
         ("max_increment", s.max_increment),
-        ("arc_length", s.arc_length),
-        ("pseudo_time", s.pseudo_time),
     ] {
-        if !positive(v) {
-            return bad(f, v);
+        if !within(v, s.min_increment, MAX_TIME) {
+            return bad(
+                field,
+                format!("must be in [min_increment, {MAX_TIME:e}], got {v:e}"),
+            );
         }
     }
-    if !positive(s.arc_length * ARC_LENGTH_MIN) {
-        return bad("arc_length", s.arc_length);
+    if !within(s.arc_length, 1e-9, 1e9) {
+        return bad(
+            "arc_length",
+            format!("must be in [1e-9, 1e9], got {:e}", s.arc_length),
+        );
     }
-    if !(s.pseudo_damping >= 0.0 && s.pseudo_damping.is_finite()) {
-        return bad("pseudo_damping", s.pseudo_damping);
+    if !within(s.pseudo_time, MIN_STEP, MAX_TIME)
+        || !within(s.pseudo_time * s.initial_increment, MIN_STEP, MAX_TIME)
+        || 2.0 / s.initial_increment > MAX_STEPS
+    {
+        return bad(
+            "pseudo_time",
+            format!(
+                "pseudo_time {:e} s with steps of initial_increment x pseudo_time = {:e} s: both must be in [1e-12, 1e12] s with at most 1e10 steps",
+                s.pseudo_time,
+                s.pseudo_time * s.initial_increment
+            ),
+        );
+    }
+    if !within(s.pseudo_damping, 0.0, crate::model::limits::MAX_PHYSICAL) {
+        return bad(
+            "pseudo_damping",
+            format!("must be in [0, 1e30], got {:e}", s.pseudo_damping),
+        );
     }
     if s.max_steps == 0 {
-        return Err(SolveError::Model(
-            "solver field 'max_steps': must be at least 1".into(),
-        ));
+        return bad("max_steps", "must be at least 1".into());
     }
     Ok(())
 }
