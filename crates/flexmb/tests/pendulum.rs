@@ -96,3 +96,23 @@ fn pendulum_joint_reaction_is_three_times_the_weight_at_the_bottom() {
     let f0 = run.rows[0].1[run.column("reaction_x")].hypot(run.rows[0].1[run.column("reaction_y")]);
     assert!(f0 < 1e-6, "reaction at release {f0}");
 }
+
+/// The trust issue's reproducer: 12 000 steps of 1.25e-4 s to 1.5 s took a 12 001st step of
+/// a few 1e-16 s and wrote t = 1.5 twice. Every step now ends on the time grid, the last
+/// exactly on t_end, and none is shorter than h / 2.
+#[test]
+fn pendulum_takes_no_sliver_step_at_the_end() {
+    let run = run(
+        "pendulum.toml",
+        &[
+            "solver.t_end=1.5",
+            "solver.h=1.25e-4",
+            "solver.output_interval=0",
+        ],
+    );
+    assert_eq!(run.stats.steps, 12_000);
+    assert_eq!(run.rows.len(), 12_001);
+    assert_eq!(run.rows.last().unwrap().0, 1.5);
+    assert!(run.rows.windows(2).all(|w| w[1].0 > w[0].0));
+    assert!(run.stats.smallest_step >= 0.5 * 1.25e-4);
+}

@@ -183,6 +183,8 @@ pub struct Stats {
     pub undetermined_multipliers: usize,
     /// Times the redundant constraint rows were chosen again as the mechanism moved.
     pub reselections: usize,
+    /// Shortest accepted step \[s\] (0 before the first).
+    pub smallest_step: f64,
 }
 
 /// Why a step failed (before step-size reduction decides what to do).
@@ -398,6 +400,9 @@ impl<'m> Simulation<'m> {
                     self.stats.max_iterations_in_a_step =
                         self.stats.max_iterations_in_a_step.max(iterations);
                     self.watch_redundant_rows();
+                    if self.stats.steps == 1 || h_try < self.stats.smallest_step {
+                        self.stats.smallest_step = h_try;
+                    }
                     successes += 1;
                     anchor = if t_new == regular {
                         (anchor.0, anchor.1 + 1)
