@@ -150,3 +150,49 @@ fn inconsistent_initial_conditions_are_reported() {
     );
     assert!(stderr.contains("velocit"), "{stderr}");
 }
+
+/// `--verify` re-checks every accepted step with a fresh matrix and reports the largest
+/// estimated error (in units of the Newton tolerance) on the closing line and in
+/// summary.json; the free body of the trust issue (reused matrix by default) passes it.
+#[test]
+fn verify_reports_the_largest_error_of_an_accepted_step() {
+    let out = out_dir("verify");
+    let result = flexmb()
+        .args([
+            "run",
+            repo("crates/flexmb-cli/tests/data/free_body.toml")
+                .to_str()
+                .unwrap(),
+            "--verify",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(result.status.success());
+    let stdout = String::from_utf8_lossy(&result.stdout);
+    assert!(stdout.contains("verify: 400 steps re-checked"), "{stdout}");
+    let s = summary(&out);
+    let v = &s["verify"];
+    assert_eq!(v["steps"], 400);
+    let max = v["max_error"].as_f64().expect("a number");
+    assert!(max > 0.0 && max <= 1.0, "{v}");
+    assert!(
+        v["worst_equation"].as_str().unwrap().contains("node 'b'"),
+        "{v}"
+    );
+    // Without the flag there is no verify entry.
+    let plain = out_dir("verify-off");
+    flexmb()
+        .args([
+            "run",
+            repo("crates/flexmb-cli/tests/data/free_body.toml")
+                .to_str()
+                .unwrap(),
+            "--out",
+        ])
+        .arg(&plain)
+        .output()
+        .expect("runs");
+    assert!(summary(&plain).get("verify").is_none());
+}

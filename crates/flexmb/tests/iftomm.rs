@@ -39,14 +39,11 @@ fn four_bar_follows_reference_through_its_singular_positions() {
     // Over-constrained planar loops: redundant rows found and removed (3 per loop).
     let redundant = run.warnings.iter().filter(|w| w.contains("was removed"));
     assert_eq!(redundant.count(), 6, "{:?}", run.warnings);
-    // The mechanism passes its singular positions, where the multipliers are not
-    // determined: the run says so.
+    // Its singular positions (links aligned) are passed with few step reductions.
     assert!(
-        run.warnings
-            .iter()
-            .any(|w| w.contains("singular configurations")),
-        "{:?}",
-        run.warnings
+        run.stats.rejected_steps < 50,
+        "{}",
+        run.stats.rejected_steps
     );
     let reference = four_bar_reference(2.0, 10.0, 0.01);
     // Published end point (benchmarks.md A02): B0(10 s) = (0.3284581115, 0.9445185382).
@@ -191,7 +188,11 @@ fn bricard_moves_the_same_whatever_its_node_placement_and_formulation() {
             assert_eq!(r.stats.rejected_steps, 0, "{s:?}");
             assert!(e < 1e-4, "{s:?}: {e}");
             // No sliver step before an output time (the trust issue saw steps of 1e-12 s).
-            assert!(r.stats.smallest_step >= 0.5e-3, "{s:?}: {}", r.stats.smallest_step);
+            assert!(
+                r.stats.smallest_step >= 0.5e-3,
+                "{s:?}: {}",
+                r.stats.smallest_step
+            );
         }
         assert!(between < 1e-6, "{s:?}: {between}");
     }

@@ -33,10 +33,11 @@
 //! safety factor (0.01 to 0.1 there): an exact Newton step lands far inside the tolerance
 //! (its error is quadratic in `|dx|`), and a linearly converging one must too, or the two
 //! give different answers that differ by up to the tolerance at every step. Measured on a
-//! free body near its intermediate axis (`tests/matrix_reuse.rs`, 20 s at h = 2.5e-3): the
-//! second flip comes at 13.5675 s with fresh matrices (13.56625 s at h/2), and at 14.15 /
-//! 13.88 / 13.58 s with reused ones for kappa = 1 / 0.1 / 0.01 (15.5 s before this test
-//! existed); kappa = 0.01 costs 0 to 0.5 more (cheap) iterations per step than kappa = 1.
+//! free body near its intermediate axis (`tests/matrix_reuse.rs`, 20 s at h = 2.5e-3): full
+//! Newton flips at 8.2875, 13.5675 and 18.845 s (13.56625 s at h / 2); with a reused matrix
+//! the acceptance on one correction's size gave 7.84, 12.275 and 16.605 s, this test with
+//! kappa = 1 about 8.6 and 14.15 s, and with kappa = 0.01 8.2875, 13.565 and 18.845 s
+//! (BENCHMARKS.md has the cost).
 
 /// Tolerances and limits of the Newton iteration.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -94,6 +95,12 @@ pub fn weighted_norm(
 /// come from the exact iteration matrix (see the module documentation).
 pub const KAPPA: f64 = 0.01;
 
+/// Weighted correction below which a block is converged to round-off: its ratio of
+/// successive corrections is noise and does not enter the contraction rate (measured on
+/// the spin-up after its drive stops: increments at 5e-7 of the tolerance with ratios of
+/// 0.3 to 0.7 while the multipliers converge at 0.06).
+pub const NEGLIGIBLE: f64 = 1e-4 * KAPPA;
+
 /// Most blocks of unknowns [`Convergence`] tracks separately.
 pub const MAX_BLOCKS: usize = 4;
 
@@ -132,7 +139,7 @@ impl Convergence {
             norms
                 .iter()
                 .zip(previous)
-                .filter(|(&now, _)| now > 0.0)
+                .filter(|(&now, _)| now > NEGLIGIBLE)
                 .map(|(&now, before)| now / before)
                 .fold(0.0f64, |m, v| m.max(v))
         });
