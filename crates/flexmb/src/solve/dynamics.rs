@@ -657,12 +657,8 @@ impl<'m> Simulation<'m> {
                 self.stats.undetermined_multipliers += 1;
             }
             let theta = match verdict {
-                Verdict::Converged { .. } => Ok(()),
-                Verdict::Continue { .. } if undetermined => Ok(()),
-                Verdict::Continue { theta } => Err(theta),
-            };
-            let theta = match theta {
-                Ok(()) => {
+                Verdict::Continue { theta } if !undetermined => theta,
+                _ => {
                     let total = self.total_increments(&dq);
                     self.finish_step(&total);
                     self.total = total;
@@ -672,7 +668,6 @@ impl<'m> Simulation<'m> {
                     result = Ok(iteration);
                     break;
                 }
-                Err(theta) => theta,
             };
             let worst = norms.worst();
             if let Some(theta) = theta.filter(|&t| t > newton.max_contraction) {
