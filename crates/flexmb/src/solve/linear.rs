@@ -528,25 +528,39 @@ fn check_pivot(
 
 /// Compresses a triplet pattern to CSC (rows sorted within each column,
 /// duplicates merged). Returns `(col_ptr, row_idx, slots)` where `slots[k]` is
-/// the CSC position of the k-th triplet.
+/// the CSC position of the k-th triplet. Linear in the number of triplets: a
+/// counting sort by column, then a sort of each (short) column by row.
 fn compress_pattern(n: usize, pattern: &[(usize, usize)]) -> (Vec<usize>, Vec<usize>, Vec<usize>) {
-    let mut order: Vec<usize> = (0..pattern.len()).collect();
-    order.sort_unstable_by_key(|&k| (pattern[k].1, pattern[k].0));
+    // Triplet indices bucketed by column.
+    let mut start = vec![0usize; n + 1];
+    for &(_, j) in pattern {
+        start[j + 1] += 1;
+    }
+    for j in 0..n {
+        start[j + 1] += start[j];
+    }
+    let mut order = vec![0usize; pattern.len()];
+    let mut next = start.clone();
+    for (k, &(_, j)) in pattern.iter().enumerate() {
+        order[next[j]] = k;
+        next[j] += 1;
+    }
     let mut col_ptr = vec![0usize; n + 1];
     let mut row_idx = Vec::with_capacity(pattern.len());
     let mut slots = vec![0usize; pattern.len()];
-    let mut last = None;
-    for &k in &order {
-        let (i, j) = pattern[k];
-        if last != Some((i, j)) {
-            row_idx.push(i);
-            col_ptr[j + 1] += 1;
-            last = Some((i, j));
-        }
-        slots[k] = row_idx.len() - 1;
-    }
     for j in 0..n {
-        col_ptr[j + 1] += col_ptr[j];
+        let column = &mut order[start[j]..start[j + 1]];
+        column.sort_unstable_by_key(|&k| pattern[k].0);
+        let mut last = None;
+        for &k in column.iter() {
+            let i = pattern[k].0;
+            if last != Some(i) {
+                row_idx.push(i);
+                last = Some(i);
+            }
+            slots[k] = row_idx.len() - 1;
+        }
+        col_ptr[j + 1] = row_idx.len();
     }
     (col_ptr, row_idx, slots)
 }
