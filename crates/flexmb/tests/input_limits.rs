@@ -465,65 +465,6 @@ fn a_file_with_nul_bytes_is_not_text() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// A chain of `n` links as in examples/chain_*.toml.
-fn chain(n: usize) -> String {
-    let mut s = String::from(
-        "flexmb = 1\n[model]\ngroup = \"SE3\"\ngravity = [0.0, -9.81, 0.0]\n[solver]\nanalysis = \"dynamic\"\nt_end = 1.0\nh = 1e-3\n",
-    );
-    for i in 0..n {
-        s += &format!(
-            "[[body]]\nname = \"link{i}\"\nmass = 1.0\nposition = [{}, 0.0, 0.0]\ninertia = {{ box = [1.0, 0.1, 0.1] }}\n",
-            i as f64 + 0.5
-        );
-    }
-    for i in 0..n {
-        let a = if i == 0 {
-            "ground".to_string()
-        } else {
-            format!("link{}", i - 1)
-        };
-        s += &format!(
-            "[[joint]]\nname = \"j{i}\"\ntype = \"revolute\"\nnode_a = \"{a}\"\nnode_b = \"link{i}\"\nposition = [{}, 0.0, 0.0]\naxis = [0.0, 0.0, 1.0]\n",
-            i as f64
-        );
-    }
-    s
-}
-
-/// CPU seconds of the calling thread (Linux; `None` elsewhere), 10 ms resolution.
-fn thread_cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/thread-self/stat").ok()?;
-    let rest = &stat[stat.rfind(')')? + 2..];
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
-    Some(ticks / 100.0)
-}
-
-#[test]
-fn reading_a_chain_is_linear_in_its_length() {
-    // CPU seconds to read `copies` chains of `n` links.
-    let read = |n: usize, copies: usize| {
-        let text = chain(n);
-        let start = thread_cpu_seconds()?;
-        for _ in 0..copies {
-            let file = parse_model_str(&text, "chain.toml", &[]).unwrap();
-            assert_eq!(file.model.joints.len(), n);
-        }
-        Some((thread_cpu_seconds()? - start).max(0.01))
-    };
-    let (Some(small), Some(large)) = (read(2_000, 16), read(32_000, 1)) else {
-        return; // no per-thread CPU clock here
-    };
-    println!("16 chains of 2000 links: {small} s, one of 32000 links: {large} s");
-    // The same number of links in one chain or in 16: the same work if reading is linear;
-    // the former scan of the nodes for every joint end made the long chain about 7 times
-    // slower than the 16 short ones.
-    assert!(
-        large < 2.5 * small,
-        "16 chains of 2000 links: {small} s, one of 32000 links: {large} s"
-    );
-}
-
 #[test]
 fn name_lookups_are_hashed() {
     let mut model = Model::new(Group::SE3);

@@ -697,13 +697,15 @@ impl<'m> Simulation<'m> {
             let worst = norms.worst();
             if let Some(theta) = theta.filter(|&t| t > newton.max_contraction) {
                 if !fresh {
-                    // A stale matrix converges too slowly: rebuild it and go on. The first
-                    // rate of a step is not enough to tell: the first correction carries the
-                    // predictor's error, which one block can lose at once, so that a block
-                    // it then moves looks slow (a 1000-link chain: multipliers 0.37 -> 0.26,
-                    // truly converging at 0.007). It rebuilds the matrix only when it says
-                    // the iteration diverges; later rates above the threshold do.
-                    if iteration >= 3 || theta > 1.0 {
+                    // A stale matrix converges too slowly: rebuild it and go on. For a large
+                    // (sparse) matrix the first rate of a step is not enough to pay for a
+                    // factorization: the first correction carries the predictor's error,
+                    // which one block can lose at once, so that a block it then moves looks
+                    // slow (a 1000-link chain: multipliers 0.37 -> 0.26, truly converging at
+                    // 0.007); only a first rate above 1 rebuilds it, later rates above the
+                    // threshold do. A small (dense) matrix is cheap to rebuild at once.
+                    let dense = self.data.solver.backend() == Backend::Dense;
+                    if dense || iteration >= 3 || theta > 1.0 {
                         refresh = true;
                     }
                 } else if iteration >= 3 && theta > 1.0 {

@@ -36,7 +36,7 @@
 //! free body near its intermediate axis (`tests/matrix_reuse.rs`, 20 s at h = 2.5e-3): full
 //! Newton flips at 8.2875, 13.5675 and 18.845 s (13.56625 s at h / 2); with a reused matrix
 //! the acceptance on one correction's size gave 7.84, 12.275 and 16.605 s, this test with
-//! kappa = 1 about 8.6 and 14.15 s, and with kappa = 0.01 8.2875, 13.565 and 18.845 s
+//! kappa = 1 about 8.6 and 14.15 s, and with kappa = 0.01 8.29, 13.5775 and 18.8675 s
 //! (BENCHMARKS.md has the cost).
 
 /// Tolerances and limits of the Newton iteration.
