@@ -165,13 +165,29 @@ fn run(model: &Path, out: &Path, set: &[String], quiet: bool, verify: bool) -> i
         interrupt.as_ref().map(|i| i.flag()),
     );
     bar.finish_and_clear();
-    let summary = match result {
-        Ok(summary) => summary,
-        Err(e) => {
+    if let (Status::Running, Some(e)) = (result.summary.status, &result.unwritten) {
+        // The run could not start: summary.json could not be written.
+        tell(format_args!("error: {e}"));
+        return exit::OUTPUT_FAILED;
+    }
+    let code = report(model, out, &result.summary, interrupt);
+    match result.unwritten {
+        // The outcome was said above; summary.json could not record it.
+        Some(e) => {
             tell(format_args!("error: {e}"));
-            return exit::OUTPUT_FAILED;
+            exit::OUTPUT_FAILED
         }
-    };
+        None => code,
+    }
+}
+
+/// Says how a run ended (closing line, warnings, error) and returns its exit code.
+fn report(
+    model: &Path,
+    out: &Path,
+    summary: &Summary,
+    interrupt: Option<signals::Interrupt>,
+) -> i32 {
     for w in &summary.warnings {
         tell(format_args!("warning: {w}"));
     }

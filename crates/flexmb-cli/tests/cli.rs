@@ -183,7 +183,7 @@ fn verify_reports_the_largest_error_of_an_accepted_step() {
     );
     // Without the flag there is no verify entry.
     let plain = out_dir("verify-off");
-    flexmb()
+    let status = flexmb()
         .args([
             "run",
             repo("crates/flexmb-cli/tests/data/free_body.toml")
@@ -192,7 +192,8 @@ fn verify_reports_the_largest_error_of_an_accepted_step() {
             "--out",
         ])
         .arg(&plain)
-        .output()
+        .status()
         .expect("runs");
+    assert!(status.success());
     assert!(summary(&plain).get("verify").is_none());
 }

@@ -145,21 +145,63 @@ fn earlier_result_that_cannot_be_removed_exits_3() {
 /// EFBIG like on a full disk).
 #[cfg(unix)]
 fn run_with_file_size_limit(out: &Path, blocks: u32) -> Output {
+    run_model_with_file_size_limit(
+        "examples/pendulum.toml",
+        &["solver.t_end=0.05"],
+        out,
+        blocks,
+    )
+}
+
+/// Runs a model of the repository with `--set` overrides and the size of every file the
+/// process writes limited to `blocks` 512-byte blocks.
+#[cfg(unix)]
+fn run_model_with_file_size_limit(model: &str, set: &[&str], out: &Path, blocks: u32) -> Output {
     std::process::Command::new("sh")
         .arg("-c")
         .arg(format!(
             "trap '' XFSZ; ulimit -f {blocks} || exit 99; exec \"$0\" \"$@\""
         ))
         .arg(env!("CARGO_BIN_EXE_flexmb"))
-        .args([
-            "run",
-            repo("examples/pendulum.toml").to_str().unwrap(),
-            "--out",
-        ])
+        .args(["run", repo(model).to_str().unwrap(), "--out"])
         .arg(out)
-        .args(["--set", "solver.t_end=0.05"])
+        .args(set.iter().flat_map(|s| ["--set", s]))
         .output()
         .expect("sh runs")
+}
+
+/// An output step goes to every result file or to none: here nodes.csv (10 nodes a step)
+/// reaches the size limit while sensors.csv has room for more rows, and sensors.csv is cut
+/// back to the steps that nodes.csv holds (it kept one row more before).
+#[cfg(unix)]
+#[test]
+fn full_disk_keeps_the_same_steps_in_every_result_file() {
+    let out = out_dir("fsize-steps");
+    let result = run_model_with_file_size_limit(
+        "examples/chain_10.toml",
+        &["solver.output_interval=0", "solver.t_end=0.01"],
+        &out,
+        4,
+    );
+    assert_eq!(result.status.code(), Some(3), "{}", stderr(&result));
+    assert!(
+        stderr(&result).contains("nodes.csv: cannot write"),
+        "{}",
+        stderr(&result)
+    );
+    let sensors = rows(&out.join("sensors.csv"));
+    let nodes = rows(&out.join("nodes.csv"));
+    assert!(!sensors.is_empty());
+    assert_eq!(
+        nodes.len(),
+        10 * sensors.len(),
+        "{} sensor rows",
+        sensors.len()
+    );
+    assert_eq!(
+        summary(&out)["outputs"].as_u64().unwrap() as usize,
+        sensors.len()
+    );
 }
 
 #[cfg(unix)]
@@ -195,11 +237,13 @@ fn summary_that_cannot_be_written_is_never_left_partial() {
     let result = run_with_file_size_limit(&out, 1);
     assert_eq!(result.status.code(), Some(3), "{}", stderr(&result));
     let err = stderr(&result);
+    // Two causes, one line each: the result file and the final summary.
     assert!(
         err.contains("sensors.csv: cannot write"),
         "the cause: {err}"
     );
-    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("summary.json"), "{err}");
+    assert_eq!(err.lines().count(), 2, "{err}");
     let s = summary(&out); // parses
     assert_eq!(s["status"], "running");
     assert_eq!(s["title"], "Simple pendulum (IFToMM A01)");

@@ -10,8 +10,9 @@
 //!
 //! with `s` the row scale (`1/(beta' m)` in dynamics, `m` the largest nodal mass, so that
 //! every block stays O(1) as `h -> 0` and whatever the unit of mass), `mu = s lambda` the
-//! scaled multipliers, `c_m = s beta'`, `c_c = s gamma'`, `c_k = s`, and `K_c = d(B^T lambda)/dq`. The same routine serves the consistent initial
-//! accelerations (`c_m = s = 1/m`, `c_c = c_k = 0`, right-hand side the convective terms) and statics
+//! scaled multipliers, `c_m = s beta'`, `c_c = s gamma'`, `c_k = s`, and
+//! `K_c = d(B^T lambda)/dq`. The same routine serves the consistent initial accelerations
+//! (`c_m = s = 1/m`, `c_c = c_k = 0`, right-hand side the convective terms) and statics
 //! (`c_m = c_c = 0`).
 
 use crate::data::{active_slots, Data};

@@ -120,6 +120,26 @@ impl Layout {
         node.map(|n| 6 * n.0)
     }
 
+    /// `(joint, row within joint)` of a global row index.
+    pub fn locate_row(&self, row: usize) -> (usize, usize) {
+        let j = self.joint_row_start.partition_point(|&s| s <= row) - 1;
+        (j, row - self.joint_row_start[j])
+    }
+
+    /// A constraint row in the words of its joint, e.g. "revolute joint 'P5', row 3
+    /// (translation along the joint's z axis)".
+    pub fn describe_row(&self, model: &Model, row: usize) -> String {
+        let (j, r) = self.locate_row(row);
+        let joint = &model.joints[j];
+        format!(
+            "{} joint '{}', row {} ({})",
+            joint.kind.name(),
+            joint.name,
+            r + 1,
+            self.joint_rows[j][r].describe()
+        )
+    }
+
     /// Human-readable name of unknown `i`, for diagnostics.
     pub fn describe_unknown(&self, model: &Model, i: usize) -> String {
         const COMP: [&str; 6] = ["x", "y", "z", "rx", "ry", "rz"];
@@ -131,21 +151,16 @@ impl Layout {
                 COMP[i % 6]
             );
         }
-        let (k, what) = if i >= self.n_dofs + self.n_active {
-            (i - self.n_dofs - self.n_active, "velocity-level constraint")
+        let (k, prefix) = if i >= self.n_dofs + self.n_active {
+            (
+                i - self.n_dofs - self.n_active,
+                "velocity-level constraint of ",
+            )
         } else {
-            (i - self.n_dofs, "constraint")
+            (i - self.n_dofs, "")
         };
         if let Some(row) = self.row_unknown.iter().position(|&u| u == Some(k)) {
-            let what = if what == "constraint" {
-                ""
-            } else {
-                "velocity-level constraint of "
-            };
-            return format!(
-                "{what}{}",
-                crate::solve::initial::describe_row(model, self, row)
-            );
+            return format!("{prefix}{}", self.describe_row(model, row));
         }
         format!("unknown {i}")
     }

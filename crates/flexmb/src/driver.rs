@@ -13,9 +13,7 @@
 //! results of an earlier run).
 
 use crate::input::{Analysis, ModelFile};
-use crate::output::{
-    CsvWriter, ErrorKind, OutputDir, OutputError, ShapeWriter, Status, Summary, SENSORS_FILE,
-};
+use crate::output::{ErrorKind, OutputDir, OutputError, ResultFiles, Status, Summary};
 use crate::sensors::SensorEvaluator;
 use crate::solve::{DynamicSettings, Simulation, StaticSettings, Statics};
 use crate::SolveError;
@@ -23,19 +21,24 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
 
+/// What a run did: its summary (the outcome, whether or not `summary.json` could record it)
+/// and, when the summary file could not be written, why.
+#[derive(Debug)]
+pub struct Report {
+    pub summary: Summary,
+    pub unwritten: Option<OutputError>,
+}
+
 /// Runs the analysis a model file declares into `out`. `progress(t, t_end)` is called at
 /// every output step; `interrupt`, when set (e.g. by a signal handler), stops the run before
-/// its next step with status `interrupted`.
-///
-/// Returns the summary that was written. `Err` only when a result file could not be written
-/// and the summary could not record it either; when the summary could record it, the
-/// summary says `failed` with `error_kind` `output`.
+/// its next step with status `interrupted`. A result file that cannot be written ends the
+/// run with `failed` and `error_kind` `output`.
 pub fn run(
     file: &ModelFile,
     out: &OutputDir,
     progress: &mut dyn FnMut(f64, f64),
     interrupt: Option<Arc<AtomicBool>>,
-) -> Result<Summary, OutputError> {
+) -> Report {
     let start = Instant::now();
     let model = &file.model;
     let (analysis, t_end) = match &file.analysis {
@@ -50,22 +53,24 @@ pub fn run(
         t_end,
         ..Default::default()
     };
-    out.write_summary(&summary)?;
+    if let Err(e) = out.write_summary(&summary) {
+        // Nothing ran: the summary stays `running`, the error says why.
+        return Report {
+            summary,
+            unwritten: Some(e),
+        };
+    }
     let ended = match &file.analysis {
         Analysis::Dynamic(settings) => run_dynamic(model, settings, out, progress, interrupt),
         Analysis::Static(settings) => run_static(model, settings, out, progress, interrupt),
     };
     let output_seconds = ended.output_seconds;
-    let output_error = ended.record(&mut summary);
+    ended.record(&mut summary);
     let wall = start.elapsed().as_secs_f64();
     summary.wall_seconds = wall;
     summary.solve_seconds = (wall - output_seconds).max(0.0);
-    match (output_error, out.write_summary(&summary)) {
-        // The summary could not record the output error (a full disk): report the cause.
-        (Some(first), Err(_)) => Err(first),
-        (None, Err(e)) => Err(e),
-        (_, Ok(())) => Ok(summary),
-    }
+    let unwritten = out.write_summary(&summary).err();
+    Report { summary, unwritten }
 }
 
 /// How an analysis ended: its work counts and the error that stopped it, if any.
@@ -133,7 +138,7 @@ impl Ended {
     }
 
     /// Writes the counts and the outcome into the summary; returns the output error, if any.
-    fn record(self, summary: &mut Summary) -> Option<OutputError> {
+    fn record(self, summary: &mut Summary) {
         let w = self.work;
         summary.steps = w.steps;
         summary.newton_iterations = w.newton_iterations;
@@ -147,22 +152,10 @@ impl Ended {
         summary.warnings = w.warnings;
         summary.verify = w.verify;
         match self.outcome {
-            Outcome::Completed => {
-                summary.status = Status::Ok;
-                None
-            }
-            Outcome::Interrupted => {
-                summary.status = Status::Interrupted;
-                None
-            }
-            Outcome::Failed(kind, message) => {
-                summary.fail(kind, message);
-                None
-            }
-            Outcome::Output(e) => {
-                summary.fail(ErrorKind::Output, e.to_string());
-                Some(e)
-            }
+            Outcome::Completed => summary.status = Status::Ok,
+            Outcome::Interrupted => summary.status = Status::Interrupted,
+            Outcome::Failed(kind, message) => summary.fail(kind, message),
+            Outcome::Output(e) => summary.fail(ErrorKind::Output, e.to_string()),
         }
     }
 }
@@ -172,8 +165,7 @@ impl Ended {
 struct Outputs<'m> {
     model: &'m crate::Model,
     sensors: SensorEvaluator,
-    csv: CsvWriter,
-    shape: ShapeWriter,
+    files: ResultFiles,
     rows: usize,
     seconds: f64,
 }
@@ -185,8 +177,7 @@ impl<'m> Outputs<'m> {
         Ok(Self {
             model,
             sensors: SensorEvaluator::new(model),
-            csv: CsvWriter::create(&out.file(SENSORS_FILE), first, &names)?,
-            shape: ShapeWriter::create(out, first, model)?,
+            files: ResultFiles::create(out, first, model, &names)?,
             rows: 0,
             seconds: 0.0,
         })
@@ -201,8 +192,7 @@ impl<'m> Outputs<'m> {
     ) -> Result<(), OutputError> {
         let t0 = Instant::now();
         let values = self.sensors.evaluate(self.model, data, state);
-        self.csv.row(x, &values)?;
-        self.shape.write(x, self.model, state)?;
+        self.files.write_step(x, &values, self.model, state)?;
         self.rows += 1;
         self.seconds += t0.elapsed().as_secs_f64();
         Ok(())

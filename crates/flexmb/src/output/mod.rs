@@ -23,7 +23,7 @@
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::fs::File;
-use std::io::Write as _;
+use std::io::{Seek, SeekFrom, Write as _};
 use std::path::{Path, PathBuf};
 
 /// The summary of the run.
@@ -141,7 +141,7 @@ impl OutputDir {
 /// Appends `x` to `out` in the shortest decimal form that parses back to the same bits:
 /// plain for zero and magnitudes in `[1e-5, 1e16)`, scientific otherwise; `NaN`, `inf` and
 /// `-inf` for non-finite values.
-pub fn push_number(out: &mut String, x: f64) {
+fn push_number(out: &mut String, x: f64) {
     let magnitude = x.abs();
     // `{}` and `{:e}` without a precision both print the shortest round-trip digits.
     let plain = magnitude == 0.0 || (1e-5..1e16).contains(&magnitude) || !x.is_finite();
@@ -199,52 +199,124 @@ impl CsvFile {
         self.pending.push('\n');
     }
 
-    /// Writes the pending rows in one write; after a failed write, removes what part of it
-    /// reached the file (best effort: the write error is the one reported).
+    /// Writes the pending rows in one write; after a failed write, cuts the file back to the
+    /// complete steps before it (best effort: the write error is the one reported).
     fn commit(&mut self) -> Result<(), OutputError> {
         let result = self.file.write_all(self.pending.as_bytes());
+        let written = self.pending.len() as u64;
+        self.pending.clear();
         match result {
-            Ok(()) => self.len += self.pending.len() as u64,
-            Err(_) => {
-                let _ = self.file.set_len(self.len);
+            Ok(()) => {
+                self.len += written;
+                Ok(())
+            }
+            Err(e) => {
+                self.truncate(self.len);
+                Err(OutputError::io(&self.path, "cannot write")(e))
             }
         }
+    }
+
+    /// Cuts the file back to `len` bytes and writes on from there (best effort).
+    fn truncate(&mut self, len: u64) {
+        let _ = self.file.set_len(len);
+        let _ = self.file.seek(SeekFrom::Start(len));
+        self.len = len;
         self.pending.clear();
-        result.map_err(OutputError::io(&self.path, "cannot write"))
     }
 }
 
-/// Streams sensor rows to `sensors.csv`.
-pub struct CsvWriter {
-    csv: CsvFile,
+/// The CSV result files of a run: `sensors.csv`, `nodes.csv` and, for a model with beams,
+/// `beams.csv`, written one output step at a time. The rows of a step are staged for every
+/// file, then each file gets one write; if one of them fails (a full disk), every file is
+/// cut back to the previous step, so the files always hold the same complete steps.
+pub struct ResultFiles {
+    sensors: CsvFile,
+    nodes: CsvFile,
+    beams: Option<CsvFile>,
 }
 
-impl CsvWriter {
-    /// Creates the file and writes the header `<first>,<names>`; `first` names the first
-    /// column (`time` or `load_factor`).
-    pub fn create(path: &Path, first: &str, names: &[String]) -> Result<Self, OutputError> {
+impl ResultFiles {
+    /// Creates the files in `dir` with their headers; the first column is named `first`
+    /// (`time` or `load_factor`), the sensor columns `sensor_names`.
+    pub fn create(
+        dir: &OutputDir,
+        first: &str,
+        model: &crate::Model,
+        sensor_names: &[String],
+    ) -> Result<Self, OutputError> {
         let mut header = first.to_string();
-        for n in names {
+        for n in sensor_names {
             header.push(',');
             header.push_str(n);
         }
+        let sensors = CsvFile::create(dir.file(SENSORS_FILE), &header)?;
+        let nodes = CsvFile::create(
+            dir.file(NODES_FILE),
+            &format!("{first},node,x,y,z,qw,qx,qy,qz"),
+        )?;
+        let beams = if model.beams.is_empty() {
+            None
+        } else {
+            Some(CsvFile::create(
+                dir.file(BEAMS_FILE),
+                &format!("{first},element,{BEAM_COLUMNS}"),
+            )?)
+        };
         Ok(Self {
-            csv: CsvFile::create(path.to_path_buf(), &header)?,
+            sensors,
+            nodes,
+            beams,
         })
     }
 
-    /// Appends one row and hands it to the operating system.
-    pub fn row(&mut self, t: f64, values: &[f64]) -> Result<(), OutputError> {
-        self.csv.start_row(t, None);
-        for &v in values {
-            self.csv.field(v);
+    /// Appends the rows of one output step at `t`: the sensor values, the configuration of
+    /// every node and the strains and stress resultants of every beam element.
+    pub fn write_step(
+        &mut self,
+        t: f64,
+        sensors: &[f64],
+        model: &crate::Model,
+        state: &crate::State,
+    ) -> Result<(), OutputError> {
+        self.sensors.start_row(t, None);
+        for &v in sensors {
+            self.sensors.field(v);
         }
-        self.csv.end_row();
-        self.csv.commit()
-    }
-
-    pub fn path(&self) -> &Path {
-        &self.csv.path
+        self.sensors.end_row();
+        for (node, q) in model.nodes.iter().zip(&state.q) {
+            self.nodes.start_row(t, Some(&node.name));
+            for x in [q.x.x, q.x.y, q.x.z].into_iter().chain(q.quaternion()) {
+                self.nodes.field(x);
+            }
+            self.nodes.end_row();
+        }
+        if let Some(beams) = self.beams.as_mut() {
+            let nodes = crate::sensors::node_states(state);
+            for b in &model.beams {
+                let st = b.state(&[nodes[b.nodes[0].0], nodes[b.nodes[1].0]]);
+                beams.start_row(t, Some(&b.name));
+                for &v in st.strain.iter().chain(st.stress.iter()) {
+                    beams.field(v);
+                }
+                beams.end_row();
+            }
+        }
+        let mut files: Vec<&mut CsvFile> = [Some(&mut self.sensors), Some(&mut self.nodes)]
+            .into_iter()
+            .chain([self.beams.as_mut()])
+            .flatten()
+            .collect();
+        let before: Vec<u64> = files.iter().map(|f| f.len).collect();
+        for k in 0..files.len() {
+            if let Err(e) = files[k].commit() {
+                for (f, &len) in files.iter_mut().zip(&before) {
+                    f.truncate(len);
+                }
+                return Err(e);
+            }
+        }
+        Ok(())
     }
 }
 
@@ -322,63 +394,6 @@ impl Summary {
 
 /// Column names of `beams.csv` after `time,element`: strains, then stress resultants.
 const BEAM_COLUMNS: &str = "axial_strain,shear_strain_2,shear_strain_3,torsion,curvature_2,curvature_3,axial_force,shear_force_2,shear_force_3,torque,bending_moment_2,bending_moment_3";
-
-/// Streams the deformed shape (`nodes.csv`, every node) and the beam element strains and
-/// stress resultants (`beams.csv`) of every output step.
-pub struct ShapeWriter {
-    nodes: CsvFile,
-    beams: Option<CsvFile>,
-}
-
-impl ShapeWriter {
-    /// Creates `nodes.csv` (and `beams.csv` if the model has beams) in `dir`; the first column
-    /// is named `first` (`time` or `load_factor`).
-    pub fn create(dir: &OutputDir, first: &str, model: &crate::Model) -> Result<Self, OutputError> {
-        let nodes = CsvFile::create(
-            dir.file(NODES_FILE),
-            &format!("{first},node,x,y,z,qw,qx,qy,qz"),
-        )?;
-        let beams = if model.beams.is_empty() {
-            None
-        } else {
-            Some(CsvFile::create(
-                dir.file(BEAMS_FILE),
-                &format!("{first},element,{BEAM_COLUMNS}"),
-            )?)
-        };
-        Ok(Self { nodes, beams })
-    }
-
-    /// Appends the rows of one output step, one write per file.
-    pub fn write(
-        &mut self,
-        t: f64,
-        model: &crate::Model,
-        state: &crate::State,
-    ) -> Result<(), OutputError> {
-        for (node, q) in model.nodes.iter().zip(&state.q) {
-            self.nodes.start_row(t, Some(&node.name));
-            for x in [q.x.x, q.x.y, q.x.z].into_iter().chain(q.quaternion()) {
-                self.nodes.field(x);
-            }
-            self.nodes.end_row();
-        }
-        self.nodes.commit()?;
-        if let Some(beams) = self.beams.as_mut() {
-            let nodes = crate::sensors::node_states(state);
-            for b in &model.beams {
-                let st = b.state(&[nodes[b.nodes[0].0], nodes[b.nodes[1].0]]);
-                beams.start_row(t, Some(&b.name));
-                for &v in st.strain.iter().chain(st.stress.iter()) {
-                    beams.field(v);
-                }
-                beams.end_row();
-            }
-            beams.commit()?;
-        }
-        Ok(())
-    }
-}
 
 #[cfg(test)]
 mod tests {
@@ -467,12 +482,16 @@ mod tests {
         let out = OutputDir::prepare(&dir).unwrap();
         let values = hard_values();
         let names: Vec<String> = (0..values.len()).map(|i| format!("s{i}")).collect();
-        let mut csv = CsvWriter::create(&out.file(SENSORS_FILE), "time", &names).unwrap();
+        let model = crate::Model::new(flexmb_lie::Group::SE3);
+        let state = crate::State::initial(&model, 0);
+        let mut files = ResultFiles::create(&out, "time", &model, &names).unwrap();
         // Each row: a time taken from the list and every value, rotated by the row number.
         for row in 0..5 {
             let mut rotated = values.clone();
             rotated.rotate_left(row);
-            csv.row(values[row], &rotated).unwrap();
+            files
+                .write_step(values[row], &rotated, &model, &state)
+                .unwrap();
         }
         let text = std::fs::read_to_string(out.file(SENSORS_FILE)).unwrap();
         let mut lines = text.lines();

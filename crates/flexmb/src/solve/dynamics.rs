@@ -181,7 +181,6 @@ pub struct Stats {
     pub rejected_steps: usize,
     pub factorizations: usize,
     pub max_iterations_in_a_step: usize,
-    pub outputs: usize,
     /// Steps accepted at a singular configuration (regularized constraint block) with the
     /// configuration converged and the multipliers not determined by the equations.
     pub undetermined_multipliers: usize,
@@ -229,9 +228,6 @@ pub struct Simulation<'m> {
     first_reselection: f64,
     /// State at the start of the current step (restored when a step is rejected).
     saved: State,
-    /// Size of the constraint-block regularization when it is on (see [`Scaling`]), relative
-    /// to the mass block (normalized to O(1)).
-    regularization: f64,
     /// Largest nodal mass of the model \[kg\]: the equilibrium rows are divided by it.
     mass: f64,
     /// Steps left with the regularization on (switched on by a singular matrix or a failure).
@@ -252,6 +248,15 @@ pub struct Simulation<'m> {
     used_stale_matrix: bool,
     /// Rebuild the iteration matrix at every iteration of the next step.
     fresh_only: bool,
+}
+
+/// Why a step's multipliers could not be converged to the tolerance (its configuration was).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum MultiplierLimit {
+    /// A singular configuration: the equations do not determine them.
+    Undetermined,
+    /// Round-off of an ill-conditioned system.
+    RoundOff,
 }
 
 /// Weighted norms of one Newton correction ([`super::newton::weighted_norm`]).
@@ -290,6 +295,10 @@ struct Previous {
     vdot: Vec<Vec6>,
     lambda: Vec<f64>,
 }
+
+/// Size of the constraint-block regularization when it is on (see [`Scaling`]), relative to
+/// the mass block (normalized to O(1)).
+const REGULARIZATION: f64 = 1e-9;
 
 /// Steps that keep the regularization after a singular matrix or a rejected step.
 const REGULARIZED_STEPS: usize = 20;
@@ -332,7 +341,6 @@ impl<'m> Simulation<'m> {
             mu_floor: Vec::new(),
             pivot_reference: None,
             first_reselection: 0.0,
-            regularization: 1e-9,
             mass: mass_scale(model),
             regularized_steps: 0,
             jacobian: None,
@@ -384,14 +392,10 @@ impl<'m> Simulation<'m> {
         let s = self.settings;
         let out_dt = s.output_interval;
         output(self).map_err(SolveError::Output)?;
-        self.stats.outputs += 1;
         let mut k_out = 1usize;
-        let mut h = s.h;
+        let mut clock = StepClock::new(s.h);
         let mut successes = 0usize;
         let mut reductions = 0usize;
-        // Time and count of the steps of size `h` taken since `h` last changed: step ends are
-        // `anchor + k h`, free of the round-off that summing `t += h` accumulates.
-        let mut anchor = (0.0, 0usize);
         while self.state.t < s.t_end {
             if interrupted(&self.interrupt) {
                 return Err(SolveError::Interrupted {
@@ -403,10 +407,12 @@ impl<'m> Simulation<'m> {
             } else {
                 s.t_end
             };
-            let regular = anchor.0 + (anchor.1 + 1) as f64 * h;
-            let t_new = step_end(self.state.t, regular, target, h);
+            let t_new = clock.next(self.state.t, target);
             if t_new <= self.state.t {
-                return Err(SolveError::StepUnderflow { t: self.state.t, h });
+                return Err(SolveError::StepUnderflow {
+                    t: self.state.t,
+                    h: clock.h,
+                });
             }
             let h_try = t_new - self.state.t;
             match self.step(t_new) {
@@ -419,20 +425,14 @@ impl<'m> Simulation<'m> {
                         self.stats.smallest_step = h_try;
                     }
                     successes += 1;
-                    anchor = if t_new == regular {
-                        (anchor.0, anchor.1 + 1)
-                    } else {
-                        (t_new, 0)
-                    };
-                    if h < s.h && successes >= 4 {
-                        h = (2.0 * h).min(s.h);
+                    clock.advance(t_new);
+                    if clock.h < s.h && successes >= 4 {
+                        clock.restart(t_new, (2.0 * clock.h).min(s.h));
                         successes = 0;
-                        anchor = (t_new, 0);
                     }
                     let reached = self.state.t == target;
                     if out_dt == 0.0 || reached {
                         output(self).map_err(SolveError::Output)?;
-                        self.stats.outputs += 1;
                         if reached && out_dt > 0.0 {
                             k_out += 1;
                         }
@@ -455,14 +455,13 @@ impl<'m> Simulation<'m> {
                     }
                     self.regularized_steps = REGULARIZED_STEPS;
                     successes = 0;
-                    h = h_try * 0.25;
-                    anchor = (self.state.t, 0);
+                    clock.restart(self.state.t, h_try * 0.25);
                     reductions += 1;
                     // Give up when the step can no longer shrink, or when rejections keep
                     // coming back after the step size recovers (an unstable solution).
                     // (Retries with a fresh matrix above do not count: they do not reduce h.)
                     let thrashing = reductions > 100 + self.stats.steps / 10;
-                    if h < s.h_min || thrashing {
+                    if clock.h < s.h_min || thrashing {
                         let worst = failure
                             .worst_unknown
                             .map(|i| self.data.layout.describe_unknown(self.model, i))
@@ -573,7 +572,7 @@ impl<'m> Simulation<'m> {
             constraint_rhs: ConstraintRhs::Position,
             load_factor: self.settings.load_factor_at(t_new),
             regularization: if self.regularized_steps > 0 {
-                self.regularization
+                REGULARIZATION
             } else {
                 0.0
             },
@@ -634,10 +633,8 @@ impl<'m> Simulation<'m> {
                 });
                 break;
             }
-            if iteration == 1 {
-                self.update_multiplier_floor();
-            }
             if fresh {
+                self.update_multiplier_floor();
                 if let Err(failure) = self.factorize(&mut sc) {
                     result = Err(failure);
                     break;
@@ -664,30 +661,41 @@ impl<'m> Simulation<'m> {
                 configuration.update(&[norms.q, norms.zeta], exact),
                 Verdict::Converged { .. }
             );
-            let undetermined = sc.regularization > 0.0 && configuration_converged;
-            // Round-off floor of the multipliers: with the exact matrix and the configuration
-            // converged, multiplier corrections that no longer halve are round-off that
-            // Newton cannot reduce (a 100 000-link chain: 3 to 5 times the tolerance,
-            // whatever the number of exact iterations).
-            let at_floor = exact
-                && norms.configuration() <= 1.0
-                && previous_mu.is_some_and(|p| norms.mu > 0.5 * p);
+            // Multipliers that Newton cannot converge further: at a singular configuration
+            // (regularized matrix) the equations do not determine them; with the exact
+            // matrix, multiplier corrections that no longer halve are round-off (a 100 000-
+            // link chain: 3 to 5 times the tolerance, whatever the number of iterations).
+            // The step is then accepted on its configuration, and the run says so.
+            let limit = if sc.regularization > 0.0 {
+                Some(MultiplierLimit::Undetermined)
+            } else if exact && previous_mu.is_some_and(|p| norms.mu > 0.5 * p) {
+                Some(MultiplierLimit::RoundOff)
+            } else {
+                None
+            };
             previous_mu = Some(norms.mu);
-            if matches!(verdict, Verdict::Continue { .. }) {
-                if undetermined {
-                    self.stats.undetermined_multipliers += 1;
-                } else if at_floor {
-                    self.stats.multiplier_floor_steps += 1;
-                    self.stats.multiplier_floor = self.stats.multiplier_floor.max(norms.mu);
-                }
-            }
-            let theta = match verdict {
-                Verdict::Continue { theta } if !undetermined && !at_floor => theta,
-                _ => {
+            let limit = limit.filter(|_| configuration_converged);
+            let theta = match (verdict, limit) {
+                (Verdict::Continue { theta }, None) => theta,
+                (verdict, limit) => {
+                    if matches!(verdict, Verdict::Continue { .. }) {
+                        match limit {
+                            Some(MultiplierLimit::Undetermined) => {
+                                self.stats.undetermined_multipliers += 1;
+                            }
+                            Some(MultiplierLimit::RoundOff) => {
+                                self.stats.multiplier_floor_steps += 1;
+                                self.stats.multiplier_floor =
+                                    self.stats.multiplier_floor.max(norms.mu);
+                            }
+                            None => {}
+                        }
+                    }
                     let total = self.total_increments(&dq);
                     self.finish_step(&total);
                     self.total = total;
                     if self.settings.verify {
+                        let undetermined = limit == Some(MultiplierLimit::Undetermined);
                         self.verify_step(&dq, &sc, max_mu, undetermined);
                     }
                     result = Ok(iteration);
@@ -807,7 +815,7 @@ impl<'m> Simulation<'m> {
         self.stats.factorizations += 1;
         let mut factorized = self.data.solver.factorize(&self.data.values);
         if matches!(factorized, Err(LinearError::Singular { .. })) && sc.regularization == 0.0 {
-            sc.regularization = self.regularization;
+            sc.regularization = REGULARIZATION;
             self.regularized_steps = REGULARIZED_STEPS;
             let n_unknowns = self.data.layout.n_unknowns();
             let nd = self.data.layout.n_dofs;
@@ -889,8 +897,8 @@ impl<'m> Simulation<'m> {
     }
 
     /// Round-off floor of each active scaled multiplier, `1000 eps L D_k` (`L` the size of
-    /// the model, `D_k` the largest diagonal entry of the last assembled iteration matrix
-    /// on the dofs of the row's nodes: mass, damping and stiffness, scaled): the size of the
+    /// the model, `D_k` the largest diagonal entry of the iteration matrix just assembled on
+    /// the dofs of the row's nodes: mass, damping and stiffness, scaled): the size of the
     /// round-off in the equilibrium rows that the multiplier balances. It matters only where
     /// every force of the model is near zero (a mechanism starting from rest without
     /// gravity), and keeps the test from asking for a multiplier below round-off.
@@ -1043,19 +1051,56 @@ impl<'m> Simulation<'m> {
     }
 }
 
-/// End of the next step from `t` toward `target` (an output time or the end) with the
-/// nominal step `h`: `regular` (`t + h` computed without accumulated round-off), except
-/// that the last steps end exactly on `target` and none is shorter than `h / 2` unless the
-/// whole interval is: a remainder below `h / 2` is shared with the step before it (two equal
-/// steps), and a remainder within round-off of `h` is taken whole.
-fn step_end(t: f64, regular: f64, target: f64, h: f64) -> f64 {
-    let remaining = target - t;
-    if remaining <= h * (1.0 + 1e-9) {
-        target
-    } else if remaining < 1.5 * h {
-        t + 0.5 * remaining
-    } else {
-        regular
+/// The ends of the steps of a run. Steps of size `h` end at `anchor + k h` (`k` steps since
+/// `h` last changed), free of the round-off that summing `t += h` accumulates; the last
+/// steps before a target (an output time or the end) end exactly on it, and none is shorter
+/// than `h / 2` unless the whole interval is: a remainder below `h / 2` is shared with the
+/// step before it (two equal steps), a remainder within round-off of `h` is taken whole.
+#[derive(Clone, Copy, Debug)]
+struct StepClock {
+    /// Current step size \[s\].
+    h: f64,
+    anchor: f64,
+    k: usize,
+}
+
+impl StepClock {
+    fn new(h: f64) -> Self {
+        Self {
+            h,
+            anchor: 0.0,
+            k: 0,
+        }
+    }
+
+    fn regular(&self) -> f64 {
+        self.anchor + (self.k + 1) as f64 * self.h
+    }
+
+    /// End of the next step from `t` toward `target`.
+    fn next(&self, t: f64, target: f64) -> f64 {
+        let remaining = target - t;
+        if remaining <= self.h * (1.0 + 1e-9) {
+            target
+        } else if remaining < 1.5 * self.h {
+            t + 0.5 * remaining
+        } else {
+            self.regular()
+        }
+    }
+
+    /// The step to `t_new` was accepted.
+    fn advance(&mut self, t_new: f64) {
+        if t_new == self.regular() {
+            self.k += 1;
+        } else {
+            self.restart(t_new, self.h);
+        }
+    }
+
+    /// Steps of size `h` from `t` on.
+    fn restart(&mut self, t: f64, h: f64) {
+        *self = Self { h, anchor: t, k: 0 };
     }
 }
 
@@ -1121,19 +1166,14 @@ fn check_settings(s: &DynamicSettings) -> Result<(), SolveError> {
 
 #[cfg(test)]
 mod tests {
-    use super::step_end;
+    use super::StepClock;
 
-    /// Steps from 0 to `t_end` with the rule of [`step_end`], as the run loop takes them.
+    /// Steps from 0 to `t_end` as the run loop takes them with a [`StepClock`].
     fn steps(t_end: f64, h: f64) -> Vec<f64> {
-        let (mut t, mut anchor, mut out) = (0.0, (0.0, 0usize), vec![]);
+        let (mut t, mut clock, mut out) = (0.0, StepClock::new(h), vec![]);
         while t < t_end {
-            let regular = anchor.0 + (anchor.1 + 1) as f64 * h;
-            let t_new = step_end(t, regular, t_end, h);
-            anchor = if t_new == regular {
-                (anchor.0, anchor.1 + 1)
-            } else {
-                (t_new, 0)
-            };
+            let t_new = clock.next(t, t_end);
+            clock.advance(t_new);
             out.push(t_new - t);
             t = t_new;
         }

@@ -110,7 +110,7 @@ pub fn prepare_layout(model: &Model) -> (Layout, Vec<String>) {
     for &row in redundant {
         warnings.push(format!(
             "{} is redundant and was removed; its reaction is carried by the other joints of the loop",
-            describe_row(model, &layout, row)
+            layout.describe_row(model, row)
         ));
     }
     layout.deactivate_rows(model, redundant);
@@ -138,26 +138,6 @@ pub fn reselect_redundant_rows(model: &Model, layout: &Layout, q: &[Frame]) -> O
         .filter(|&r| layout.row_unknown[r].is_none())
         .collect();
     (redundant != current).then_some(redundant)
-}
-
-/// A constraint row in the words of its joint, e.g. "revolute joint 'P5', row 3
-/// (translation along the joint's z axis)".
-pub fn describe_row(model: &Model, layout: &Layout, row: usize) -> String {
-    let (j, r) = locate_row(layout, row);
-    let joint = &model.joints[j];
-    format!(
-        "{} joint '{}', row {} ({})",
-        joint.kind.name(),
-        joint.name,
-        r + 1,
-        layout.joint_rows[j][r].describe()
-    )
-}
-
-/// `(joint, row within joint)` of a global row index.
-pub fn locate_row(layout: &Layout, row: usize) -> (usize, usize) {
-    let j = layout.joint_row_start.partition_point(|&s| s <= row) - 1;
-    (j, row - layout.joint_row_start[j])
 }
 
 /// Loads a state into the node kinematics of `data` (tangent operators set to identity).
@@ -204,7 +184,7 @@ pub fn initial_accelerations(
         if v > POSITION_TOLERANCE {
             return Err(SolveError::InconsistentInitialConditions(format!(
                 "{} is violated by {v:.3e} at t = {}: the initial positions/orientations of its nodes do not satisfy it (tolerance {POSITION_TOLERANCE:e})",
-                describe_row(model, &data.layout, row),
+                data.layout.describe_row(model, row),
                 state.t
             )));
         }
