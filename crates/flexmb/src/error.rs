@@ -18,11 +18,54 @@ impl ModelError {
     }
 }
 
+/// A solver setting outside its range ([`crate::solve::DynamicSettings::check`] and its
+/// siblings): the model-file keys of `[solver]` the rule is about (the first is the one to
+/// blame unless the file or a `--set` says otherwise) and why.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("solver field '{}': {message}", keys[0])]
+pub struct SettingsError {
+    pub keys: Vec<&'static str>,
+    pub message: String,
+}
+
+impl SettingsError {
+    pub(crate) fn new(keys: &[&'static str], message: impl Into<String>) -> Self {
+        Self {
+            keys: keys.to_vec(),
+            message: message.into(),
+        }
+    }
+
+    /// `Err` unless `v > 0` and `lo <= v <= hi` (`lo > 0`).
+    pub(crate) fn positive(key: &'static str, v: f64, lo: f64, hi: f64) -> Result<(), Self> {
+        if v <= 0.0 {
+            return Err(Self::new(&[key], format!("must be positive, got {v}")));
+        }
+        Self::range(key, v, lo, hi)
+    }
+
+    /// `Err` unless `lo <= v <= hi`.
+    pub(crate) fn range(key: &'static str, v: f64, lo: f64, hi: f64) -> Result<(), Self> {
+        if crate::model::limits::within(v, lo, hi) {
+            Ok(())
+        } else {
+            Err(Self::new(
+                &[key],
+                format!(
+                    "must be between {lo:e} and {hi:e} (see 'Ranges' in docs/model-format.md), got {v:e}"
+                ),
+            ))
+        }
+    }
+}
+
 /// A failure during an analysis, with its diagnosis.
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum SolveError {
     #[error("{0}")]
     Model(String),
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
     #[error("inconsistent initial conditions: {0}")]
     InconsistentInitialConditions(String),
     #[error("Newton failed at step {step}, t = {t:.6e} s (last step tried h = {h:.3e} s, {reductions} step-size reductions): {reason}; worst equation: {worst_equation}")]

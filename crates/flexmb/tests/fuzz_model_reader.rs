@@ -14,10 +14,11 @@
 //!
 //! (`FLEXMB_FUZZ_SEED=<integer>` changes the seed; a failure prints the smallest input found.)
 
+mod common;
+
 use flexmb::input::{parse_model_str, Analysis, InputError};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestCaseError, TestRng, TestRunner};
-use std::path::PathBuf;
 
 /// The example files mutated (the long chains are left out to keep a case fast).
 const EXAMPLES: &[&str] = &[
@@ -257,10 +258,8 @@ fn examples() -> Vec<(String, String)> {
     EXAMPLES
         .iter()
         .map(|name| {
-            let path: PathBuf = [env!("CARGO_MANIFEST_DIR"), "..", "..", "examples", name]
-                .iter()
-                .collect();
-            (name.to_string(), std::fs::read_to_string(path).unwrap())
+            let text = std::fs::read_to_string(common::example(name)).unwrap();
+            (name.to_string(), text)
         })
         .collect()
 }

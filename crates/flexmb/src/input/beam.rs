@@ -160,7 +160,7 @@ pub(super) fn read_beams(
             }
             (Some(f), None) => (point(&f)?, None),
             (None, Some(f)) => {
-                let id = require_node(model, &f)?;
+                let id = require_node(model, origins, &f)?;
                 (model.nodes[id.0].frame.x, Some(id))
             }
             (None, None) => {
@@ -216,7 +216,7 @@ pub(super) fn read_beams(
         // End node.
         let end_node = match t.field("end_node") {
             Some(f) => {
-                let id = require_node(model, &f)?;
+                let id = require_node(model, origins, &f)?;
                 let at = model.nodes[id.0].frame.x;
                 let end = axis.point(1.0);
                 let gap = (at - end).norm();
@@ -320,6 +320,7 @@ pub(super) fn read_beams(
             node_names.insert(node_name.clone(), t.path.clone());
             let p = axis.point(i as f64 / n as f64);
             let id = model.add_node(&node_name, Frame::new(p, *frame));
+            origins.node_ids.insert(node_name.clone(), id);
             model.nodes[id.0].velocity = v_start + omega.cross(&(p - start));
             model.nodes[id.0].angular_velocity = frame.transpose() * omega;
             ids.push(id);

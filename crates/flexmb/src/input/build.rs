@@ -6,7 +6,7 @@ use super::reader::{name_list, suggestion, Field, Result, Source, Span, Table, V
 use super::{Analysis, ModelFile};
 use crate::error::ModelError;
 use crate::model::limits::{
-    within, MAX_ANGLE, MAX_KINEMATIC, MAX_PHYSICAL, MAX_STEPS, MAX_TIME, MIN_PHYSICAL, MIN_STEP,
+    within, MAX_ANGLE, MAX_KINEMATIC, MAX_PHYSICAL, MAX_TIME, MIN_PHYSICAL, MIN_STEP,
 };
 use crate::model::{
     box_inertia, clip, frame_from_axis, rotation_from_vector, JointKind, Load, LoadFrame, Model,
@@ -98,6 +98,10 @@ pub(super) struct Origins {
     /// One per element of `Model::beams`.
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
+    /// Node and joint of each name, as they are created (names are unique in a file): look-ups
+    /// by hash keep reading linear in the size of the model.
+    pub node_ids: HashMap<String, NodeId>,
+    joint_ids: HashMap<String, crate::model::JointId>,
     /// The elements of each `[[beam]]` (indices in `Model::beams`), by the beam's name.
     pub beam_elements: HashMap<String, std::ops::Range<usize>>,
 }
@@ -318,7 +322,7 @@ fn read_solver(t: &Table<'_>) -> Result<Analysis> {
         (s.newton, Analysis::Static(s))
     };
     let newton = read_newton(t, newton)?;
-    Ok(match analysis {
+    let analysis = match analysis {
         Analysis::Dynamic(mut s) => {
             s.newton = newton;
             Analysis::Dynamic(s)
@@ -327,97 +331,51 @@ fn read_solver(t: &Table<'_>) -> Result<Analysis> {
             s.newton = newton;
             Analysis::Static(s)
         }
-    })
+    };
+    // The ranges are the solver's own rules, reported here at the key they are about.
+    let checked = match &analysis {
+        Analysis::Dynamic(s) => s.check(),
+        Analysis::Static(s) => s.check(),
+    };
+    checked.map_err(|e| t.key_err(blame(t, &e.keys), e.message))?;
+    Ok(analysis)
 }
 
-/// The Newton keys shared by both analyses, over the analysis' defaults.
+/// The Newton keys shared by both analyses, over the analysis' defaults (their ranges are
+/// checked by the solver's settings, see [`read_solver`]).
 fn read_newton(t: &Table<'_>, mut n: NewtonSettings) -> Result<NewtonSettings> {
     if let Some(f) = t.field("rtol") {
-        n.rtol = f.f64_in(MIN_PHYSICAL, 1.0)?;
+        n.rtol = f.f64()?;
     }
     if let Some(f) = t.field("atol") {
-        n.atol = f.f64_in(MIN_PHYSICAL, MAX_PHYSICAL)?;
+        n.atol = f.f64()?;
     }
     if let Some(f) = t.field("max_iterations") {
-        let v = f.int()?;
-        if !(1..=10_000).contains(&v) {
-            return Err(f.err(format!("must be between 1 and 10000, got {v}")));
-        }
-        n.max_iterations = v as usize;
+        n.max_iterations = count(&f)?;
     }
     Ok(n)
 }
 
-/// A positive integer at most `max`.
-fn count(f: &Field<'_>, max: i64) -> Result<usize> {
+/// A non-negative integer (its range is checked by the solver's settings).
+fn count(f: &Field<'_>) -> Result<usize> {
     let n = f.int()?;
-    if !(1..=max).contains(&n) {
-        return Err(f.err(format!("must be between 1 and {max}, got {n}")));
-    }
-    Ok(n as usize)
+    usize::try_from(n).map_err(|_| f.err(format!("must be a positive integer, got {n}")))
 }
 
 fn read_static(t: &Table<'_>) -> Result<StaticSettings> {
     let mut s = StaticSettings::new();
     if let Some(f) = t.field("load_factor") {
         s.load_factor = f.f64()?;
-        if s.load_factor == 0.0 {
-            return Err(f.err("must not be 0 (the final load factor)"));
-        }
-        if !within(s.load_factor.abs(), MIN_STEP, f64::INFINITY) {
-            f.f64_in(MIN_STEP, MAX_TIME)?;
-        }
-        f.f64_in(-MAX_TIME, MAX_TIME)?;
     }
     // Increments are steps in the load factor, which plays the role of time.
     if let Some(f) = t.field("increment") {
-        s.initial_increment = positive_step(&f)?;
+        s.initial_increment = f.f64()?;
     }
     if let Some(f) = t.field("min_increment") {
-        s.min_increment = positive_step(&f)?;
+        s.min_increment = f.f64()?;
     }
     if let Some(f) = t.field("max_increment") {
-        s.max_increment = positive_step(&f)?;
-    }
-    // The load factor must advance by the smallest increment: 1e-12 of it at least.
-    let floor = MIN_STEP * s.load_factor.abs().max(1.0);
-    if s.min_increment < floor {
-        let key = blame(t, &["min_increment", "load_factor"]);
-        return Err(t.key_err(
-            key,
-            format!(
-                "min_increment = {:e} is below 1e-12 times the load factor {} ({floor:e}): the load factor would not advance; raise min_increment",
-                s.min_increment, s.load_factor
-            ),
-        ));
-    }
-    if s.min_increment > s.max_increment {
-        let key = if t.has("min_increment") {
-            "min_increment"
-        } else {
-            "max_increment"
-        };
-        return Err(t.key_err(
-            key,
-            format!(
-                "min_increment = {} exceeds max_increment = {}",
-                s.min_increment, s.max_increment
-            ),
-        ));
-    }
-    if s.initial_increment < s.min_increment {
-        let key = if t.has("increment") {
-            "increment"
-        } else {
-            "min_increment"
-        };
-        return Err(t.key_err(
-            key,
-            format!(
-                "increment = {} is below min_increment = {}",
-                s.initial_increment, s.min_increment
-            ),
-        ));
+        s.max_increment = f.f64()?;
     }
     if let Some(m) = t.opt_choice("method", &["load_control", "arc_length", "pseudo_dynamic"])? {
         s.method = match m {
@@ -432,90 +390,42 @@ fn read_static(t: &Table<'_>) -> Result<StaticSettings> {
                 return Err(t.key_name_err(key, "only allowed with method = \"pseudo_dynamic\""));
             }
             if key == "pseudo_time" {
-                s.pseudo_time = positive_step(&f)?;
+                s.pseudo_time = f.f64()?;
             } else {
-                s.pseudo_damping = f.f64_in(MIN_PHYSICAL, MAX_KINEMATIC)?;
+                s.pseudo_damping = f.f64()?;
             }
-        }
-    }
-    if s.method == StaticMethod::PseudoDynamic {
-        // The pseudo-dynamic run takes steps of increment x pseudo_time over 2 pseudo_time.
-        let h = s.initial_increment * s.pseudo_time;
-        let steps = 2.0 / s.initial_increment;
-        if !within(h, MIN_STEP, MAX_TIME) || steps > MAX_STEPS {
-            let key = blame(t, &["increment", "pseudo_time"]);
-            return Err(t.key_err(
-                key,
-                format!(
-                    "the pseudo-dynamic step increment x pseudo_time = {h:e} s over 2 pseudo_time ({steps:e} steps) must be at least {MIN_STEP:e} s and make at most {MAX_STEPS:e} steps"
-                ),
-            ));
         }
     }
     if let Some(f) = t.field("arc_length") {
         if s.method != StaticMethod::ArcLength {
             return Err(t.key_name_err("arc_length", "only allowed with method = \"arc_length\""));
         }
-        // Its minimum, 1e-6 of it, stays a meaningful length (>= 1e-15).
-        s.arc_length = f.f64_in(1e-9, MAX_KINEMATIC)?;
+        s.arc_length = f.f64()?;
     }
     if let Some(f) = t.field("max_steps") {
-        s.max_steps = count(&f, 100_000_000)?;
+        s.max_steps = count(&f)?;
     }
     if let Some(f) = t.field("adaptive") {
         s.adaptive = f.bool()?;
     }
     if let Some(f) = t.field("target_iterations") {
-        s.target_iterations = count(&f, 10_000)?;
+        s.target_iterations = count(&f)?;
     }
     Ok(s)
 }
 
 fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
-    let t_end = positive_step(&t.req("t_end")?)?;
-    let h = positive_step(&t.req("h")?)?;
-    if t_end / h > MAX_STEPS {
-        return Err(t.key_err(
-            blame(t, &["h", "t_end"]),
-            format!(
-                "t_end / h = {:e} steps exceeds {MAX_STEPS:e} (t_end = {t_end:e}, h = {h:e}): beyond it t + h loses the precision of the step; increase h or reduce t_end",
-                t_end / h
-            ),
-        ));
-    }
+    let t_end = t.req("t_end")?.f64()?;
+    let h = t.req("h")?.f64()?;
     let mut s = DynamicSettings::new(t_end, h);
     if let Some(f) = t.field("rho_inf") {
         s.rho_inf = f.f64()?;
-        if !(0.0..=1.0).contains(&s.rho_inf) {
-            return Err(f.err(format!("must be in [0, 1], got {}", s.rho_inf)));
-        }
     }
     if let Some(f) = t.field("output_interval") {
-        let v = f.f64()?;
-        if v != 0.0 {
-            s.output_interval = positive_step(&f)?;
-            if t_end / v > MAX_STEPS {
-                return Err(t.key_err(
-                    blame(t, &["output_interval", "t_end"]),
-                    format!(
-                        "t_end / output_interval = {:e} outputs exceeds {MAX_STEPS:e}: give 0 (every step) or a longer interval",
-                        t_end / v
-                    ),
-                ));
-            }
-        } else {
-            s.output_interval = 0.0;
-        }
+        s.output_interval = f.f64()?;
     }
     if let Some(f) = t.field("h_min") {
-        // Below 1e-12 h, steps would not advance the time within rounding.
-        s.h_min = f.f64_in(MIN_STEP * h, h).map_err(|_| {
-            f.err(format!(
-                "must be between 1e-12 h = {:e} and h = {h:e}, got {:e}",
-                MIN_STEP * h,
-                f.f64().unwrap_or(f64::NAN)
-            ))
-        })?;
+        s.h_min = f.f64()?;
     }
     if let Some(f) = t.field("formulation") {
         s.formulation = match f.choice(&["auto", "index3", "index2"])? {
@@ -539,32 +449,15 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
     only_for("newmark_gamma", "newmark")?;
     match scheme {
         Some("hht") => {
-            let f = t.req("hht_alpha")?;
-            let alpha = f.f64()?;
-            if !(0.0..=1.0 / 3.0).contains(&alpha) {
-                return Err(f.err(format!("must be in [0, 1/3], got {alpha}")));
-            }
+            let alpha = t.req("hht_alpha")?.f64()?;
             s.scheme = crate::solve::Scheme::Hht { alpha };
         }
         Some("newmark") => {
-            let beta = match t.field("newmark_beta") {
-                Some(f) => f.f64_in(0.0, 100.0)?,
-                None => 0.25,
+            let value = |key: &str, default: f64| t.field(key).map_or(Ok(default), |f| f.f64());
+            s.scheme = crate::solve::Scheme::Newmark {
+                beta: value("newmark_beta", 0.25)?,
+                gamma: value("newmark_gamma", 0.5)?,
             };
-            let gamma = match t.field("newmark_gamma") {
-                Some(f) => f.f64_in(0.0, 10.0)?,
-                None => 0.5,
-            };
-            if !(gamma >= 0.5 && beta >= 0.25 * (gamma + 0.5).powi(2) - 1e-12) {
-                let f = t
-                    .field("newmark_beta")
-                    .or_else(|| t.field("newmark_gamma"))
-                    .unwrap_or(t.req("scheme")?);
-                return Err(f.err(format!(
-                    "Newmark needs gamma >= 1/2 and beta >= (gamma + 1/2)^2 / 4 for unconditional stability, got beta = {beta}, gamma = {gamma}"
-                )));
-            }
-            s.scheme = crate::solve::Scheme::Newmark { beta, gamma };
         }
         _ => {}
     }
@@ -572,17 +465,10 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
         s.newton.reuse_jacobian = f.bool()?;
     }
     if let Some(f) = t.field("max_contraction") {
-        s.newton.max_contraction = f.f64_in(MIN_PHYSICAL, 1.0)?;
-        if s.newton.max_contraction >= 1.0 {
-            return Err(f.err(format!("must be below 1, got {}", s.newton.max_contraction)));
-        }
+        s.newton.max_contraction = f.f64()?;
     }
     if let Some(f) = t.field("max_jacobian_age") {
-        let n = f.int()?;
-        if n < 1 {
-            return Err(f.err(format!("must be at least 1, got {n}")));
-        }
-        s.newton.max_jacobian_age = n as usize;
+        s.newton.max_jacobian_age = count(&f)?;
     }
     Ok(s)
 }
@@ -642,14 +528,15 @@ fn read_orientation(f: &Field<'_>) -> Result<Mat3> {
         )),
         Some("rotation_vector") => {
             let f = t.req("rotation_vector")?;
-            let v = f.vec3_within(MAX_ANGLE)?;
-            if v.norm() > MAX_ANGLE {
+            let v = f.vec3()?;
+            // A component out of range alone is named by vec3_within below.
+            if v.amax() <= MAX_ANGLE && v.norm() > MAX_ANGLE {
                 return Err(f.err(format!(
                     "has an angle |v| = {:e} rad beyond {MAX_ANGLE:e}: a double no longer holds the orientation to 1e-10",
                     v.norm()
                 )));
             }
-            Ok(rotation_from_vector(&v))
+            Ok(rotation_from_vector(&f.vec3_within(MAX_ANGLE)?))
         }
         Some("quaternion") => {
             let q = t.req("quaternion")?;
@@ -706,8 +593,9 @@ fn read_node_init(t: &Table<'_>) -> Result<NodeInit> {
     })
 }
 
-fn add_node(model: &mut Model, name: &str, init: NodeInit) -> NodeId {
+fn add_node(model: &mut Model, origins: &mut Origins, name: &str, init: NodeInit) -> NodeId {
     let id = model.add_node(name, init.frame);
+    origins.node_ids.insert(name.to_string(), id);
     model.nodes[id.0].velocity = init.velocity;
     model.nodes[id.0].angular_velocity = init.angular_velocity;
     id
@@ -778,7 +666,7 @@ fn read_nodes_and_bodies(
             return Err(t.key_err("name", "'ground' is reserved for the fixed inertial frame"));
         }
         let init = read_node_init(&t)?;
-        add_node(model, &name, init);
+        add_node(model, origins, &name, init);
         origins.nodes.push(Origin::of(&t));
     }
 
@@ -815,7 +703,7 @@ fn read_nodes_and_bodies(
                 }
                 node_names.insert(name.clone(), t.path.clone());
                 let init = read_node_init(t)?;
-                own_nodes.push(Some(add_node(model, &name, init)));
+                own_nodes.push(Some(add_node(model, origins, &name, init)));
                 origins.nodes.push(Origin::of(t));
                 continue;
             }
@@ -828,7 +716,7 @@ fn read_nodes_and_bodies(
         let name = t.req("name")?.str()?;
         let node = match own {
             Some(id) => id,
-            None => require_node(model, &t.req("node")?)?,
+            None => require_node(model, origins, &t.req("node")?)?,
         };
         let mass = physical(&t.req("mass")?)?;
         let com = opt_point(t, "com")?.unwrap_or_else(Vec3::zeros);
@@ -840,15 +728,20 @@ fn read_nodes_and_bodies(
 }
 
 /// A node name (not the ground).
-pub(super) fn require_node(model: &Model, f: &Field<'_>) -> Result<NodeId> {
-    match resolve_node(model, f, false)? {
+pub(super) fn require_node(model: &Model, origins: &Origins, f: &Field<'_>) -> Result<NodeId> {
+    match resolve_node(model, origins, f, false)? {
         Some(id) => Ok(id),
         None => Err(f.err("must be a node, not the ground")),
     }
 }
 
 /// A node name, or "ground" (`None`) when `ground_ok`.
-fn resolve_node(model: &Model, f: &Field<'_>, ground_ok: bool) -> Result<Option<NodeId>> {
+fn resolve_node(
+    model: &Model,
+    origins: &Origins,
+    f: &Field<'_>,
+    ground_ok: bool,
+) -> Result<Option<NodeId>> {
     let name = f.str()?;
     if name == GROUND {
         return if ground_ok {
@@ -857,16 +750,21 @@ fn resolve_node(model: &Model, f: &Field<'_>, ground_ok: bool) -> Result<Option<
             Err(f.err("must be a node, not the ground"))
         };
     }
-    model.node_id(name).map(Some).ok_or_else(|| {
-        let names = || model.nodes.iter().map(|n| n.name.as_str());
-        f.err(format!(
-            "unknown node '{}'{} (nodes: {}{})",
-            clip(name, QUOTED),
-            suggestion(name, names()),
-            name_list(names(), 12),
-            if ground_ok { ", or 'ground'" } else { "" }
-        ))
-    })
+    origins
+        .node_ids
+        .get(name)
+        .copied()
+        .map(Some)
+        .ok_or_else(|| {
+            let names = || model.nodes.iter().map(|n| n.name.as_str());
+            f.err(format!(
+                "unknown node '{}'{} (nodes: {}{})",
+                clip(name, QUOTED),
+                suggestion(name, names()),
+                name_list(names(), 12),
+                if ground_ok { ", or 'ground'" } else { "" }
+            ))
+        })
 }
 
 fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
@@ -996,10 +894,10 @@ fn read_joints(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Res
             _ => JointKind::Planar,
         };
         let node_a = match t.field("node_a") {
-            Some(f) => resolve_node(model, &f, true)?,
+            Some(f) => resolve_node(model, origins, &f, true)?,
             None => None,
         };
-        let node_b = resolve_node(model, &t.req("node_b")?, true)?;
+        let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
         let position = point(&t.req("position")?)?;
         let (orientation, orientation_b) =
             if matches!(kind, JointKind::Fixed | JointKind::Spherical) {
@@ -1050,6 +948,7 @@ fn read_joints(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Res
             orientation_b,
         );
         model.joints[id.0].drive = drive;
+        origins.joint_ids.insert(name.clone(), id);
         origins.joints.push(Origin::of(&t));
     }
     Ok(())
@@ -1118,7 +1017,7 @@ fn read_loads(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
             "torque_per_length",
             "without `beam`: only a distributed load takes it",
         )?;
-        let node = require_node(model, &t.req("node")?)?;
+        let node = require_node(model, origins, &t.req("node")?)?;
         let force = opt_load(&t, "force")?;
         let torque = opt_load(&t, "torque")?;
         model.loads.push(Load {
@@ -1172,10 +1071,10 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         ])?;
         let name = read_name(&t, &mut names, "spring")?;
         let node_a = match t.field("node_a") {
-            Some(f) => resolve_node(model, &f, true)?,
+            Some(f) => resolve_node(model, origins, &f, true)?,
             None => None,
         };
-        let node_b = resolve_node(model, &t.req("node_b")?, true)?;
+        let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
         let pa = point(&t.req("point_a")?)?;
         let pb = point(&t.req("point_b")?)?;
         let stiffness = physical_or_zero(&t.req("stiffness")?)?;
@@ -1262,7 +1161,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                 t.forbid(k, &why)?;
             }
         }
-        let node = || -> Result<NodeId> { require_node(model, &t.req("node")?) };
+        let node = || -> Result<NodeId> { require_node(model, origins, &t.req("node")?) };
         let component = |allowed: &[&'static str]| -> Result<usize> {
             let c = t.req("component")?.choice(allowed)?;
             Ok(allowed.iter().position(|a| *a == c).unwrap_or(0))
@@ -1270,7 +1169,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         let joint = || -> Result<crate::model::JointId> {
             let f = t.req("joint")?;
             let jname = f.str()?;
-            model.joint_id(jname).ok_or_else(|| {
+            origins.joint_ids.get(jname).copied().ok_or_else(|| {
                 let names = || model.joints.iter().map(|j| j.name.as_str());
                 f.err(format!(
                     "unknown joint '{}'{} (joints: {})",

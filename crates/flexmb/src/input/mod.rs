@@ -101,38 +101,30 @@ fn read_limited(path: &Path) -> std::io::Result<String> {
     };
     let meta = std::fs::metadata(path)?;
     let kind = meta.file_type();
-    let mut options = std::fs::OpenOptions::new();
-    options.read(true);
     if kind.is_dir() {
         return Err(invalid("is a directory, not a model file".into()));
     }
     #[cfg(unix)]
     {
-        use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+        use std::os::unix::fs::FileTypeExt;
         if kind.is_char_device() || kind.is_block_device() || kind.is_socket() {
             return Err(invalid(
                 "is a device or a socket, not a model file (give a regular file or a pipe)".into(),
             ));
         }
-        if kind.is_fifo() {
-            options.custom_flags(libc::O_NONBLOCK);
-        }
     }
     if kind.is_file() && meta.len() > MAX_FILE_BYTES as u64 {
         return Err(too_large());
     }
-    let mut reader = options.open(path)?;
+    // A pipe is read as it comes, waiting for its writer like any program reading a pipe;
+    // more than MAX_FILE_BYTES from it is refused like a larger file.
+    let mut reader = std::fs::File::open(path)?;
     let mut bytes = Vec::new();
     let mut chunk = vec![0u8; 1 << 16];
     loop {
         let n = match reader.read(&mut chunk) {
             Ok(0) => break,
             Ok(n) => n,
-            // A pipe whose writer has not written yet.
-            Err(e) if e.kind() == ErrorKind::WouldBlock => {
-                std::thread::sleep(std::time::Duration::from_millis(2));
-                continue;
-            }
             Err(e) if e.kind() == ErrorKind::Interrupted => continue,
             Err(e) => return Err(e),
         };

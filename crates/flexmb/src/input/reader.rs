@@ -12,8 +12,7 @@ pub(crate) type Value<'i> = Spanned<DeValue<'i>>;
 pub(crate) type Span = Range<usize>;
 pub(crate) type Result<T> = std::result::Result<T, InputError>;
 
-/// Most characters of a name or value quoted in a message.
-pub(crate) const QUOTED: usize = 60;
+pub(crate) use crate::model::QUOTED;
 /// Most characters of a field path, or of an override, in an error.
 pub(crate) const PATH: usize = 200;
 /// Most characters of an error message: a 10 MB name or value is never echoed whole.
@@ -317,11 +316,19 @@ impl<'a> Field<'a> {
 
     /// A vector whose components are at most `max` in magnitude (the error names the
     /// component).
+    /// A vector of length at most `max` (a bound on the length holds in every frame the
+    /// model later expresses it in); an error names a component that is out of range alone.
     pub fn vec3_within(&self, max: f64) -> Result<Vec3> {
         let v = self.vec3()?;
         let bad = (0..3).find(|&i| v[i].abs() > max);
         if let (Some(i), DeValue::Array(a)) = (bad, self.value.get_ref()) {
             return Err(self.elem(i, &a[i]).err(out_of_range(v[i], -max, max)));
+        }
+        if v.norm() > max {
+            return Err(self.err(format!(
+                "has length {:e}, beyond {max:e} (see 'Ranges' in docs/model-format.md)",
+                v.norm()
+            )));
         }
         Ok(v)
     }

@@ -9,15 +9,13 @@
 //! Units are SI throughout (m, kg, s, N, rad) unless a model chooses consistent others.
 
 pub mod limits;
-mod names;
 mod time_function;
 mod validate;
 
 pub use time_function::TimeFunction;
-pub(crate) use validate::clip;
+pub(crate) use validate::{clip, QUOTED};
 
 use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
-use names::NameIndex;
 
 /// Index of a node in [`Model::nodes`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -356,9 +354,6 @@ pub struct Model {
     pub springs: Vec<SpringDamper>,
     pub beams: Vec<Beam>,
     pub sensors: Vec<Sensor>,
-    /// Name -> index of the nodes and joints, kept by [`Model::add_node`] and
-    /// [`Model::add_joint`] (not part of the model's equality).
-    names: NameIndex,
 }
 
 /// Reference to one item of a model and one of its fields, for error messages.
@@ -385,7 +380,6 @@ impl Model {
             springs: Vec::new(),
             beams: Vec::new(),
             sensors: Vec::new(),
-            names: NameIndex::default(),
         }
     }
 
@@ -510,7 +504,6 @@ impl Model {
 
     /// Adds a node at rest; returns its id.
     pub fn add_node(&mut self, name: &str, frame: Frame) -> NodeId {
-        self.names.add_node(name, self.nodes.len());
         self.nodes.push(Node {
             name: name.to_string(),
             frame,
@@ -559,23 +552,18 @@ impl Model {
             frame_b: local(node_b, &global_b),
             drive: None,
         };
-        self.names.add_joint(name, self.joints.len());
         self.joints.push(joint);
         JointId(self.joints.len() - 1)
     }
 
-    /// Finds a node by name (the first of that name): a hash look-up for the nodes added by
-    /// [`Model::add_node`]; a scan when the name is not there (nodes pushed or renamed through
-    /// the public field).
+    /// Finds a node by name (the first of that name).
     pub fn node_id(&self, name: &str) -> Option<NodeId> {
-        self.names.node(name, &self.nodes, |n| &n.name).map(NodeId)
+        self.nodes.iter().position(|n| n.name == name).map(NodeId)
     }
 
-    /// Finds a joint by name (the first of that name), like [`Model::node_id`].
+    /// Finds a joint by name (the first of that name).
     pub fn joint_id(&self, name: &str) -> Option<JointId> {
-        self.names
-            .joint(name, &self.joints, |j| &j.name)
-            .map(JointId)
+        self.joints.iter().position(|j| j.name == name).map(JointId)
     }
 }
 

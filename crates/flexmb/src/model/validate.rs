@@ -14,7 +14,7 @@ use flexmb_lie::{Frame, Group, Mat3, Vec3};
 use std::collections::HashMap;
 
 /// Most characters of a name or value quoted in an error message.
-const QUOTED: usize = 60;
+pub(crate) const QUOTED: usize = 60;
 
 /// `text` cut to `max` characters, with an ellipsis (for names and values in messages).
 pub(crate) fn clip(text: &str, max: usize) -> String {
@@ -30,14 +30,18 @@ const RESERVED_COLUMNS: [&str; 2] = ["time", "load_factor"];
 
 type Check = Result<(), String>;
 
+/// A finite vector of length at most `max` (a bound on the length holds in every frame).
 fn finite3(v: &Vec3, max: f64) -> Check {
-    match v.iter().find(|c| !within(c.abs(), 0.0, max)) {
-        None => Ok(()),
-        Some(c) if c.is_finite() => Err(format!(
-            "has a component {c:e} beyond the range +-{max:e} (see limits)"
-        )),
-        Some(c) => Err(format!("has a non-finite component ({c})")),
+    if let Some(c) = v.iter().find(|c| !c.is_finite()) {
+        return Err(format!("has a non-finite component ({c})"));
     }
+    if v.norm() > max {
+        return Err(format!(
+            "has length {:e}, beyond {max:e} (see limits)",
+            v.norm()
+        ));
+    }
+    Ok(())
 }
 
 fn in_range(v: f64, lo: f64, hi: f64) -> Check {
@@ -330,7 +334,9 @@ impl Model {
             finite3(&s.point_b, 2.0 * MAX_KINEMATIC).map_err(|m| fail("point_b", m))?;
             in_range(s.stiffness, 0.0, MAX_PHYSICAL).map_err(|m| fail("stiffness", m))?;
             in_range(s.damping, 0.0, MAX_PHYSICAL).map_err(|m| fail("damping", m))?;
-            in_range(s.rest_length, 0.0, MAX_KINEMATIC).map_err(|m| fail("rest_length", m))?;
+            // The default rest length is the distance of two points in range: up to 2e9.
+            in_range(s.rest_length, 0.0, 2.0 * MAX_KINEMATIC)
+                .map_err(|m| fail("rest_length", m))?;
             let world = |node: Option<NodeId>, p: &Vec3| match node {
                 Some(id) => self.nodes[id.0].frame.point(p),
                 None => *p,

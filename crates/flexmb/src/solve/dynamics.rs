@@ -40,7 +40,7 @@ use super::newton::{weighted_norm, Convergence, NewtonSettings, Verdict, Verific
 use crate::assembly::{assemble, ConstraintRhs, Scaling};
 use crate::data::{Data, Layout};
 use crate::elements::Coefficients;
-use crate::error::SolveError;
+use crate::error::{SettingsError, SolveError};
 use crate::model::Model;
 use crate::state::State;
 use flexmb_lie::Vec6;
@@ -141,6 +141,76 @@ impl DynamicSettings {
             1.0
         };
         self.load_scale * ramp
+    }
+
+    /// Rejects settings out of their ranges (`docs/model-format.md`, "Ranges"): every
+    /// derived quantity (`beta'`, `gamma'`, `h_min`, the number of steps and outputs) is
+    /// finite, normal and bounded, so that no loop of the run can stall on an underflow or
+    /// run for ever. The model-file reader reports these errors at their keys.
+    pub fn check(&self) -> Result<(), SettingsError> {
+        use crate::model::limits::{MAX_STEPS, MAX_TIME, MIN_STEP};
+        SettingsError::positive("t_end", self.t_end, MIN_STEP, MAX_TIME)?;
+        SettingsError::positive("h", self.h, MIN_STEP, MAX_TIME)?;
+        let steps = self.t_end / self.h;
+        if steps > MAX_STEPS {
+            return Err(SettingsError::new(
+                &["h", "t_end"],
+                format!(
+                    "t_end / h = {steps:e} steps exceeds {MAX_STEPS:e} (t_end = {:e}, h = {:e}): beyond it t + h loses the precision of the step; increase h or reduce t_end",
+                    self.t_end, self.h
+                ),
+            ));
+        }
+        SettingsError::range("rho_inf", self.rho_inf, 0.0, 1.0)?;
+        let out = self.output_interval;
+        if out != 0.0 {
+            SettingsError::positive("output_interval", out, MIN_STEP, MAX_TIME)?;
+            if self.t_end / out > MAX_STEPS {
+                return Err(SettingsError::new(
+                    &["output_interval", "t_end"],
+                    format!(
+                        "t_end / output_interval = {:e} outputs exceeds {MAX_STEPS:e}: give 0 (every step) or a longer interval",
+                        self.t_end / out
+                    ),
+                ));
+            }
+        }
+        if !(MIN_STEP * self.h <= self.h_min && self.h_min <= self.h) {
+            return Err(SettingsError::new(
+                &["h_min", "h"],
+                format!(
+                    "must be between 1e-12 h = {:e} and h = {:e}, got {:e}",
+                    MIN_STEP * self.h,
+                    self.h,
+                    self.h_min
+                ),
+            ));
+        }
+        match self.scheme {
+            Scheme::GeneralizedAlpha => {}
+            Scheme::Hht { alpha } => SettingsError::range("hht_alpha", alpha, 0.0, 1.0 / 3.0)?,
+            Scheme::Newmark { beta, gamma } => {
+                let stable = (0.5..=10.0).contains(&gamma)
+                    && (0.25 * (gamma + 0.5).powi(2) - 1e-12..=100.0).contains(&beta);
+                if !stable {
+                    return Err(SettingsError::new(
+                        &["newmark_beta", "newmark_gamma", "scheme"],
+                        format!(
+                            "Newmark needs gamma in [1/2, 10] and beta in [(gamma + 1/2)^2 / 4, 100] for unconditional stability, got beta = {beta}, gamma = {gamma}"
+                        ),
+                    ));
+                }
+            }
+        }
+        let p = self.scheme.parameters(self.rho_inf);
+        let derived = [p.beta_prime(self.h), p.gamma_prime(self.h)];
+        if derived.iter().any(|d| !d.is_normal()) {
+            return Err(SettingsError::new(
+                &["h"],
+                format!("{:e} s gives a non-finite beta' or gamma'", self.h),
+            ));
+        }
+        self.newton.check()
     }
 
     /// Whether the stabilized index-2 formulation is used.
@@ -313,7 +383,7 @@ impl<'m> Simulation<'m> {
         model
             .validate()
             .map_err(|e| SolveError::Model(e.to_string()))?;
-        check_settings(&settings)?;
+        settings.check()?;
         let (layout, warnings) = prepare_layout(model);
         let n_rows = layout.n_rows;
         let model_error = |e: LinearError| SolveError::Model(e.to_string());
@@ -1107,61 +1177,6 @@ impl StepClock {
 /// Whether an interrupt flag is set.
 pub(crate) fn interrupted(flag: &Option<Arc<AtomicBool>>) -> bool {
     flag.as_ref().is_some_and(|f| f.load(Ordering::Relaxed))
-}
-
-/// Rejects settings that cannot run, with the ranges of the model file
-/// ([`crate::model::limits`]): every derived quantity (`beta'`, `gamma'`, `h_min`, the
-/// number of steps) must be finite, normal and bounded, so that no loop of the run can
-/// stall on an underflow or run for ever.
-fn check_settings(s: &DynamicSettings) -> Result<(), SolveError> {
-    use crate::model::limits::{within, MAX_STEPS, MAX_TIME, MIN_STEP};
-    let bad = |f: &str, m: String| Err(SolveError::Model(format!("solver field '{f}': {m}")));
-    for (field, v) in [("h", s.h), ("t_end", s.t_end)] {
-        if !within(v, MIN_STEP, MAX_TIME) {
-            return bad(
-                field,
-                format!("must be in [{MIN_STEP:e}, {MAX_TIME:e}] s, got {v:e}"),
-            );
-        }
-    }
-    if s.t_end / s.h > MAX_STEPS {
-        return bad(
-            "h",
-            format!(
-                "t_end / h = {:e} steps is more than {MAX_STEPS:e}",
-                s.t_end / s.h
-            ),
-        );
-    }
-    if !within(s.rho_inf, 0.0, 1.0) {
-        return bad("rho_inf", format!("must be in [0, 1], got {:e}", s.rho_inf));
-    }
-    let out = s.output_interval;
-    if !(out == 0.0 || within(out, MIN_STEP, MAX_TIME) && s.t_end / out <= MAX_STEPS) {
-        return bad(
-            "output_interval",
-            format!("must be 0 or in [{MIN_STEP:e}, {MAX_TIME:e}] s with at most {MAX_STEPS:e} outputs, got {out:e}"),
-        );
-    }
-    let p = s.scheme.parameters(s.rho_inf);
-    let derived = [
-        p.beta_prime(s.h),
-        p.gamma_prime(s.h),
-        1.0 / p.beta_prime(s.h),
-    ];
-    if derived.iter().any(|d| !d.is_normal()) {
-        return bad(
-            "h",
-            format!("{:e} s gives a non-finite beta' or gamma'", s.h),
-        );
-    }
-    if !within(s.h_min, MIN_STEP * s.h, s.h) {
-        return bad(
-            "h_min",
-            format!("must be in [1e-12 h, h], got {:e} (h = {:e})", s.h_min, s.h),
-        );
-    }
-    Ok(())
 }
 
 #[cfg(test)]

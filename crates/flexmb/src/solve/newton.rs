@@ -39,6 +39,8 @@
 //! kappa = 1 about 8.6 and 14.15 s, and with kappa = 0.01 8.29, 13.5775 and 18.8675 s
 //! (BENCHMARKS.md has the cost).
 
+use crate::error::SettingsError;
+
 /// Tolerances and limits of the Newton iteration.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NewtonSettings {
@@ -68,6 +70,34 @@ impl Default for NewtonSettings {
             max_contraction: 0.25,
             max_jacobian_age: 100,
         }
+    }
+}
+
+impl NewtonSettings {
+    /// Rejects settings out of their ranges (`docs/model-format.md`, "Ranges").
+    pub fn check(&self) -> Result<(), SettingsError> {
+        use crate::model::limits::{MAX_PHYSICAL, MIN_PHYSICAL};
+        SettingsError::range("rtol", self.rtol, MIN_PHYSICAL, 1.0)?;
+        SettingsError::range("atol", self.atol, MIN_PHYSICAL, MAX_PHYSICAL)?;
+        if !(1..=10_000).contains(&self.max_iterations) {
+            return Err(SettingsError::new(
+                &["max_iterations"],
+                format!("must be between 1 and 10000, got {}", self.max_iterations),
+            ));
+        }
+        if !(self.max_contraction >= MIN_PHYSICAL && self.max_contraction < 1.0) {
+            return Err(SettingsError::new(
+                &["max_contraction"],
+                format!("must be in [1e-30, 1), got {:e}", self.max_contraction),
+            ));
+        }
+        if self.max_jacobian_age < 1 {
+            return Err(SettingsError::new(
+                &["max_jacobian_age"],
+                "must be at least 1",
+            ));
+        }
+        Ok(())
     }
 }
 

@@ -21,7 +21,8 @@ use super::newton::{weighted_norm, NewtonSettings, Verification};
 use crate::assembly::{assemble, ConstraintRhs, Scaling};
 use crate::data::Data;
 use crate::elements::Coefficients;
-use crate::error::SolveError;
+use crate::error::{SettingsError, SolveError};
+use crate::model::limits::within;
 use crate::model::Model;
 use crate::state::State;
 use flexmb_lie::Vec6;
@@ -106,6 +107,92 @@ impl StaticSettings {
     }
 }
 
+impl StaticSettings {
+    /// Rejects settings out of their ranges (`docs/model-format.md`, "Ranges"): every
+    /// increment and its smallest allowed value are finite and normal, so that no loop can
+    /// stall on an underflow (a halved increment falls below its positive minimum after
+    /// finitely many halvings), and the load factor always advances. The model-file reader
+    /// reports these errors at their keys (`increment` is `initial_increment`).
+    pub fn check(&self) -> Result<(), SettingsError> {
+        use crate::model::limits::{MAX_KINEMATIC, MAX_STEPS, MAX_TIME, MIN_STEP};
+        let lf = self.load_factor;
+        if !within(lf.abs(), MIN_STEP, MAX_TIME) {
+            return Err(SettingsError::new(
+                &["load_factor"],
+                format!("its size must be between {MIN_STEP:e} and {MAX_TIME:e} (it may be negative, not 0), got {lf:e}"),
+            ));
+        }
+        for (key, v) in [
+            ("increment", self.initial_increment),
+            ("min_increment", self.min_increment),
+            ("max_increment", self.max_increment),
+        ] {
+            SettingsError::positive(key, v, MIN_STEP, MAX_TIME)?;
+        }
+        let floor = MIN_STEP * lf.abs().max(1.0);
+        if self.min_increment < floor {
+            return Err(SettingsError::new(
+                &["min_increment", "load_factor"],
+                format!(
+                    "min_increment = {:e} is below 1e-12 times the load factor {lf} ({floor:e}): the load factor would not advance; raise min_increment",
+                    self.min_increment
+                ),
+            ));
+        }
+        if self.min_increment > self.max_increment {
+            return Err(SettingsError::new(
+                &["min_increment", "max_increment"],
+                format!(
+                    "min_increment = {} exceeds max_increment = {}",
+                    self.min_increment, self.max_increment
+                ),
+            ));
+        }
+        if self.initial_increment < self.min_increment {
+            return Err(SettingsError::new(
+                &["increment", "min_increment"],
+                format!(
+                    "increment = {} is below min_increment = {}",
+                    self.initial_increment, self.min_increment
+                ),
+            ));
+        }
+        // Its minimum, 1e-6 of it, stays a meaningful length (>= 1e-15).
+        SettingsError::range("arc_length", self.arc_length, 1e-9, MAX_KINEMATIC)?;
+        SettingsError::positive("pseudo_time", self.pseudo_time, MIN_STEP, MAX_TIME)?;
+        SettingsError::range("pseudo_damping", self.pseudo_damping, 0.0, MAX_KINEMATIC)?;
+        if self.method == StaticMethod::PseudoDynamic {
+            // The pseudo-dynamic run takes steps of increment x pseudo_time over 2 pseudo_time.
+            let h = self.initial_increment * self.pseudo_time;
+            let steps = 2.0 / self.initial_increment;
+            if !within(h, MIN_STEP, MAX_TIME) || steps > MAX_STEPS {
+                return Err(SettingsError::new(
+                    &["increment", "pseudo_time"],
+                    format!(
+                        "the pseudo-dynamic step increment x pseudo_time = {h:e} s over 2 pseudo_time ({steps:e} steps) must be at least {MIN_STEP:e} s and make at most {MAX_STEPS:e} steps"
+                    ),
+                ));
+            }
+        }
+        if !(1..=100_000_000).contains(&self.max_steps) {
+            return Err(SettingsError::new(
+                &["max_steps"],
+                format!("must be between 1 and 100000000, got {}", self.max_steps),
+            ));
+        }
+        if !(1..=10_000).contains(&self.target_iterations) {
+            return Err(SettingsError::new(
+                &["target_iterations"],
+                format!(
+                    "must be between 1 and 10000, got {}",
+                    self.target_iterations
+                ),
+            ));
+        }
+        self.newton.check()
+    }
+}
+
 impl Default for StaticSettings {
     fn default() -> Self {
         Self::new()
@@ -162,7 +249,7 @@ impl<'m> Statics<'m> {
         model
             .validate()
             .map_err(|e| SolveError::Model(e.to_string()))?;
-        check_settings(&settings)?;
+        settings.check()?;
         let (layout, warnings) = prepare_layout(model);
         let n_rows = layout.n_rows;
         let mut data = Data::new(model, layout).map_err(|e| SolveError::Model(e.to_string()))?;
@@ -700,73 +787,4 @@ impl<'m> Statics<'m> {
         }
         Ok(())
     }
-}
-
-/// Rejects settings that cannot run, with the ranges of the model file
-/// ([`crate::model::limits`]): every increment and its smallest allowed value must be
-/// finite and normal, so that no loop can stall on an underflow (a halved increment always
-/// falls below its positive minimum after finitely many halvings) and the load factor always
-/// advances.
-fn check_settings(s: &StaticSettings) -> Result<(), SolveError> {
-    use crate::model::limits::{within, MAX_STEPS, MAX_TIME, MIN_STEP};
-    let bad = |f: &str, m: String| Err(SolveError::Model(format!("solver field '{f}': {m}")));
-    if !(within(s.load_factor.abs(), MIN_STEP, MAX_TIME)) {
-        return bad(
-            "load_factor",
-            format!(
-                "must be non-zero and at most {MAX_TIME:e} in size, got {:e}",
-                s.load_factor
-            ),
-        );
-    }
-    let floor = MIN_STEP * s.load_factor.abs().max(1.0);
-    if !within(s.min_increment, floor, MAX_TIME) {
-        return bad(
-            "min_increment",
-            format!(
-                "must be at least {floor:e} (1e-12 max(1, |load_factor|)), got {:e}",
-                s.min_increment
-            ),
-        );
-    }
-    for (field, v) in [
-        ("initial_increment", s.initial_increment),
-        ("max_increment", s.max_increment),
-    ] {
-        if !within(v, s.min_increment, MAX_TIME) {
-            return bad(
-                field,
-                format!("must be in [min_increment, {MAX_TIME:e}], got {v:e}"),
-            );
-        }
-    }
-    if !within(s.arc_length, 1e-9, 1e9) {
-        return bad(
-            "arc_length",
-            format!("must be in [1e-9, 1e9], got {:e}", s.arc_length),
-        );
-    }
-    if !within(s.pseudo_time, MIN_STEP, MAX_TIME)
-        || !within(s.pseudo_time * s.initial_increment, MIN_STEP, MAX_TIME)
-        || 2.0 / s.initial_increment > MAX_STEPS
-    {
-        return bad(
-            "pseudo_time",
-            format!(
-                "pseudo_time {:e} s with steps of initial_increment x pseudo_time = {:e} s: both must be in [1e-12, 1e12] s with at most 1e10 steps",
-                s.pseudo_time,
-                s.pseudo_time * s.initial_increment
-            ),
-        );
-    }
-    if !within(s.pseudo_damping, 0.0, crate::model::limits::MAX_PHYSICAL) {
-        return bad(
-            "pseudo_damping",
-            format!("must be in [0, 1e30], got {:e}", s.pseudo_damping),
-        );
-    }
-    if s.max_steps == 0 {
-        return bad("max_steps", "must be at least 1".into());
-    }
-    Ok(())
 }
