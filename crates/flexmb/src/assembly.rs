@@ -15,7 +15,7 @@
 //! (`c_m = s = 1/m`, `c_c = c_k = 0`, right-hand side the convective terms) and statics
 //! (`c_m = c_c = 0`).
 
-use crate::data::{active_slots, Data};
+use crate::data::{active_slots, Data, Layout};
 use crate::elements::{Coefficients, Context, ElementKernel, Mat12, NodeState, Vec12};
 use crate::joints::{self, ConstraintKernel};
 use crate::model::{Model, NodeId};
@@ -53,135 +53,331 @@ pub struct Scaling {
     pub nodal_damping: f64,
 }
 
-fn gather(data: &Data, slots: [Option<NodeId>; 2], ground: &[NodeState; 2]) -> [NodeState; 2] {
+/// The point at which the equations are assembled: every input is explicit, nothing is read
+/// from a copy kept elsewhere.
+#[derive(Clone, Copy, Debug)]
+pub struct Iterate<'a> {
+    /// Node kinematics `q, v, vdot` and the tangent operator `T` of each node's increment
+    /// (`n_nodes`; `T = I` outside a Newton iteration).
+    pub nodes: &'a [NodeState],
+    /// Time (the load factor in statics).
+    pub t: f64,
+    /// Multipliers, unscaled (`n_rows`; redundant rows are ignored).
+    pub lambda: &'a [f64],
+    /// Rows of `B(q_n)` at the start of the step (`n_rows`): the stabilized formulation's
+    /// block of the position rows against the stabilization unknowns. Unused otherwise.
+    pub b_start: &'a [Vec12],
+}
+
+/// Where the entries of the iteration matrix go. The same traversal of elements and joints
+/// records the sparsity pattern ([`Pattern`]) and writes the values ([`Values`]), so the two
+/// cannot disagree on the order of the entries.
+pub trait Sink {
+    /// Whether element and joint kernels are evaluated (values and residual): `false` when only
+    /// the positions of the entries are recorded.
+    const EVALUATE: bool;
+    /// Whether matrix entries are emitted at all (`false`: residual only).
+    const MATRIX: bool;
+    /// The entry `(i, j)` with value `v` (in emission order; duplicates are summed).
+    fn entry(&mut self, i: usize, j: usize, v: f64);
+}
+
+/// Records the positions of the entries.
+pub struct Pattern<'a>(pub &'a mut Vec<(usize, usize)>);
+
+impl Sink for Pattern<'_> {
+    const EVALUATE: bool = false;
+    const MATRIX: bool = true;
+    #[inline]
+    fn entry(&mut self, i: usize, j: usize, _: f64) {
+        self.0.push((i, j));
+    }
+}
+
+/// Writes values in the order of the pattern recorded by [`Pattern`].
+pub struct Values<'a> {
+    pub values: &'a mut [f64],
+    pub pos: usize,
+}
+
+impl Sink for Values<'_> {
+    const EVALUATE: bool = true;
+    const MATRIX: bool = true;
+    #[inline]
+    fn entry(&mut self, _: usize, _: usize, v: f64) {
+        self.values[self.pos] = v;
+        self.pos += 1;
+    }
+}
+
+/// Residual only.
+pub struct NoMatrix;
+
+impl Sink for NoMatrix {
+    const EVALUATE: bool = true;
+    const MATRIX: bool = false;
+    #[inline]
+    fn entry(&mut self, _: usize, _: usize, _: f64) {}
+}
+
+/// Outputs of a traversal besides the matrix: the residual (`n_unknowns`), `Phi` and the rows
+/// of `B` at the iterate (`n_rows`).
+pub struct Outputs<'a> {
+    pub residual: &'a mut [f64],
+    pub phi: &'a mut [f64],
+    pub b_rows: &'a mut [Vec12],
+}
+
+impl Scaling {
+    /// Unit row scale, no coefficient, no load: the scaling of a traversal that records the
+    /// sparsity pattern only.
+    pub const NONE: Scaling = Scaling {
+        row_scale: 1.0,
+        coef: Coefficients {
+            m: 0.0,
+            c: 0.0,
+            k: 0.0,
+        },
+        constraint_rhs: ConstraintRhs::Position,
+        load_factor: 1.0,
+        regularization: 0.0,
+        velocity_scale: 1.0,
+        nodal_damping: 0.0,
+    };
+}
+
+fn gather(
+    nodes: &[NodeState],
+    slots: [Option<NodeId>; 2],
+    ground: &[NodeState; 2],
+) -> [NodeState; 2] {
     [
-        slots[0].map_or(ground[0], |n| data.nodes[n.0]),
-        slots[1].map_or(ground[1], |n| data.nodes[n.0]),
+        slots[0].map_or(ground[0], |n| nodes[n.0]),
+        slots[1].map_or(ground[1], |n| nodes[n.0]),
     ]
 }
 
-/// Fills `data.residual` (and `data.values` if `matrix`) at time `t` from `data.nodes` and the
-/// multipliers `lambda` (unscaled, `n_rows`); also `data.phi`.
-pub fn assemble(
+/// Fills `data.residual` (and `data.values` if `matrix`), `data.phi` and `data.b_rows` at the
+/// iterate `it`.
+pub fn assemble(model: &Model, data: &mut Data, it: &Iterate, sc: &Scaling, matrix: bool) {
+    let Data {
+        layout,
+        values,
+        residual,
+        phi,
+        b_rows,
+        nodal_mass,
+        ..
+    } = data;
+    let out = Outputs {
+        residual,
+        phi,
+        b_rows,
+    };
+    if matrix {
+        let mut sink = Values { values, pos: 0 };
+        traverse(model, layout, nodal_mass, it, sc, out, &mut sink);
+        debug_assert_eq!(
+            sink.pos,
+            sink.values.len(),
+            "assembly order differs from the pattern"
+        );
+    } else {
+        traverse(model, layout, nodal_mass, it, sc, out, &mut NoMatrix);
+    }
+}
+
+/// The sparsity pattern of the iteration matrix of `layout`: the traversal of [`assemble`]
+/// with no kernel evaluated.
+pub fn pattern(model: &Model, layout: &Layout) -> Vec<(usize, usize)> {
+    let mut p = Vec::new();
+    let ground = [NodeState::ground(Default::default())];
+    let it = Iterate {
+        nodes: &ground[..0],
+        t: 0.0,
+        lambda: &[],
+        b_start: &[],
+    };
+    let out = Outputs {
+        residual: &mut [],
+        phi: &mut [],
+        b_rows: &mut [],
+    };
+    traverse(
+        model,
+        layout,
+        &[],
+        &it,
+        &Scaling::NONE,
+        out,
+        &mut Pattern(&mut p),
+    );
+    p
+}
+
+/// One pass over elements and joints: residual and `Phi` (when `S::EVALUATE`) and the matrix
+/// entries in a fixed order (when `S::MATRIX`): for each element its node-node blocks; for
+/// each joint its node-node blocks, then for each active row the row `B T` (row x node dofs)
+/// and the column `B^T` (node dofs x row), interleaved; in the stabilized formulation the
+/// velocity-level rows `B` and the block `B B_n^T` of the position rows against the
+/// stabilization unknowns; last the diagonal of every unknown (nodal damping, and `-epsilon`
+/// on the constraint block).
+fn traverse<S: Sink>(
     model: &Model,
-    data: &mut Data,
-    t: f64,
-    lambda: &[f64],
+    layout: &Layout,
+    nodal_mass: &[flexmb_lie::Vec6],
+    it: &Iterate,
     sc: &Scaling,
-    matrix: bool,
+    out: Outputs,
+    sink: &mut S,
 ) {
+    let Outputs {
+        residual,
+        phi,
+        b_rows,
+    } = out;
     let ctx = Context {
         model,
         group: model.group,
-        t,
+        t: it.t,
         gravity_scale: sc.load_factor,
         load_scale: sc.load_factor,
     };
     let ground = [NodeState::ground(Default::default()); 2];
-    data.residual.iter_mut().for_each(|r| *r = 0.0);
-    let mut pos = 0;
+    residual.iter_mut().for_each(|r| *r = 0.0);
     let mut r = Vec12::zeros();
     let mut s = Mat12::zeros();
-    let layout = &data.layout;
     let n_dofs = layout.n_dofs;
     for e in &layout.elements {
         let kernel = e.kernel(model);
         let slots = kernel.nodes();
-        let nodes = gather(data, slots, &ground);
-        kernel.evaluate(&ctx, &nodes, &mut r, matrix.then_some((&sc.coef, &mut s)));
         let dofs = [layout.dof(slots[0]), layout.dof(slots[1])];
-        for (ka, a) in active_slots(dofs) {
-            for i in 0..6 {
-                data.residual[a + i] += sc.row_scale * r[6 * ka + i];
+        if S::EVALUATE {
+            let nodes = gather(it.nodes, slots, &ground);
+            kernel.evaluate(
+                &ctx,
+                &nodes,
+                &mut r,
+                S::MATRIX.then_some((&sc.coef, &mut s)),
+            );
+            for (ka, a) in active_slots(dofs) {
+                for i in 0..6 {
+                    residual[a + i] += sc.row_scale * r[6 * ka + i];
+                }
             }
         }
-        if matrix {
-            pos = scatter_blocks(&mut data.values, pos, dofs, &s);
+        if S::MATRIX {
+            scatter_blocks(sink, dofs, &s);
         }
     }
-    if sc.nodal_damping > 0.0 {
-        for (i, node) in data.nodes.iter().enumerate() {
+    if S::EVALUATE && sc.nodal_damping > 0.0 {
+        for (i, node) in it.nodes.iter().enumerate() {
             for k in 0..6 {
-                data.residual[6 * i + k] +=
-                    sc.row_scale * sc.nodal_damping * data.nodal_mass[i][k] * node.v[k];
+                residual[6 * i + k] +=
+                    sc.row_scale * sc.nodal_damping * nodal_mass[i][k] * node.v[k];
             }
         }
     }
     let needs_h = sc.constraint_rhs == ConstraintRhs::Acceleration;
+    let mut jv = joints::JointValues {
+        n_rows: 0,
+        phi: [0.0; joints::MAX_ROWS],
+        b: [Vec12::zeros(); joints::MAX_ROWS],
+        phi_t: [0.0; joints::MAX_ROWS],
+    };
     for (j, joint) in model.joints.iter().enumerate() {
         let slots = [joint.node_a, joint.node_b];
-        let nodes = gather(data, slots, &ground);
         let dofs = [layout.dof(slots[0]), layout.dof(slots[1])];
-        let active = [dofs[0].is_some(), dofs[1].is_some()];
         let start = layout.joint_row_start[j];
         let rows = &layout.joint_rows[j];
-        let lam = &lambda[start..start + rows.len()];
-        let mut k = Mat12::zeros();
-        let jv = joint.evaluate(model.group, rows, &nodes, t, lam, matrix.then_some(&mut k));
-        let mut vloc = Vec12::zeros();
-        for (ka, _) in active_slots(dofs) {
-            vloc.fixed_rows_mut::<6>(6 * ka).copy_from(&nodes[ka].v);
-        }
-        for ri in 0..rows.len() {
-            data.phi[start + ri] = jv.phi[ri];
-            if layout.row_unknown[start + ri].is_some() {
-                for (ka, a) in active_slots(dofs) {
-                    for i in 0..6 {
-                        data.residual[a + i] += sc.row_scale * jv.b[ri][6 * ka + i] * lam[ri];
+        let mut nodes = ground;
+        if S::EVALUATE {
+            nodes = gather(it.nodes, slots, &ground);
+            let active = [dofs[0].is_some(), dofs[1].is_some()];
+            let lam = &it.lambda[start..start + rows.len()];
+            let mut k = Mat12::zeros();
+            jv = joint.evaluate(
+                model.group,
+                rows,
+                &nodes,
+                it.t,
+                lam,
+                S::MATRIX.then_some(&mut k),
+            );
+            for ri in 0..rows.len() {
+                phi[start + ri] = jv.phi[ri];
+                b_rows[start + ri] = jv.b[ri];
+                if layout.row_unknown[start + ri].is_some() {
+                    for (ka, a) in active_slots(dofs) {
+                        for i in 0..6 {
+                            residual[a + i] += sc.row_scale * jv.b[ri][6 * ka + i] * lam[ri];
+                        }
                     }
                 }
             }
+            if S::MATRIX {
+                // c_k K_c T, column block by column block
+                s = k * sc.coef.k;
+                crate::elements::physical::apply_tangent_full(&nodes, active, &mut s, &sc.coef, &k);
+            }
         }
-        if matrix {
-            // c_k K_c T, column block by column block
-            let mut kt = k * sc.coef.k;
-            crate::elements::physical::apply_tangent_full(&nodes, active, &mut kt, &sc.coef, &k);
-            pos = scatter_blocks(&mut data.values, pos, dofs, &kt);
+        if S::MATRIX {
+            scatter_blocks(sink, dofs, &s);
+        }
+        let mut vloc = Vec12::zeros();
+        if S::EVALUATE {
+            for (ka, _) in active_slots(dofs) {
+                vloc.fixed_rows_mut::<6>(6 * ka).copy_from(&nodes[ka].v);
+            }
         }
         for ri in 0..rows.len() {
-            data.b_rows[start + ri] = jv.b[ri];
             let Some(k) = layout.row_unknown[start + ri] else {
                 continue;
             };
-            if layout.stabilized {
-                data.residual[layout.zeta(k)] =
-                    (jv.b[ri].dot(&vloc) + jv.phi_t[ri]) * sc.velocity_scale;
-            }
             let c = n_dofs + k;
             let b = &jv.b[ri];
-            data.residual[c] = match sc.constraint_rhs {
-                ConstraintRhs::Position => jv.phi[ri],
-                ConstraintRhs::Acceleration if needs_h => {
-                    joints::evaluate_row(model.group, joint, rows[ri], &nodes, t).convective(&vloc)
+            if S::EVALUATE {
+                if layout.stabilized {
+                    residual[layout.zeta(k)] = (b.dot(&vloc) + jv.phi_t[ri]) * sc.velocity_scale;
                 }
-                ConstraintRhs::Acceleration => unreachable!(),
-                ConstraintRhs::Velocity => b.dot(&vloc) + jv.phi_t[ri],
-            };
-            if matrix {
-                for (ka, _) in active_slots(dofs) {
+                residual[c] = match sc.constraint_rhs {
+                    ConstraintRhs::Position => jv.phi[ri],
+                    ConstraintRhs::Acceleration if needs_h => {
+                        joints::evaluate_row(model.group, joint, rows[ri], &nodes, it.t)
+                            .convective(&vloc)
+                    }
+                    ConstraintRhs::Acceleration => unreachable!(),
+                    ConstraintRhs::Velocity => b.dot(&vloc) + jv.phi_t[ri],
+                };
+            }
+            if S::MATRIX {
+                for (ka, a) in active_slots(dofs) {
                     let bt = nodes[ka].t.transpose() * b.fixed_rows::<6>(6 * ka);
                     for i in 0..6 {
-                        data.values[pos] = bt[i];
-                        data.values[pos + 1] = b[6 * ka + i];
-                        pos += 2;
+                        sink.entry(c, a + i, bt[i]);
+                        sink.entry(a + i, c, b[6 * ka + i]);
                     }
                 }
             }
         }
     }
-    if matrix && layout.stabilized {
+    if S::MATRIX && layout.stabilized {
         // Velocity-level rows: B.
         for (j, joint) in model.joints.iter().enumerate() {
             let dofs = [layout.dof(joint.node_a), layout.dof(joint.node_b)];
             let start = layout.joint_row_start[j];
             for ri in 0..layout.joint_rows[j].len() {
-                if layout.row_unknown[start + ri].is_none() {
+                let Some(k) = layout.row_unknown[start + ri] else {
                     continue;
-                }
-                for (ka, _) in active_slots(dofs) {
+                };
+                for (ka, a) in active_slots(dofs) {
                     for i in 0..6 {
-                        data.values[pos] = data.b_rows[start + ri][6 * ka + i];
-                        pos += 1;
+                        let v = if S::EVALUATE {
+                            b_rows[start + ri][6 * ka + i]
+                        } else {
+                            0.0
+                        };
+                        sink.entry(layout.zeta(k), a + i, v);
                     }
                 }
             }
@@ -190,61 +386,67 @@ pub fn assemble(
         for rows in &layout.node_rows {
             for &(r1, s1) in rows {
                 for &(r2, s2) in rows {
-                    let b1 = data.b_rows[r1].fixed_rows::<6>(6 * s1);
-                    let b2 = data.b_start[r2].fixed_rows::<6>(6 * s2);
-                    data.values[pos] = b1.dot(&b2);
-                    pos += 1;
+                    let v = if S::EVALUATE {
+                        let b1 = b_rows[r1].fixed_rows::<6>(6 * s1);
+                        let b2 = it.b_start[r2].fixed_rows::<6>(6 * s2);
+                        b1.dot(&b2)
+                    } else {
+                        0.0
+                    };
+                    let (k1, k2) = (
+                        layout.row_unknown[r1].expect("active row"),
+                        layout.row_unknown[r2].expect("active row"),
+                    );
+                    sink.entry(n_dofs + k1, layout.zeta(k2), v);
                 }
             }
         }
     }
-    if matrix {
-        // Diagonal entries come last in the pattern, one per unknown.
-        let n = layout.n_unknowns();
-        for (k, v) in data.values[pos..pos + n_dofs].iter_mut().enumerate() {
-            *v = sc.coef.c * sc.nodal_damping * data.nodal_mass[k / 6][k % 6];
+    if S::MATRIX {
+        // Every diagonal entry is in the pattern (nodes without elements, zero blocks).
+        for k in 0..n_dofs {
+            let v = if S::EVALUATE {
+                sc.coef.c * sc.nodal_damping * nodal_mass[k / 6][k % 6]
+            } else {
+                0.0
+            };
+            sink.entry(k, k, v);
         }
-        for v in &mut data.values[pos + n_dofs..pos + n] {
-            *v = -sc.regularization;
+        for k in n_dofs..layout.n_unknowns() {
+            sink.entry(k, k, -sc.regularization);
         }
-        debug_assert_eq!(
-            pos + n,
-            data.values.len(),
-            "assembly order differs from the pattern"
-        );
     }
 }
 
-/// Writes the node-node blocks of a local matrix in pattern order; returns the new position.
-fn scatter_blocks(
-    values: &mut [f64],
-    mut pos: usize,
-    dofs: [Option<usize>; 2],
-    s: &Mat12,
-) -> usize {
-    for (kb, _) in active_slots(dofs) {
-        for (ka, _) in active_slots(dofs) {
+/// Emits the node-node blocks of a local matrix, column block by column block.
+fn scatter_blocks<S: Sink>(sink: &mut S, dofs: [Option<usize>; 2], s: &Mat12) {
+    for (kb, b) in active_slots(dofs) {
+        for (ka, a) in active_slots(dofs) {
             for j in 0..6 {
                 for i in 0..6 {
-                    values[pos] = s[(6 * ka + i, 6 * kb + j)];
-                    pos += 1;
+                    sink.entry(a + i, b + j, s[(6 * ka + i, 6 * kb + j)]);
                 }
             }
         }
     }
-    pos
 }
 
-/// Rows of `B(q)` at the configuration in `data.nodes` into `data.b_rows` (group coordinates,
-/// tangent operators ignored): `B(q_n)` for the stabilized formulation.
-pub fn constraint_rows(model: &Model, data: &mut Data, t: f64) {
+/// Rows of `B(q)` at the node configurations `nodes` (`n_rows`, group coordinates, tangent
+/// operators ignored): `B(q_n)` for the stabilized formulation.
+pub fn constraint_rows(
+    model: &Model,
+    layout: &Layout,
+    nodes: &[NodeState],
+    t: f64,
+    out: &mut [Vec12],
+) {
     let ground = [NodeState::ground(Default::default()); 2];
     let zeros = [0.0; joints::MAX_ROWS];
     for (j, joint) in model.joints.iter().enumerate() {
-        let nodes = gather(data, [joint.node_a, joint.node_b], &ground);
-        let start = data.layout.joint_row_start[j];
-        let rows = &data.layout.joint_rows[j];
-        let jv = joint.evaluate(model.group, rows, &nodes, t, &zeros[..rows.len()], None);
-        data.b_rows[start..start + rows.len()].copy_from_slice(&jv.b[..rows.len()]);
+        let pair = gather(nodes, [joint.node_a, joint.node_b], &ground);
+        let start = layout.joint_row_start[j];
+        let rows = &layout.joint_rows[j];
+        let jv = joint.evaluate(model.group, rows, &pair, t, &zeros[..rows.len()], None);
+        out[start..start + rows.len()].copy_from_slice(&jv.b[..rows.len()]);
     }
 }

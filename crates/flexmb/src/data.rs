@@ -15,11 +15,12 @@
 //! over-constrained closed loop) are detected at start and left out of the unknowns; their
 //! multipliers stay zero and the others carry the load (a valid, least-constrained set).
 
-use crate::elements::{ElementKernel, ElementRef, NodeState};
+use crate::elements::ElementRef;
 use crate::joints::{self, Row};
-use crate::model::{Model, NodeId};
+use crate::model::{JointId, Model, NodeId};
 use crate::solve::linear::{LinearError, LinearSolver};
-use flexmb_lie::{Mat6, Vec6};
+use flexmb_lie::Vec6;
+use std::ops::Range;
 
 /// Numbering of unknowns and constraint rows.
 #[derive(Clone, Debug)]
@@ -35,6 +36,8 @@ pub struct Layout {
     pub n_rows: usize,
     /// For each row, its unknown index among the multipliers, `None` if redundant.
     pub row_unknown: Vec<Option<usize>>,
+    /// The row of each multiplier unknown (`n_active`): the inverse of `row_unknown`.
+    pub active_rows: Vec<usize>,
     /// Number of independent rows (multiplier unknowns).
     pub n_active: usize,
     /// Stabilized index-2 formulation: `n_active` more unknowns and equations.
@@ -62,6 +65,7 @@ impl Layout {
             joint_row_start,
             n_rows,
             row_unknown: (0..n_rows).map(Some).collect(),
+            active_rows: (0..n_rows).collect(),
             n_active: n_rows,
             stabilized: false,
             node_rows: Vec::new(),
@@ -102,16 +106,16 @@ impl Layout {
 
     /// Marks the given rows as redundant.
     pub fn deactivate_rows(&mut self, model: &Model, redundant: &[usize]) {
-        let mut k = 0;
+        self.active_rows.clear();
         for r in 0..self.n_rows {
             if redundant.contains(&r) {
                 self.row_unknown[r] = None;
             } else {
-                self.row_unknown[r] = Some(k);
-                k += 1;
+                self.row_unknown[r] = Some(self.active_rows.len());
+                self.active_rows.push(r);
             }
         }
-        self.n_active = k;
+        self.n_active = self.active_rows.len();
         self.rebuild_node_rows(model);
     }
 
@@ -140,30 +144,85 @@ impl Layout {
         )
     }
 
-    /// Human-readable name of unknown `i`, for diagnostics.
-    pub fn describe_unknown(&self, model: &Model, i: usize) -> String {
-        const COMP: [&str; 6] = ["x", "y", "z", "rx", "ry", "rz"];
-        if i < self.n_dofs {
-            let node = &model.nodes[i / 6];
-            return format!(
-                "equilibrium of node '{}', component {}",
-                node.name,
-                COMP[i % 6]
-            );
+    /// The range of a block of unknowns in the Newton vector (empty if the block is absent).
+    pub fn block(&self, block: Block) -> Range<usize> {
+        let (nd, na) = (self.n_dofs, self.n_active);
+        match block {
+            Block::NodeIncrements => 0..nd,
+            Block::Multipliers => nd..nd + na,
+            Block::Stabilization if self.stabilized => nd + na..nd + 2 * na,
+            Block::Stabilization => nd + na..nd + na,
         }
-        let (k, prefix) = if i >= self.n_dofs + self.n_active {
-            (
-                i - self.n_dofs - self.n_active,
-                "velocity-level constraint of ",
-            )
-        } else {
-            (i - self.n_dofs, "")
-        };
-        if let Some(row) = self.row_unknown.iter().position(|&u| u == Some(k)) {
-            return format!("{prefix}{}", self.describe_row(model, row));
-        }
-        format!("unknown {i}")
     }
+
+    /// What unknown `i` of the Newton vector is.
+    pub fn unknown(&self, i: usize) -> UnknownId {
+        let (nd, na) = (self.n_dofs, self.n_active);
+        let row = |k: usize| {
+            let (j, r) = self.locate_row(self.active_rows[k]);
+            (JointId(j), r as u8)
+        };
+        if i < nd {
+            UnknownId::Node {
+                node: NodeId(i / 6),
+                component: (i % 6) as u8,
+            }
+        } else if i < nd + na {
+            let (joint, row) = row(i - nd);
+            UnknownId::Multiplier { joint, row }
+        } else {
+            let (joint, row) = row(i - nd - na);
+            UnknownId::Stabilization { joint, row }
+        }
+    }
+
+    /// An unknown in words, with the equation it stands for (e.g. "equilibrium of node 'tip',
+    /// component ry"; "revolute joint 'P5', row 3 (translation along the joint's z axis)").
+    pub fn describe(&self, model: &Model, id: UnknownId) -> String {
+        const COMP: [&str; 6] = ["x", "y", "z", "rx", "ry", "rz"];
+        match id {
+            UnknownId::Node { node, component } => format!(
+                "equilibrium of node '{}', component {}",
+                model.nodes[node.0].name, COMP[component as usize]
+            ),
+            UnknownId::Multiplier { joint, row } => {
+                self.describe_row(model, self.joint_row_start[joint.0] + row as usize)
+            }
+            UnknownId::Stabilization { joint, row } => format!(
+                "velocity-level constraint of {}",
+                self.describe_row(model, self.joint_row_start[joint.0] + row as usize)
+            ),
+        }
+    }
+
+    /// [`Layout::describe`] of unknown `i`.
+    pub fn describe_unknown(&self, model: &Model, i: usize) -> String {
+        self.describe(model, self.unknown(i))
+    }
+}
+
+/// The blocks of the Newton vector, in order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Block {
+    /// `6 n_nodes` configuration increments (Lie algebra: translation, then rotation).
+    NodeIncrements,
+    /// One scaled multiplier per active constraint row.
+    Multipliers,
+    /// One stabilization unknown `zeta` per active row (stabilized index-2 form only).
+    Stabilization,
+}
+
+/// One unknown of the Newton vector, by what it belongs to: the typed form of an index that
+/// failures and diagnoses carry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UnknownId {
+    /// Component (0 to 5: x, y, z, rx, ry, rz) of a node's increment; its equation is that
+    /// component of the node's equilibrium.
+    Node { node: NodeId, component: u8 },
+    /// Multiplier of a joint's row (0-based within the joint); its equation is the row.
+    Multiplier { joint: JointId, row: u8 },
+    /// Stabilization unknown of a joint's row; its equation is the row at velocity level.
+    Stabilization { joint: JointId, row: u8 },
 }
 
 /// Everything derived from a model plus the solver workspaces.
@@ -182,8 +241,6 @@ pub struct Data {
     pub residual: Vec<f64>,
     /// Newton correction (`n_unknowns`).
     pub correction: Vec<f64>,
-    /// Node kinematics at the current iterate (`n_nodes`).
-    pub nodes: Vec<NodeState>,
     /// Constraint values `Phi` (`n_rows`).
     pub phi: Vec<f64>,
     /// Diagonal nodal masses and inertias (`n_nodes`, 6 each: the body and lumped beam
@@ -191,15 +248,13 @@ pub struct Data {
     pub nodal_mass: Vec<flexmb_lie::Vec6>,
     /// Rows of `B` at the current iterate (`n_rows`, group coordinates).
     pub b_rows: Vec<crate::elements::Vec12>,
-    /// Rows of `B(q_n)` at the start of the step (`n_rows`; stabilized formulation).
-    pub b_start: Vec<crate::elements::Vec12>,
     pub solver: LinearSolver,
 }
 
 impl Data {
     /// Builds the layout, the sparsity pattern and the linear solver.
     pub fn new(model: &Model, layout: Layout) -> Result<Self, LinearError> {
-        let pattern = build_pattern(model, &layout);
+        let pattern = crate::assembly::pattern(model, &layout);
         let n = layout.n_unknowns();
         let solver = LinearSolver::new(n, &pattern)?;
         let diagonal_slots = pattern
@@ -214,96 +269,14 @@ impl Data {
             diagonal: vec![0.0; n],
             residual: vec![0.0; n],
             correction: vec![0.0; n],
-            nodes: model
-                .nodes
-                .iter()
-                .map(|nd| NodeState {
-                    q: nd.frame,
-                    v: Vec6::zeros(),
-                    vdot: Vec6::zeros(),
-                    t: Mat6::identity(),
-                })
-                .collect(),
             phi: vec![0.0; layout.n_rows],
             nodal_mass: nodal_mass(model),
             b_rows: vec![crate::elements::Vec12::zeros(); layout.n_rows],
-            b_start: vec![crate::elements::Vec12::zeros(); layout.n_rows],
             pattern,
             solver,
             layout,
         })
     }
-}
-
-/// Triplets in the order [`crate::assembly`] writes values: for each element its node-node
-/// blocks; for each joint its node-node blocks, then for each active row the row
-/// `B T` (row x node dofs) and the column `B^T` (node dofs x row).
-fn build_pattern(model: &Model, layout: &Layout) -> Vec<(usize, usize)> {
-    let mut p = Vec::new();
-    let node_blocks = |p: &mut Vec<(usize, usize)>, slots: [Option<usize>; 2]| {
-        for (_, b) in active_slots(slots) {
-            for (_, a) in active_slots(slots) {
-                for j in 0..6 {
-                    for i in 0..6 {
-                        p.push((a + i, b + j));
-                    }
-                }
-            }
-        }
-    };
-    for e in &layout.elements {
-        let nodes = e.kernel(model).nodes();
-        node_blocks(&mut p, [layout.dof(nodes[0]), layout.dof(nodes[1])]);
-    }
-    for (j, joint) in model.joints.iter().enumerate() {
-        let slots = [layout.dof(joint.node_a), layout.dof(joint.node_b)];
-        node_blocks(&mut p, slots);
-        for r in 0..layout.joint_rows[j].len() {
-            let Some(c) = layout.row_unknown[layout.joint_row_start[j] + r] else {
-                continue;
-            };
-            let c = layout.n_dofs + c;
-            for (_, a) in active_slots(slots) {
-                for i in 0..6 {
-                    p.push((c, a + i));
-                    p.push((a + i, c));
-                }
-            }
-        }
-    }
-    if layout.stabilized {
-        // Velocity-level rows: B (row x node dofs), in the joint order of the assembly.
-        for (j, joint) in model.joints.iter().enumerate() {
-            let slots = [layout.dof(joint.node_a), layout.dof(joint.node_b)];
-            for r in 0..layout.joint_rows[j].len() {
-                let Some(k) = layout.row_unknown[layout.joint_row_start[j] + r] else {
-                    continue;
-                };
-                for (_, a) in active_slots(slots) {
-                    for i in 0..6 {
-                        p.push((layout.zeta(k), a + i));
-                    }
-                }
-            }
-        }
-        // Position rows against the stabilization unknowns: B B_n^T, node by node.
-        for rows in &layout.node_rows {
-            for &(r1, _) in rows {
-                for &(r2, _) in rows {
-                    let (k1, k2) = (
-                        layout.row_unknown[r1].unwrap(),
-                        layout.row_unknown[r2].unwrap(),
-                    );
-                    p.push((layout.n_dofs + k1, layout.zeta(k2)));
-                }
-            }
-        }
-    }
-    // Keep every diagonal entry in the pattern (nodes without elements, zero blocks).
-    for i in 0..layout.n_unknowns() {
-        p.push((i, i));
-    }
-    p
 }
 
 /// `(slot, dof offset)` of the slots that are nodes (not the ground).

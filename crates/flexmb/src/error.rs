@@ -3,7 +3,7 @@
 use crate::model::ItemRef;
 
 /// An inconsistent or unphysical model.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ModelError {
     #[error("{item_table} '{name}' (#{index}), field '{field}': {message}", item_table = item.table, name = item.name, index = item.index + 1, field = item.field)]
     Invalid { item: ItemRef, message: String },
@@ -62,8 +62,19 @@ impl SettingsError {
 /// A failure during an analysis, with its diagnosis.
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum SolveError {
-    #[error("{0}")]
-    Model(String),
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    /// The linear solver could not be set up for the model (its pattern).
+    #[error("linear solver: {0}")]
+    Linear(#[from] crate::solve::linear::LinearError),
+    /// The consistent initial accelerations cannot be computed (e.g. `[M B^T; B 0]` is
+    /// singular): the unknown blamed, if any, and the diagnosis.
+    #[error("consistent initial accelerations at t = {t}: {message}")]
+    InitialAccelerations {
+        t: f64,
+        unknown: Option<crate::data::UnknownId>,
+        message: String,
+    },
     #[error(transparent)]
     Settings(#[from] SettingsError),
     #[error("inconsistent initial conditions: {0}")]
@@ -74,7 +85,13 @@ pub enum SolveError {
         t: f64,
         h: f64,
         reductions: usize,
+        /// The failure of the last attempt.
+        error: Box<crate::solve::NewtonError>,
+        /// The unknown it blames.
+        unknown: Option<crate::data::UnknownId>,
+        /// `error` in words, with the count of rejected steps when reductions kept coming.
         reason: String,
+        /// `unknown` in words.
         worst_equation: String,
     },
     #[error("static analysis failed at load step {step}, load factor {load_factor:.6e} (last increment tried {increment:.3e}, {rejected} rejected steps): {reason}; worst equation: {worst_equation}")]
@@ -83,6 +100,9 @@ pub enum SolveError {
         load_factor: f64,
         increment: f64,
         rejected: usize,
+        /// The failure of the last attempt (`None`: the step budget ran out).
+        error: Option<Box<crate::solve::NewtonError>>,
+        unknown: Option<crate::data::UnknownId>,
         reason: String,
         worst_equation: String,
     },

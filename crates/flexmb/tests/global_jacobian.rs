@@ -2,9 +2,9 @@
 //! on the manifold (`q = q0 exp(dq)`, differences in `dq`): covers scatter, the tangent
 //! operator T(dq), the group conversions and the constraint blocks together.
 
-use flexmb::assembly::{assemble, ConstraintRhs, Scaling};
+use flexmb::assembly::{assemble, ConstraintRhs, Iterate, Scaling};
 use flexmb::data::{Data, Layout};
-use flexmb::elements::Coefficients;
+use flexmb::elements::{Coefficients, NodeState};
 use flexmb::model::{BeamSection, JointKind, Load, LoadFrame, Model, TimeFunction};
 use flexmb_lie::{Frame, Group, Mat3, Vec3, Vec6};
 
@@ -17,12 +17,22 @@ fn residual(
     sc: &Scaling,
     matrix: bool,
 ) -> Vec<f64> {
-    for (i, node) in data.nodes.iter_mut().enumerate() {
-        let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
-        node.q = model.group.integrate(&q0[i], &inc);
-        node.t = model.group.tangent(&inc);
-    }
-    assemble(model, data, 0.3, lambda, sc, matrix);
+    let nodes: Vec<NodeState> = (0..q0.len())
+        .map(|i| {
+            let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
+            NodeState {
+                t: model.group.tangent(&inc),
+                ..NodeState::ground(model.group.integrate(&q0[i], &inc))
+            }
+        })
+        .collect();
+    let it = Iterate {
+        nodes: &nodes,
+        t: 0.3,
+        lambda,
+        b_start: &[],
+    };
+    assemble(model, data, &it, sc, matrix);
     data.residual.clone()
 }
 

@@ -34,14 +34,18 @@
 //! times and `t_end` are reached exactly, by steps never shorter than `h / 2`.
 
 use super::generalized_alpha::GaParameters;
-use super::initial::{self, initial_accelerations, load_nodes, mass_scale, prepare_layout};
-use super::linear::{Backend, LinearError, LinearSolver};
-use super::newton::{weighted_norm, Convergence, NewtonSettings, Verdict, Verification};
-use crate::assembly::{assemble, ConstraintRhs, Scaling};
+use super::initial::{self, initial_accelerations, mass_scale, prepare_layout};
+use super::newton::{
+    weighted_norm, MultiplierLimit, NewtonError, NewtonFailure, NewtonInfo, NewtonPolicy,
+    NewtonSettings, NewtonSolver, NonlinearSystem, Norms, Verification,
+};
+use super::step;
+use crate::assembly::{assemble, Iterate};
 use crate::data::{Data, Layout};
-use crate::elements::Coefficients;
+use crate::elements::{NodeState, Vec12};
 use crate::error::{SettingsError, SolveError};
 use crate::model::Model;
+use crate::sensors::node_states;
 use crate::state::State;
 use flexmb_lie::Vec6;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -265,16 +269,59 @@ pub struct Stats {
     pub multiplier_floor: f64,
 }
 
-/// Why a step failed (before step-size reduction decides what to do).
-#[derive(Clone, Debug)]
-struct StepFailure {
-    reason: String,
-    worst_unknown: Option<usize>,
+/// What one accepted step did ([`Simulation::step`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepInfo {
+    /// Time at the end of the step \[s\].
+    pub t: f64,
+    /// Size of the step \[s\].
+    pub h: f64,
+    /// Newton iterations of the step, failed attempts included.
+    pub iterations: usize,
+    /// Attempts rejected before this one (a reused matrix that failed, redundant rows chosen
+    /// again, step-size reductions).
+    pub rejected: usize,
+    /// Whether the accepted attempt iterated with a reused (not freshly built) matrix.
+    pub reused_matrix: bool,
+    /// Whether the iteration matrix was regularized (a singular configuration).
+    pub regularized: bool,
 }
 
-/// A dynamic analysis in progress: model (borrowed, immutable), data and state.
-pub struct Simulation<'m> {
-    pub model: &'m Model,
+/// A model that a simulation can hold: the simulation shares it, so a binding or another
+/// thread can keep it too. A borrowed model is copied once.
+pub trait IntoShared {
+    fn into_shared(self) -> Arc<Model>;
+}
+
+impl IntoShared for Arc<Model> {
+    fn into_shared(self) -> Arc<Model> {
+        self
+    }
+}
+
+impl IntoShared for &Arc<Model> {
+    fn into_shared(self) -> Arc<Model> {
+        Arc::clone(self)
+    }
+}
+
+impl IntoShared for Model {
+    fn into_shared(self) -> Arc<Model> {
+        Arc::new(self)
+    }
+}
+
+impl IntoShared for &Model {
+    fn into_shared(self) -> Arc<Model> {
+        Arc::new(self.clone())
+    }
+}
+
+/// A dynamic analysis in progress: the model (shared, immutable), the data, the state, and
+/// the parts that act on them: the integrator's memory, the Newton solver and its policies,
+/// the step-size controller and the statistics.
+pub struct Simulation {
+    pub model: Arc<Model>,
     pub data: Data,
     pub state: State,
     pub settings: DynamicSettings,
@@ -287,75 +334,33 @@ pub struct Simulation<'m> {
     pub interrupt: Option<Arc<AtomicBool>>,
     /// What [`DynamicSettings::verify`] found (`None` when it is off).
     pub verification: Option<Verification>,
-    /// The second factorization of `verify`.
-    verify_solver: Option<LinearSolver>,
-    /// Round-off floor of the scaled multipliers' tolerance (`n_active`).
-    mu_floor: Vec<f64>,
-    /// Smallest relative pivot of the first factorization after the redundant rows were
-    /// chosen (see [`Self::watch_redundant_rows`]).
-    pivot_reference: Option<f64>,
-    /// Time of the first re-selection of redundant rows.
-    first_reselection: f64,
-    /// State at the start of the current step (restored when a step is rejected).
-    saved: State,
+    newton: NewtonSolver,
+    integrator: Integrator,
+    control: StepControl,
+    redundancy: RedundancyWatch,
     /// Largest nodal mass of the model \[kg\]: the equilibrium rows are divided by it.
     mass: f64,
-    /// Steps left with the regularization on (switched on by a singular matrix or a failure).
-    regularized_steps: usize,
-    /// `(h, regularization)` of the factorized iteration matrix, `None` if there is none.
-    jacobian: Option<(f64, f64)>,
-    /// Steps since the iteration matrix was last factorized.
-    jacobian_age: usize,
-    /// Configuration increments of the current step (scratch, `6 n_nodes`).
-    increments: Vec<f64>,
-    /// Total increments `dq + B(q_n)^T zeta` (stabilized formulation; scratch, `6 n_nodes`).
-    total: Vec<f64>,
-    /// Stabilization unknowns of the current step (`n_active`).
-    zeta: Vec<f64>,
+}
+
+/// The memory of the generalized-alpha integrator between steps, and its scratch.
+#[derive(Clone, Debug, Default)]
+struct Integrator {
+    /// State at the start of the current step (restored when a step is rejected).
+    saved: State,
     /// Accelerations and multipliers at the start of the previous step, for the predictor.
     previous: Previous,
-    /// Whether the current step iterated with a reused (stale) iteration matrix.
-    used_stale_matrix: bool,
-    /// Rebuild the iteration matrix at every iteration of the next step.
-    fresh_only: bool,
-}
-
-/// Why a step's multipliers could not be converged to the tolerance (its configuration was).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum MultiplierLimit {
-    /// A singular configuration: the equations do not determine them.
-    Undetermined,
-    /// Round-off of an ill-conditioned system.
-    RoundOff,
-}
-
-/// Weighted norms of one Newton correction ([`super::newton::weighted_norm`]).
-struct CorrectionNorms {
-    q: f64,
-    worst_q: usize,
-    mu: f64,
-    worst_mu: usize,
-    zeta: f64,
-}
-
-impl CorrectionNorms {
-    fn all(&self) -> f64 {
-        self.q.max(self.mu).max(self.zeta)
-    }
-
-    /// Configuration and stabilization unknowns (not the multipliers).
-    fn configuration(&self) -> f64 {
-        self.q.max(self.zeta)
-    }
-
-    /// The unknown with the largest weighted correction.
-    fn worst(&self) -> usize {
-        if self.q >= self.mu {
-            self.worst_q
-        } else {
-            self.worst_mu
-        }
-    }
+    /// Configuration increments of the current step (`6 n_nodes`).
+    increments: Vec<f64>,
+    /// Stabilization unknowns of the current step (`n_active`).
+    zeta: Vec<f64>,
+    /// Total increments `dq + B(q_n)^T zeta` (scratch, `6 n_nodes`).
+    total: Vec<f64>,
+    /// Rows of `B(q_n)` (`n_rows`; stabilized formulation).
+    b_start: Vec<Vec12>,
+    /// Node kinematics of the current iterate (`n_nodes`).
+    nodes: Vec<NodeState>,
+    /// Round-off floor of the scaled multipliers' tolerance (`n_active`).
+    mu_floor: Vec<f64>,
 }
 
 /// Start of the previous accepted step (`h = 0` when there is none).
@@ -366,61 +371,109 @@ struct Previous {
     lambda: Vec<f64>,
 }
 
-/// Size of the constraint-block regularization when it is on (see [`Scaling`]), relative to
-/// the mass block (normalized to O(1)).
-const REGULARIZATION: f64 = 1e-9;
+/// Step-size control and the output schedule of a run.
+#[derive(Clone, Copy, Debug)]
+struct StepControl {
+    clock: StepClock,
+    /// Steps accepted since the step size last changed.
+    successes: usize,
+    /// Step-size reductions so far.
+    reductions: usize,
+    /// Index of the next output time.
+    k_out: usize,
+}
+
+impl StepControl {
+    fn new(h: f64) -> Self {
+        Self {
+            clock: StepClock::new(h),
+            successes: 0,
+            reductions: 0,
+            k_out: 1,
+        }
+    }
+
+    /// The next stop: the next output time, or the end.
+    fn target(&self, s: &DynamicSettings) -> f64 {
+        if s.output_interval > 0.0 {
+            (self.k_out as f64 * s.output_interval).min(s.t_end)
+        } else {
+            s.t_end
+        }
+    }
+
+    /// A step to `t_new` was accepted: the step size recovers after 4 accepted steps.
+    fn accepted(&mut self, t_new: f64, h_nominal: f64) {
+        self.successes += 1;
+        self.clock.advance(t_new);
+        if self.clock.h < h_nominal && self.successes >= 4 {
+            self.clock
+                .restart(t_new, (2.0 * self.clock.h).min(h_nominal));
+            self.successes = 0;
+        }
+    }
+
+    /// A step of size `h_try` from `t` failed: a quarter of it is tried next.
+    fn reduce(&mut self, t: f64, h_try: f64) {
+        self.successes = 0;
+        self.clock.restart(t, h_try * 0.25);
+        self.reductions += 1;
+    }
+}
+
+/// Watch on the redundant constraint rows (see [`Simulation::watch_redundant_rows`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct RedundancyWatch {
+    /// Smallest relative pivot of the first factorization after the rows were chosen.
+    pivot_reference: Option<f64>,
+    /// Time of the first re-selection.
+    first_reselection: f64,
+}
 
 /// Steps that keep the regularization after a singular matrix or a rejected step.
 const REGULARIZED_STEPS: usize = 20;
 
-/// A step that needed more iterations than this with a reused dense matrix has the matrix
-/// rebuilt at the next step (full Newton typically needs 2 to 3).
-const STALE_ITERATIONS: usize = 3;
-
-impl<'m> Simulation<'m> {
+impl Simulation {
     /// Validates the model, builds the data and computes consistent initial conditions.
-    pub fn new(model: &'m Model, settings: DynamicSettings) -> Result<Self, SolveError> {
-        model
-            .validate()
-            .map_err(|e| SolveError::Model(e.to_string()))?;
+    pub fn new(model: impl IntoShared, settings: DynamicSettings) -> Result<Self, SolveError> {
+        let model = model.into_shared();
+        model.validate()?;
         settings.check()?;
-        let (layout, warnings) = prepare_layout(model);
+        let (layout, warnings) = prepare_layout(&model);
         let n_rows = layout.n_rows;
-        let model_error = |e: LinearError| SolveError::Model(e.to_string());
-        let mut data = Data::new(model, layout.clone()).map_err(model_error)?;
-        let mut state = State::initial(model, n_rows);
-        initial_accelerations(model, &mut data, &mut state, settings.load_factor_at(0.0))?;
+        let mut data = Data::new(&model, layout.clone())?;
+        let mut state = State::initial(&model, n_rows);
+        initial_accelerations(&model, &mut data, &mut state, settings.load_factor_at(0.0))?;
         if settings.stabilized() {
             let mut stabilized = layout;
             stabilized.stabilized = true;
-            data = Data::new(model, stabilized).map_err(model_error)?;
-            load_nodes(&state, &mut data);
+            data = Data::new(&model, stabilized)?;
         }
+        let policy = NewtonPolicy {
+            settings: settings.newton,
+            regularized_solves: REGULARIZED_STEPS,
+            divergence_rate: 1.0,
+            diverge_after: 3,
+            exact_by_size: false,
+        };
         Ok(Self {
+            integrator: Integrator {
+                saved: state.clone(),
+                ..Default::default()
+            },
+            mass: mass_scale(&model),
             model,
-            saved: state.clone(),
             data,
             state,
             params: settings.scheme.parameters(settings.rho_inf),
+            newton: NewtonSolver::new(policy, settings.verify),
+            control: StepControl::new(settings.h),
             settings,
             stats: Stats::default(),
             warnings,
             interrupt: None,
             verification: None,
-            verify_solver: None,
-            mu_floor: Vec::new(),
-            pivot_reference: None,
-            first_reselection: 0.0,
-            mass: mass_scale(model),
-            regularized_steps: 0,
-            jacobian: None,
-            jacobian_age: 0,
-            increments: Vec::new(),
-            total: Vec::new(),
-            zeta: Vec::new(),
-            previous: Previous::default(),
-            used_stale_matrix: false,
-            fresh_only: false,
+            redundancy: RedundancyWatch::default(),
         })
     }
 
@@ -431,131 +484,182 @@ impl<'m> Simulation<'m> {
         output: &mut dyn FnMut(&Simulation) -> Result<(), String>,
     ) -> Result<Stats, SolveError> {
         let result = self.run_steps(output);
+        self.warnings.extend(self.notes());
+        result
+    }
+
+    /// What the run should tell the user about the steps so far.
+    fn notes(&self) -> Vec<String> {
+        let mut notes = Vec::new();
         if self.stats.undetermined_multipliers > 0 {
-            self.warnings.push(format!(
+            notes.push(format!(
                 "{} steps passed singular configurations (a rank-deficient constraint matrix, e.g. a dead point): positions and velocities are converged there, the multipliers (joint reactions) are not determined by the equations at those steps",
                 self.stats.undetermined_multipliers
             ));
         }
         if self.stats.multiplier_floor_steps > 0 {
-            self.warnings.push(format!(
+            notes.push(format!(
                 "at {} steps the multipliers (joint reactions) could not be converged below {:.2e} times their tolerance (rtol times the largest force of the model): round-off of an ill-conditioned constraint system; positions and velocities are converged",
                 self.stats.multiplier_floor_steps, self.stats.multiplier_floor
             ));
         }
         if self.stats.reselections > 0 {
-            self.warnings.push(format!(
+            notes.push(format!(
                 "the redundant constraint rows were chosen again {} times as the mechanism moved (first at t = {:.6e} s), where the rows kept came close to losing rank",
-                self.stats.reselections, self.first_reselection
+                self.stats.reselections, self.redundancy.first_reselection
             ));
         }
         if let Some(w) = self.verification.as_ref().and_then(Verification::warning) {
-            self.warnings.push(w);
+            notes.push(w);
         }
-        result
+        notes
     }
 
     fn run_steps(
         &mut self,
         output: &mut dyn FnMut(&Simulation) -> Result<(), String>,
     ) -> Result<Stats, SolveError> {
-        let s = self.settings;
-        let out_dt = s.output_interval;
         output(self).map_err(SolveError::Output)?;
-        let mut k_out = 1usize;
-        let mut clock = StepClock::new(s.h);
-        let mut successes = 0usize;
-        let mut reductions = 0usize;
-        while self.state.t < s.t_end {
+        while self.state.t < self.settings.t_end {
             if interrupted(&self.interrupt) {
                 return Err(SolveError::Interrupted {
                     reached: self.state.t,
                 });
             }
-            let target = if out_dt > 0.0 {
-                (k_out as f64 * out_dt).min(s.t_end)
-            } else {
-                s.t_end
-            };
-            let t_new = clock.next(self.state.t, target);
+            let target = self.control.target(&self.settings);
+            self.step()?;
+            if self.settings.output_interval == 0.0 || self.state.t == target {
+                output(self).map_err(SolveError::Output)?;
+            }
+        }
+        Ok(self.stats)
+    }
+
+    /// Takes one step toward the next output time (or the end), reducing the step size
+    /// after failures, and returns what it did. Fails with a diagnosis when the step cannot
+    /// be completed at `h_min` (or reductions keep coming back); the state is then the one
+    /// at the start of the step.
+    pub fn step(&mut self) -> Result<StepInfo, SolveError> {
+        let s = self.settings;
+        let mut info = StepInfo {
+            t: self.state.t,
+            h: 0.0,
+            iterations: 0,
+            rejected: 0,
+            reused_matrix: false,
+            regularized: false,
+        };
+        loop {
+            let target = self.control.target(&s);
+            let t_new = self.control.clock.next(self.state.t, target);
             if t_new <= self.state.t {
                 return Err(SolveError::StepUnderflow {
                     t: self.state.t,
-                    h: clock.h,
+                    h: self.control.clock.h,
                 });
             }
             let h_try = t_new - self.state.t;
-            match self.step(t_new) {
-                Ok(iterations) => {
-                    self.stats.steps += 1;
-                    self.stats.max_iterations_in_a_step =
-                        self.stats.max_iterations_in_a_step.max(iterations);
-                    self.watch_redundant_rows();
-                    if self.stats.steps == 1 || h_try < self.stats.smallest_step {
-                        self.stats.smallest_step = h_try;
+            let attempt = self.attempt(t_new);
+            let work = match &attempt {
+                Ok(n) | Err(NewtonFailure { info: n, .. }) => *n,
+            };
+            self.stats.newton_iterations += work.iterations;
+            self.stats.factorizations += work.factorizations;
+            self.stats.rejected_steps += work.retries;
+            info.iterations += work.iterations;
+            info.rejected += work.retries;
+            match attempt {
+                Ok(newton) => {
+                    self.accepted(&newton, h_try);
+                    if self.state.t == target && s.output_interval > 0.0 {
+                        self.control.k_out += 1;
                     }
-                    successes += 1;
-                    clock.advance(t_new);
-                    if clock.h < s.h && successes >= 4 {
-                        clock.restart(t_new, (2.0 * clock.h).min(s.h));
-                        successes = 0;
-                    }
-                    let reached = self.state.t == target;
-                    if out_dt == 0.0 || reached {
-                        output(self).map_err(SolveError::Output)?;
-                        if reached && out_dt > 0.0 {
-                            k_out += 1;
-                        }
-                    }
+                    info.t = self.state.t;
+                    info.h = h_try;
+                    info.reused_matrix = newton.reused_matrix;
+                    info.regularized = newton.regularized;
+                    return Ok(info);
                 }
                 Err(failure) => {
                     self.stats.rejected_steps += 1;
-                    if self.used_stale_matrix {
-                        // Iterations with a reused matrix may have led Newton astray: retry
-                        // the same step with a fresh matrix before reducing it.
-                        self.state = self.saved.clone();
-                        self.used_stale_matrix = false;
-                        self.fresh_only = true;
-                        continue;
-                    }
-                    self.state = self.saved.clone();
+                    info.rejected += 1;
+                    self.state.clone_from(&self.integrator.saved);
                     if self.reselect_redundant_rows() {
                         // The rows kept as independent had lost rank: retry with new ones.
                         continue;
                     }
-                    self.regularized_steps = REGULARIZED_STEPS;
-                    successes = 0;
-                    clock.restart(self.state.t, h_try * 0.25);
-                    reductions += 1;
+                    self.newton.regularize_next();
+                    self.control.reduce(self.state.t, h_try);
                     // Give up when the step can no longer shrink, or when rejections keep
                     // coming back after the step size recovers (an unstable solution).
-                    // (Retries with a fresh matrix above do not count: they do not reduce h.)
-                    let thrashing = reductions > 100 + self.stats.steps / 10;
-                    if clock.h < s.h_min || thrashing {
-                        let worst = failure
-                            .worst_unknown
-                            .map(|i| self.data.layout.describe_unknown(self.model, i))
-                            .unwrap_or_else(|| "unknown".into());
-                        return Err(SolveError::NewtonFailed {
-                            step: self.stats.steps + 1,
-                            t: self.state.t,
-                            h: h_try,
-                            reductions,
-                            reason: if thrashing {
-                                format!(
-                                    "{} ({} steps rejected so far)",
-                                    failure.reason, self.stats.rejected_steps
-                                )
-                            } else {
-                                failure.reason
-                            },
-                            worst_equation: worst,
-                        });
+                    let thrashing = self.control.reductions > 100 + self.stats.steps / 10;
+                    if self.control.clock.h < s.h_min || thrashing {
+                        return Err(self.failed(failure.error, h_try, thrashing));
                     }
                 }
             }
         }
-        Ok(self.stats)
+    }
+
+    /// The diagnosis of a step that cannot be completed.
+    fn failed(&self, error: NewtonError, h: f64, thrashing: bool) -> SolveError {
+        let worst = error
+            .unknown()
+            .map(|i| self.data.layout.describe_unknown(&self.model, i))
+            .unwrap_or_else(|| "unknown".into());
+        let unknown = error.unknown().map(|i| self.data.layout.unknown(i));
+        SolveError::NewtonFailed {
+            step: self.stats.steps + 1,
+            t: self.state.t,
+            h,
+            reductions: self.control.reductions,
+            reason: if thrashing {
+                format!(
+                    "{error} ({} steps rejected so far)",
+                    self.stats.rejected_steps
+                )
+            } else {
+                error.to_string()
+            },
+            error: Box::new(error),
+            unknown,
+            worst_equation: worst,
+        }
+    }
+
+    /// Bookkeeping of an accepted step of size `h`.
+    fn accepted(&mut self, newton: &NewtonInfo, h: f64) {
+        let t_new = self.state.t;
+        self.stats.steps += 1;
+        self.stats.max_iterations_in_a_step = self
+            .stats
+            .max_iterations_in_a_step
+            .max(newton.final_iterations);
+        match newton.multiplier_limit {
+            Some(MultiplierLimit::Undetermined) => self.stats.undetermined_multipliers += 1,
+            Some(MultiplierLimit::RoundOff) => {
+                self.stats.multiplier_floor_steps += 1;
+                self.stats.multiplier_floor =
+                    self.stats.multiplier_floor.max(newton.multiplier_norm);
+            }
+            None => {}
+        }
+        if let Some(check) = newton.check {
+            let (model, layout) = (&self.model, &self.data.layout);
+            self.verification
+                .get_or_insert_with(Verification::default)
+                .record(check.error, t_new, || {
+                    check
+                        .worst
+                        .map(|i| layout.describe_unknown(model, i))
+                        .unwrap_or_default()
+                });
+        }
+        self.watch_redundant_rows();
+        if self.stats.steps == 1 || h < self.stats.smallest_step {
+            self.stats.smallest_step = h;
+        }
+        self.control.accepted(t_new, self.settings.h);
     }
 
     /// After an accepted step of a model with redundant constraint rows: when the smallest
@@ -571,11 +675,11 @@ impl<'m> Simulation<'m> {
         let Some(pivot) = self.data.solver.min_pivot_ratio() else {
             return;
         };
-        match self.pivot_reference {
-            None => self.pivot_reference = Some(pivot),
+        match self.redundancy.pivot_reference {
+            None => self.redundancy.pivot_reference = Some(pivot),
             Some(reference) if pivot < 1e-2 * reference => {
                 self.reselect_redundant_rows();
-                self.pivot_reference = None;
+                self.redundancy.pivot_reference = None;
             }
             Some(_) => {}
         }
@@ -586,7 +690,7 @@ impl<'m> Simulation<'m> {
     /// are zero; the total constraint force, hence the motion, does not depend on which
     /// rows carry it) and returns `true`.
     fn reselect_redundant_rows(&mut self) -> bool {
-        let model = self.model;
+        let model = &*self.model;
         let Some(redundant) =
             initial::reselect_redundant_rows(model, &self.data.layout, &self.state.q)
         else {
@@ -599,525 +703,269 @@ impl<'m> Simulation<'m> {
             return false;
         };
         self.data = data;
-        load_nodes(&self.state, &mut self.data);
         for &row in &redundant {
             self.state.lambda[row] = 0.0;
         }
-        self.saved.clone_from(&self.state);
-        self.jacobian = None;
-        self.previous.h = 0.0;
-        self.verify_solver = None;
-        self.pivot_reference = None;
+        self.integrator.saved.clone_from(&self.state);
+        self.integrator.previous.h = 0.0;
+        self.newton.forget_matrix();
+        self.redundancy.pivot_reference = None;
         self.stats.reselections += 1;
         if self.stats.reselections == 1 {
-            self.first_reselection = self.state.t;
+            self.redundancy.first_reselection = self.state.t;
         }
         true
     }
 
-    /// One generalized-alpha step to `t_new`; returns the Newton iterations used.
-    ///
-    /// Newton's iteration matrix is reused across iterations and steps while the iteration
-    /// contracts fast (a chord method: the converged solution is the same, each iteration is
-    /// cheaper); it is rebuilt when `h` or the regularization changes, when the contraction
-    /// rate exceeds [`NewtonSettings::max_contraction`], when the iteration diverges, after
-    /// [`NewtonSettings::max_jacobian_age`] steps, and, for dense (small) systems, at the next
-    /// step after a step that needed more than 3 iterations with it.
-    fn step(&mut self, t_new: f64) -> Result<usize, StepFailure> {
-        self.saved.clone_from(&self.state);
-        let h = t_new - self.saved.t;
-        let p = self.params;
-        let bp = p.beta_prime(h);
-        let gp = p.gamma_prime(h);
-        // Equilibrium rows times 1 / (beta' m) with m the largest nodal mass: the mass block
-        // is O(1) whatever h and the units of mass, like the constraint block.
-        let scale = 1.0 / (bp * self.mass);
-        let mut sc = Scaling {
-            row_scale: scale,
-            coef: Coefficients {
-                m: 1.0 / self.mass,
-                c: gp * scale,
-                k: scale,
-            },
-            constraint_rhs: ConstraintRhs::Position,
-            load_factor: self.settings.load_factor_at(t_new),
-            regularization: if self.regularized_steps > 0 {
-                REGULARIZATION
-            } else {
-                0.0
-            },
-            velocity_scale: 1.0 / gp,
-            nodal_damping: self.settings.nodal_damping,
-        };
+    /// One attempt at the generalized-alpha step to `t_new` (see [`step`] for the step as
+    /// functions): the predictor, then the Newton solve of [`StepSystem`].
+    fn attempt(&mut self, t_new: f64) -> Result<NewtonInfo, NewtonFailure> {
+        let model = &*self.model;
+        let it = &mut self.integrator;
+        it.saved.clone_from(&self.state);
+        let h = t_new - it.saved.t;
+        let start = step::Start::new(self.params, h, self.mass, &self.settings, t_new);
         let stabilized = self.data.layout.stabilized;
+        it.nodes.clear();
+        it.nodes.extend(node_states(&it.saved));
         if stabilized {
-            crate::assembly::constraint_rows(self.model, &mut self.data, self.saved.t);
-            self.data.b_start.clone_from(&self.data.b_rows);
-            self.zeta.clear();
-            self.zeta.resize(self.data.layout.n_active, 0.0);
+            it.b_start.resize(self.data.layout.n_rows, Vec12::zeros());
+            crate::assembly::constraint_rows(
+                model,
+                &self.data.layout,
+                &it.nodes,
+                it.saved.t,
+                &mut it.b_start,
+            );
         }
-        self.regularized_steps = self.regularized_steps.saturating_sub(1);
-        let mut dq = std::mem::take(&mut self.increments);
-        self.predict(h, &mut dq);
+        let extrapolate = (it.previous.h > 0.0).then_some((
+            it.previous.h,
+            &it.previous.vdot[..],
+            &it.previous.lambda[..],
+        ));
+        step::predict(
+            &self.params,
+            h,
+            &it.saved,
+            extrapolate,
+            &mut self.state,
+            &mut it.increments,
+        );
         self.state.t = t_new;
-        let max_mu = self.force_scale() * scale;
-        let newton = self.settings.newton;
-        let mut convergence = Convergence::default();
-        // Of the configuration (and stabilization) unknowns alone: at a singular configuration
-        // (regularized matrix) the multipliers are not determined.
-        let mut configuration = Convergence::default();
-        let mut previous_mu = None;
-        let same_matrix = self
-            .jacobian
-            .is_some_and(|(hj, reg)| (hj - h).abs() <= 1e-6 * h && reg == sc.regularization);
-        let mut refresh = !newton.reuse_jacobian
-            || self.fresh_only
-            || !same_matrix
-            || self.jacobian_age >= newton.max_jacobian_age;
-        let fresh_only = std::mem::take(&mut self.fresh_only);
-        self.used_stale_matrix = false;
-        let mut result = Err(StepFailure {
-            reason: "no iteration".into(),
-            worst_unknown: None,
-        });
-        // Iteration at which the matrix was last rebuilt in this step (0: a reused matrix).
-        let mut last_factorization = 0;
-        for iteration in 1..=newton.max_iterations {
-            let fresh = refresh || fresh_only;
-            self.used_stale_matrix |= !fresh;
-            let total = self.total_increments(&dq);
-            self.update_configuration(&total, fresh);
-            self.total = total;
-            assemble(
-                self.model,
-                &mut self.data,
-                t_new,
-                &self.state.lambda,
-                &sc,
-                fresh,
-            );
-            if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
-                result = Err(StepFailure {
-                    reason: "non-finite residual".into(),
-                    worst_unknown: Some(i),
-                });
-                break;
-            }
-            if fresh {
-                self.update_multiplier_floor();
-                if let Err(failure) = self.factorize(&mut sc) {
-                    result = Err(failure);
-                    break;
-                }
-                self.jacobian = Some((h, sc.regularization));
-                self.jacobian_age = 0;
-                last_factorization = iteration;
-                refresh = false;
-            }
-            if let Err(failure) = self.solve() {
-                result = Err(failure);
-                break;
-            }
-            self.correct(&mut dq, gp, bp, scale);
-            let norms = self.correction_norms(&dq, max_mu);
-            let err = norms.all();
-            self.stats.newton_iterations += 1;
-            // The matrix is the exact Jacobian at this iterate only when it was just built,
-            // without regularization, and for index 3 (the stabilized rows omit the
-            // O(h) derivative of B(q) v with respect to q).
-            let exact = fresh && sc.regularization == 0.0 && !stabilized;
-            let verdict = convergence.update(&[norms.q, norms.mu, norms.zeta], exact);
-            let configuration_converged = matches!(
-                configuration.update(&[norms.q, norms.zeta], exact),
-                Verdict::Converged { .. }
-            );
-            // Multipliers that Newton cannot converge further: at a singular configuration
-            // (regularized matrix) the equations do not determine them; with the exact
-            // matrix, multiplier corrections that no longer halve are round-off (a 100 000-
-            // link chain: 3 to 5 times the tolerance, whatever the number of iterations).
-            // The step is then accepted on its configuration, and the run says so.
-            let limit = if sc.regularization > 0.0 {
-                Some(MultiplierLimit::Undetermined)
-            } else if exact && previous_mu.is_some_and(|p| norms.mu > 0.5 * p) {
-                Some(MultiplierLimit::RoundOff)
-            } else {
-                None
-            };
-            previous_mu = Some(norms.mu);
-            let limit = limit.filter(|_| configuration_converged);
-            let theta = match (verdict, limit) {
-                (Verdict::Continue { theta }, None) => theta,
-                (verdict, limit) => {
-                    if matches!(verdict, Verdict::Continue { .. }) {
-                        match limit {
-                            Some(MultiplierLimit::Undetermined) => {
-                                self.stats.undetermined_multipliers += 1;
-                            }
-                            Some(MultiplierLimit::RoundOff) => {
-                                self.stats.multiplier_floor_steps += 1;
-                                self.stats.multiplier_floor =
-                                    self.stats.multiplier_floor.max(norms.mu);
-                            }
-                            None => {}
-                        }
-                    }
-                    let total = self.total_increments(&dq);
-                    self.finish_step(&total);
-                    self.total = total;
-                    if self.settings.verify {
-                        let undetermined = limit == Some(MultiplierLimit::Undetermined);
-                        self.verify_step(&dq, &sc, max_mu, undetermined);
-                    }
-                    result = Ok(iteration);
-                    break;
-                }
-            };
-            let worst = norms.worst();
-            if let Some(theta) = theta.filter(|&t| t > newton.max_contraction) {
-                if !fresh {
-                    // A stale matrix converges too slowly: rebuild it and go on. For a large
-                    // (sparse) matrix the first rate of a step is not enough to pay for a
-                    // factorization: the first correction carries the predictor's error,
-                    // which one block can lose at once, so that a block it then moves looks
-                    // slow (a 1000-link chain: multipliers 0.37 -> 0.26, truly converging at
-                    // 0.007); only a first rate above 1 rebuilds it, later rates above the
-                    // threshold do. A small (dense) matrix is cheap to rebuild at once.
-                    let dense = self.data.solver.backend() == Backend::Dense;
-                    if dense || iteration >= 3 || theta > 1.0 {
-                        refresh = true;
-                    }
-                } else if iteration >= 3 && theta > 1.0 {
-                    result = Err(StepFailure {
-                        reason: format!(
-                            "Newton diverging (weighted correction {err:.3e}, contraction rate {theta:.3})"
-                        ),
-                        worst_unknown: Some(worst),
-                    });
-                    break;
-                }
-            }
-            if iteration == newton.max_iterations {
-                result = Err(StepFailure {
-                    reason: format!(
-                        "no convergence in {iteration} iterations (weighted correction {err:.3e})"
-                    ),
-                    worst_unknown: Some(worst),
-                });
-            }
-        }
-        self.increments = dq;
-        match result {
-            Ok(iterations) => {
-                self.jacobian_age += 1;
-                // Iterations done with the matrix the next step would reuse.
-                if iterations - last_factorization.saturating_sub(1) > STALE_ITERATIONS
-                    && self.data.solver.backend() == Backend::Dense
-                {
-                    // The reused matrix has drifted from the current one: a small (dense)
-                    // matrix is cheaper to rebuild for the next step than extra iterations
-                    // at every step. A large sparse factorization costs several iterations,
-                    // so it waits for the contraction test.
-                    self.jacobian_age = newton.max_jacobian_age;
-                }
-                self.previous.h = h;
-                self.previous.vdot.clone_from(&self.saved.vdot);
-                self.previous.lambda.clone_from(&self.saved.lambda);
-            }
-            Err(_) => {
-                self.jacobian = None;
-                self.previous.h = 0.0;
-            }
-        }
-        result
-    }
-
-    /// Predictor: `vdot_{n+1} = vdot_n`, `lambda_{n+1} = lambda_n`, and the `v`, `a` and
-    /// increment that the generalized-alpha formulas give for it.
-    fn predict(&mut self, h: f64, dq: &mut Vec<f64>) {
-        let p = self.params;
-        let n = self.data.layout.n_nodes;
-        dq.clear();
-        dq.resize(6 * n, 0.0);
-        // Linear extrapolation of vdot and lambda from the last two steps when there are
-        // two (a closer start saves Newton iterations; the solution does not depend on it).
-        let ratio = if self.previous.h > 0.0 {
-            h / self.previous.h
-        } else {
-            0.0
+        let max_mu = force_scale(model, &self.data, &it.saved, &self.settings) * start.scale;
+        let mut sys = StepSystem {
+            model,
+            start,
+            settings: &self.settings,
+            saved: &it.saved,
+            state: &mut self.state,
+            dq: &mut it.increments,
+            zeta: &mut it.zeta,
+            total: &mut it.total,
+            nodes: &mut it.nodes,
+            b_start: &it.b_start,
+            mu_floor: &mut it.mu_floor,
+            max_mu,
+            previous: &mut it.previous,
         };
-        for i in 0..n {
-            let (v0, vd0, a0) = (self.saved.v[i], self.saved.vdot[i], self.saved.a[i]);
-            let vd1 = if ratio > 0.0 {
-                vd0 + (vd0 - self.previous.vdot[i]) * ratio
-            } else {
-                vd0
-            };
-            let a1 =
-                (vd0 * p.alpha_f + vd1 * (1.0 - p.alpha_f) - a0 * p.alpha_m) / (1.0 - p.alpha_m);
-            self.state.vdot[i] = vd1;
-            self.state.v[i] = v0 + a0 * (h * (1.0 - p.gamma)) + a1 * (h * p.gamma);
-            let inc = v0 * h + a0 * (h * h * (0.5 - p.beta)) + a1 * (h * h * p.beta);
-            dq[6 * i..6 * i + 6].copy_from_slice(inc.as_slice());
-        }
-        if ratio > 0.0 {
-            for (k, l) in self.state.lambda.iter_mut().enumerate() {
-                *l += (*l - self.previous.lambda[k]) * ratio;
+        sys.reset_zeta(self.data.layout.n_active);
+        let result = self.newton.solve(&mut sys, &mut self.data, h);
+        match result {
+            Ok(info) => {
+                sys.finish(&self.data.layout);
+                let it = &mut self.integrator;
+                it.previous.h = h;
+                it.previous.vdot.clone_from(&it.saved.vdot);
+                it.previous.lambda.clone_from(&it.saved.lambda);
+                Ok(info)
+            }
+            Err(failure) => {
+                self.integrator.previous.h = 0.0;
+                Err(failure)
             }
         }
     }
+}
 
-    /// `q = q_n exp(dq)` and, when the matrix is rebuilt, the tangent operators `T(dq)`.
-    fn update_configuration(&mut self, dq: &[f64], tangents: bool) {
-        let group = self.model.group;
-        for (i, node) in self.data.nodes.iter_mut().enumerate() {
-            let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
-            node.q = group.integrate(&self.saved.q[i], &inc);
-            node.v = self.state.v[i];
-            node.vdot = self.state.vdot[i];
-            if tangents {
-                node.t = group.tangent(&inc);
-            }
-        }
+/// The Newton system of one generalized-alpha step: the iterate `(dq, mu, zeta)` held as
+/// the increments, the state's `v`, `vdot` and multipliers (updated by the corrections as
+/// the scheme's affine relations give them) and the stabilization unknowns.
+struct StepSystem<'a> {
+    model: &'a Model,
+    start: step::Start,
+    settings: &'a DynamicSettings,
+    saved: &'a State,
+    state: &'a mut State,
+    dq: &'a mut Vec<f64>,
+    zeta: &'a mut Vec<f64>,
+    total: &'a mut Vec<f64>,
+    nodes: &'a mut Vec<NodeState>,
+    b_start: &'a [Vec12],
+    mu_floor: &'a mut Vec<f64>,
+    /// Scaled force scale of the multipliers' tolerance ([`force_scale`]).
+    max_mu: f64,
+    previous: &'a mut Previous,
+}
+
+impl StepSystem<'_> {
+    fn reset_zeta(&mut self, n_active: usize) {
+        self.zeta.clear();
+        self.zeta.resize(n_active, 0.0);
     }
 
-    /// Numeric factorization of the iteration matrix, regularized if it is singular.
-    fn factorize(&mut self, sc: &mut Scaling) -> Result<(), StepFailure> {
-        self.stats.factorizations += 1;
-        let mut factorized = self.data.solver.factorize(&self.data.values);
-        if matches!(factorized, Err(LinearError::Singular { .. })) && sc.regularization == 0.0 {
-            sc.regularization = REGULARIZATION;
-            self.regularized_steps = REGULARIZED_STEPS;
-            let n_unknowns = self.data.layout.n_unknowns();
-            let nd = self.data.layout.n_dofs;
-            let diag = self.data.values.len() - n_unknowns;
-            for v in &mut self.data.values[diag + nd..] {
-                *v = -sc.regularization;
-            }
-            factorized = self.data.solver.factorize(&self.data.values);
-        }
-        factorized.map_err(|e| StepFailure {
-            reason: format!("singular iteration matrix ({e})"),
-            worst_unknown: match e {
-                LinearError::Singular { column } => column,
-                _ => None,
-            },
-        })
+    /// `dq + B(q_n)^T zeta` into `total` (stabilized), `dq` otherwise.
+    fn update_total(&mut self, layout: &Layout) {
+        step::total_increments(layout, self.dq, self.zeta, self.b_start, self.total);
     }
 
-    /// Newton correction `dx = -S^-1 residual`.
-    fn solve(&mut self) -> Result<(), StepFailure> {
-        let dx = &mut self.data.correction;
-        for (d, r) in dx.iter_mut().zip(&self.data.residual) {
-            *d = -r;
-        }
-        self.data.solver.solve_in_place(dx);
-        match dx.iter().position(|d| !d.is_finite()) {
-            Some(i) => Err(StepFailure {
-                reason: "non-finite Newton correction".into(),
-                worst_unknown: Some(i),
-            }),
-            None => Ok(()),
-        }
+    /// Final configuration and algorithmic acceleration.
+    fn finish(&mut self, layout: &Layout) {
+        self.update_total(layout);
+        step::finish(
+            self.model.group,
+            &self.start.params,
+            self.saved,
+            self.total,
+            self.state,
+        );
+    }
+}
+
+impl NonlinearSystem for StepSystem<'_> {
+    fn assemble(&mut self, data: &mut Data, matrix: bool, regularization: f64) {
+        self.update_total(&data.layout);
+        step::kinematics(
+            self.model.group,
+            self.saved,
+            self.state,
+            self.total,
+            matrix,
+            self.nodes,
+        );
+        let sc = self.start.scaling(regularization);
+        let it = Iterate {
+            nodes: self.nodes,
+            t: self.state.t,
+            lambda: &self.state.lambda,
+            b_start: self.b_start,
+        };
+        assemble(self.model, data, &it, &sc, matrix);
     }
 
-    /// `dq += dx`, `v += gamma' dx`, `vdot += beta' dx`, `lambda += dmu / s`, and
-    /// `zeta += dzeta` in the stabilized formulation.
-    fn correct(&mut self, dq: &mut [f64], gp: f64, bp: f64, scale: f64) {
-        let dx = &self.data.correction;
-        let nd = self.data.layout.n_dofs;
-        if self.data.layout.stabilized {
-            let na = self.data.layout.n_active;
-            for (z, d) in self.zeta.iter_mut().zip(&dx[nd + na..]) {
-                *z += d;
-            }
-        }
-        for i in 0..self.data.layout.n_nodes {
-            let d = Vec6::from_column_slice(&dx[6 * i..6 * i + 6]);
-            for k in 0..6 {
-                dq[6 * i + k] += d[k];
-            }
-            self.state.v[i] += d * gp;
-            self.state.vdot[i] += d * bp;
-        }
-        for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
-            if let Some(k) = slot {
-                self.state.lambda[row] += dx[nd + k] / scale;
-            }
-        }
+    fn matrix_assembled(&mut self, data: &mut Data) {
+        update_multiplier_floor(self.model, self.saved, data, self.mu_floor);
     }
 
-    /// Force scale of the multipliers' tolerance at the start of the step: the largest
-    /// multiplier and the largest nodal force `m (|vdot| + |g|)` (or moment `J |vdot|`). A
-    /// joint carrying no load yet (multipliers near zero) is then judged against the forces
-    /// of the system instead of against round-off.
-    fn force_scale(&self) -> f64 {
-        let g = self.model.gravity.norm() * self.settings.load_factor_at(self.saved.t);
-        let nodal = self
-            .saved
-            .vdot
-            .iter()
-            .zip(&self.data.nodal_mass)
-            .map(|(a, m)| {
-                let translation = m[0] * (a.fixed_rows::<3>(0).norm() + g);
-                translation.max(m[3] * a.fixed_rows::<3>(3).norm())
-            })
-            .fold(0.0, f64::max);
-        let lambda = self.saved.lambda.iter().fold(0.0f64, |m, l| m.max(l.abs()));
-        lambda.max(nodal)
+    fn apply(&mut self, data: &Data) {
+        step::correct(
+            &data.layout,
+            &data.correction,
+            &self.start,
+            self.dq,
+            self.zeta,
+            self.state,
+        );
     }
 
-    /// Round-off floor of each active scaled multiplier, `1000 eps L D_k` (`L` the size of
-    /// the model, `D_k` the largest diagonal entry of the iteration matrix just assembled on
-    /// the dofs of the row's nodes: mass, damping and stiffness, scaled): the size of the
-    /// round-off in the equilibrium rows that the multiplier balances. It matters only where
-    /// every force of the model is near zero (a mechanism starting from rest without
-    /// gravity), and keeps the test from asking for a multiplier below round-off.
-    fn update_multiplier_floor(&mut self) {
-        let length = self.saved.q.iter().fold(1e-3f64, |m, q| m.max(q.x.norm()));
-        let roundoff = 1e3 * f64::EPSILON * length;
-        let data = &mut self.data;
-        data.diagonal.fill(0.0);
-        for &(i, slot) in &data.diagonal_slots {
-            data.diagonal[i] += data.values[slot];
-        }
-        let layout = &data.layout;
-        self.mu_floor.clear();
-        self.mu_floor.resize(layout.n_active, 0.0);
-        for (j, joint) in self.model.joints.iter().enumerate() {
-            let start = layout.joint_row_start[j];
-            let mut d = 0.0f64;
-            for n in [joint.node_a, joint.node_b].into_iter().flatten() {
-                d = data.diagonal[6 * n.0..6 * n.0 + 6]
-                    .iter()
-                    .fold(d, |m, v| m.max(v.abs()));
-            }
-            for r in 0..layout.joint_rows[j].len() {
-                if let Some(k) = layout.row_unknown[start + r] {
-                    self.mu_floor[k] = roundoff * d;
-                }
-            }
-        }
-    }
-
-    /// Weighted norms of the Newton correction in `data.correction` (after it was applied):
-    /// increments relative to `dq`; multipliers with the tolerance `rtol max_mu + floor_k`
-    /// (`max_mu` the scaled [`Self::force_scale`], `floor` from
-    /// [`Self::update_multiplier_floor`]); stabilization unknowns relative to `zeta`.
-    fn correction_norms(&self, dq: &[f64], max_mu: f64) -> CorrectionNorms {
+    fn norms(&self, data: &Data) -> Norms {
         let newton = &self.settings.newton;
-        let layout = &self.data.layout;
+        let layout = &data.layout;
         let (nd, na) = (layout.n_dofs, layout.n_active);
-        let dx = &self.data.correction;
-        let (q, worst_q) = weighted_norm(&dx[..nd], dq, &|_| newton.atol, newton.rtol);
+        let dx = &data.correction;
+        let (q, worst_q) = weighted_norm(&dx[..nd], self.dq, &|_| newton.atol, newton.rtol);
         let (mut mu, mut worst_mu) = (0.0, nd);
         if na > 0 {
-            let relative = newton.rtol * max_mu;
+            let relative = newton.rtol * self.max_mu;
             let dmu = &dx[nd..nd + na];
             let (e, w) = weighted_norm(dmu, dmu, &|k| relative + self.mu_floor[k], 0.0);
             (mu, worst_mu) = (e, nd + w);
         }
         let zeta = if layout.stabilized {
-            weighted_norm(&dx[nd + na..], &self.zeta, &|_| newton.atol, newton.rtol).0
+            weighted_norm(&dx[nd + na..], self.zeta, &|_| newton.atol, newton.rtol).0
         } else {
             0.0
         };
-        CorrectionNorms {
-            q,
-            worst_q,
-            mu,
-            worst_mu,
-            zeta,
+        Norms {
+            blocks: [q, mu, zeta, 0.0],
+            n: 3,
+            multipliers: Some(1),
+            worst: if q >= mu { worst_q } else { worst_mu },
         }
     }
 
-    /// `--verify`: a Newton correction from the accepted iterate with a freshly built and
-    /// factorized matrix (a second factorization, so a reused one is kept) estimates the
-    /// error left in the step, in units of the tolerance. Records the largest.
-    fn verify_step(&mut self, dq: &[f64], sc: &Scaling, max_mu: f64, undetermined: bool) {
-        let total = self.total_increments(dq);
-        self.update_configuration(&total, true);
-        self.total = total;
-        assemble(
-            self.model,
-            &mut self.data,
-            self.state.t,
-            &self.state.lambda,
-            sc,
-            true,
+    fn exact_matrix(&self) -> bool {
+        // The stabilized rows omit the O(h) derivative of B(q) v with respect to q.
+        self.b_start.is_empty()
+    }
+
+    fn restart(&mut self) {
+        // As a new attempt after a failure: from the start of the step, predictor without
+        // extrapolation.
+        let t = self.state.t;
+        self.state.clone_from(self.saved);
+        self.previous.h = 0.0;
+        step::predict(
+            &self.start.params,
+            self.start.h,
+            self.saved,
+            None,
+            self.state,
+            self.dq,
         );
-        if self.verify_solver.is_none() {
-            let n = self.data.layout.n_unknowns();
-            self.verify_solver = LinearSolver::new(n, &self.data.pattern).ok();
-        }
-        let factorized = match &mut self.verify_solver {
-            Some(solver) => solver.factorize(&self.data.values).is_ok(),
-            None => false,
-        };
-        // A singular matrix at the accepted point gives no estimate (the step itself was
-        // accepted with the regularization): recorded as NaN.
-        let mut error = (f64::NAN, None);
-        if let (true, Some(solver)) = (factorized, &mut self.verify_solver) {
-            let dx = &mut self.data.correction;
-            for (d, r) in dx.iter_mut().zip(&self.data.residual) {
-                *d = -r;
-            }
-            solver.solve_in_place(dx);
-            let norms = self.correction_norms(dq, max_mu);
-            let e = if undetermined {
-                norms.configuration()
-            } else {
-                norms.all()
-            };
-            error = (e, Some(norms.worst()));
-        }
-        let (model, layout) = (self.model, &self.data.layout);
-        self.verification
-            .get_or_insert_with(Verification::default)
-            .record(error.0, self.state.t, || {
-                error
-                    .1
-                    .map(|i| layout.describe_unknown(model, i))
-                    .unwrap_or_default()
-            });
-        load_nodes(&self.state, &mut self.data);
+        self.state.t = t;
+        let n = self.zeta.len();
+        self.reset_zeta(n);
     }
+}
 
-    /// `dq + B(q_n)^T zeta` in the stabilized formulation, `dq` otherwise. Returns a copy
-    /// held in a reused buffer.
-    fn total_increments(&mut self, dq: &[f64]) -> Vec<f64> {
-        let mut total = std::mem::take(&mut self.total);
-        total.clear();
-        total.extend_from_slice(dq);
-        if self.data.layout.stabilized {
-            let layout = &self.data.layout;
-            for (n, rows) in layout.node_rows.iter().enumerate() {
-                for &(row, slot) in rows {
-                    let zeta = self.zeta[layout.row_unknown[row].expect("active row")];
-                    for i in 0..6 {
-                        total[6 * n + i] += self.data.b_start[row][6 * slot + i] * zeta;
-                    }
-                }
+/// Force scale of the multipliers' tolerance at the start of the step: the largest
+/// multiplier and the largest nodal force `m (|vdot| + |g|)` (or moment `J |vdot|`). A
+/// joint carrying no load yet (multipliers near zero) is then judged against the forces of
+/// the system instead of against round-off.
+fn force_scale(model: &Model, data: &Data, saved: &State, settings: &DynamicSettings) -> f64 {
+    let g = model.gravity.norm() * settings.load_factor_at(saved.t);
+    let nodal = saved
+        .vdot
+        .iter()
+        .zip(&data.nodal_mass)
+        .map(|(a, m)| {
+            let translation = m[0] * (a.fixed_rows::<3>(0).norm() + g);
+            translation.max(m[3] * a.fixed_rows::<3>(3).norm())
+        })
+        .fold(0.0, f64::max);
+    let lambda = saved.lambda.iter().fold(0.0f64, |m, l| m.max(l.abs()));
+    lambda.max(nodal)
+}
+
+/// Round-off floor of each active scaled multiplier, `1000 eps L D_k` (`L` the size of the
+/// model, `D_k` the largest diagonal entry of the iteration matrix just assembled on the
+/// dofs of the row's nodes: mass, damping and stiffness, scaled): the size of the round-off
+/// in the equilibrium rows that the multiplier balances. It matters only where every force
+/// of the model is near zero (a mechanism starting from rest without gravity), and keeps
+/// the test from asking for a multiplier below round-off.
+fn update_multiplier_floor(model: &Model, saved: &State, data: &mut Data, mu_floor: &mut Vec<f64>) {
+    let length = saved.q.iter().fold(1e-3f64, |m, q| m.max(q.x.norm()));
+    let roundoff = 1e3 * f64::EPSILON * length;
+    data.diagonal.fill(0.0);
+    for &(i, slot) in &data.diagonal_slots {
+        data.diagonal[i] += data.values[slot];
+    }
+    let layout = &data.layout;
+    mu_floor.clear();
+    mu_floor.resize(layout.n_active, 0.0);
+    for (j, joint) in model.joints.iter().enumerate() {
+        let start = layout.joint_row_start[j];
+        let mut d = 0.0f64;
+        for n in [joint.node_a, joint.node_b].into_iter().flatten() {
+            d = data.diagonal[6 * n.0..6 * n.0 + 6]
+                .iter()
+                .fold(d, |m, v| m.max(v.abs()));
+        }
+        for r in 0..layout.joint_rows[j].len() {
+            if let Some(k) = layout.row_unknown[start + r] {
+                mu_floor[k] = roundoff * d;
             }
         }
-        total
-    }
-
-    /// Final configuration and algorithmic acceleration
-    /// `a_{n+1} = (alpha_f vdot_n + (1 - alpha_f) vdot_{n+1} - alpha_m a_n) / (1 - alpha_m)`.
-    fn finish_step(&mut self, dq: &[f64]) {
-        let p = self.params;
-        let group = self.model.group;
-        for i in 0..self.data.layout.n_nodes {
-            let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
-            let mut q = group.integrate(&self.saved.q[i], &inc);
-            q.orthonormalize();
-            self.state.q[i] = q;
-            self.state.a[i] = (self.saved.vdot[i] * p.alpha_f
-                + self.state.vdot[i] * (1.0 - p.alpha_f)
-                - self.saved.a[i] * p.alpha_m)
-                / (1.0 - p.alpha_m);
-        }
-        load_nodes(&self.state, &mut self.data);
     }
 }
 

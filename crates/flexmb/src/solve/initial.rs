@@ -10,15 +10,17 @@
 //! * Accelerations: `[M B^T; B 0] [vdot0; lambda0] = -[r(q0, v0, 0); v0^T H v0 + 2 B_t v0 + Phi_tt]`
 //!   (Arnold & Brüls 2007, Sect. 3: the generalized-alpha scheme starts from `a0 = vdot0`).
 
-use crate::assembly::{assemble, ConstraintRhs, Scaling};
+use super::newton::{
+    NewtonError, NewtonPolicy, NewtonSettings, NewtonSolver, NonlinearSystem, Norms,
+};
+use crate::assembly::{assemble, ConstraintRhs, Iterate, Scaling};
 use crate::data::{Data, Layout};
 use crate::elements::{Coefficients, NodeState};
 use crate::error::SolveError;
 use crate::joints;
 use crate::model::Model;
-use crate::solve::linear::LinearError;
 use crate::state::State;
-use flexmb_lie::{Frame, Mat6};
+use flexmb_lie::Frame;
 use nalgebra::DMatrix;
 
 /// Position-level tolerance of the initial configuration [m, or dimensionless for angles].
@@ -140,13 +142,42 @@ pub fn reselect_redundant_rows(model: &Model, layout: &Layout, q: &[Frame]) -> O
     (redundant != current).then_some(redundant)
 }
 
-/// Loads a state into the node kinematics of `data` (tangent operators set to identity).
-pub fn load_nodes(state: &State, data: &mut Data) {
-    for (i, n) in data.nodes.iter_mut().enumerate() {
-        n.q = state.q[i];
-        n.v = state.v[i];
-        n.vdot = state.vdot[i];
-        n.t = Mat6::identity();
+/// The consistent initial accelerations as a (linear) system for [`NewtonSolver`]:
+/// `[M B^T; B 0] [vdot0; mu0] = -[s r(q0, v0, 0); v0^T H v0 + 2 B_t v0 + Phi_tt]`, with
+/// the equilibrium rows divided by the largest nodal mass (multipliers solved for as
+/// `mu = lambda / m`): mass and constraint blocks are then both O(1), and a model of heavy
+/// bodies is not mistaken for a singular one by the relative pivot test.
+struct Accelerations<'a> {
+    model: &'a Model,
+    nodes: &'a [NodeState],
+    t: f64,
+    sc: Scaling,
+    zeros: &'a [f64],
+    /// The solution `[vdot0; mu0]` (`n_unknowns`).
+    x: Vec<f64>,
+}
+
+impl NonlinearSystem for Accelerations<'_> {
+    fn assemble(&mut self, data: &mut Data, matrix: bool, _: f64) {
+        let it = Iterate {
+            nodes: self.nodes,
+            t: self.t,
+            lambda: self.zeros,
+            b_start: &[],
+        };
+        assemble(self.model, data, &it, &self.sc, matrix);
+    }
+
+    fn apply(&mut self, data: &Data) {
+        self.x.clone_from(&data.correction);
+    }
+
+    /// The system is linear: one exact correction leaves no error.
+    fn norms(&self, _: &Data) -> Norms {
+        Norms {
+            n: 1,
+            ..Norms::default()
+        }
     }
 }
 
@@ -157,14 +188,11 @@ pub fn initial_accelerations(
     state: &mut State,
     load_factor: f64,
 ) -> Result<(), SolveError> {
-    load_nodes(state, data);
-    for n in data.nodes.iter_mut() {
+    let mut nodes = crate::sensors::node_states(state);
+    for n in nodes.iter_mut() {
         n.vdot.fill(0.0);
     }
     let zeros = vec![0.0; data.layout.n_rows];
-    // Equilibrium rows divided by the largest nodal mass (multipliers solved for as
-    // `lambda / m`): mass and constraint blocks are then both O(1), and a model of heavy
-    // bodies is not mistaken for a singular one by the relative pivot test.
     let s = 1.0 / mass_scale(model);
     let mut sc = Scaling {
         row_scale: s,
@@ -179,7 +207,13 @@ pub fn initial_accelerations(
         velocity_scale: 1.0,
         nodal_damping: 0.0,
     };
-    assemble(model, data, state.t, &zeros, &sc, false);
+    let mut it = Iterate {
+        nodes: &nodes,
+        t: state.t,
+        lambda: &zeros,
+        b_start: &[],
+    };
+    assemble(model, data, &it, &sc, false);
     if let Some((row, v)) = worst(&data.phi) {
         if v > POSITION_TOLERANCE {
             return Err(SolveError::InconsistentInitialConditions(format!(
@@ -190,7 +224,8 @@ pub fn initial_accelerations(
         }
     }
     sc.constraint_rhs = ConstraintRhs::Velocity;
-    assemble(model, data, state.t, &zeros, &sc, false);
+    it.nodes = &nodes;
+    assemble(model, data, &it, &sc, false);
     let nd = data.layout.n_dofs;
     if let Some((k, v)) = worst(&data.residual[nd..]) {
         if v > VELOCITY_TOLERANCE {
@@ -201,17 +236,32 @@ pub fn initial_accelerations(
         }
     }
     sc.constraint_rhs = ConstraintRhs::Acceleration;
-    assemble(model, data, state.t, &zeros, &sc, true);
-    data.solver
-        .factorize(&data.values)
-        .map_err(|e| singular_mass_matrix(model, data, state.t, e))?;
-    let mut x: Vec<f64> = data.residual.iter().map(|r| -r).collect();
-    data.solver.solve_in_place(&mut x);
-    if x.iter().any(|v| !v.is_finite()) {
-        return Err(SolveError::Model(
-            "initial accelerations are not finite".into(),
-        ));
+    let mut system = Accelerations {
+        model,
+        nodes: &nodes,
+        t: state.t,
+        sc,
+        zeros: &zeros,
+        x: Vec::new(),
+    };
+    let mut newton = NewtonSolver::new(
+        NewtonPolicy {
+            settings: NewtonSettings {
+                max_iterations: 1,
+                reuse_jacobian: false,
+                ..NewtonSettings::default()
+            },
+            regularized_solves: 0,
+            divergence_rate: f64::INFINITY,
+            diverge_after: 1,
+            exact_by_size: false,
+        },
+        false,
+    );
+    if let Err(failure) = newton.solve(&mut system, data, 0.0) {
+        return Err(initial_failure(model, data, state.t, failure.error));
     }
+    let x = system.x;
     for i in 0..data.layout.n_nodes {
         let acc = flexmb_lie::Vec6::from_column_slice(&x[6 * i..6 * i + 6]);
         state.vdot[i] = acc;
@@ -220,34 +270,35 @@ pub fn initial_accelerations(
     for (row, slot) in data.layout.row_unknown.iter().enumerate() {
         state.lambda[row] = slot.map_or(0.0, |k| x[nd + k] / s);
     }
-    load_nodes(state, data);
     Ok(())
 }
 
-/// The diagnosis of a singular `[M B^T; B 0]`: a node without mass is named only when the
-/// unknown blamed belongs to a node whose nodal mass or inertia is zero.
-fn singular_mass_matrix(model: &Model, data: &Data, t: f64, e: LinearError) -> SolveError {
-    let column = match e {
-        LinearError::Singular { column } => column,
-        LinearError::Factorization(_) => None,
-    };
-    let nd = data.layout.n_dofs;
-    let cause = match column {
-        Some(c) if c < nd && data.nodal_mass[c / 6][c % 6] == 0.0 => format!(
-            "node '{}' has no {} and nothing else determines its motion in {}",
+/// The diagnosis of a failed solve for the initial accelerations: for a singular
+/// `[M B^T; B 0]`, a node without mass is named only when the unknown blamed belongs to a
+/// node whose nodal mass or inertia is zero.
+fn initial_failure(model: &Model, data: &Data, t: f64, error: NewtonError) -> SolveError {
+    let unknown = error.unknown();
+    let message = match (&error, unknown) {
+        (NewtonError::Singular { .. }, Some(c)) if c < data.layout.n_dofs && data.nodal_mass[c / 6][c % 6] == 0.0 => format!(
+            "the mass/constraint matrix [M B^T; B 0] is singular: node '{}' has no {} and nothing else determines its motion in {} ({error})",
             model.nodes[c / 6].name,
             if c % 6 < 3 { "mass" } else { "rotational inertia" },
             data.layout.describe_unknown(model, c)
         ),
-        Some(c) => format!(
-            "the motion of the model is not determined near {}: a node without mass, or constraints that are redundant or contradict each other there",
+        (NewtonError::Singular { .. }, Some(c)) => format!(
+            "the mass/constraint matrix [M B^T; B 0] is singular: the motion of the model is not determined near {}: a node without mass, or constraints that are redundant or contradict each other there ({error})",
             data.layout.describe_unknown(model, c)
         ),
-        None => "no unknown can be blamed".into(),
+        (NewtonError::Singular { .. }, None) => format!(
+            "the mass/constraint matrix [M B^T; B 0] is singular; no unknown can be blamed ({error})"
+        ),
+        _ => format!("the initial accelerations are not finite ({error})"),
     };
-    SolveError::Model(format!(
-        "the mass/constraint matrix [M B^T; B 0] is singular at t = {t}: {cause} ({e})"
-    ))
+    SolveError::InitialAccelerations {
+        t,
+        unknown: unknown.map(|i| data.layout.unknown(i)),
+        message,
+    }
 }
 
 /// Largest nodal mass of the model [kg] (1 if there is none): the scale of the mass block,

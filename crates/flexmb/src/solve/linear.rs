@@ -85,7 +85,7 @@ pub enum Backend {
     Sparse,
 }
 
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LinearError {
     #[error("the iteration matrix is singular (zero or tiny pivot{})", .column.map(|c| format!(" at unknown {c}")).unwrap_or_default())]
     Singular { column: Option<usize> },

@@ -7,9 +7,10 @@ pub mod initial;
 pub mod linear;
 pub mod newton;
 pub mod statics;
+pub mod step;
 
-pub use dynamics::{DynamicSettings, Formulation, Scheme, Simulation, Stats};
+pub use dynamics::{DynamicSettings, Formulation, IntoShared, Scheme, Simulation, Stats, StepInfo};
 pub use generalized_alpha::GaParameters;
 pub use initial::{initial_accelerations, prepare_layout};
-pub use newton::{NewtonSettings, Verification};
+pub use newton::{NewtonError, NewtonSettings, Verification};
 pub use statics::{StaticMethod, StaticSettings, StaticStats, Statics};

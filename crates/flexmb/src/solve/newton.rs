@@ -39,6 +39,8 @@
 //! kappa = 1 about 8.6 and 14.15 s, and with kappa = 0.01 8.29, 13.5775 and 18.8675 s
 //! (BENCHMARKS.md has the cost).
 
+use super::linear::{Backend, LinearError, LinearSolver};
+use crate::data::Data;
 use crate::error::SettingsError;
 
 /// Tolerances and limits of the Newton iteration.
@@ -146,6 +148,8 @@ pub const MAX_BLOCKS: usize = 4;
 pub struct Convergence {
     /// Weighted norms of the previous correction (`None` before the first).
     previous: Option<[f64; MAX_BLOCKS]>,
+    /// Judge corrections from the exact matrix on their size alone (no rate estimate).
+    pub exact_by_size: bool,
 }
 
 /// What the iteration should do after a correction.
@@ -183,6 +187,9 @@ impl Convergence {
         if exact && dx <= 1.0 {
             // Quadratic convergence: the error left is O(dx^2), far below dx.
             return Verdict::Converged { estimate: dx };
+        }
+        if exact && self.exact_by_size {
+            return Verdict::Continue { theta };
         }
         match theta {
             Some(theta) if theta < 1.0 => {
@@ -233,6 +240,508 @@ impl Verification {
             self.max_error = error;
             self.t = at;
             self.worst_equation = worst_equation();
+        }
+    }
+}
+
+/// Weighted norms of one Newton correction, one per block of unknowns (at most
+/// [`MAX_BLOCKS`]), and the unknown with the largest weighted term.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Norms {
+    pub blocks: [f64; MAX_BLOCKS],
+    /// Blocks in use.
+    pub n: usize,
+    /// The block of the multipliers, if the system has one: a step may be accepted on the
+    /// other blocks alone where the multipliers cannot be converged (see
+    /// [`MultiplierLimit`]).
+    pub multipliers: Option<usize>,
+    /// Index (in the Newton vector) of the unknown with the largest weighted correction.
+    pub worst: usize,
+}
+
+impl Norms {
+    /// The largest block norm.
+    pub fn max(&self) -> f64 {
+        self.blocks[..self.n].iter().fold(0.0f64, |m, &v| m.max(v))
+    }
+
+    /// The block norms without the multipliers'.
+    fn configuration(&self) -> ([f64; MAX_BLOCKS], usize) {
+        let mut out = [0.0; MAX_BLOCKS];
+        let mut n = 0;
+        for (k, &v) in self.blocks[..self.n].iter().enumerate() {
+            if Some(k) != self.multipliers {
+                out[n] = v;
+                n += 1;
+            }
+        }
+        (out, n)
+    }
+
+    fn multiplier_norm(&self) -> f64 {
+        self.multipliers.map_or(0.0, |k| self.blocks[k])
+    }
+}
+
+/// A nonlinear system `R(x) = 0` that [`NewtonSolver`] solves: the time step of dynamics, a
+/// load step or an arc-length step of statics, the consistent initial accelerations. The
+/// system holds its iterate `x` and everything the residual depends on; the solver holds
+/// the iteration matrix and decides when to rebuild it.
+pub trait NonlinearSystem {
+    /// The residual at the current iterate into `data.residual` and, when `matrix`, the
+    /// iteration matrix into `data.values` with `-regularization` on the diagonal of the
+    /// constraint block.
+    fn assemble(&mut self, data: &mut Data, matrix: bool, regularization: f64);
+    /// Called after a fresh matrix is assembled, before it is factorized.
+    fn matrix_assembled(&mut self, _data: &mut Data) {}
+    /// The Newton correction into `data.correction`, the matrix being factorized in
+    /// `data.solver`: by default `dx = -S^-1 R`.
+    fn correction(&mut self, data: &mut Data) -> Result<(), NewtonError> {
+        newton_correction(data);
+        Ok(())
+    }
+    /// Applies `data.correction` to the iterate.
+    fn apply(&mut self, data: &Data);
+    /// Weighted norms of `data.correction` at the current iterate.
+    fn norms(&self, data: &Data) -> Norms;
+    /// Whether a fresh matrix without regularization is the exact Jacobian `dR/dx` at the
+    /// iterate (quadratic convergence; see [`Convergence`]).
+    fn exact_matrix(&self) -> bool {
+        true
+    }
+    /// Puts the iterate back to its start, for a second attempt with a fresh matrix.
+    fn restart(&mut self) {}
+}
+
+/// `data.correction = -S^-1 data.residual` with the factorization in `data.solver`.
+pub fn newton_correction(data: &mut Data) {
+    let dx = &mut data.correction;
+    for (d, r) in dx.iter_mut().zip(&data.residual) {
+        *d = -r;
+    }
+    data.solver.solve_in_place(dx);
+}
+
+/// Why a Newton solve failed, with the unknown to blame (an index of the Newton vector;
+/// [`crate::data::Layout::unknown`] names it).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum NewtonError {
+    #[error("non-finite residual")]
+    NonFiniteResidual { unknown: usize },
+    #[error("non-finite Newton correction")]
+    NonFiniteCorrection { unknown: usize },
+    #[error("singular iteration matrix ({source})")]
+    Singular {
+        unknown: Option<usize>,
+        source: LinearError,
+    },
+    #[error("Newton diverging (weighted correction {error:.3e}, contraction rate {rate:.3})")]
+    Diverging {
+        error: f64,
+        rate: f64,
+        unknown: usize,
+    },
+    #[error("no convergence in {iterations} iterations (weighted correction {error:.3e})")]
+    MaxIterations {
+        iterations: usize,
+        error: f64,
+        unknown: usize,
+    },
+    /// A failure particular to the system (e.g. no real root of the arc-length constraint).
+    #[error("{message}")]
+    System {
+        message: String,
+        unknown: Option<usize>,
+    },
+}
+
+impl NewtonError {
+    /// The unknown to blame, if any.
+    pub fn unknown(&self) -> Option<usize> {
+        match *self {
+            NewtonError::NonFiniteResidual { unknown }
+            | NewtonError::NonFiniteCorrection { unknown }
+            | NewtonError::Diverging { unknown, .. }
+            | NewtonError::MaxIterations { unknown, .. } => Some(unknown),
+            NewtonError::Singular { unknown, .. } | NewtonError::System { unknown, .. } => unknown,
+        }
+    }
+}
+
+/// Why a solve's multipliers could not be converged to the tolerance (its other unknowns
+/// were): the solve is accepted on the other blocks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MultiplierLimit {
+    /// A singular configuration (regularized matrix): the equations do not determine them.
+    Undetermined,
+    /// Round-off of an ill-conditioned system: with the exact matrix, their corrections no
+    /// longer halve.
+    RoundOff,
+}
+
+/// What a converged solve did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NewtonInfo {
+    /// Corrections computed (all attempts).
+    pub iterations: usize,
+    /// Corrections of the attempt that converged.
+    pub final_iterations: usize,
+    pub factorizations: usize,
+    /// Attempts that failed with a reused matrix and were repeated with fresh ones.
+    pub retries: usize,
+    /// Whether the converged attempt used a reused matrix.
+    pub reused_matrix: bool,
+    /// Set when the multipliers were not converged (the other unknowns were).
+    pub multiplier_limit: Option<MultiplierLimit>,
+    /// Weighted norm of the last multiplier correction.
+    pub multiplier_norm: f64,
+    /// Whether the matrix was regularized.
+    pub regularized: bool,
+    /// What the verify mode measured (`None` when it is off).
+    pub check: Option<Check>,
+}
+
+/// A failed solve: the error and the work done.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NewtonFailure {
+    pub error: NewtonError,
+    pub info: NewtonInfo,
+}
+
+/// How [`NewtonSolver`] treats a system.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NewtonPolicy {
+    pub settings: NewtonSettings,
+    /// Regularize a singular constraint block ([`REGULARIZATION`]) for this many solves
+    /// instead of failing (0: fail).
+    pub regularized_solves: usize,
+    /// A fresh matrix whose iterates contract more slowly than this rate, from iteration
+    /// `diverge_after` on, fails the solve as diverging.
+    pub divergence_rate: f64,
+    pub diverge_after: usize,
+    /// Accept an iterate reached with the exact matrix on the size of its correction alone
+    /// (`|dx| <= 1`), never on the rate estimate of [`Convergence`]: statics, whose
+    /// continuation paths are followed from where each step stops.
+    pub exact_by_size: bool,
+}
+
+/// Size of the constraint-block regularization when it is on, relative to the mass block
+/// (normalized to O(1)). It makes the iteration matrix regular at a singular configuration
+/// (a transient rank loss of `B`, as in a four-bar passing its dead point) and tends to the
+/// least-norm multipliers; the residual is unchanged, so a converged solution is exact.
+pub const REGULARIZATION: f64 = 1e-9;
+
+/// A solve that needed more iterations than this with a reused dense matrix has the matrix
+/// rebuilt at the next solve (full Newton typically needs 2 to 3).
+const STALE_ITERATIONS: usize = 3;
+
+/// The one Newton iteration of flexmb, with its policies: the acceptance test
+/// ([`Convergence`], module documentation), reuse of the factorized matrix across
+/// iterations and solves (a chord method) while it contracts fast, a second attempt with a
+/// fresh matrix when an attempt with a reused one fails, regularization of a singular
+/// constraint block, and the verify mode.
+///
+/// The matrix is reused while its key (e.g. the step size) and regularization are those
+/// of the factorized one; it is rebuilt when the contraction rate exceeds
+/// [`NewtonSettings::max_contraction`] (for a large sparse matrix only from the third
+/// iteration, or above 1: the first rate carries the predictor's error), after
+/// [`NewtonSettings::max_jacobian_age`] solves, and, for dense (small) systems, at the next
+/// solve after one that needed more than 3 iterations with it.
+pub struct NewtonSolver {
+    pub policy: NewtonPolicy,
+    /// `(key, regularization)` of the factorized matrix, `None` if there is none.
+    matrix: Option<(f64, f64)>,
+    /// Solves since the matrix was last factorized.
+    age: usize,
+    /// Rebuild the matrix at every iteration of the next attempt.
+    fresh_only: bool,
+    /// Solves left with the regularization on.
+    regularized_solves: usize,
+    /// Verify mode: every accepted iterate re-checked ([`NewtonInfo::check`]).
+    verify: bool,
+    /// The second factorization of the verify mode.
+    verify_solver: Option<LinearSolver>,
+}
+
+impl NewtonSolver {
+    pub fn new(policy: NewtonPolicy, verify: bool) -> Self {
+        Self {
+            policy,
+            matrix: None,
+            age: 0,
+            fresh_only: false,
+            regularized_solves: 0,
+            verify,
+            verify_solver: None,
+        }
+    }
+
+    /// Forgets the factorized matrix (the data was rebuilt).
+    pub fn forget_matrix(&mut self) {
+        self.matrix = None;
+        self.verify_solver = None;
+    }
+
+    /// Keeps the regularization on for the next solves (after a rejected step).
+    pub fn regularize_next(&mut self) {
+        self.regularized_solves = self.policy.regularized_solves;
+    }
+
+    /// Solves the system from its current iterate. `key` identifies the matrix (a reused
+    /// one must have been built with the same key). An attempt that fails with a reused
+    /// matrix is repeated once from the start with fresh ones.
+    pub fn solve<S: NonlinearSystem>(
+        &mut self,
+        sys: &mut S,
+        data: &mut Data,
+        key: f64,
+    ) -> Result<NewtonInfo, NewtonFailure> {
+        let mut info = NewtonInfo::default();
+        loop {
+            let result = self.attempt(sys, data, key, &mut info);
+            match result {
+                Ok(()) => return Ok(info),
+                Err(error) if info.reused_matrix => {
+                    // Iterations with a reused matrix may have led Newton astray: once more
+                    // from the start, with fresh matrices.
+                    let _ = error;
+                    info.retries += 1;
+                    self.fresh_only = true;
+                    sys.restart();
+                }
+                Err(error) => return Err(NewtonFailure { error, info }),
+            }
+        }
+    }
+
+    fn attempt<S: NonlinearSystem>(
+        &mut self,
+        sys: &mut S,
+        data: &mut Data,
+        key: f64,
+        info: &mut NewtonInfo,
+    ) -> Result<(), NewtonError> {
+        let newton = self.policy.settings;
+        let mut regularization = if self.regularized_solves > 0 {
+            REGULARIZATION
+        } else {
+            0.0
+        };
+        self.regularized_solves = self.regularized_solves.saturating_sub(1);
+        let mut convergence = Convergence {
+            exact_by_size: self.policy.exact_by_size,
+            ..Convergence::default()
+        };
+        // Of the unknowns other than the multipliers: where the multipliers cannot be
+        // converged, the solve is accepted on these.
+        let mut configuration = convergence;
+        let mut previous_mu = None;
+        let same_matrix = self
+            .matrix
+            .is_some_and(|(k, reg)| (k - key).abs() <= 1e-6 * key.abs() && reg == regularization);
+        let mut refresh = !newton.reuse_jacobian
+            || self.fresh_only
+            || !same_matrix
+            || self.age >= newton.max_jacobian_age;
+        let fresh_only = std::mem::take(&mut self.fresh_only);
+        info.reused_matrix = false;
+        // Iteration at which the matrix was last rebuilt (0: a reused matrix).
+        let mut last_factorization = 0;
+        let result = (|| {
+            for iteration in 1..=newton.max_iterations {
+                // Without reuse every iteration is a full Newton iteration.
+                let fresh = refresh || fresh_only || !newton.reuse_jacobian;
+                info.reused_matrix |= !fresh;
+                sys.assemble(data, fresh, regularization);
+                if let Some(i) = data.residual.iter().position(|r| !r.is_finite()) {
+                    return Err(NewtonError::NonFiniteResidual { unknown: i });
+                }
+                if fresh {
+                    sys.matrix_assembled(data);
+                    info.factorizations += 1;
+                    let mut factorized = data.solver.factorize(&data.values);
+                    if matches!(factorized, Err(LinearError::Singular { .. }))
+                        && regularization == 0.0
+                        && self.policy.regularized_solves > 0
+                    {
+                        regularization = REGULARIZATION;
+                        self.regularized_solves = self.policy.regularized_solves;
+                        sys.assemble(data, true, regularization);
+                        factorized = data.solver.factorize(&data.values);
+                    }
+                    if let Err(e) = factorized {
+                        return Err(NewtonError::Singular {
+                            unknown: match e {
+                                LinearError::Singular { column } => column,
+                                _ => None,
+                            },
+                            source: e,
+                        });
+                    }
+                    self.matrix = Some((key, regularization));
+                    self.age = 0;
+                    last_factorization = iteration;
+                    refresh = false;
+                }
+                sys.correction(data)?;
+                if let Some(i) = data.correction.iter().position(|d| !d.is_finite()) {
+                    return Err(NewtonError::NonFiniteCorrection { unknown: i });
+                }
+                sys.apply(data);
+                let norms = sys.norms(data);
+                let err = norms.max();
+                info.iterations += 1;
+                let exact = fresh && regularization == 0.0 && sys.exact_matrix();
+                let verdict = convergence.update(&norms.blocks[..norms.n], exact);
+                let (blocks, n) = norms.configuration();
+                let configuration_converged = matches!(
+                    configuration.update(&blocks[..n], exact),
+                    Verdict::Converged { .. }
+                );
+                // Multipliers that Newton cannot converge further: at a singular configuration
+                // (regularized matrix) the equations do not determine them; with the exact
+                // matrix, multiplier corrections that no longer halve are round-off (a
+                // 100 000-link chain: 3 to 5 times the tolerance, whatever the number of
+                // iterations). The solve is then accepted on its configuration, and says so.
+                let mu = norms.multiplier_norm();
+                let limit = if regularization > 0.0 {
+                    Some(MultiplierLimit::Undetermined)
+                } else if exact && previous_mu.is_some_and(|p| mu > 0.5 * p) {
+                    Some(MultiplierLimit::RoundOff)
+                } else {
+                    None
+                };
+                previous_mu = Some(mu);
+                let limit = limit.filter(|_| configuration_converged);
+                let theta = match (verdict, limit) {
+                    (Verdict::Continue { theta }, None) => theta,
+                    (verdict, limit) => {
+                        if matches!(verdict, Verdict::Continue { .. }) {
+                            info.multiplier_limit = limit;
+                        }
+                        info.multiplier_norm = mu;
+                        info.final_iterations = iteration;
+                        info.regularized = regularization > 0.0;
+                        if self.verify {
+                            let undetermined = limit == Some(MultiplierLimit::Undetermined);
+                            info.check =
+                                Some(self.verify_solve(sys, data, regularization, undetermined));
+                        }
+                        return Ok(iteration);
+                    }
+                };
+                if let Some(theta) = theta.filter(|&t| t > newton.max_contraction) {
+                    if !fresh {
+                        // A stale matrix converges too slowly: rebuild it and go on. For a
+                        // large (sparse) matrix the first rate of a solve is not enough to pay
+                        // for a factorization: the first correction carries the predictor's
+                        // error, which one block can lose at once, so that a block it then
+                        // moves looks slow (a 1000-link chain: multipliers 0.37 -> 0.26, truly
+                        // converging at 0.007); only a first rate above 1 rebuilds it, later
+                        // rates above the threshold do. A small (dense) matrix is cheap to
+                        // rebuild at once.
+                        let dense = data.solver.backend() == Backend::Dense;
+                        if dense || iteration >= 3 || theta > 1.0 {
+                            refresh = true;
+                        }
+                    } else if iteration >= self.policy.diverge_after
+                        && theta > self.policy.divergence_rate
+                    {
+                        return Err(NewtonError::Diverging {
+                            error: err,
+                            rate: theta,
+                            unknown: norms.worst,
+                        });
+                    }
+                }
+                if iteration == newton.max_iterations {
+                    return Err(NewtonError::MaxIterations {
+                        iterations: iteration,
+                        error: err,
+                        unknown: norms.worst,
+                    });
+                }
+            }
+            unreachable!("max_iterations >= 1")
+        })();
+        match result {
+            Ok(iterations) => {
+                self.age += 1;
+                // Iterations done with the matrix the next solve would reuse.
+                if iterations - last_factorization.saturating_sub(1) > STALE_ITERATIONS
+                    && data.solver.backend() == Backend::Dense
+                {
+                    // The reused matrix has drifted from the current one: a small (dense)
+                    // matrix is cheaper to rebuild for the next solve than extra iterations
+                    // at every one. A large sparse factorization costs several iterations,
+                    // so it waits for the contraction test.
+                    self.age = newton.max_jacobian_age;
+                }
+                Ok(())
+            }
+            Err(e) => {
+                self.matrix = None;
+                Err(e)
+            }
+        }
+    }
+
+    /// Verify mode: a Newton correction from the accepted iterate with a freshly built and
+    /// factorized matrix (a second factorization, so a reused one is kept) estimates the
+    /// error left in the solve, in units of the tolerance (NaN when the matrix is singular),
+    /// with the unknown of the largest weighted term. Where the multipliers are undetermined
+    /// only the other blocks count.
+    fn verify_solve<S: NonlinearSystem>(
+        &mut self,
+        sys: &mut S,
+        data: &mut Data,
+        regularization: f64,
+        undetermined: bool,
+    ) -> Check {
+        sys.assemble(data, true, regularization);
+        if self.verify_solver.is_none() {
+            let n = data.residual.len();
+            self.verify_solver = LinearSolver::new(n, &data.pattern).ok();
+        }
+        let Some(solver) = self.verify_solver.as_mut() else {
+            return Check::default();
+        };
+        if solver.factorize(&data.values).is_err() {
+            return Check::default();
+        }
+        let dx = &mut data.correction;
+        for (d, r) in dx.iter_mut().zip(&data.residual) {
+            *d = -r;
+        }
+        solver.solve_in_place(dx);
+        let norms = sys.norms(data);
+        let error = if undetermined {
+            let (blocks, n) = norms.configuration();
+            blocks[..n].iter().fold(0.0f64, |m, &v| m.max(v))
+        } else {
+            norms.max()
+        };
+        Check {
+            error,
+            worst: Some(norms.worst),
+        }
+    }
+}
+
+/// What the verify mode measured at an accepted iterate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Check {
+    /// Estimated error in units of the tolerance (NaN: no estimate, singular matrix).
+    pub error: f64,
+    /// The unknown with the largest weighted correction.
+    pub worst: Option<usize>,
+}
+
+impl Default for Check {
+    fn default() -> Self {
+        Self {
+            error: f64::NAN,
+            worst: None,
         }
     }
 }

@@ -15,15 +15,20 @@
 //! damping), with the equilibrium rows scaled by `1 / max diag K_t` so that forces and
 //! constraints are of comparable size.
 
-use super::initial::{load_nodes, prepare_layout};
+use super::dynamics::IntoShared;
+use super::initial::prepare_layout;
 use super::linear::LinearError;
-use super::newton::{weighted_norm, NewtonSettings, Verification};
-use crate::assembly::{assemble, ConstraintRhs, Scaling};
+use super::newton::{
+    newton_correction, weighted_norm, NewtonError, NewtonFailure, NewtonPolicy, NewtonSettings,
+    NewtonSolver, NonlinearSystem, Norms, Verification,
+};
+use crate::assembly::{assemble, ConstraintRhs, Iterate, Scaling};
 use crate::data::Data;
-use crate::elements::Coefficients;
+use crate::elements::{Coefficients, NodeState};
 use crate::error::{SettingsError, SolveError};
 use crate::model::limits::within;
 use crate::model::Model;
+use crate::sensors::node_states;
 use crate::state::State;
 use flexmb_lie::Vec6;
 use std::sync::atomic::AtomicBool;
@@ -209,8 +214,8 @@ pub struct StaticStats {
 }
 
 /// A static analysis in progress.
-pub struct Statics<'m> {
-    pub model: &'m Model,
+pub struct Statics {
+    pub model: Arc<Model>,
     pub data: Data,
     /// Converged configuration and multipliers (velocities stay zero).
     pub state: State,
@@ -224,94 +229,283 @@ pub struct Statics<'m> {
     pub interrupt: Option<Arc<AtomicBool>>,
     /// What [`StaticSettings::verify`] found (`None` when it is off).
     pub verification: Option<Verification>,
+    newton: NewtonSolver,
+    /// Node kinematics of the current iterate (`n_nodes`).
+    nodes: Vec<NodeState>,
     /// Scale of the equilibrium rows (`1 / max diag K_t` at the start).
     row_scale: f64,
 }
 
-/// Why a load step failed: the reason and, if known, the worst unknown.
-type Failure = (String, Option<usize>);
-
-/// A converged arc-length step: configuration increment, load increment, iterations.
-struct ArcStep {
+/// The Newton system of a static load step: the increment `dq` from the last converged
+/// configuration `q0` and the multipliers, at a given load factor; in the arc-length form
+/// the load factor is an unknown too.
+struct LoadStep<'a> {
+    model: &'a Model,
+    q0: &'a [flexmb_lie::Frame],
+    nodes: &'a mut [NodeState],
+    lambda: &'a mut Vec<f64>,
     dq: Vec<f64>,
+    row_scale: f64,
+    newton: NewtonSettings,
+    /// Load factor of the iterate.
+    load_factor: f64,
+    /// Arc-length continuation: the constraint `|dq| = dl` and its state.
+    arc: Option<ArcLength>,
+}
+
+/// The arc-length part of a load step (Crisfield's cylindrical constraint).
+struct ArcLength {
+    dl: f64,
+    /// Load factor at the start of the step.
+    lambda0: f64,
+    /// Load increment so far.
     dlambda: f64,
-    iterations: usize,
+    /// `dR/dlambda` at the iterate (scaled).
+    load_derivative: Vec<f64>,
+    /// `x_b = S^-1 (-dR/dlambda)`.
+    xb: Vec<f64>,
+    /// Newton vector of the load step's correction (`x_a + dmu x_b`).
+    dmu: f64,
+    /// Load-factor part of the last correction.
+    last_correction: Vec<f64>,
 }
 
-/// What one Newton solve at a load step returns.
-struct Converged {
-    iterations: usize,
+/// The scaling of statics: the iteration matrix `K_t T` with equilibrium rows times
+/// `row_scale`, loads and gravity times the load factor.
+fn scaling(row_scale: f64, load_factor: f64) -> Scaling {
+    Scaling {
+        row_scale,
+        coef: Coefficients {
+            m: 0.0,
+            c: 0.0,
+            k: row_scale,
+        },
+        constraint_rhs: ConstraintRhs::Position,
+        load_factor,
+        regularization: 0.0,
+        velocity_scale: 1.0,
+        nodal_damping: 0.0,
+    }
 }
 
-impl<'m> Statics<'m> {
+impl LoadStep<'_> {
+    /// `q = q_0 exp(dq)` and the tangent operators into the node kinematics.
+    fn set_configuration(&mut self) {
+        let group = self.model.group;
+        for (i, node) in self.nodes.iter_mut().enumerate() {
+            let inc = Vec6::from_column_slice(&self.dq[6 * i..6 * i + 6]);
+            node.q = group.integrate(&self.q0[i], &inc);
+            node.v = Vec6::zeros();
+            node.vdot = Vec6::zeros();
+            node.t = group.tangent(&inc);
+        }
+    }
+
+    fn assemble_at(&self, data: &mut Data, load_factor: f64, matrix: bool) {
+        let it = Iterate {
+            nodes: self.nodes,
+            t: load_factor,
+            lambda: self.lambda,
+            b_start: &[],
+        };
+        assemble(
+            self.model,
+            data,
+            &it,
+            &scaling(self.row_scale, load_factor),
+            matrix,
+        );
+    }
+
+    /// `lambda += dmu / s` for the multiplier part of a Newton vector.
+    fn add_multipliers(&mut self, layout: &crate::data::Layout, x: &[f64], factor: f64) {
+        let nd = layout.n_dofs;
+        for (row, slot) in layout.row_unknown.iter().enumerate() {
+            if let Some(k) = slot {
+                self.lambda[row] += factor * x[nd + k] / self.row_scale;
+            }
+        }
+    }
+}
+
+impl NonlinearSystem for LoadStep<'_> {
+    fn assemble(&mut self, data: &mut Data, matrix: bool, _: f64) {
+        self.set_configuration();
+        if let Some(arc) = &mut self.arc {
+            // dR/dlambda of the scaled system: applied loads (`lambda f(t)` with
+            // `t = lambda`), gravity and driven joints (`Phi_t`). The internal forces cancel
+            // exactly in the forward difference `(R(lambda + delta) - R(lambda)) / delta`,
+            // `delta = sqrt(eps) max(1, |lambda|)`, which costs one residual assembly and
+            // holds for any load function.
+            let lambda = self.load_factor;
+            let delta = f64::EPSILON.sqrt() * lambda.abs().max(1.0);
+            let (ahead, at) = (
+                scaling(self.row_scale, lambda + delta),
+                scaling(self.row_scale, lambda),
+            );
+            let it = Iterate {
+                nodes: self.nodes,
+                t: lambda + delta,
+                lambda: self.lambda,
+                b_start: &[],
+            };
+            assemble(self.model, data, &it, &ahead, false);
+            arc.load_derivative.clone_from(&data.residual);
+            let it = Iterate { t: lambda, ..it };
+            assemble(self.model, data, &it, &at, matrix);
+            for (d, r) in arc.load_derivative.iter_mut().zip(&data.residual) {
+                *d = (*d - r) / delta;
+            }
+        } else {
+            self.assemble_at(data, self.load_factor, matrix);
+        }
+    }
+
+    fn correction(&mut self, data: &mut Data) -> Result<(), NewtonError> {
+        let Some(arc) = &mut self.arc else {
+            newton_correction(data);
+            return Ok(());
+        };
+        let nd = data.layout.n_dofs;
+        // x_b = S^-1 (-dR/dlambda): the response to a unit load increment.
+        arc.xb.clear();
+        arc.xb.extend(arc.load_derivative.iter().map(|v| -v));
+        data.solver.solve_in_place(&mut arc.xb);
+        let xb = &arc.xb;
+        let norm_b = xb[..nd].iter().map(|v| v * v).sum::<f64>();
+        // x_a = S^-1 (-R)
+        newton_correction(data);
+        let xa = &data.correction;
+        // |dq + xa + dmu xb|^2 = dl^2
+        let u: Vec<f64> = (0..nd).map(|k| self.dq[k] + xa[k]).collect();
+        let a1 = norm_b;
+        let a2 = 2.0 * u.iter().zip(xb).map(|(a, b)| a * b).sum::<f64>();
+        let a3 = u.iter().map(|v| v * v).sum::<f64>() - arc.dl * arc.dl;
+        let disc = a2 * a2 - 4.0 * a1 * a3;
+        if disc < 0.0 || a1 <= 0.0 {
+            return Err(NewtonError::System {
+                message: "no real root of the arc-length constraint".into(),
+                unknown: None,
+            });
+        }
+        let roots = [
+            (-a2 + disc.sqrt()) / (2.0 * a1),
+            (-a2 - disc.sqrt()) / (2.0 * a1),
+        ];
+        // Crisfield: the root whose new increment is closest to the current one.
+        let dq = &self.dq;
+        let score = |m: f64| (0..nd).map(|k| (u[k] + m * xb[k]) * dq[k]).sum::<f64>();
+        arc.dmu = if score(roots[0]) >= score(roots[1]) {
+            roots[0]
+        } else {
+            roots[1]
+        };
+        for (d, b) in data.correction.iter_mut().zip(xb) {
+            *d += arc.dmu * b;
+        }
+        Ok(())
+    }
+
+    fn apply(&mut self, data: &Data) {
+        let nd = data.layout.n_dofs;
+        for (q, d) in self.dq.iter_mut().zip(&data.correction[..nd]) {
+            *q += d;
+        }
+        if let Some(arc) = &mut self.arc {
+            arc.dlambda += arc.dmu;
+            self.load_factor = arc.lambda0 + arc.dlambda;
+            arc.last_correction.clear();
+            arc.last_correction
+                .extend_from_slice(&data.correction[..nd]);
+        }
+        self.add_multipliers(&data.layout, &data.correction, 1.0);
+    }
+
+    /// The increments' weighted correction; with arc length also the load factor's,
+    /// `|dmu| / (rtol |dlambda| + atol)`.
+    fn norms(&self, data: &Data) -> Norms {
+        let nd = data.layout.n_dofs;
+        let newton = &self.newton;
+        let (q, worst) = weighted_norm(
+            &data.correction[..nd],
+            &self.dq,
+            &|_| newton.atol,
+            newton.rtol,
+        );
+        let mut norms = Norms {
+            n: 1,
+            worst,
+            ..Norms::default()
+        };
+        norms.blocks[0] = q;
+        if let Some(arc) = &self.arc {
+            norms.n = 2;
+            norms.blocks[1] =
+                arc.dmu.abs() / (newton.rtol * arc.dlambda.abs().max(1e-12) + newton.atol);
+        }
+        norms
+    }
+}
+
+impl Statics {
     /// Validates the model and builds the data at the initial configuration (`lambda = 0`).
-    pub fn new(model: &'m Model, settings: StaticSettings) -> Result<Self, SolveError> {
-        model
-            .validate()
-            .map_err(|e| SolveError::Model(e.to_string()))?;
+    pub fn new(model: impl IntoShared, settings: StaticSettings) -> Result<Self, SolveError> {
+        let model = model.into_shared();
+        model.validate()?;
         settings.check()?;
-        let (layout, warnings) = prepare_layout(model);
+        let (layout, warnings) = prepare_layout(&model);
         let n_rows = layout.n_rows;
-        let mut data = Data::new(model, layout).map_err(|e| SolveError::Model(e.to_string()))?;
-        let mut state = State::initial(model, n_rows);
+        let mut data = Data::new(&model, layout)?;
+        let mut state = State::initial(&model, n_rows);
         for v in state.v.iter_mut() {
             *v = Vec6::zeros();
         }
-        load_nodes(&state, &mut data);
-        let mut s = Self {
+        let nodes = node_states(&state);
+        // Row scale from the stiffness at the start.
+        let mut row_scale = 1.0;
+        let mut start = LoadStep {
+            model: &model,
+            q0: &state.q,
+            nodes: &mut nodes.clone(),
+            lambda: &mut state.lambda.clone(),
+            dq: vec![0.0; data.layout.n_dofs],
+            row_scale,
+            newton: settings.newton,
+            load_factor: 0.0,
+            arc: None,
+        };
+        start.assemble(&mut data, true, 0.0);
+        let nd = data.layout.n_dofs;
+        let kmax = data
+            .pattern
+            .iter()
+            .zip(&data.values)
+            .filter(|((i, j), _)| i == j && *i < nd)
+            .fold(0.0f64, |m, (_, v)| m.max(v.abs()));
+        if kmax > 0.0 {
+            row_scale = 1.0 / kmax;
+        }
+        let policy = NewtonPolicy {
+            settings: settings.newton,
+            regularized_solves: 0,
+            divergence_rate: 10.0,
+            diverge_after: 4,
+            exact_by_size: true,
+        };
+        Ok(Self {
             model,
             data,
             state,
+            newton: NewtonSolver::new(policy, settings.verify),
             settings,
             load_factor: 0.0,
             stats: StaticStats::default(),
             warnings,
             interrupt: None,
             verification: None,
-            row_scale: 1.0,
-        };
-        // Row scale from the stiffness at the start.
-        s.assemble(0.0, true);
-        let nd = s.data.layout.n_dofs;
-        let kmax = s
-            .data
-            .pattern
-            .iter()
-            .zip(&s.data.values)
-            .filter(|((i, j), _)| i == j && *i < nd)
-            .fold(0.0f64, |m, (_, v)| m.max(v.abs()));
-        if kmax > 0.0 {
-            s.row_scale = 1.0 / kmax;
-        }
-        Ok(s)
-    }
-
-    fn scaling(&self, lambda: f64) -> Scaling {
-        Scaling {
-            row_scale: self.row_scale,
-            coef: Coefficients {
-                m: 0.0,
-                c: 0.0,
-                k: self.row_scale,
-            },
-            constraint_rhs: ConstraintRhs::Position,
-            load_factor: lambda,
-            regularization: 0.0,
-            velocity_scale: 1.0,
-            nodal_damping: 0.0,
-        }
-    }
-
-    fn assemble(&mut self, lambda: f64, matrix: bool) {
-        let sc = self.scaling(lambda);
-        assemble(
-            self.model,
-            &mut self.data,
-            lambda,
-            &self.state.lambda,
-            &sc,
-            matrix,
-        );
+            nodes,
+            row_scale,
+        })
     }
 
     /// Runs to the final load factor, calling `output` at `lambda = 0` and after every
@@ -344,8 +538,8 @@ impl<'m> Statics<'m> {
             self.check_interrupt()?;
             if self.stats.steps >= s.max_steps {
                 return Err(self.failure(
-                    "the maximum number of load steps was reached".into(),
                     None,
+                    "the maximum number of load steps was reached",
                     inc,
                 ));
             }
@@ -355,9 +549,8 @@ impl<'m> Statics<'m> {
             } else {
                 inc * remaining.signum()
             };
-            let saved = self.state.clone();
             match self.solve_at(self.load_factor + step) {
-                Ok(c) => {
+                Ok(iterations) => {
                     self.load_factor = if step == remaining {
                         target
                     } else {
@@ -366,20 +559,19 @@ impl<'m> Statics<'m> {
                     self.stats.steps += 1;
                     output(self).map_err(SolveError::Output)?;
                     if s.adaptive {
-                        if c.iterations <= s.target_iterations / 2 {
+                        if iterations <= s.target_iterations / 2 {
                             inc = (inc * 1.5).min(s.max_increment);
-                        } else if 2 * c.iterations > 3 * s.target_iterations {
+                        } else if 2 * iterations > 3 * s.target_iterations {
                             inc *= 0.7;
                         }
                     }
                 }
-                Err((reason, worst)) => {
+                Err(error) => {
                     self.stats.rejected_steps += 1;
-                    self.state = saved;
-                    load_nodes(&self.state, &mut self.data);
                     inc *= 0.5;
                     if inc < s.min_increment || !s.adaptive {
-                        return Err(self.failure(reason, worst, inc));
+                        let reason = error.to_string();
+                        return Err(self.failure(Some(error), &reason, inc));
                     }
                 }
             }
@@ -396,73 +588,85 @@ impl<'m> Statics<'m> {
         Ok(())
     }
 
-    fn failure(&self, reason: String, worst: Option<usize>, inc: f64) -> SolveError {
+    fn failure(&self, error: Option<NewtonError>, reason: &str, inc: f64) -> SolveError {
+        let unknown = error.as_ref().and_then(NewtonError::unknown);
+        let mut reason = reason.to_string();
+        if matches!(error, Some(NewtonError::Singular { .. })) {
+            reason.push_str(": a mechanism (try method = \"pseudo_dynamic\") or a limit point (try method = \"arc_length\")");
+        }
         SolveError::StaticFailed {
             step: self.stats.steps + 1,
             load_factor: self.load_factor,
             increment: inc,
             rejected: self.stats.rejected_steps,
             reason,
-            worst_equation: worst
-                .map(|i| self.data.layout.describe_unknown(self.model, i))
+            worst_equation: unknown
+                .map(|i| self.data.layout.describe_unknown(&self.model, i))
                 .unwrap_or_else(|| "unknown".into()),
+            unknown: unknown.map(|i| self.data.layout.unknown(i)),
+            error: error.map(Box::new),
         }
+    }
+
+    /// Solves a load step's system from the last converged state; on success takes the
+    /// converged configuration and multipliers into the state. Returns the iterations and
+    /// the load increment and configuration increment of the step.
+    fn solve_step(
+        &mut self,
+        load_factor: f64,
+        arc: Option<ArcLength>,
+    ) -> Result<(usize, Option<ArcLength>, Vec<f64>), NewtonError> {
+        let nd = self.data.layout.n_dofs;
+        let mut lambda = self.state.lambda.clone();
+        let mut sys = LoadStep {
+            model: &self.model,
+            q0: &self.state.q,
+            nodes: &mut self.nodes,
+            lambda: &mut lambda,
+            dq: vec![0.0; nd],
+            row_scale: self.row_scale,
+            newton: self.settings.newton,
+            load_factor,
+            arc,
+        };
+        if let Some(arc) = &sys.arc {
+            // The predictor moved the configuration along the tangent.
+            sys.dq.copy_from_slice(&arc.last_correction);
+        }
+        let result = self.newton.solve(&mut sys, &mut self.data, 0.0);
+        let work = match &result {
+            Ok(info) | Err(NewtonFailure { info, .. }) => *info,
+        };
+        self.stats.newton_iterations += work.iterations;
+        self.stats.factorizations += work.factorizations;
+        let info = result.map_err(|f| f.error)?;
+        let (dq, reached, arc) = (std::mem::take(&mut sys.dq), sys.load_factor, sys.arc.take());
+        let group = self.model.group;
+        for (i, q) in self.state.q.iter_mut().enumerate() {
+            *q = group.integrate(q, &Vec6::from_column_slice(&dq[6 * i..6 * i + 6]));
+            q.orthonormalize();
+        }
+        self.state.lambda = lambda;
+        self.state.t = reached;
+        if let Some(check) = info.check {
+            let (model, layout) = (&self.model, &self.data.layout);
+            self.verification
+                .get_or_insert_with(Verification::default)
+                .record(check.error, reached, || {
+                    check
+                        .worst
+                        .map(|i| layout.describe_unknown(model, i))
+                        .unwrap_or_default()
+                });
+        }
+        Ok((info.final_iterations, arc, dq))
     }
 
     /// Newton at a fixed load factor (load control). On success the state holds the
     /// converged configuration; returns the iterations.
-    fn solve_at(&mut self, lambda: f64) -> Result<Converged, Failure> {
-        let nd = self.data.layout.n_dofs;
-        let q0 = self.state.q.clone();
-        let mut dq = vec![0.0; nd];
-        let newton = self.settings.newton;
-        let mut previous = f64::INFINITY;
-        for iteration in 1..=newton.max_iterations {
-            self.set_configuration(&q0, &dq);
-            self.assemble(lambda, true);
-            if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
-                return Err(("non-finite residual".into(), Some(i)));
-            }
-            self.factorize()?;
-            let dx = &mut self.data.correction;
-            for (d, r) in dx.iter_mut().zip(&self.data.residual) {
-                *d = -r;
-            }
-            self.data.solver.solve_in_place(dx);
-            if let Some(i) = dx.iter().position(|d| !d.is_finite()) {
-                return Err(("non-finite Newton correction".into(), Some(i)));
-            }
-            let dx = &self.data.correction;
-            for k in 0..nd {
-                dq[k] += dx[k];
-            }
-            for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
-                if let Some(k) = slot {
-                    self.state.lambda[row] += dx[nd + k] / self.row_scale;
-                }
-            }
-            self.stats.newton_iterations += 1;
-            let (err, worst) = weighted_norm(&dx[..nd], &dq, &|_| newton.atol, newton.rtol);
-            if err <= 1.0 {
-                self.accept(&q0, &dq, lambda);
-                return Ok(Converged {
-                    iterations: iteration,
-                });
-            }
-            if iteration >= 4 && err > 10.0 * previous {
-                return Err((
-                    format!(
-                        "Newton diverging (weighted correction {err:.3e} after {previous:.3e})"
-                    ),
-                    Some(worst),
-                ));
-            }
-            previous = err;
-        }
-        Err((
-            format!("no convergence in {} iterations", newton.max_iterations),
-            None,
-        ))
+    fn solve_at(&mut self, lambda: f64) -> Result<usize, NewtonError> {
+        self.solve_step(lambda, None)
+            .map(|(iterations, _, _)| iterations)
     }
 
     fn run_arc_length(
@@ -474,8 +678,8 @@ impl<'m> Statics<'m> {
         let mut dl = s.arc_length;
         let dl_min = s.arc_length * ARC_LENGTH_MIN;
         let dl_max = s.arc_length * 4.0;
-        // Direction of the previous converged increment (dq, dlambda), for the predictor's sign.
-        let mut previous: Option<(Vec<f64>, f64)> = None;
+        // Direction of the previous converged increment, for the predictor's sign.
+        let mut previous: Option<Vec<f64>> = None;
         while (target - self.load_factor) * target.signum() > 1e-12 * target.abs().max(1.0) {
             self.check_interrupt()?;
             if self.stats.steps >= s.max_steps {
@@ -488,23 +692,16 @@ impl<'m> Statics<'m> {
             }
             let saved = self.state.clone();
             let lambda0 = self.load_factor;
-            match self.arc_length_step(dl, previous.as_ref(), target.signum()) {
-                Ok(ArcStep {
-                    dq,
-                    dlambda,
-                    iterations,
-                }) => {
+            match self.arc_length_step(dl, previous.as_deref(), target.signum()) {
+                Ok((dq, dlambda, iterations)) => {
                     if (lambda0 + dlambda - target) * target.signum() > 0.0 {
                         // Crossed the final load factor: end exactly on it with a load-control
                         // solve from the last converged state (or keep the crossing point).
-                        let crossed = self.state.clone();
-                        self.state = saved.clone();
-                        load_nodes(&self.state, &mut self.data);
+                        let crossed = std::mem::replace(&mut self.state, saved);
                         if self.solve_at(target).is_ok() {
                             self.load_factor = target;
                         } else {
                             self.state = crossed;
-                            load_nodes(&self.state, &mut self.data);
                             self.load_factor = lambda0 + dlambda;
                         }
                         self.stats.steps += 1;
@@ -514,17 +711,16 @@ impl<'m> Statics<'m> {
                     self.stats.steps += 1;
                     self.load_factor = lambda0 + dlambda;
                     output(self).map_err(SolveError::Output)?;
-                    previous = Some((dq, dlambda));
+                    previous = Some(dq);
                     let ratio = (s.target_iterations as f64 / iterations.max(1) as f64).sqrt();
                     dl = (dl * ratio.clamp(0.5, 2.0)).min(dl_max);
                 }
-                Err((reason, worst)) => {
+                Err(error) => {
                     self.stats.rejected_steps += 1;
-                    self.state = saved;
-                    load_nodes(&self.state, &mut self.data);
                     dl *= 0.5;
                     if dl < dl_min {
-                        return Err(self.failure(reason, worst, dl));
+                        let reason = error.to_string();
+                        return Err(self.failure(Some(error), &reason, dl));
                     }
                 }
             }
@@ -532,203 +728,83 @@ impl<'m> Statics<'m> {
         Ok(())
     }
 
-    /// Numeric factorization of the tangent matrix in the data, with the diagnosis of a
-    /// singular one.
-    fn factorize(&mut self) -> Result<(), Failure> {
-        self.stats.factorizations += 1;
-        self.data.solver.factorize(&self.data.values).map_err(|e| {
-            let col = match e {
-                LinearError::Singular { column } => column,
-                _ => None,
-            };
-            (
-                format!("singular tangent matrix ({e}): a mechanism (try method = \"pseudo_dynamic\") or a limit point (try method = \"arc_length\")"),
-                col,
-            )
-        })
-    }
-
-    /// Takes the converged configuration `q = q_0 exp(dq)` at load factor `lambda` into the
-    /// state and the data.
-    fn accept(&mut self, q0: &[flexmb_lie::Frame], dq: &[f64], lambda: f64) {
-        let group = self.model.group;
-        for (i, q) in self.state.q.iter_mut().enumerate() {
-            *q = group.integrate(&q0[i], &Vec6::from_column_slice(&dq[6 * i..6 * i + 6]));
-            q.orthonormalize();
-        }
-        self.state.t = lambda;
-        load_nodes(&self.state, &mut self.data);
-        if self.settings.verify {
-            self.verify_step(dq, lambda);
-        }
-    }
-
-    /// `verify`: the Newton correction at the accepted configuration and load factor (fresh
-    /// matrix) in units of the tolerance, weighted like the step's increments `dq`.
-    fn verify_step(&mut self, dq: &[f64], lambda: f64) {
-        self.assemble(lambda, true);
-        let error = match self.data.solver.factorize(&self.data.values) {
-            Ok(()) => {
-                let dx = &mut self.data.correction;
-                for (d, r) in dx.iter_mut().zip(&self.data.residual) {
-                    *d = -r;
-                }
-                self.data.solver.solve_in_place(dx);
-                let newton = &self.settings.newton;
-                let nd = self.data.layout.n_dofs;
-                let (e, worst) = weighted_norm(&dx[..nd], dq, &|_| newton.atol, newton.rtol);
-                (e, Some(worst))
-            }
-            Err(_) => (f64::NAN, None),
-        };
-        let (model, layout) = (self.model, &self.data.layout);
-        self.verification
-            .get_or_insert_with(Verification::default)
-            .record(error.0, lambda, || {
-                error
-                    .1
-                    .map(|i| layout.describe_unknown(model, i))
-                    .unwrap_or_default()
-            });
-    }
-
-    /// Puts `q = q_0 exp(dq)` (and the tangent operators) into the data.
-    fn set_configuration(&mut self, q0: &[flexmb_lie::Frame], dq: &[f64]) {
-        let group = self.model.group;
-        for (i, node) in self.data.nodes.iter_mut().enumerate() {
-            let inc = Vec6::from_column_slice(&dq[6 * i..6 * i + 6]);
-            node.q = group.integrate(&q0[i], &inc);
-            node.v = Vec6::zeros();
-            node.vdot = Vec6::zeros();
-            node.t = group.tangent(&inc);
-        }
-    }
-
-    /// Assembles the residual and the iteration matrix at `lambda` and returns `dR/dlambda`
-    /// of the scaled system at the configuration in the data: applied loads (`lambda f(t)`
-    /// with `t = lambda`), gravity and driven joints (`Phi_t`). The residual is affine in
-    /// nothing else, and the internal forces cancel exactly in the forward difference
-    /// `(R(lambda + delta) - R(lambda)) / delta`, `delta = sqrt(eps) max(1, |lambda|)`, which
-    /// costs one residual assembly and holds for any load function.
-    fn assemble_with_load_derivative(&mut self, lambda: f64) -> Vec<f64> {
-        let delta = f64::EPSILON.sqrt() * lambda.abs().max(1.0);
-        self.assemble(lambda + delta, false);
-        let ahead = self.data.residual.clone();
-        self.assemble(lambda, true);
-        ahead
-            .iter()
-            .zip(&self.data.residual)
-            .map(|(a, r)| (a - r) / delta)
-            .collect()
-    }
-
-    /// One arc-length step (Crisfield's cylindrical constraint `|dq| = dl`); returns the
-    /// converged increment, the load increment and the iterations.
+    /// One arc-length step (Crisfield's cylindrical constraint `|dq| = dl`): the predictor
+    /// along the tangent at the last converged state, then Newton on the increment, the
+    /// multipliers and the load factor. Returns the converged increment, the load increment
+    /// and the iterations.
     fn arc_length_step(
         &mut self,
         dl: f64,
-        previous: Option<&(Vec<f64>, f64)>,
+        previous: Option<&[f64]>,
         direction: f64,
-    ) -> Result<ArcStep, Failure> {
+    ) -> Result<(Vec<f64>, f64, usize), NewtonError> {
         let nd = self.data.layout.n_dofs;
-        let nu = self.data.layout.n_unknowns();
-        let q0 = self.state.q.clone();
         let lambda0 = self.load_factor;
-        let newton = self.settings.newton;
-        let mut dq = vec![0.0; nd];
-        let mut dlambda = 0.0;
-        let mut xb = vec![0.0; nu];
-        for iteration in 0..=newton.max_iterations {
-            let lambda = lambda0 + dlambda;
-            self.set_configuration(&q0, &dq);
-            let f = self.assemble_with_load_derivative(lambda);
-            if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
-                return Err(("non-finite residual".into(), Some(i)));
-            }
-            self.factorize()?;
-            // x_b = S^-1 (-dR/dlambda): the response to a unit load increment.
-            for (x, v) in xb.iter_mut().zip(&f) {
-                *x = -v;
-            }
-            self.data.solver.solve_in_place(&mut xb);
-            let norm_b = xb[..nd].iter().map(|v| v * v).sum::<f64>();
-            if iteration == 0 {
-                // Predictor: dlambda along the tangent, signed to continue the path.
-                let mut sign = direction;
-                if let Some((pq, _)) = previous {
-                    // Follow the path: the new tangent points along the last increment
-                    // (Feng, Peric & Owen 1996), which turns lambda back at limit points.
-                    let dot: f64 = pq.iter().zip(&xb[..nd]).map(|(a, b)| a * b).sum();
-                    sign = dot.signum();
-                }
-                let dlam = sign * dl / norm_b.sqrt().max(1e-300);
-                for k in 0..nd {
-                    dq[k] = dlam * xb[k];
-                }
-                for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
-                    if let Some(k) = slot {
-                        self.state.lambda[row] += dlam * xb[nd + k] / self.row_scale;
-                    }
-                }
-                dlambda = dlam;
-                continue;
-            }
-            // x_a = S^-1 (-R)
-            let xa = &mut self.data.correction;
-            for (d, r) in xa.iter_mut().zip(&self.data.residual) {
-                *d = -r;
-            }
-            self.data.solver.solve_in_place(xa);
-            let xa = self.data.correction.clone();
-            // |dq + xa + dmu xb|^2 = dl^2
-            let u: Vec<f64> = (0..nd).map(|k| dq[k] + xa[k]).collect();
-            let a1 = norm_b;
-            let a2 = 2.0 * u.iter().zip(&xb).map(|(a, b)| a * b).sum::<f64>();
-            let a3 = u.iter().map(|v| v * v).sum::<f64>() - dl * dl;
-            let disc = a2 * a2 - 4.0 * a1 * a3;
-            if disc < 0.0 || a1 <= 0.0 {
-                return Err(("no real root of the arc-length constraint".into(), None));
-            }
-            let roots = [
-                (-a2 + disc.sqrt()) / (2.0 * a1),
-                (-a2 - disc.sqrt()) / (2.0 * a1),
-            ];
-            // Crisfield: the root whose new increment is closest to the current one.
-            let score = |m: f64| (0..nd).map(|k| (u[k] + m * xb[k]) * dq[k]).sum::<f64>();
-            let dmu = if score(roots[0]) >= score(roots[1]) {
-                roots[0]
-            } else {
-                roots[1]
-            };
-            let mut correction = vec![0.0; nd];
-            for k in 0..nd {
-                correction[k] = xa[k] + dmu * xb[k];
-                dq[k] += correction[k];
-            }
-            dlambda += dmu;
-            for (row, slot) in self.data.layout.row_unknown.iter().enumerate() {
-                if let Some(k) = slot {
-                    self.state.lambda[row] += (xa[nd + k] + dmu * xb[nd + k]) / self.row_scale;
-                }
-            }
-            self.stats.newton_iterations += 1;
-            let (err, worst) = weighted_norm(&correction, &dq, &|_| newton.atol, newton.rtol);
-            if err <= 1.0 && dmu.abs() <= newton.rtol * dlambda.abs().max(1e-12) + newton.atol {
-                self.accept(&q0, &dq, lambda0 + dlambda);
-                return Ok(ArcStep {
-                    dq,
-                    dlambda,
-                    iterations: iteration,
-                });
-            }
-            if iteration == newton.max_iterations {
-                return Err((
-                    format!("no convergence in {iteration} iterations"),
-                    Some(worst),
-                ));
+        let mut lambda = self.state.lambda.clone();
+        let mut predictor = LoadStep {
+            model: &self.model,
+            q0: &self.state.q,
+            nodes: &mut self.nodes,
+            lambda: &mut lambda,
+            dq: vec![0.0; nd],
+            row_scale: self.row_scale,
+            newton: self.settings.newton,
+            load_factor: lambda0,
+            arc: Some(ArcLength {
+                dl,
+                lambda0,
+                dlambda: 0.0,
+                load_derivative: Vec::new(),
+                xb: Vec::new(),
+                dmu: 0.0,
+                last_correction: Vec::new(),
+            }),
+        };
+        predictor.assemble(&mut self.data, true, 0.0);
+        if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
+            return Err(NewtonError::NonFiniteResidual { unknown: i });
+        }
+        self.stats.factorizations += 1;
+        self.data
+            .solver
+            .factorize(&self.data.values)
+            .map_err(|e| NewtonError::Singular {
+                unknown: match e {
+                    LinearError::Singular { column } => column,
+                    _ => None,
+                },
+                source: e,
+            })?;
+        let mut arc = predictor.arc.take().expect("arc");
+        let mut xb: Vec<f64> = arc.load_derivative.iter().map(|v| -v).collect();
+        self.data.solver.solve_in_place(&mut xb);
+        let norm_b = xb[..nd].iter().map(|v| v * v).sum::<f64>();
+        // Predictor: dlambda along the tangent, signed to continue the path.
+        let mut sign = direction;
+        if let Some(pq) = previous {
+            // Follow the path: the new tangent points along the last increment
+            // (Feng, Peric & Owen 1996), which turns lambda back at limit points.
+            let dot: f64 = pq.iter().zip(&xb[..nd]).map(|(a, b)| a * b).sum();
+            sign = dot.signum();
+        }
+        let dlam = sign * dl / norm_b.sqrt().max(1e-300);
+        predictor.add_multipliers(&self.data.layout, &xb, dlam);
+        arc.dlambda = dlam;
+        arc.last_correction = xb[..nd].iter().map(|b| dlam * b).collect();
+        let saved_lambda = std::mem::replace(&mut self.state.lambda, lambda);
+        // Arc length has no divergence test: the constraint keeps the iterates bounded.
+        let policy = self.newton.policy;
+        self.newton.policy.diverge_after = usize::MAX;
+        let result = self.solve_step(lambda0 + dlam, Some(arc));
+        self.newton.policy = policy;
+        match result {
+            Ok((iterations, Some(arc), dq)) => Ok((dq, arc.dlambda, iterations)),
+            Ok(_) => unreachable!("an arc-length step keeps its arc"),
+            Err(e) => {
+                self.state.lambda = saved_lambda;
+                Err(e)
             }
         }
-        Err(("no convergence".into(), None))
     }
 
     /// Pseudo-dynamic solution: a damped dynamic run with the loads ramped from 0 to the final
@@ -750,7 +826,7 @@ impl<'m> Statics<'m> {
         d.newton.atol = s.newton.atol;
         d.newton.max_iterations = s.newton.max_iterations;
         d.verify = s.verify;
-        let mut sim = super::Simulation::new(self.model, d)?;
+        let mut sim = super::Simulation::new(&self.model, d)?;
         sim.interrupt.clone_from(&self.interrupt);
         let mut last_speed = 0.0f64;
         let result = sim.run(&mut |sim| {
@@ -763,7 +839,6 @@ impl<'m> Statics<'m> {
                 *v = Vec6::zeros();
             }
             self.load_factor = d.load_factor_at(sim.state.t);
-            load_nodes(&self.state, &mut self.data);
             output(self)
         });
         self.stats.steps += sim.stats.steps;
