@@ -57,6 +57,19 @@ impl Group {
         self.log(&self.compose(&self.inverse(a), b))
     }
 
+    /// Adjoint `Ad(h)`: `h exp(w) h^-1 = exp(Ad(h) w)` (R3xSO(3): the translation part is
+    /// unchanged, the rotation part rotated by `h.r`).
+    pub fn adjoint(self, h: &Frame) -> Mat6 {
+        match self {
+            Group::R3xSO3 => {
+                let mut m = Mat6::identity();
+                m.fixed_view_mut::<3, 3>(3, 3).copy_from(&h.r);
+                m
+            }
+            Group::SE3 => se3::big_ad(h),
+        }
+    }
+
     /// Tangent operator `T(w)`: `exp(w + dw) = exp(w) exp(T(w) dw)`.
     pub fn tangent(self, w: &Vec6) -> Mat6 {
         match self {

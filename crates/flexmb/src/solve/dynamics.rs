@@ -488,6 +488,19 @@ impl Simulation {
         result
     }
 
+    /// The next step of size `h` from the current state as a function of its unknowns
+    /// ([`step::StepFunction`]): residual, exact Jacobian and the products with its
+    /// derivatives.
+    pub fn step_function(&self, h: f64) -> step::StepFunction<'_> {
+        step::StepFunction::new(
+            &self.model,
+            &self.data.layout,
+            &self.state,
+            &self.settings,
+            h,
+        )
+    }
+
     /// What the run should tell the user about the steps so far.
     fn notes(&self) -> Vec<String> {
         let mut notes = Vec::new();

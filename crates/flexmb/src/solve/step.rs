@@ -36,8 +36,10 @@ use super::DynamicSettings;
 use crate::assembly::{ConstraintRhs, Scaling};
 use crate::data::Layout;
 use crate::elements::{Coefficients, NodeState, Vec12};
+use crate::joints::ConstraintKernel;
+use crate::model::Model;
 use crate::state::State;
-use flexmb_lie::{Group, Vec6};
+use flexmb_lie::{Group, Mat6, Vec6};
 
 /// The fixed numbers of one step: scheme, size, scaling and loading.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -225,5 +227,428 @@ pub fn finish(group: Group, p: &GaParameters, start: &State, total: &[f64], stat
         state.a[i] = (start.vdot[i] * p.alpha_f + state.vdot[i] * (1.0 - p.alpha_f)
             - start.a[i] * p.alpha_m)
             / (1.0 - p.alpha_m);
+    }
+}
+
+/// A tangent (or, for the transposed products, a cotangent) of the start of a step `s_n`:
+/// right-trivialized perturbations of `q_n` (`q_n exp(q)`) and changes of `v_n`, `vdot_n`,
+/// `a_n`, one vector of 6 per node each.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StartTangent {
+    pub q: Vec<Vec6>,
+    pub v: Vec<Vec6>,
+    pub vdot: Vec<Vec6>,
+    pub a: Vec<Vec6>,
+}
+
+impl StartTangent {
+    pub fn zeros(n_nodes: usize) -> Self {
+        let z = vec![Vec6::zeros(); n_nodes];
+        Self {
+            q: z.clone(),
+            v: z.clone(),
+            vdot: z.clone(),
+            a: z,
+        }
+    }
+
+    /// Euclidean inner product of the components.
+    pub fn dot(&self, other: &Self) -> f64 {
+        let d = |a: &[Vec6], b: &[Vec6]| a.iter().zip(b).map(|(x, y)| x.dot(y)).sum::<f64>();
+        d(&self.q, &other.q)
+            + d(&self.v, &other.v)
+            + d(&self.vdot, &other.vdot)
+            + d(&self.a, &other.a)
+    }
+}
+
+/// Sparse matrix entries `(row, column, value)`; duplicates are summed.
+pub type Triplets = Vec<(usize, usize, f64)>;
+
+/// The step residual `R(x; s_n, p, h)` as a function (see the module documentation), with
+/// its exact Jacobian `dR/dx` and the products of `dR/ds_n` with a tangent and with a
+/// transposed vector. Every evaluation takes its inputs explicitly; `data` is scratch (a
+/// [`crate::Data`] of the same layout).
+pub struct StepFunction<'a> {
+    model: &'a Model,
+    layout: &'a Layout,
+    start: &'a State,
+    /// The fixed numbers of the step.
+    pub step: Start,
+    /// Rows of `B(q_n)` (`n_rows`).
+    b_start: Vec<Vec12>,
+    /// Node kinematics of `s_n` (`T = I`).
+    start_nodes: Vec<NodeState>,
+}
+
+/// Partial derivatives of the residual at the end of the step with respect to its
+/// arguments: the right-trivialized configuration `q_{n+1}` (all rows, node columns), the
+/// velocities, the accelerations (node columns) and the multipliers (equilibrium rows).
+struct Partials {
+    f_q: Triplets,
+    f_v: Triplets,
+    f_vd: Triplets,
+    f_mu: Triplets,
+    /// Tangent operators `T(total)` of the nodes' increments.
+    t: Vec<Mat6>,
+    /// Transports `G = Ad(exp(-total))`: `q_n exp(d) exp(total) = q_{n+1} exp(G d)`.
+    g: Vec<Mat6>,
+}
+
+impl<'a> StepFunction<'a> {
+    /// The step of size `h` from `start` (the state `s_n`, with its time `t_n`) of a
+    /// simulation with `settings` and the unknowns of `layout`.
+    pub fn new(
+        model: &'a Model,
+        layout: &'a Layout,
+        start: &'a State,
+        settings: &DynamicSettings,
+        h: f64,
+    ) -> Self {
+        let params = settings.scheme.parameters(settings.rho_inf);
+        let step = Start::new(
+            params,
+            h,
+            super::initial::mass_scale(model),
+            settings,
+            start.t + h,
+        );
+        let start_nodes = crate::sensors::node_states(start);
+        let mut b_start = vec![Vec12::zeros(); layout.n_rows];
+        if layout.stabilized {
+            crate::assembly::constraint_rows(model, layout, &start_nodes, start.t, &mut b_start);
+        }
+        Self {
+            model,
+            layout,
+            start,
+            step,
+            b_start,
+            start_nodes,
+        }
+    }
+
+    /// The predictor of the step (no extrapolation): `vdot_{n+1} = vdot_n`,
+    /// `mu = s lambda_n`, `zeta = 0`.
+    pub fn predict(&self) -> Vec<f64> {
+        let mut state = self.start.clone();
+        let mut dq = Vec::new();
+        predict(
+            &self.step.params,
+            self.step.h,
+            self.start,
+            None,
+            &mut state,
+            &mut dq,
+        );
+        let mut x = vec![0.0; self.layout.n_unknowns()];
+        x[..dq.len()].copy_from_slice(&dq);
+        for (k, &row) in self.layout.active_rows.iter().enumerate() {
+            x[self.layout.n_dofs + k] = self.step.scale * self.start.lambda[row];
+        }
+        x
+    }
+
+    /// `dq + B(q_n)^T zeta` of the unknowns `x`.
+    fn total(&self, x: &[f64]) -> Vec<f64> {
+        let (nd, na) = (self.layout.n_dofs, self.layout.n_active);
+        let zeta = if self.layout.stabilized {
+            &x[nd + na..nd + 2 * na]
+        } else {
+            &[][..]
+        };
+        let mut total = Vec::new();
+        total_increments(self.layout, &x[..nd], zeta, &self.b_start, &mut total);
+        total
+    }
+
+    /// The end of the step `s_{n+1}` for the unknowns `x` (the scheme's relations in the
+    /// module documentation; multipliers `lambda = mu / s`, redundant rows 0).
+    pub fn end_state(&self, x: &[f64]) -> State {
+        let p = &self.step.params;
+        let h = self.step.h;
+        let s0 = self.start;
+        let mut end = s0.clone();
+        end.t = s0.t + h;
+        for i in 0..s0.q.len() {
+            let dq = Vec6::from_column_slice(&x[6 * i..6 * i + 6]);
+            let a1 = (dq - s0.v[i] * h - s0.a[i] * ((0.5 - p.beta) * h * h)) / (p.beta * h * h);
+            end.v[i] = s0.v[i] + s0.a[i] * ((1.0 - p.gamma) * h) + a1 * (p.gamma * h);
+            end.vdot[i] = (a1 * (1.0 - p.alpha_m) + s0.a[i] * p.alpha_m - s0.vdot[i] * p.alpha_f)
+                / (1.0 - p.alpha_f);
+            end.a[i] = a1;
+        }
+        let total = self.total(x);
+        for (i, q) in end.q.iter_mut().enumerate() {
+            *q = self
+                .model
+                .group
+                .integrate(&s0.q[i], &Vec6::from_column_slice(&total[6 * i..6 * i + 6]));
+        }
+        end.lambda.iter_mut().for_each(|l| *l = 0.0);
+        for (k, &row) in self.layout.active_rows.iter().enumerate() {
+            end.lambda[row] = x[self.layout.n_dofs + k] / self.step.scale;
+        }
+        end
+    }
+
+    /// Node kinematics at the end of the step, with the tangent operators `T(total)`.
+    fn end_nodes(&self, x: &[f64]) -> (State, Vec<NodeState>, Vec<f64>) {
+        let end = self.end_state(x);
+        let total = self.total(x);
+        let mut nodes = self.start_nodes.clone();
+        kinematics(self.model.group, self.start, &end, &total, true, &mut nodes);
+        (end, nodes, total)
+    }
+
+    fn assemble(
+        &self,
+        data: &mut crate::Data,
+        nodes: &[NodeState],
+        end: &State,
+        sc: &Scaling,
+        matrix: bool,
+    ) {
+        let it = crate::assembly::Iterate {
+            nodes,
+            t: end.t,
+            lambda: &end.lambda,
+            b_start: &self.b_start,
+        };
+        crate::assembly::assemble(self.model, data, &it, sc, matrix);
+    }
+
+    /// The step residual `R(x; s_n, p, h)` (`n_unknowns`).
+    pub fn residual(&self, x: &[f64], data: &mut crate::Data) -> Vec<f64> {
+        let (end, nodes, _) = self.end_nodes(x);
+        self.assemble(data, &nodes, &end, &self.step.scaling(0.0), false);
+        data.residual.clone()
+    }
+
+    /// The partial derivatives at the end of the step (see [`Partials`]).
+    fn partials(&self, x: &[f64], data: &mut crate::Data) -> Partials {
+        let (end, mut nodes, total) = self.end_nodes(x);
+        let group = self.model.group;
+        let t: Vec<Mat6> = nodes.iter().map(|n| n.t).collect();
+        let g: Vec<Mat6> = (0..nodes.len())
+            .map(|i| group.adjoint(&group.exp(&-Vec6::from_column_slice(&total[6 * i..6 * i + 6]))))
+            .collect();
+        for n in &mut nodes {
+            n.t = Mat6::identity();
+        }
+        let layout = self.layout;
+        let (nd, na) = (layout.n_dofs, layout.n_active);
+        let s = self.step.scale;
+        let mut sc = self.step.scaling(0.0);
+        let mut take =
+            |data: &mut crate::Data, coef: Coefficients, keep: &dyn Fn(usize, usize) -> bool| {
+                sc.coef = coef;
+                self.assemble(data, &nodes, &end, &sc, true);
+                data.pattern
+                    .iter()
+                    .zip(&data.values)
+                    .filter(|(&(i, j), &v)| v != 0.0 && keep(i, j))
+                    .map(|(&(i, j), &v)| (i, j, v))
+                    .collect::<Triplets>()
+            };
+        let coef = |m, c, k| Coefficients { m, c, k };
+        // Position-level rows against the configuration: s (K_t + K_c) and B.
+        let mut f_q = take(data, coef(0.0, 0.0, s), &|i, j| j < nd && i < nd + na);
+        let f_mu = take(data, coef(0.0, 0.0, 0.0), &|i, j| {
+            i < nd && (nd..nd + na).contains(&j)
+        });
+        // Velocities: s C_t (and the nodal damping) and, on the velocity-level rows,
+        // B / gamma'.
+        let mut f_v = take(data, coef(0.0, s, 0.0), &|i, j| {
+            j < nd && (i < nd || i >= nd + na)
+        });
+        for e in f_v.iter_mut().filter(|e| e.0 >= nd + na) {
+            e.2 /= self.step.gp;
+        }
+        let f_vd = take(data, coef(s, 0.0, 0.0), &|i, j| i < nd && j < nd);
+        if layout.stabilized {
+            self.velocity_rows_configuration(&nodes, &end, &mut f_q);
+        }
+        Partials {
+            f_q,
+            f_v,
+            f_vd,
+            f_mu,
+            t,
+            g,
+        }
+    }
+
+    /// `d((B(q) v + Phi_t) / gamma')/dq` of the velocity-level rows: for row `r`,
+    /// `v^T dB_r^T/dq`, the joint's `K_c` with the unit multiplier on that row.
+    fn velocity_rows_configuration(&self, nodes: &[NodeState], end: &State, f_q: &mut Triplets) {
+        let layout = self.layout;
+        let ground = NodeState::ground(Default::default());
+        for (j, joint) in self.model.joints.iter().enumerate() {
+            let slots = [joint.node_a, joint.node_b];
+            let pair = slots.map(|s| s.map_or(ground, |n| nodes[n.0]));
+            let rows = &layout.joint_rows[j];
+            let start = layout.joint_row_start[j];
+            let mut vloc = Vec12::zeros();
+            for (ka, n) in slots.iter().enumerate() {
+                if let Some(n) = n {
+                    vloc.fixed_rows_mut::<6>(6 * ka).copy_from(&end.v[n.0]);
+                }
+            }
+            for r in 0..rows.len() {
+                let Some(k) = layout.row_unknown[start + r] else {
+                    continue;
+                };
+                let mut unit = [0.0; crate::joints::MAX_ROWS];
+                unit[r] = 1.0;
+                let mut kr = crate::elements::Mat12::zeros();
+                joint.evaluate(
+                    self.model.group,
+                    rows,
+                    &pair,
+                    end.t,
+                    &unit[..rows.len()],
+                    Some(&mut kr),
+                );
+                let row = kr.transpose() * vloc / self.step.gp;
+                for (ka, n) in slots.iter().enumerate() {
+                    if let Some(n) = n {
+                        for c in 0..6 {
+                            f_q.push((layout.zeta(k), 6 * n.0 + c, row[6 * ka + c]));
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// `d(B(q_n)^T zeta)/dq_n` (node rows and columns; stabilized formulation).
+    fn start_constraint_stiffness(&self, x: &[f64]) -> Triplets {
+        let layout = self.layout;
+        let mut out = Triplets::new();
+        if !layout.stabilized {
+            return out;
+        }
+        let (nd, na) = (layout.n_dofs, layout.n_active);
+        let zeta = &x[nd + na..nd + 2 * na];
+        let ground = NodeState::ground(Default::default());
+        for (j, joint) in self.model.joints.iter().enumerate() {
+            let slots = [joint.node_a, joint.node_b];
+            let pair = slots.map(|s| s.map_or(ground, |n| self.start_nodes[n.0]));
+            let rows = &layout.joint_rows[j];
+            let start = layout.joint_row_start[j];
+            let mut lam = [0.0; crate::joints::MAX_ROWS];
+            for (r, l) in lam.iter_mut().enumerate().take(rows.len()) {
+                *l = layout.row_unknown[start + r].map_or(0.0, |k| zeta[k]);
+            }
+            let mut k = crate::elements::Mat12::zeros();
+            joint.evaluate(
+                self.model.group,
+                rows,
+                &pair,
+                self.start.t,
+                &lam[..rows.len()],
+                Some(&mut k),
+            );
+            for (ka, a) in slots.iter().enumerate() {
+                for (kb, b) in slots.iter().enumerate() {
+                    if let (Some(a), Some(b)) = (a, b) {
+                        for r in 0..6 {
+                            for c in 0..6 {
+                                out.push((6 * a.0 + r, 6 * b.0 + c, k[(6 * ka + r, 6 * kb + c)]));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The exact Jacobian `dR/dx` at `x`, built fresh (no regularization):
+    /// `[F_q T + gamma' F_v + beta' F_vd | F_mu | F_q T B(q_n)^T]`.
+    pub fn jacobian(&self, x: &[f64], data: &mut crate::Data) -> Triplets {
+        let p = self.partials(x, data);
+        let layout = self.layout;
+        let mut out = Triplets::new();
+        for &(i, j, v) in &p.f_q {
+            let (n, c) = (j / 6, j % 6);
+            for k in 0..6 {
+                let fqt = v * p.t[n][(c, k)];
+                out.push((i, 6 * n + k, fqt));
+                for &(row, slot) in &layout.node_rows[n] {
+                    if layout.stabilized {
+                        let z = layout.zeta(layout.row_unknown[row].expect("active row"));
+                        out.push((i, z, fqt * self.b_start[row][6 * slot + k]));
+                    }
+                }
+            }
+        }
+        out.extend(p.f_v.iter().map(|&(i, j, v)| (i, j, v * self.step.gp)));
+        out.extend(p.f_vd.iter().map(|&(i, j, v)| (i, j, v * self.step.bp)));
+        out.extend(p.f_mu.iter().copied());
+        out
+    }
+
+    /// Coefficients of `v_{n+1}` and `vdot_{n+1}` in `(v_n, a_n, vdot_n)` at fixed `dq`.
+    fn start_coefficients(&self) -> [f64; 5] {
+        let p = &self.step.params;
+        let h = self.step.h;
+        let c1 = 1.0 - p.gamma / p.beta;
+        let c2 = h * (1.0 - p.gamma / (2.0 * p.beta));
+        let c3 = -self.step.bp * h;
+        let c4 = (p.alpha_m - (1.0 - p.alpha_m) * (0.5 - p.beta) / p.beta) / (1.0 - p.alpha_f);
+        let c5 = -p.alpha_f / (1.0 - p.alpha_f);
+        [c1, c2, c3, c4, c5]
+    }
+
+    /// `(dR/ds_n) ds` at `x`.
+    pub fn start_jvp(&self, x: &[f64], ds: &StartTangent, data: &mut crate::Data) -> Vec<f64> {
+        let p = self.partials(x, data);
+        let [c1, c2, c3, c4, c5] = self.start_coefficients();
+        let n = ds.q.len();
+        // The configuration moves by G dq_n + T d(B_n^T zeta)/dq_n dq_n.
+        let mut kz = vec![Vec6::zeros(); n];
+        for (i, j, v) in self.start_constraint_stiffness(x) {
+            kz[i / 6][i % 6] += v * ds.q[j / 6][j % 6];
+        }
+        let w: Vec<Vec6> = (0..n).map(|i| p.g[i] * ds.q[i] + p.t[i] * kz[i]).collect();
+        let dv: Vec<Vec6> = (0..n).map(|i| ds.v[i] * c1 + ds.a[i] * c2).collect();
+        let dvd: Vec<Vec6> = (0..n)
+            .map(|i| ds.v[i] * c3 + ds.a[i] * c4 + ds.vdot[i] * c5)
+            .collect();
+        let mut out = vec![0.0; self.layout.n_unknowns()];
+        for (m, d) in [(&p.f_q, &w), (&p.f_v, &dv), (&p.f_vd, &dvd)] {
+            for &(i, j, v) in m {
+                out[i] += v * d[j / 6][j % 6];
+            }
+        }
+        out
+    }
+
+    /// `(dR/ds_n)^T w` at `x`.
+    pub fn start_vjp(&self, x: &[f64], w: &[f64], data: &mut crate::Data) -> StartTangent {
+        let p = self.partials(x, data);
+        let [c1, c2, c3, c4, c5] = self.start_coefficients();
+        let n = self.start.q.len();
+        let transpose = |m: &Triplets| {
+            let mut g = vec![Vec6::zeros(); n];
+            for &(i, j, v) in m {
+                g[j / 6][j % 6] += v * w[i];
+            }
+            g
+        };
+        let (gq, gv, gvd) = (transpose(&p.f_q), transpose(&p.f_v), transpose(&p.f_vd));
+        let tg: Vec<Vec6> = (0..n).map(|i| p.t[i].transpose() * gq[i]).collect();
+        let mut q: Vec<Vec6> = (0..n).map(|i| p.g[i].transpose() * gq[i]).collect();
+        for (i, j, v) in self.start_constraint_stiffness(x) {
+            q[j / 6][j % 6] += v * tg[i / 6][i % 6];
+        }
+        StartTangent {
+            q,
+            v: (0..n).map(|i| gv[i] * c1 + gvd[i] * c3).collect(),
+            vdot: (0..n).map(|i| gvd[i] * c5).collect(),
+            a: (0..n).map(|i| gv[i] * c2 + gvd[i] * c4).collect(),
+        }
     }
 }

@@ -1,0 +1,186 @@
+//! The step as a function (`flexmb::solve::step::StepFunction`): its exact Jacobian
+//! `dR/dx` and its products with `dR/ds_n` checked against central finite differences of
+//! the step residual, after steps taken through the public API (`Simulation::step`), on the
+//! heavy top (SE(3) and R3xSO(3)), the 10-link chain, a flexible beam mechanism, and the
+//! stabilized index-2 form. Start perturbations move `q_n` on the manifold (`q_n exp(d)`).
+
+mod common;
+
+use flexmb::input::{read_model_file, Analysis};
+use flexmb::solve::step::{StartTangent, StepFunction};
+use flexmb::{Data, Simulation, State};
+use flexmb_lie::Vec6;
+
+/// A deterministic pseudo-random sequence in [-1, 1].
+fn noise(seed: u64) -> impl FnMut() -> f64 {
+    let mut s = seed;
+    move || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+}
+
+/// A simulation of an example file after `steps` steps.
+fn simulation(file: &str, overrides: &[&str], steps: usize) -> Simulation {
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    let mf = read_model_file(&common::example(file), &overrides).expect("model file");
+    let Analysis::Dynamic(settings) = mf.analysis else {
+        panic!("{file} is dynamic")
+    };
+    let mut sim = Simulation::new(mf.model, settings).expect("starts");
+    for _ in 0..steps {
+        sim.step().expect("step");
+    }
+    sim
+}
+
+/// Largest entry of `a - b` relative to the largest entry of `b` (and at least `floor`).
+fn relative_difference(a: &[f64], b: &[f64], floor: f64) -> f64 {
+    let scale = b.iter().fold(floor, |m, v| m.max(v.abs()));
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        / scale
+}
+
+/// Checks `dR/dx` column by column, `dR/ds_n` along random tangents, and the transposed
+/// product against the direct one, at the predictor of the next step moved by a random
+/// perturbation (a point away from the solution, with non-zero multipliers and zeta).
+fn check(name: &str, sim: &Simulation) {
+    let h = sim.settings.h;
+    let f = sim.step_function(h);
+    let layout = sim.data.layout.clone();
+    let mut data = Data::new(&sim.model, layout.clone()).expect("data");
+    let nu = layout.n_unknowns();
+    let mut rand = noise(7);
+    let mut x = f.predict();
+    let x_scale = x.iter().fold(1e-3f64, |m, v| m.max(v.abs()));
+    for v in &mut x {
+        *v += 0.05 * x_scale * rand();
+    }
+    // dR/dx along directions that each move one kind of unknown (translations, rotations,
+    // multipliers, stabilization) and all of them: a product compared with a central
+    // difference of the residual, relative to its size, so that round-off in rows that sum
+    // large forces does not pass for an error and a small block is not hidden by a large one.
+    let jacobian = f.jacobian(&x, &mut data);
+    let (nd, na) = (layout.n_dofs, layout.n_active);
+    let kinds: [(&str, Box<dyn Fn(usize) -> bool>); 5] = [
+        ("translations", Box::new(|i| i < nd && i % 6 < 3)),
+        ("rotations", Box::new(|i| i < nd && i % 6 >= 3)),
+        ("multipliers", Box::new(|i| (nd..nd + na).contains(&i))),
+        ("stabilization", Box::new(|i| i >= nd + na)),
+        ("all unknowns", Box::new(|_| true)),
+    ];
+    for (kind, selected) in kinds {
+        if !(0..nu).any(|i| selected(i)) {
+            continue;
+        }
+        for trial in 0..2 {
+            let u: Vec<f64> = (0..nu)
+                .map(|i| if selected(i) { rand() } else { 0.0 })
+                .collect();
+            let mut ju = vec![0.0; nu];
+            for &(i, j, v) in &jacobian {
+                ju[i] += v * u[j];
+            }
+            let eps = 1e-5 * x_scale;
+            let along = |sign: f64| -> Vec<f64> {
+                let xs: Vec<f64> = x.iter().zip(&u).map(|(a, b)| a + sign * eps * b).collect();
+                f.residual(
+                    &xs,
+                    &mut Data::new(&sim.model, layout.clone()).expect("data"),
+                )
+            };
+            let (rp, rm) = (along(1.0), along(-1.0));
+            let fd: Vec<f64> = rp
+                .iter()
+                .zip(&rm)
+                .map(|(a, b)| (a - b) / (2.0 * eps))
+                .collect();
+            let d = relative_difference(&ju, &fd, 1e-12);
+            assert!(
+                d < 1e-6,
+                "{name}: dR/dx along the {kind} (trial {trial}) differs from finite differences by {d:e}"
+            );
+        }
+    }
+    // dR/ds_n along random tangents.
+    let n = sim.state.q.len();
+    let tangent = |rand: &mut dyn FnMut() -> f64| StartTangent {
+        q: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
+        v: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
+        vdot: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
+        a: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
+    };
+    for trial in 0..3 {
+        let ds = tangent(&mut rand);
+        let jv = f.start_jvp(&x, &ds, &mut data);
+        let eps = 1e-6;
+        let moved = |sign: f64| {
+            let mut s: State = sim.state.clone();
+            for i in 0..n {
+                s.q[i] = sim
+                    .model
+                    .group
+                    .integrate(&s.q[i], &(ds.q[i] * (sign * eps)));
+                s.v[i] += ds.v[i] * (sign * eps);
+                s.vdot[i] += ds.vdot[i] * (sign * eps);
+                s.a[i] += ds.a[i] * (sign * eps);
+            }
+            s
+        };
+        let (sp, sm) = (moved(1.0), moved(-1.0));
+        let rp =
+            StepFunction::new(&sim.model, &layout, &sp, &sim.settings, h).residual(&x, &mut data);
+        let rm =
+            StepFunction::new(&sim.model, &layout, &sm, &sim.settings, h).residual(&x, &mut data);
+        let fd: Vec<f64> = rp
+            .iter()
+            .zip(&rm)
+            .map(|(a, b)| (a - b) / (2.0 * eps))
+            .collect();
+        let d = relative_difference(&jv, &fd, 1e-6);
+        assert!(d < 1e-5, "{name}: dR/ds_n (trial {trial}) differs by {d:e}");
+        // <w, J ds> = <J^T w, ds>
+        let w: Vec<f64> = (0..nu).map(|_| rand()).collect();
+        let left: f64 = w.iter().zip(&jv).map(|(a, b)| a * b).sum();
+        let right = f.start_vjp(&x, &w, &mut data).dot(&ds);
+        assert!(
+            (left - right).abs() <= 1e-10 * left.abs().max(right.abs()).max(1e-12),
+            "{name}: transposed product {right:e} against {left:e}"
+        );
+    }
+}
+
+#[test]
+fn heavy_top_step_jacobians_match_finite_differences_on_both_groups() {
+    check("heavy top SE(3)", &simulation("heavy_top.toml", &[], 5));
+    check(
+        "heavy top R3xSO(3)",
+        &simulation("heavy_top_r3so3.toml", &[], 5),
+    );
+}
+
+#[test]
+fn chain_step_jacobians_match_finite_differences() {
+    check("chain_10", &simulation("chain_10.toml", &[], 5));
+}
+
+#[test]
+fn beam_step_jacobians_match_finite_differences() {
+    check(
+        "flexible four-bar",
+        &simulation("flexible_four_bar.toml", &[], 3),
+    );
+}
+
+#[test]
+fn stabilized_step_jacobians_match_finite_differences() {
+    let sim = simulation("heavy_top.toml", &["solver.formulation=index2"], 5);
+    assert!(sim.data.layout.stabilized);
+    check("heavy top, stabilized index 2", &sim);
+    let sim = simulation("chain_10.toml", &["solver.formulation=index2"], 5);
+    check("chain_10, stabilized index 2", &sim);
+}
