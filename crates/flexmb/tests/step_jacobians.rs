@@ -66,7 +66,8 @@ fn check(name: &str, sim: &Simulation) {
     // large forces does not pass for an error and a small block is not hidden by a large one.
     let jacobian = f.jacobian(&x, &mut data);
     let (nd, na) = (layout.n_dofs, layout.n_active);
-    let kinds: [(&str, Box<dyn Fn(usize) -> bool>); 5] = [
+    type Selection = Box<dyn Fn(usize) -> bool>;
+    let kinds: [(&str, Selection); 5] = [
         ("translations", Box::new(|i| i < nd && i % 6 < 3)),
         ("rotations", Box::new(|i| i < nd && i % 6 >= 3)),
         ("multipliers", Box::new(|i| (nd..nd + na).contains(&i))),
@@ -74,7 +75,7 @@ fn check(name: &str, sim: &Simulation) {
         ("all unknowns", Box::new(|_| true)),
     ];
     for (kind, selected) in kinds {
-        if !(0..nu).any(|i| selected(i)) {
+        if !(0..nu).any(&selected) {
             continue;
         }
         for trial in 0..2 {
