@@ -66,12 +66,12 @@ fn check(name: &str, sim: &Simulation) {
     // large forces does not pass for an error and a small block is not hidden by a large one.
     let jacobian = f.jacobian(&x, &mut data);
     let (nd, na) = (layout.n_dofs, layout.n_active);
-    type Selection = Box<dyn Fn(usize) -> bool>;
+    type Selection<'a> = Box<dyn Fn(usize) -> bool + 'a>;
     let kinds: [(&str, Selection); 5] = [
-        ("translations", Box::new(|i| i < nd && i % 6 < 3)),
-        ("rotations", Box::new(|i| i < nd && i % 6 >= 3)),
-        ("multipliers", Box::new(|i| (nd..nd + na).contains(&i))),
-        ("stabilization", Box::new(|i| i >= nd + na)),
+        ("translations", Box::new(move |i| i < nd && i % 6 < 3)),
+        ("rotations", Box::new(move |i| i < nd && i % 6 >= 3)),
+        ("multipliers", Box::new(move |i| (nd..nd + na).contains(&i))),
+        ("stabilization", Box::new(move |i| i >= nd + na)),
         ("all unknowns", Box::new(|_| true)),
     ];
     for (kind, selected) in kinds {
