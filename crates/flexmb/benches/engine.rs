@@ -59,7 +59,9 @@ fn solve(file: &str, overrides: &[String]) -> Outcome {
     };
     let mut sim = Simulation::new(&mf.model, settings).expect("initial conditions");
     let t0 = Instant::now();
-    let stats = sim.run(&mut |_| Ok(())).expect("run");
+    let stats = sim
+        .run(&mut |_: &flexmb::observe::Sample| Ok(()))
+        .expect("run");
     Outcome {
         steps: stats.steps,
         iterations: stats.newton_iterations,
@@ -137,7 +139,9 @@ fn roll_up() {
     };
     let t0 = Instant::now();
     let mut statics = flexmb::solve::Statics::new(&mf.model, settings).expect("starts");
-    let stats = statics.run(&mut |_| Ok(())).expect("converges");
+    let stats = statics
+        .run(&mut |_: &flexmb::observe::Sample| Ok(()))
+        .expect("converges");
     let dt = t0.elapsed().as_secs_f64();
     println!(
         "| roll_up (10 elements, static) | {} load steps | {:.2} | {} Newton iterations | | |",
@@ -178,7 +182,9 @@ fn long_beam(n: usize) {
     s.rho_inf = 0.5;
     let mut sim = Simulation::new(&m, s).expect("starts");
     let t0 = Instant::now();
-    let stats = sim.run(&mut |_| Ok(())).expect("runs");
+    let stats = sim
+        .run(&mut |_: &flexmb::observe::Sample| Ok(()))
+        .expect("runs");
     let dt = t0.elapsed().as_secs_f64();
     println!(
         "| beam_{n} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",

@@ -53,7 +53,7 @@ fn run(example: &str, overrides: &[String]) -> Run {
             rho_inf = Some(settings.rho_inf);
             let mut sim = Simulation::new(model, settings).unwrap_or_else(|e| panic!("{e}"));
             let stats = sim
-                .run(&mut |s| {
+                .run(&mut |s: &flexmb::observe::Sample| {
                     rows.push((s.state.t, sensors.evaluate(&s.model, &s.data, &s.state)));
                     Ok(())
                 })
@@ -63,8 +63,8 @@ fn run(example: &str, overrides: &[String]) -> Run {
         Analysis::Static(settings) => {
             let mut statics = Statics::new(model, settings).unwrap_or_else(|e| panic!("{e}"));
             let stats = statics
-                .run(&mut |s| {
-                    rows.push((s.load_factor, sensors.evaluate(&s.model, &s.data, &s.state)));
+                .run(&mut |s: &flexmb::observe::Sample| {
+                    rows.push((s.at, sensors.evaluate(&s.model, &s.data, &s.state)));
                     Ok(())
                 })
                 .unwrap_or_else(|e| panic!("{example} {overrides:?}: {e}"));

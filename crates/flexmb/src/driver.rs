@@ -13,6 +13,7 @@
 //! results of an earlier run).
 
 use crate::input::{Analysis, ModelFile};
+use crate::observe::{Observer, Observers, Sample};
 use crate::output::{ErrorKind, OutputDir, OutputError, ResultFiles, Status, Summary};
 use crate::sensors::SensorEvaluator;
 use crate::solve::{DynamicSettings, Simulation, StaticSettings, Statics};
@@ -199,20 +200,61 @@ impl<'m> Outputs<'m> {
     }
 }
 
-/// The output callback's side of a run: writes a step and keeps the first write error (the
-/// solver only sees its message and stops).
-fn deliver(
-    outputs: &mut Outputs,
-    error: &mut Option<OutputError>,
-    x: f64,
-    data: &crate::Data,
-    state: &crate::State,
-) -> Result<(), String> {
-    outputs.write(x, data, state).map_err(|e| {
-        let message = e.to_string();
-        *error = Some(e);
-        message
-    })
+/// The result files as an observer: writes every output point and keeps the first write
+/// error (the solver only sees its message and stops).
+struct ResultSink<'m> {
+    outputs: Outputs<'m>,
+    error: Option<OutputError>,
+}
+
+impl Observer for ResultSink<'_> {
+    fn output(&mut self, s: &Sample) -> Result<(), String> {
+        self.outputs.write(s.at, s.data, s.state).map_err(|e| {
+            let message = e.to_string();
+            self.error = Some(e);
+            message
+        })
+    }
+}
+
+/// The progress callback as an observer.
+struct Progress<'p> {
+    report: &'p mut dyn FnMut(f64, f64),
+    end: f64,
+}
+
+impl Observer for Progress<'_> {
+    fn output(&mut self, s: &Sample) -> Result<(), String> {
+        (self.report)(s.at, self.end);
+        Ok(())
+    }
+}
+
+/// Runs an analysis with the result files and the progress as its observers; returns the
+/// analysis' result, the files (if they could be created) and the first write error.
+fn observed<'m, R>(
+    out: &OutputDir,
+    first: &str,
+    model: &'m crate::Model,
+    progress: Progress,
+    run: impl FnOnce(&mut dyn Observer) -> Result<R, SolveError>,
+) -> (
+    Result<(), SolveError>,
+    Option<Outputs<'m>>,
+    Option<OutputError>,
+) {
+    match Outputs::create(out, first, model) {
+        Ok(outputs) => {
+            let mut sink = ResultSink {
+                outputs,
+                error: None,
+            };
+            let mut progress = progress;
+            let result = run(&mut Observers(vec![&mut sink, &mut progress]));
+            (result.map(|_| ()), Some(sink.outputs), sink.error)
+        }
+        Err(e) => (Ok(()), None, Some(e)),
+    }
 }
 
 /// Static analysis: `sensors.csv` has the load factor in its first column.
@@ -228,22 +270,12 @@ fn run_static(
         Err(e) => return Ended::rejected(e),
     };
     statics.interrupt = interrupt;
-    let target = settings.load_factor;
-    let mut error = None;
-    let (result, outputs) = match Outputs::create(out, "load_factor", model) {
-        Ok(mut outputs) => {
-            let result = statics.run(&mut |s| {
-                deliver(&mut outputs, &mut error, s.load_factor, &s.data, &s.state)?;
-                progress(s.load_factor, target);
-                Ok(())
-            });
-            (result.map(|_| ()), Some(outputs))
-        }
-        Err(e) => {
-            error = Some(e);
-            (Ok(()), None)
-        }
+    let progress = Progress {
+        report: progress,
+        end: settings.load_factor,
     };
+    let (result, outputs, error) =
+        observed(out, "load_factor", model, progress, |o| statics.run(o));
     let stats = statics.stats;
     let work = Work {
         steps: stats.steps,
@@ -273,22 +305,11 @@ fn run_dynamic(
         Err(e) => return Ended::rejected(e),
     };
     sim.interrupt = interrupt;
-    let t_end = settings.t_end;
-    let mut error = None;
-    let (result, outputs) = match Outputs::create(out, "time", model) {
-        Ok(mut outputs) => {
-            let result = sim.run(&mut |s| {
-                deliver(&mut outputs, &mut error, s.state.t, &s.data, &s.state)?;
-                progress(s.state.t, t_end);
-                Ok(())
-            });
-            (result.map(|_| ()), Some(outputs))
-        }
-        Err(e) => {
-            error = Some(e);
-            (Ok(()), None)
-        }
+    let progress = Progress {
+        report: progress,
+        end: settings.t_end,
     };
+    let (result, outputs, error) = observed(out, "time", model, progress, |o| sim.run(o));
     let work = Work {
         steps: sim.stats.steps,
         newton_iterations: sim.stats.newton_iterations,

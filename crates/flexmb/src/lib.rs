@@ -19,6 +19,7 @@
 //! | [`solve`] | generalized-alpha, initial conditions, Newton, linear solver |
 //! | [`sensors`] | output channels |
 //! | [`input`] | the TOML model file |
+//! | [`observe`] | observers: what a run reports to at its output points and steps |
 //! | [`output`] | `sensors.csv` and `summary.json` |
 //!
 //! The convenient API: build or read a [`Model`], then
@@ -32,6 +33,7 @@ pub mod error;
 pub mod input;
 pub mod joints;
 pub mod model;
+pub mod observe;
 pub mod output;
 pub mod sensors;
 pub mod solve;

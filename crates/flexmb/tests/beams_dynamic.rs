@@ -214,7 +214,7 @@ fn rayleigh_damping_gives_the_modal_damping_ratio() {
     s.rho_inf = 1.0;
     let mut sim = Simulation::new(&m, s).expect("starts");
     let mut w = vec![];
-    sim.run(&mut |s| {
+    sim.run(&mut |s: &flexmb::observe::Sample| {
         w.push((s.state.t, s.state.q[tip.0].x.z));
         Ok(())
     })

@@ -55,8 +55,8 @@ fn cantilever_rolls_up_into_a_full_circle() {
     let mut statics = Statics::new(&model, settings).expect("starts");
     let mut checked = 0;
     statics
-        .run(&mut |s| {
-            let lam = s.load_factor;
+        .run(&mut |s: &flexmb::observe::Sample| {
+            let lam = s.at;
             let x = s.state.q[tip.0].x;
             let (ex, ez) = if lam == 0.0 {
                 (l, 0.0)
@@ -147,8 +147,8 @@ fn bathe_bolourchi_bend_matches_continuum_reference() {
     let mut statics = Statics::new(&m, settings).expect("starts");
     let mut at = vec![];
     statics
-        .run(&mut |s| {
-            at.push((s.load_factor, s.state.q[tip.0].x));
+        .run(&mut |s: &flexmb::observe::Sample| {
+            at.push((s.at, s.state.q[tip.0].x));
             Ok(())
         })
         .expect("converges");
@@ -211,16 +211,16 @@ fn arc_length_follows_the_von_mises_truss_through_its_limit_points() {
     let mut statics = Statics::new(&m, settings).expect("starts");
     let mut path = vec![];
     statics
-        .run(&mut |s| {
+        .run(&mut |s: &flexmb::observe::Sample| {
             let y = s.state.q[apex.0].x.y;
             let l = (b * b + y * y).sqrt();
             let exact = 2.0 * k * (l0 - l) * y / l;
             assert!(
-                (s.load_factor - exact).abs() < 1e-6 * (1.0 + exact.abs()),
+                (s.at - exact).abs() < 1e-6 * (1.0 + exact.abs()),
                 "y {y}: lambda {} vs {exact}",
-                s.load_factor
+                s.at
             );
-            path.push((y, s.load_factor));
+            path.push((y, s.at));
             Ok(())
         })
         .expect("follows the path");
@@ -435,7 +435,9 @@ fn distributed_load_on_a_cantilever_matches_beam_theory() {
         let total: f64 = model.loads.iter().map(|l| l.force.z).sum();
         assert!((total + q * l).abs() < 1e-12, "total load {total}");
         let mut statics = Statics::new(&model, StaticSettings::new()).expect("starts");
-        statics.run(&mut |_| Ok(())).expect("converges");
+        statics
+            .run(&mut |_: &flexmb::observe::Sample| Ok(()))
+            .expect("converges");
         let w = -statics.state.q[tip.0].x.z;
         errors.push(((w - exact) / exact).abs());
     }

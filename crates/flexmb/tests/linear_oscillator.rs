@@ -35,7 +35,7 @@ fn oscillate(scheme: Scheme, rho_inf: f64) -> Vec<(f64, f64, f64)> {
     s.newton.atol = 1e-15;
     let mut sim = Simulation::new(&m, s).expect("starts");
     let mut out = vec![];
-    sim.run(&mut |s| {
+    sim.run(&mut |s: &flexmb::observe::Sample| {
         out.push((s.state.t, s.state.q[0].x.x, s.state.v[0][0]));
         Ok(())
     })

@@ -51,7 +51,7 @@ fn trajectory(model: &Model, mut settings: DynamicSettings, reuse: bool) -> Run 
     settings.verify = true;
     let mut sim = Simulation::new(model, settings).expect("starts");
     let mut states = Vec::new();
-    sim.run(&mut |s| {
+    sim.run(&mut |s: &flexmb::observe::Sample| {
         states.push(s.state.clone());
         Ok(())
     })
@@ -217,7 +217,7 @@ fn every_example_passes_verify_and_matches_full_newton() {
                 let mut statics = Statics::new(&file.model, settings).expect("starts");
                 let mut sensors = SensorEvaluator::new(&file.model);
                 statics
-                    .run(&mut |s| {
+                    .run(&mut |s: &flexmb::observe::Sample| {
                         sensors.evaluate(&s.model, &s.data, &s.state);
                         Ok(())
                     })

@@ -720,7 +720,7 @@ fn documented_examples_run() {
             let mut statics = flexmb::solve::Statics::new(&file.model, settings)
                 .unwrap_or_else(|e| panic!("{}: {e}", file.model.title));
             statics
-                .run(&mut |_| Ok(()))
+                .run(&mut |_: &flexmb::observe::Sample| Ok(()))
                 .unwrap_or_else(|e| panic!("{}: {e}", file.model.title));
             assert!((statics.load_factor - settings.load_factor).abs() < 1e-9);
             if file.model.title == "45-degree bend" {
@@ -739,7 +739,7 @@ fn documented_examples_run() {
         let mut sim = flexmb::Simulation::new(&file.model, dynamic(&file))
             .unwrap_or_else(|e| panic!("{}: {e}", file.model.title));
         let stats = sim
-            .run(&mut |_| Ok(()))
+            .run(&mut |_: &flexmb::observe::Sample| Ok(()))
             .unwrap_or_else(|e| panic!("{}: {e}", file.model.title));
         assert!(stats.steps >= 20, "{stats:?}");
     }

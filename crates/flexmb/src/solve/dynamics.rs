@@ -45,6 +45,7 @@ use crate::data::{Data, Layout};
 use crate::elements::{NodeState, Vec12};
 use crate::error::{SettingsError, SolveError};
 use crate::model::Model;
+use crate::observe::{Observer, Sample, StepRecord};
 use crate::sensors::node_states;
 use crate::state::State;
 use flexmb_lie::Vec6;
@@ -479,11 +480,8 @@ impl Simulation {
 
     /// Runs to `t_end`, calling `output` at t = 0 and at every output time. Stops at the
     /// first error of `output` or when a step cannot be completed even at `h_min`.
-    pub fn run(
-        &mut self,
-        output: &mut dyn FnMut(&Simulation) -> Result<(), String>,
-    ) -> Result<Stats, SolveError> {
-        let result = self.run_steps(output);
+    pub fn run(&mut self, observer: &mut dyn Observer) -> Result<Stats, SolveError> {
+        let result = self.run_steps(observer);
         self.warnings.extend(self.notes());
         result
     }
@@ -528,11 +526,12 @@ impl Simulation {
         notes
     }
 
-    fn run_steps(
-        &mut self,
-        output: &mut dyn FnMut(&Simulation) -> Result<(), String>,
-    ) -> Result<Stats, SolveError> {
-        output(self).map_err(SolveError::Output)?;
+    fn run_steps(&mut self, observer: &mut dyn Observer) -> Result<Stats, SolveError> {
+        observer
+            .output(&self.sample())
+            .map_err(SolveError::Output)?;
+        let wants_steps = observer.wants_steps();
+        let mut unknowns = Vec::new();
         while self.state.t < self.settings.t_end {
             if interrupted(&self.interrupt) {
                 return Err(SolveError::Interrupted {
@@ -540,12 +539,55 @@ impl Simulation {
                 });
             }
             let target = self.control.target(&self.settings);
-            self.step()?;
+            let info = self.step()?;
+            if wants_steps {
+                self.step_unknowns(&mut unknowns);
+                let record = StepRecord {
+                    index: self.stats.steps,
+                    start: &self.integrator.saved,
+                    unknowns: &unknowns,
+                    end: &self.state,
+                    info: &info,
+                };
+                observer.step(&record).map_err(SolveError::Output)?;
+            }
             if self.settings.output_interval == 0.0 || self.state.t == target {
-                output(self).map_err(SolveError::Output)?;
+                observer
+                    .output(&self.sample())
+                    .map_err(SolveError::Output)?;
             }
         }
         Ok(self.stats)
+    }
+
+    /// The current point of the run, for observers.
+    pub fn sample(&self) -> Sample<'_> {
+        Sample {
+            model: &self.model,
+            data: &self.data,
+            state: &self.state,
+            at: self.state.t,
+        }
+    }
+
+    /// The converged unknowns of the last step in the layout of the Newton vector:
+    /// increments, scaled multipliers `mu = s lambda` and stabilization unknowns.
+    fn step_unknowns(&self, x: &mut Vec<f64>) {
+        let layout = &self.data.layout;
+        let it = &self.integrator;
+        let h = self.state.t - it.saved.t;
+        let scale = 1.0 / (self.params.beta_prime(h) * self.mass);
+        x.clear();
+        x.extend_from_slice(&it.increments);
+        x.extend(
+            layout
+                .active_rows
+                .iter()
+                .map(|&r| scale * self.state.lambda[r]),
+        );
+        if layout.stabilized {
+            x.extend_from_slice(&it.zeta);
+        }
     }
 
     /// Takes one step toward the next output time (or the end), reducing the step size

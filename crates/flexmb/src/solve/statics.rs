@@ -28,6 +28,7 @@ use crate::elements::{Coefficients, NodeState};
 use crate::error::{SettingsError, SolveError};
 use crate::model::limits::within;
 use crate::model::Model;
+use crate::observe::{Observer, Sample};
 use crate::sensors::node_states;
 use crate::state::State;
 use flexmb_lie::Vec6;
@@ -510,11 +511,8 @@ impl Statics {
 
     /// Runs to the final load factor, calling `output` at `lambda = 0` and after every
     /// converged load step.
-    pub fn run(
-        &mut self,
-        output: &mut dyn FnMut(&Statics) -> Result<(), String>,
-    ) -> Result<StaticStats, SolveError> {
-        output(self).map_err(SolveError::Output)?;
+    pub fn run(&mut self, output: &mut dyn Observer) -> Result<StaticStats, SolveError> {
+        output.output(&self.sample()).map_err(SolveError::Output)?;
         let result = match self.settings.method {
             StaticMethod::LoadControl => self.run_load_control(output),
             StaticMethod::ArcLength => self.run_arc_length(output),
@@ -526,10 +524,7 @@ impl Statics {
         result.map(|()| self.stats)
     }
 
-    fn run_load_control(
-        &mut self,
-        output: &mut dyn FnMut(&Statics) -> Result<(), String>,
-    ) -> Result<(), SolveError> {
+    fn run_load_control(&mut self, output: &mut dyn Observer) -> Result<(), SolveError> {
         let s = self.settings;
         let mut inc = s.initial_increment.min(s.max_increment);
         let target = s.load_factor;
@@ -557,7 +552,7 @@ impl Statics {
                         self.load_factor + step
                     };
                     self.stats.steps += 1;
-                    output(self).map_err(SolveError::Output)?;
+                    output.output(&self.sample()).map_err(SolveError::Output)?;
                     if s.adaptive {
                         if iterations <= s.target_iterations / 2 {
                             inc = (inc * 1.5).min(s.max_increment);
@@ -577,6 +572,16 @@ impl Statics {
             }
         }
         Ok(())
+    }
+
+    /// The current point of the analysis, for observers (`at` is the load factor).
+    pub fn sample(&self) -> Sample<'_> {
+        Sample {
+            model: &self.model,
+            data: &self.data,
+            state: &self.state,
+            at: self.load_factor,
+        }
     }
 
     fn check_interrupt(&self) -> Result<(), SolveError> {
@@ -669,10 +674,7 @@ impl Statics {
             .map(|(iterations, _, _)| iterations)
     }
 
-    fn run_arc_length(
-        &mut self,
-        output: &mut dyn FnMut(&Statics) -> Result<(), String>,
-    ) -> Result<(), SolveError> {
+    fn run_arc_length(&mut self, output: &mut dyn Observer) -> Result<(), SolveError> {
         let s = self.settings;
         let target = s.load_factor;
         let mut dl = s.arc_length;
@@ -705,12 +707,12 @@ impl Statics {
                             self.load_factor = lambda0 + dlambda;
                         }
                         self.stats.steps += 1;
-                        output(self).map_err(SolveError::Output)?;
+                        output.output(&self.sample()).map_err(SolveError::Output)?;
                         break;
                     }
                     self.stats.steps += 1;
                     self.load_factor = lambda0 + dlambda;
-                    output(self).map_err(SolveError::Output)?;
+                    output.output(&self.sample()).map_err(SolveError::Output)?;
                     previous = Some(dq);
                     let ratio = (s.target_iterations as f64 / iterations.max(1) as f64).sqrt();
                     dl = (dl * ratio.clamp(0.5, 2.0)).min(dl_max);
@@ -811,10 +813,7 @@ impl Statics {
     /// load factor over `pseudo_time`, then held for as long again to settle. Each step is
     /// reported as a load step as soon as it is computed, so a run that fails or is
     /// interrupted keeps every completed step.
-    fn run_pseudo_dynamic(
-        &mut self,
-        output: &mut dyn FnMut(&Statics) -> Result<(), String>,
-    ) -> Result<(), SolveError> {
+    fn run_pseudo_dynamic(&mut self, output: &mut dyn Observer) -> Result<(), SolveError> {
         let s = self.settings;
         let t_ramp = s.pseudo_time;
         let mut d = super::DynamicSettings::new(2.0 * t_ramp, s.initial_increment * t_ramp);
@@ -829,17 +828,17 @@ impl Statics {
         let mut sim = super::Simulation::new(&self.model, d)?;
         sim.interrupt.clone_from(&self.interrupt);
         let mut last_speed = 0.0f64;
-        let result = sim.run(&mut |sim| {
+        let result = sim.run(&mut |sim: &Sample| {
             if sim.state.t == 0.0 {
                 return Ok(()); // the start was reported by `run`
             }
             last_speed = sim.state.v.iter().fold(0.0f64, |m, v| m.max(v.norm()));
-            self.state.clone_from(&sim.state);
+            self.state.clone_from(sim.state);
             for v in self.state.v.iter_mut() {
                 *v = Vec6::zeros();
             }
             self.load_factor = d.load_factor_at(sim.state.t);
-            output(self)
+            output.output(&self.sample())
         });
         self.stats.steps += sim.stats.steps;
         self.stats.newton_iterations += sim.stats.newton_iterations;

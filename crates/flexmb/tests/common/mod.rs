@@ -86,7 +86,7 @@ pub fn run_model(
     let mut sim = Simulation::new(model, settings)?;
     let mut sensors = SensorEvaluator::new(model);
     let mut rows = Vec::new();
-    let result = sim.run(&mut |s| {
+    let result = sim.run(&mut |s: &flexmb::observe::Sample| {
         rows.push((s.state.t, sensors.evaluate(&s.model, &s.data, &s.state)));
         Ok(())
     });
@@ -127,8 +127,8 @@ pub fn run_static(name: &str, overrides: &[&str]) -> History {
     let mut sensors = SensorEvaluator::new(model);
     let mut rows = Vec::new();
     let stats = statics
-        .run(&mut |s| {
-            rows.push((s.load_factor, sensors.evaluate(&s.model, &s.data, &s.state)));
+        .run(&mut |s: &flexmb::observe::Sample| {
+            rows.push((s.at, sensors.evaluate(&s.model, &s.data, &s.state)));
             Ok(())
         })
         .unwrap_or_else(|e| panic!("{name}: {e}"));
