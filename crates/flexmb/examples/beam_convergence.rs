@@ -54,7 +54,7 @@ fn run(example: &str, overrides: &[String]) -> Run {
             let mut sim = Simulation::new(model, settings).unwrap_or_else(|e| panic!("{e}"));
             let stats = sim
                 .run(&mut |s: &flexmb::observe::Sample| {
-                    rows.push((s.state.t, sensors.evaluate(&s.model, &s.data, &s.state)));
+                    rows.push((s.state.t, sensors.evaluate(s.model, s.data, s.state)));
                     Ok(())
                 })
                 .unwrap_or_else(|e| panic!("{example} {overrides:?}: {e}"));
@@ -64,7 +64,7 @@ fn run(example: &str, overrides: &[String]) -> Run {
             let mut statics = Statics::new(model, settings).unwrap_or_else(|e| panic!("{e}"));
             let stats = statics
                 .run(&mut |s: &flexmb::observe::Sample| {
-                    rows.push((s.at, sensors.evaluate(&s.model, &s.data, &s.state)));
+                    rows.push((s.at, sensors.evaluate(s.model, s.data, s.state)));
                     Ok(())
                 })
                 .unwrap_or_else(|e| panic!("{example} {overrides:?}: {e}"));

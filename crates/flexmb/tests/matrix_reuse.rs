@@ -218,7 +218,7 @@ fn every_example_passes_verify_and_matches_full_newton() {
                 let mut sensors = SensorEvaluator::new(&file.model);
                 statics
                     .run(&mut |s: &flexmb::observe::Sample| {
-                        sensors.evaluate(&s.model, &s.data, &s.state);
+                        sensors.evaluate(s.model, s.data, s.state);
                         Ok(())
                     })
                     .expect("runs");

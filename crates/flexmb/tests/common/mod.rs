@@ -87,7 +87,7 @@ pub fn run_model(
     let mut sensors = SensorEvaluator::new(model);
     let mut rows = Vec::new();
     let result = sim.run(&mut |s: &flexmb::observe::Sample| {
-        rows.push((s.state.t, sensors.evaluate(&s.model, &s.data, &s.state)));
+        rows.push((s.state.t, sensors.evaluate(s.model, s.data, s.state)));
         Ok(())
     });
     let stats = result?;
@@ -128,7 +128,7 @@ pub fn run_static(name: &str, overrides: &[&str]) -> History {
     let mut rows = Vec::new();
     let stats = statics
         .run(&mut |s: &flexmb::observe::Sample| {
-            rows.push((s.at, sensors.evaluate(&s.model, &s.data, &s.state)));
+            rows.push((s.at, sensors.evaluate(s.model, s.data, s.state)));
             Ok(())
         })
         .unwrap_or_else(|e| panic!("{name}: {e}"));
