@@ -10,12 +10,13 @@
 //!
 //! | module | what lives there |
 //! |---|---|
-//! | [`model`] | the immutable [`Model`]: nodes, bodies, joints, loads, springs, sensors |
+//! | [`model`] | the immutable [`Model`]: nodes, bodies, joints, loads, springs, sensors; [`model::Parameters`], its parameters by path |
 //! | [`state`] | the [`State`]: q, v, vdot, a, lambda |
 //! | [`data`] | [`Data`]: numbering of unknowns, sparsity pattern, scratch, linear solver |
-//! | [`elements`] | force elements (rigid body, load, spring) behind one small trait |
+//! | [`elements`] | force elements (rigid body, beam, load, spring) behind small capability traits |
 //! | [`joints`] | holonomic constraints built from two primitives |
 //! | [`assembly`] | the Newton system from element and joint contributions |
+//! | [`parameter_derivatives`] | derivatives of the equations with respect to model parameters |
 //! | [`solve`] | generalized-alpha, initial conditions, Newton, linear solver |
 //! | [`sensors`] | output channels |
 //! | [`input`] | the TOML model file |
@@ -35,6 +36,7 @@ pub mod joints;
 pub mod model;
 pub mod observe;
 pub mod output;
+pub mod parameter_derivatives;
 pub mod sensors;
 pub mod solve;
 pub mod state;

@@ -27,8 +27,9 @@ fn pair(nodes: &[NodeState], slots: [Option<crate::model::NodeId>; 2]) -> [NodeS
     ]
 }
 
-/// Kinetic and potential energy of the whole model \[J\].
-pub fn energies(model: &Model, state: &State) -> (f64, f64) {
+/// Kinetic and potential energy of the whole model \[J\]; `elements` are the model's force
+/// elements ([`ElementRef::all`], e.g. those of [`crate::data::Layout`]).
+pub fn energies(model: &Model, elements: &[ElementRef], state: &State) -> (f64, f64) {
     let nodes = node_states(state);
     let ctx = Context {
         model,
@@ -39,7 +40,7 @@ pub fn energies(model: &Model, state: &State) -> (f64, f64) {
     };
     let mut ke = 0.0;
     let mut pe = 0.0;
-    for e in ElementRef::all(model) {
+    for e in elements {
         let k = e.kernel(model);
         let p = pair(&nodes, k.nodes());
         ke += k.kinetic_energy(&ctx, &p);
@@ -139,7 +140,8 @@ impl SensorEvaluator {
                 SensorKind::KineticEnergy
                 | SensorKind::PotentialEnergy
                 | SensorKind::TotalEnergy => {
-                    let (ke, pe) = *energy.get_or_insert_with(|| energies(model, state));
+                    let (ke, pe) = *energy
+                        .get_or_insert_with(|| energies(model, &data.layout.elements, state));
                     match s.kind {
                         SensorKind::KineticEnergy => ke,
                         SensorKind::PotentialEnergy => pe,

@@ -1,8 +1,9 @@
 //! Every analytic derivative against central differences taken on the manifold
 //! (`q -> q exp(+-eps e_k)`, never `q +- eps e_k`): element tangents K, C, M; joint
-//! gradients B and their derivatives H; parameter derivatives. One shared checker serves all.
+//! gradients B and their derivatives H. One shared checker serves all. Parameter derivatives:
+//! `parameters_match_finite_differences.rs`.
 
-use flexmb::elements::{Coefficients, Context, ElementKernel, Mat12, NodeState, Parameter, Vec12};
+use flexmb::elements::{Coefficients, Context, ElementKernel, Mat12, NodeState, Vec12};
 use flexmb::joints;
 use flexmb::model::{
     Beam, BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, RigidBody,
@@ -322,76 +323,6 @@ fn joint_gradients_and_their_derivatives_match_finite_differences() {
                 }
             }
         }
-    }
-}
-
-#[test]
-fn parameter_derivatives_match_finite_differences() {
-    let mut rng = Lcg(5);
-    for model in models() {
-        let ctx = context(&model);
-        let nodes = [rng.node(model.group), rng.node(model.group)];
-        let body = RigidBody {
-            name: "b".into(),
-            node: NodeId(0),
-            mass: 2.5,
-            com: Vec3::new(0.3, -0.7, 0.2),
-            inertia: Mat3::from_diagonal(&Vec3::new(0.3, 0.4, 0.5)),
-        };
-        let spring = SpringDamper {
-            name: "s".into(),
-            node_a: Some(NodeId(0)),
-            node_b: Some(NodeId(1)),
-            point_a: Vec3::new(0.2, 0.1, -0.3),
-            point_b: Vec3::new(-0.1, 0.4, 0.2),
-            stiffness: 120.0,
-            damping: 3.5,
-            rest_length: 0.4,
-        };
-        let e = 1e-6;
-        let fd = |f: &dyn Fn(f64) -> Vec12, p: f64| (f(p + e) - f(p - e)) / (2.0 * e);
-        let eval_body = |m: f64| {
-            let mut b = body.clone();
-            b.mass = m;
-            let mut r = Vec12::zeros();
-            b.evaluate(&ctx, &nodes, &mut r, None);
-            r
-        };
-        let mut dr = Vec12::zeros();
-        assert!(body.parameter_derivative(&ctx, &Parameter::BodyMass("b".into()), &nodes, &mut dr));
-        assert!((dr - fd(&eval_body, body.mass)).norm() < 1e-6 * (1.0 + dr.norm()));
-        for (param, which) in [
-            (Parameter::SpringStiffness("s".into()), 0),
-            (Parameter::SpringDamping("s".into()), 1),
-        ] {
-            let eval = |p: f64| {
-                let mut s = spring.clone();
-                if which == 0 {
-                    s.stiffness = p
-                } else {
-                    s.damping = p
-                }
-                let mut r = Vec12::zeros();
-                s.evaluate(&ctx, &nodes, &mut r, None);
-                r
-            };
-            let p0 = if which == 0 {
-                spring.stiffness
-            } else {
-                spring.damping
-            };
-            assert!(spring.parameter_derivative(&ctx, &param, &nodes, &mut dr));
-            assert!(
-                (dr - fd(&eval, p0)).norm() < 1e-6 * (1.0 + dr.norm()),
-                "{param:?}"
-            );
-        }
-        assert!(!body.parameter_derivative(
-            &ctx,
-            &Parameter::BodyMass("other".into()),
-            &nodes,
-            &mut dr
-        ));
     }
 }
 

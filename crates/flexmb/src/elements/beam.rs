@@ -70,18 +70,36 @@
 //! differ by `O(L^2)`), on both mass models. Mass-proportional damping uses the same `M`.
 //! Beams need SE(3) nodes: on R3xSO(3) the model is rejected with a clear error (the relative
 //! motion `d` and its tangent operator are those of SE(3)).
+//!
+//! The mass matrix is not part of the model: [`mass_matrix`] computes it from the section,
+//! and the assembly evaluates a [`BeamElement`], the element with the matrix computed once
+//! (see [`super::ElementRef`]); evaluating a [`Beam`] alone computes it on the way.
+//!
+//! **Parameter derivatives** ([`SectionParam`]). `r` is linear in every section parameter:
+//! with `sigma_tot = C (epsilon + beta P v / L)` and `E` the unit symmetric matrix of the
+//! entry `(i, j)`,
+//!
+//! ```text
+//! dr/dC_ij   = P^T E (epsilon + beta P v / L)
+//! dr/drho A  = f_ine(M_A) - [ R_a^T g L/2 ; 0 ; R_b^T g L/2 ; 0 ]    M_A = M(rho A = 1, J = 0)
+//! dr/dJ_ij   = f_ine(M_J)                                              M_J = M(rho A = 0, J = E)
+//! dr/dalpha  = M v,      dr/dbeta = P^T C P v / L
+//! dr/dg_k    = -[ R_a^T e_k ; 0 ; R_b^T e_k ; 0 ] rho A L / 2
+//! ```
+//!
+//! with `f_ine(M) = M vdot + alpha M v - [ ad(v_a)^T (M v)_a ; ad(v_b)^T (M v)_b ]` (gravity
+//! and the applied-load terms times the load factor). The damping terms are evaluated only
+//! for `alpha > 0`, `beta > 0`: at 0 these are the derivatives from above.
 
 use super::rigid_body::momentum_jacobian;
-use super::{Coefficients, Context, ElementKernel, Mat12, NodeState, Vec12};
+use super::{
+    Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Mat12, NodeState,
+    Vec12,
+};
+use crate::model::parameters::SectionParam;
 use crate::model::{Beam, BeamMass, NodeId};
 use flexmb_lie::{se3, so3::hat, Frame, Mat3, Mat6, Vec3, Vec6};
 use nalgebra::SMatrix;
-
-/// Length of the element axis for a reference relative motion `d_0` (the translation part,
-/// which the SE(3) interpolation travels at constant speed).
-pub fn arc_length(d0: &Vec6) -> f64 {
-    d0.fixed_rows::<3>(0).norm()
-}
 
 /// `blockdiag(O^T, O^T)`: maps a node variation to a section-frame variation.
 fn offset_map(o: &Mat3) -> Mat6 {
@@ -100,14 +118,20 @@ const GAUSS5: [(f64, f64); 5] = [
     (0.953_089_922_969_332, 0.118_463_442_528_095),
 ];
 
-/// Element mass matrix in the nodes' body velocities (see the module documentation).
+/// Element mass matrix in the nodes' body velocities `[v_a; v_b]` (12 x 12, see the module
+/// documentation), from the section, the geometry and `mass_kind`.
 pub fn mass_matrix(beam: &Beam) -> Mat12 {
     let sec = &beam.section;
+    mass_matrix_with(beam, sec.mass_per_length, &sec.rotary_inertia)
+}
+
+/// [`mass_matrix`] with the mass per length and the rotary inertia given (it is linear in
+/// them).
+pub fn mass_matrix_with(beam: &Beam, mass_per_length: f64, rotary_inertia: &Mat3) -> Mat12 {
     let mut ms = Mat6::zeros();
     ms.fixed_view_mut::<3, 3>(0, 0)
-        .copy_from(&(Mat3::identity() * sec.mass_per_length));
-    ms.fixed_view_mut::<3, 3>(3, 3)
-        .copy_from(&sec.rotary_inertia);
+        .copy_from(&(Mat3::identity() * mass_per_length));
+    ms.fixed_view_mut::<3, 3>(3, 3).copy_from(rotary_inertia);
     let (aa, ab) = (offset_map(&beam.offset_a), offset_map(&beam.offset_b));
     let l = beam.length;
     let mut m = Mat12::zeros();
@@ -187,11 +211,41 @@ impl Beam {
             * ctx.model.gravity
             * (0.5 * self.length * self.section.mass_per_length * ctx.gravity_scale)
     }
+
+    /// `P = [ -T^-1(-d) A_a, T^-1(d) A_b ]` (6 x 12): `delta d = P [w_a; w_b]`.
+    fn projection(&self, d: &Vec6, aa: &Mat6, ab: &Mat6) -> SMatrix<f64, 6, 12> {
+        let mut p = SMatrix::<f64, 6, 12>::zeros();
+        p.fixed_view_mut::<6, 6>(0, 0)
+            .copy_from(&(-se3::tangent_inv(&(-d)) * aa));
+        p.fixed_view_mut::<6, 6>(0, 6)
+            .copy_from(&(se3::tangent_inv(d) * ab));
+        p
+    }
 }
 
-impl ElementKernel for Beam {
+/// Velocities (`what = 'v'`) or accelerations of both nodes, `[node a; node b]`.
+fn stack(nodes: &[NodeState; 2], what: char) -> Vec12 {
+    let mut out = Vec12::zeros();
+    for (end, n) in nodes.iter().enumerate() {
+        let x = if what == 'v' { &n.v } else { &n.vdot };
+        out.fixed_rows_mut::<6>(6 * end).copy_from(x);
+    }
+    out
+}
+
+/// A beam element with its mass matrix (12 x 12, in the nodes' body velocities), as the
+/// assembly evaluates it.
+#[derive(Clone, Copy, Debug)]
+pub struct BeamElement<'m> {
+    pub beam: &'m Beam,
+    /// [`mass_matrix`] of `beam`.
+    pub mass: &'m Mat12,
+}
+
+impl ElementKernel for BeamElement<'_> {
     fn nodes(&self) -> [Option<NodeId>; 2] {
-        [Some(self.nodes[0]), Some(self.nodes[1])]
+        let b = self.beam;
+        [Some(b.nodes[0]), Some(b.nodes[1])]
     }
 
     fn evaluate(
@@ -201,18 +255,13 @@ impl ElementKernel for Beam {
         r: &mut Vec12,
         s: Option<(&Coefficients, &mut Mat12)>,
     ) {
-        let st = self.state(nodes);
-        let (aa, ab) = (offset_map(&self.offset_a), offset_map(&self.offset_b));
-        let mut p = SMatrix::<f64, 6, 12>::zeros();
-        p.fixed_view_mut::<6, 6>(0, 0)
-            .copy_from(&(-se3::tangent_inv(&(-st.d)) * aa));
-        p.fixed_view_mut::<6, 6>(0, 6)
-            .copy_from(&(se3::tangent_inv(&st.d) * ab));
-        let (alpha, beta) = (self.section.damping_mass, self.section.damping_stiffness);
-        let mut v = Vec12::zeros();
-        v.fixed_rows_mut::<6>(0).copy_from(&nodes[0].v);
-        v.fixed_rows_mut::<6>(6).copy_from(&nodes[1].v);
-        let c_over_l = self.section.stiffness / self.length;
+        let b = self.beam;
+        let st = b.state(nodes);
+        let (aa, ab) = (offset_map(&b.offset_a), offset_map(&b.offset_b));
+        let p = b.projection(&st.d, &aa, &ab);
+        let (alpha, beta) = (b.section.damping_mass, b.section.damping_stiffness);
+        let v = stack(nodes, 'v');
+        let c_over_l = b.section.stiffness / b.length;
         // total stress resultants: elastic plus stiffness-proportional damping
         let sigma = if beta > 0.0 {
             st.stress + c_over_l * (p * v) * beta
@@ -222,10 +271,8 @@ impl ElementKernel for Beam {
         *r = p.transpose() * sigma;
 
         // Inertia and gravity (module documentation).
-        let mut vdot = Vec12::zeros();
-        vdot.fixed_rows_mut::<6>(0).copy_from(&nodes[0].vdot);
-        vdot.fixed_rows_mut::<6>(6).copy_from(&nodes[1].vdot);
-        let mm = &self.mass;
+        let vdot = stack(nodes, 'a');
+        let mm = self.mass;
         let momentum = mm * v;
         *r += mm * vdot;
         if alpha > 0.0 {
@@ -234,7 +281,7 @@ impl ElementKernel for Beam {
         let mut weights = [Vec3::zeros(); 2];
         for end in 0..2 {
             let pe = momentum.fixed_rows::<6>(6 * end).into_owned();
-            let we = self.half_weight(ctx, &nodes[end]);
+            let we = b.half_weight(ctx, &nodes[end]);
             weights[end] = we;
             let mut re = r.fixed_rows_mut::<6>(6 * end);
             re -= se3::ad(&nodes[end].v).transpose() * pe;
@@ -278,19 +325,149 @@ impl ElementKernel for Beam {
     }
 
     fn kinetic_energy(&self, _ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        let mut v = Vec12::zeros();
-        v.fixed_rows_mut::<6>(0).copy_from(&nodes[0].v);
-        v.fixed_rows_mut::<6>(6).copy_from(&nodes[1].v);
+        let v = stack(nodes, 'v');
         0.5 * v.dot(&(self.mass * v))
     }
 
     fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        let st = self.state(nodes);
-        let half_mass = 0.5 * self.length * self.section.mass_per_length * ctx.gravity_scale;
+        let b = self.beam;
+        let st = b.state(nodes);
+        let half_mass = 0.5 * b.length * b.section.mass_per_length * ctx.gravity_scale;
         let gravity: f64 = nodes
             .iter()
             .map(|n| -half_mass * ctx.model.gravity.dot(&n.q.x))
             .sum();
-        0.5 * self.length * st.strain.dot(&st.stress) + gravity
+        0.5 * b.length * st.strain.dot(&st.stress) + gravity
+    }
+}
+
+/// A beam alone: the [`BeamElement`] with the mass matrix computed at each call.
+impl ElementKernel for Beam {
+    fn nodes(&self) -> [Option<NodeId>; 2] {
+        [Some(self.nodes[0]), Some(self.nodes[1])]
+    }
+
+    fn evaluate(
+        &self,
+        ctx: &Context,
+        nodes: &[NodeState; 2],
+        r: &mut Vec12,
+        s: Option<(&Coefficients, &mut Mat12)>,
+    ) {
+        let mass = mass_matrix(self);
+        BeamElement {
+            beam: self,
+            mass: &mass,
+        }
+        .evaluate(ctx, nodes, r, s);
+    }
+
+    fn kinetic_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
+        let mass = mass_matrix(self);
+        BeamElement {
+            beam: self,
+            mass: &mass,
+        }
+        .kinetic_energy(ctx, nodes)
+    }
+
+    fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
+        let mass = Mat12::zeros(); // not used by the potential energy
+        BeamElement {
+            beam: self,
+            mass: &mass,
+        }
+        .potential_energy(ctx, nodes)
+    }
+}
+
+/// Inertia forces of a mass matrix `mm` with mass-proportional damping `alpha`:
+/// `M vdot + alpha M v - [ ad(v_a)^T (M v)_a ; ad(v_b)^T (M v)_b ]`.
+fn inertia_forces(mm: &Mat12, alpha: f64, nodes: &[NodeState; 2]) -> Vec12 {
+    let momentum = mm * stack(nodes, 'v');
+    let mut f = mm * stack(nodes, 'a');
+    if alpha > 0.0 {
+        f += momentum * alpha;
+    }
+    for end in 0..2 {
+        let pe = momentum.fixed_rows::<6>(6 * end).into_owned();
+        let mut fe = f.fixed_rows_mut::<6>(6 * end);
+        fe -= se3::ad(&nodes[end].v).transpose() * pe;
+    }
+    f
+}
+
+/// The unit symmetric matrix of entry `(i, j)`.
+fn unit_symmetric<const N: usize>(i: usize, j: usize) -> SMatrix<f64, N, N> {
+    let mut e = SMatrix::<f64, N, N>::zeros();
+    e[(i, j)] = 1.0;
+    e[(j, i)] = 1.0;
+    e
+}
+
+impl ElementParameters for Beam {
+    type Param = SectionParam;
+
+    fn parameter_derivative(
+        &self,
+        ctx: &Context,
+        p: SectionParam,
+        nodes: &[NodeState; 2],
+        dr: &mut Vec12,
+    ) -> DerivativeMethod {
+        let sec = &self.section;
+        let (alpha, beta) = (sec.damping_mass, sec.damping_stiffness);
+        // P v / L and P, when the stiffness terms need them
+        let rate = || {
+            let st = self.state(nodes);
+            let (aa, ab) = (offset_map(&self.offset_a), offset_map(&self.offset_b));
+            let p = self.projection(&st.d, &aa, &ab);
+            let pv = p * stack(nodes, 'v') / self.length;
+            (st, p, pv)
+        };
+        *dr = match p {
+            SectionParam::Stiffness(i, j) => {
+                let (st, p, pv) = rate();
+                let e = unit_symmetric::<6>(i, j);
+                let strain = if beta > 0.0 {
+                    st.strain + pv * beta
+                } else {
+                    st.strain
+                };
+                p.transpose() * (e * strain)
+            }
+            SectionParam::DampingStiffness => {
+                let (_, p, pv) = rate();
+                p.transpose() * (sec.stiffness * pv)
+            }
+            SectionParam::MassPerLength => {
+                let m = mass_matrix_with(self, 1.0, &Mat3::zeros());
+                let mut f = inertia_forces(&m, alpha, nodes);
+                for end in 0..2 {
+                    let w = nodes[end].q.r.transpose()
+                        * ctx.model.gravity
+                        * (0.5 * self.length * ctx.gravity_scale);
+                    let mut fe = f.fixed_rows_mut::<3>(6 * end);
+                    fe -= w;
+                }
+                f
+            }
+            SectionParam::RotaryInertia(i, j) => {
+                let m = mass_matrix_with(self, 0.0, &unit_symmetric::<3>(i, j));
+                inertia_forces(&m, alpha, nodes)
+            }
+            SectionParam::DampingMass => mass_matrix(self) * stack(nodes, 'v'),
+        };
+        DerivativeMethod::Analytic
+    }
+
+    fn gravity_derivative(&self, ctx: &Context, k: usize, nodes: &[NodeState; 2], dr: &mut Vec12) {
+        let mut e = Vec3::zeros();
+        e[k] = -0.5 * self.length * self.section.mass_per_length * ctx.gravity_scale;
+        dr.fill(0.0);
+        for end in 0..2 {
+            let w = nodes[end].q.r.transpose() * e;
+            dr.fixed_rows_mut::<3>(6 * end).copy_from(&w);
+        }
     }
 }

@@ -7,10 +7,35 @@
 //! ```
 //! converted to group coordinates by [`super::physical::to_group`].
 //! Géradin & Cardona 2001, Sect. 6.4 (follower loads).
+//!
+//! **Parameter derivatives** ([`LoadParam`]): `r` is linear in `F`, `M` and `f`, so `dr/dF_k`
+//! is `r` with `F = e_k, M = 0`, `dr/dM_k` is `r` with `F = 0, M = e_k`, and the derivative
+//! with respect to an amplitude `a` of the time function is `r` with `f` replaced by
+//! `df/da` ([`crate::model::TimeFunction::amplitude_derivative`]).
 
-use super::{physical, Coefficients, Context, ElementKernel, Mat12, NodeState, Vec12};
+use super::{
+    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Mat12,
+    NodeState, Vec12,
+};
+use crate::model::parameters::LoadParam;
 use crate::model::{Load, LoadFrame, NodeId};
-use flexmb_lie::so3::hat;
+use flexmb_lie::{so3::hat, Vec3};
+
+impl Load {
+    /// Physical residual of force `force` and torque `torque` scaled by `f` (module
+    /// documentation).
+    fn physical_residual(&self, force: &Vec3, torque: &Vec3, f: f64, n: &NodeState) -> Vec12 {
+        let rot = n.q.r;
+        let (rf, rm) = match self.frame {
+            LoadFrame::Inertial => (-force * f, -(rot.transpose() * torque) * f),
+            LoadFrame::Body => (-(rot * force) * f, -torque * f),
+        };
+        let mut r_p = Vec12::zeros();
+        r_p.fixed_rows_mut::<3>(0).copy_from(&rf);
+        r_p.fixed_rows_mut::<3>(3).copy_from(&rm);
+        r_p
+    }
+}
 
 impl ElementKernel for Load {
     fn nodes(&self) -> [Option<NodeId>; 2] {
@@ -53,5 +78,35 @@ impl ElementKernel for Load {
             r,
             s,
         );
+    }
+}
+
+impl ElementParameters for Load {
+    type Param = LoadParam;
+
+    fn parameter_derivative(
+        &self,
+        ctx: &Context,
+        p: LoadParam,
+        nodes: &[NodeState; 2],
+        dr: &mut Vec12,
+    ) -> DerivativeMethod {
+        let f = self.function.value(ctx.t) * ctx.load_scale;
+        let unit = |k: usize| {
+            let mut e = Vec3::zeros();
+            e[k] = 1.0;
+            e
+        };
+        let zero = Vec3::zeros();
+        let r_p = match p {
+            LoadParam::Force(k) => self.physical_residual(&unit(k), &zero, f, &nodes[0]),
+            LoadParam::Torque(k) => self.physical_residual(&zero, &unit(k), f, &nodes[0]),
+            LoadParam::Amplitude(a) => {
+                let df = self.function.amplitude_derivative(a, ctx.t).0 * ctx.load_scale;
+                self.physical_residual(&self.force, &self.torque, df, &nodes[0])
+            }
+        };
+        physical::to_group(ctx.group, nodes, [true, false], &r_p, None, None, dr, None);
+        DerivativeMethod::Analytic
     }
 }

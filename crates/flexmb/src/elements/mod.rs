@@ -14,9 +14,11 @@
 //! S = c_m M + c_c C_t + c_k K_t T,     M = dr/dvdot, C_t = dr/dv, K_t = dr/dw (q -> q exp(w)),
 //! ```
 //!
-//! where `T` is the tangent operator of each node's increment, and derivatives of `r` with
-//! respect to named model parameters for sensitivity analysis. One trait,
-//! [`ElementKernel`], serves simulation, statics and sensitivities.
+//! where `T` is the tangent operator of each node's increment. One trait, [`ElementKernel`],
+//! serves simulation and statics; a second, [`ElementParameters`], gives the derivatives
+//! `dr/dp` with respect to the element's own parameters
+//! ([`crate::model::parameters`]) that sensitivity analysis needs
+//! ([`crate::parameter_derivatives`]).
 //!
 //! Elements written most naturally in "physical" coordinates (inertial translation
 //! variation, body rotation variation) are converted to the group's coordinates by
@@ -31,6 +33,7 @@ pub mod spring;
 use crate::model::{Model, NodeId};
 use flexmb_lie::{Frame, Group, Mat6, Vec3, Vec6};
 use nalgebra::{SMatrix, SVector};
+use std::sync::Arc;
 
 /// Local vector of a two-node element: `[node a (6), node b (6)]`.
 pub type Vec12 = SVector<f64, 12>;
@@ -97,22 +100,16 @@ pub struct Context<'a> {
     pub load_scale: f64,
 }
 
-/// A named model parameter an element's residual may depend on.
+/// The built-in force elements (enum dispatch), each with what it derives from the model
+/// once: a beam element carries its mass matrix (computed from its section by
+/// [`beam::mass_matrix`]), so that a [`Model`] holds no derived data. Built by
+/// [`ElementRef::all`] with the [`crate::data::Layout`]: it belongs to that model as it was
+/// then.
 #[derive(Clone, Debug, PartialEq)]
-pub enum Parameter {
-    /// Mass of the named body.
-    BodyMass(String),
-    /// Stiffness of the named spring.
-    SpringStiffness(String),
-    /// Damping of the named spring.
-    SpringDamping(String),
-}
-
-/// The built-in force elements (enum dispatch).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ElementRef {
     Body(usize),
-    Beam(usize),
+    /// Index in [`Model::beams`] and the element's mass matrix.
+    Beam(usize, Arc<Mat12>),
     Load(usize),
     Spring(usize),
 }
@@ -130,16 +127,6 @@ pub trait ElementKernel {
         r: &mut Vec12,
         s: Option<(&Coefficients, &mut Mat12)>,
     );
-    /// `dr/dp` for a parameter; `false` if the residual does not depend on it.
-    fn parameter_derivative(
-        &self,
-        _ctx: &Context,
-        _param: &Parameter,
-        _nodes: &[NodeState; 2],
-        _dr: &mut Vec12,
-    ) -> bool {
-        false
-    }
     /// Kinetic energy \[J\].
     fn kinetic_energy(&self, _ctx: &Context, _nodes: &[NodeState; 2]) -> f64 {
         0.0
@@ -151,32 +138,38 @@ pub trait ElementKernel {
 }
 
 impl ElementRef {
-    /// All force elements of a model.
+    /// All force elements of a model (beam mass matrices computed here).
     pub fn all(model: &Model) -> Vec<ElementRef> {
         let mut out: Vec<ElementRef> = (0..model.bodies.len()).map(ElementRef::Body).collect();
-        out.extend((0..model.beams.len()).map(ElementRef::Beam));
+        out.extend(
+            (model.beams.iter().enumerate())
+                .map(|(i, b)| ElementRef::Beam(i, Arc::new(beam::mass_matrix(b)))),
+        );
         out.extend((0..model.loads.len()).map(ElementRef::Load));
         out.extend((0..model.springs.len()).map(ElementRef::Spring));
         out
     }
 
     /// The kernel of this element.
-    pub fn kernel<'m>(&self, model: &'m Model) -> Kernel<'m> {
-        match *self {
-            ElementRef::Body(i) => Kernel::Body(&model.bodies[i]),
-            ElementRef::Beam(i) => Kernel::Beam(&model.beams[i]),
-            ElementRef::Load(i) => Kernel::Load(&model.loads[i]),
-            ElementRef::Spring(i) => Kernel::Spring(&model.springs[i]),
+    pub fn kernel<'m>(&'m self, model: &'m Model) -> Kernel<'m> {
+        match self {
+            ElementRef::Body(i) => Kernel::Body(&model.bodies[*i]),
+            ElementRef::Beam(i, mass) => Kernel::Beam(beam::BeamElement {
+                beam: &model.beams[*i],
+                mass,
+            }),
+            ElementRef::Load(i) => Kernel::Load(&model.loads[*i]),
+            ElementRef::Spring(i) => Kernel::Spring(&model.springs[*i]),
         }
     }
 
     /// Name for diagnostics, e.g. `body 'crank'`.
     pub fn describe(&self, model: &Model) -> String {
-        match *self {
-            ElementRef::Body(i) => format!("body '{}'", model.bodies[i].name),
-            ElementRef::Beam(i) => format!("beam element '{}'", model.beams[i].name),
-            ElementRef::Load(i) => format!("load '{}'", model.loads[i].name),
-            ElementRef::Spring(i) => format!("spring '{}'", model.springs[i].name),
+        match self {
+            ElementRef::Body(i) => format!("body '{}'", model.bodies[*i].name),
+            ElementRef::Beam(i, _) => format!("beam element '{}'", model.beams[*i].name),
+            ElementRef::Load(i) => format!("load '{}'", model.loads[*i].name),
+            ElementRef::Spring(i) => format!("spring '{}'", model.springs[*i].name),
         }
     }
 }
@@ -184,7 +177,7 @@ impl ElementRef {
 /// Borrowed kernel of a built-in element.
 pub enum Kernel<'m> {
     Body(&'m crate::model::RigidBody),
-    Beam(&'m crate::model::Beam),
+    Beam(beam::BeamElement<'m>),
     Load(&'m crate::model::Load),
     Spring(&'m crate::model::SpringDamper),
 }
@@ -213,15 +206,6 @@ impl ElementKernel for Kernel<'_> {
     ) {
         dispatch!(self, k => k.evaluate(ctx, nodes, r, s))
     }
-    fn parameter_derivative(
-        &self,
-        ctx: &Context,
-        param: &Parameter,
-        nodes: &[NodeState; 2],
-        dr: &mut Vec12,
-    ) -> bool {
-        dispatch!(self, k => k.parameter_derivative(ctx, param, nodes, dr))
-    }
     fn kinetic_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
         dispatch!(self, k => k.kinetic_energy(ctx, nodes))
     }
@@ -238,4 +222,68 @@ pub fn point_velocity(group: Group, node: &NodeState, p: &Vec3) -> Vec3 {
         Group::SE3 => node.q.r * u,
     };
     origin + node.q.r * om.cross(p)
+}
+
+/// How a parameter derivative was obtained.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DerivativeMethod {
+    /// From the formula (exact up to round-off).
+    Analytic,
+    /// Central difference on a perturbed copy of one element or joint
+    /// ([`central_difference`], [`crate::joints::parameters`]).
+    FiniteDifference,
+}
+
+/// The parameter-derivative capability of a force element: `dr/dp` for the element's own
+/// parameters ([`crate::model::parameters`]) and for gravity, at given node kinematics.
+/// Analytic where the element implements it, otherwise the [`central_difference`] default.
+pub trait ElementParameters: ElementKernel {
+    /// The element's parameters.
+    type Param: Copy;
+    /// `dr/dp` (12 entries like the residual, group coordinates, overwritten).
+    fn parameter_derivative(
+        &self,
+        ctx: &Context,
+        p: Self::Param,
+        nodes: &[NodeState; 2],
+        dr: &mut Vec12,
+    ) -> DerivativeMethod;
+    /// `dr/dg_k`, component `k` of gravity (overwritten; zero for massless elements).
+    fn gravity_derivative(
+        &self,
+        _ctx: &Context,
+        _k: usize,
+        _nodes: &[NodeState; 2],
+        dr: &mut Vec12,
+    ) {
+        dr.fill(0.0);
+    }
+}
+
+/// Relative step of [`central_difference`]: about the cube root of the machine epsilon,
+/// which balances the round-off error (`eps / h`) against the `O(h^2)` truncation error of a
+/// central difference.
+pub const FD_STEP: f64 = 6e-6;
+
+/// The finite-difference default of [`ElementParameters::parameter_derivative`]:
+/// `dr/dp = (r(p + h) - r(p - h)) / 2h` on two copies of `element` with the parameter set by
+/// `set`, `h = FD_STEP max(|p|, scale)` (`scale`: a typical magnitude of the parameter).
+pub fn central_difference<E: ElementKernel + Clone>(
+    element: &E,
+    ctx: &Context,
+    nodes: &[NodeState; 2],
+    (value, scale): (f64, f64),
+    set: impl Fn(&mut E, f64),
+    dr: &mut Vec12,
+) -> DerivativeMethod {
+    let h = FD_STEP * value.abs().max(scale);
+    let r = |v: f64| {
+        let mut copy = element.clone();
+        set(&mut copy, v);
+        let mut out = Vec12::zeros();
+        copy.evaluate(ctx, nodes, &mut out, None);
+        out
+    };
+    *dr = (r(value + h) - r(value - h)) / (2.0 * h);
+    DerivativeMethod::FiniteDifference
 }

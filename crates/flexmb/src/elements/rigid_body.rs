@@ -25,8 +25,27 @@
 //! K_t = [[0, -m R tilde(c)], [0, tilde(X) (tilde(b) - m tilde(c))]].
 //! ```
 //! With `X = 0` both reduce to the classical Newton-Euler equations.
+//!
+//! **Parameter derivatives** ([`BodyParam`]). `r` is linear in `(m, J_c)` jointly (gravity
+//! included), so `dr/dm` is `r` with `m = 1, J_c = 0` and `dr/dJ_c` (entry `(i, j)` and
+//! `(j, i)`, `E = e_i e_j^T + e_j e_i^T`, or `e_i e_i^T`) is `r` with `m = 0, J_c = E`. With
+//! `E_k = tilde(e_k)`, the derivative with respect to the centre of mass `X_k` is, on SE(3),
+//!
+//! ```text
+//! dr/dX_k = M_X vdot - ad(v)^T M_X v - [ 0 ; E_k R^T m g ],
+//! M_X = [[ 0, -m E_k ], [ m E_k, -m (E_k tilde(X) + tilde(X) E_k) ]],
+//! ```
+//!
+//! and on R3xSO(3), with `c_X = -E_k Omegadot + tilde(Omega)^2 e_k`,
+//! `dr/dX_k = [ m R c_X ; E_k b + tilde(X) R^T m R c_X ]`. Gravity:
+//! `dr/dg_k = -[ R^T e_k m ; tilde(X) R^T e_k m ]` (SE(3)),
+//! `-[ e_k m ; tilde(X) R^T e_k m ]` (R3xSO(3)), times the load factor.
 
-use super::{Coefficients, Context, ElementKernel, Mat12, NodeState, Parameter, Vec12};
+use super::{
+    Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Mat12, NodeState,
+    Vec12,
+};
+use crate::model::parameters::{BodyParam, VOIGT};
 use crate::model::{NodeId, RigidBody};
 use flexmb_lie::{se3, so3::hat, split, Group, Mat3, Mat6, Vec3, Vec6};
 
@@ -41,19 +60,45 @@ pub(crate) fn momentum_jacobian(p: &Vec6) -> Mat6 {
     q
 }
 
+/// Mass matrix about the node, SE(3) form, of mass `m`, centre of mass `com` and inertia `jc`.
+fn mass_matrix_se3(m: f64, com: &Vec3, jc: &Mat3) -> Mat6 {
+    let xt = hat(com);
+    let mut mm = Mat6::zeros();
+    mm.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(Mat3::identity() * m));
+    mm.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-xt * m));
+    mm.fixed_view_mut::<3, 3>(3, 0).copy_from(&(xt * m));
+    mm.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(jc - xt * xt * m));
+    mm
+}
+
+/// Residual of a body of mass `m`, centre of mass `com` and inertia `jc` on node `n`.
+fn residual_of(ctx: &Context, n: &NodeState, m: f64, com: &Vec3, jc: &Mat3) -> Vec6 {
+    let g = ctx.model.gravity * (m * ctx.gravity_scale);
+    let xt = hat(com);
+    match ctx.group {
+        Group::SE3 => {
+            let mm = mass_matrix_se3(m, com, jc);
+            let wg = n.q.r.transpose() * g;
+            mm * n.vdot - se3::ad(&n.v).transpose() * (mm * n.v) - flexmb_lie::join(&wg, &(xt * wg))
+        }
+        Group::R3xSO3 => {
+            let (ud, omd) = split(&n.vdot);
+            let om = n.v.fixed_rows::<3>(3).into_owned();
+            let omt = hat(&om);
+            let c = -xt * omd + omt * (omt * com);
+            let f_g = (ud + n.q.r * c) * m - g;
+            let b = n.q.r.transpose() * f_g;
+            flexmb_lie::join(&f_g, &(xt * b + jc * omd + omt * (jc * om)))
+        }
+    }
+}
+
 impl RigidBody {
     /// Mass matrix about the node, SE(3) form (constant).
     pub fn mass_matrix_se3(&self) -> Mat6 {
-        let m = self.mass;
-        let xt = hat(&self.com);
-        let mut mm = Mat6::zeros();
-        mm.fixed_view_mut::<3, 3>(0, 0)
-            .copy_from(&(Mat3::identity() * m));
-        mm.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-xt * m));
-        mm.fixed_view_mut::<3, 3>(3, 0).copy_from(&(xt * m));
-        mm.fixed_view_mut::<3, 3>(3, 3)
-            .copy_from(&(self.inertia - xt * xt * m));
-        mm
+        mass_matrix_se3(self.mass, &self.com, &self.inertia)
     }
 
     /// Inertial position of the centre of mass.
@@ -66,23 +111,9 @@ impl RigidBody {
         super::point_velocity(group, n, &self.com)
     }
 
-    fn residual_se3(
-        &self,
-        ctx: &Context,
-        n: &NodeState,
-        unit_mass: bool,
-    ) -> (Vec6, Mat6, Mat6, Mat6) {
-        let mut mm = self.mass_matrix_se3();
-        if unit_mass {
-            // d/dm of everything: inertia tensor does not scale with m here (J_c given).
-            let xt = hat(&self.com);
-            mm.fill(0.0);
-            mm.fixed_view_mut::<3, 3>(0, 0).copy_from(&Mat3::identity());
-            mm.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-xt));
-            mm.fixed_view_mut::<3, 3>(3, 0).copy_from(&xt);
-            mm.fixed_view_mut::<3, 3>(3, 3).copy_from(&(-xt * xt));
-        }
-        let m = if unit_mass { 1.0 } else { self.mass };
+    fn residual_se3(&self, ctx: &Context, n: &NodeState) -> (Vec6, Mat6, Mat6, Mat6) {
+        let mm = self.mass_matrix_se3();
+        let m = self.mass;
         let v = &n.v;
         let p = mm * v;
         let adt = se3::ad(v).transpose();
@@ -98,18 +129,9 @@ impl RigidBody {
         (r, mm, c, k)
     }
 
-    fn residual_r3so3(
-        &self,
-        ctx: &Context,
-        n: &NodeState,
-        unit_mass: bool,
-    ) -> (Vec6, Mat6, Mat6, Mat6) {
-        let m = if unit_mass { 1.0 } else { self.mass };
-        let jc = if unit_mass {
-            Mat3::zeros()
-        } else {
-            self.inertia
-        };
+    fn residual_r3so3(&self, ctx: &Context, n: &NodeState) -> (Vec6, Mat6, Mat6, Mat6) {
+        let m = self.mass;
+        let jc = self.inertia;
         let (ud, omd) = split(&n.vdot);
         let (_, om) = split(&n.v);
         let r_mat = n.q.r;
@@ -145,40 +167,45 @@ impl RigidBody {
 
     /// Residual only (the hot path of iterations that reuse the iteration matrix).
     pub fn residual(&self, ctx: &Context, n: &NodeState) -> Vec6 {
+        residual_of(ctx, n, self.mass, &self.com, &self.inertia)
+    }
+
+    /// Residual, mass matrix, C_t and K_t of the body.
+    pub(crate) fn local(&self, ctx: &Context, n: &NodeState) -> (Vec6, Mat6, Mat6, Mat6) {
+        match ctx.group {
+            Group::SE3 => self.residual_se3(ctx, n),
+            Group::R3xSO3 => self.residual_r3so3(ctx, n),
+        }
+    }
+
+    /// `dr/dX_k` (module documentation).
+    fn com_derivative(&self, ctx: &Context, n: &NodeState, k: usize) -> Vec6 {
         let m = self.mass;
-        let g = ctx.model.gravity * (m * ctx.gravity_scale);
-        let xt = hat(&self.com);
+        let mut e = Vec3::zeros();
+        e[k] = 1.0;
+        let (ek, xt) = (hat(&e), hat(&self.com));
         match ctx.group {
             Group::SE3 => {
-                let mm = self.mass_matrix_se3();
-                let wg = n.q.r.transpose() * g;
-                mm * n.vdot
-                    - se3::ad(&n.v).transpose() * (mm * n.v)
-                    - flexmb_lie::join(&wg, &(xt * wg))
+                let mut mx = Mat6::zeros();
+                mx.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-ek * m));
+                mx.fixed_view_mut::<3, 3>(3, 0).copy_from(&(ek * m));
+                mx.fixed_view_mut::<3, 3>(3, 3)
+                    .copy_from(&(-(ek * xt + xt * ek) * m));
+                let wg = n.q.r.transpose() * ctx.model.gravity * (m * ctx.gravity_scale);
+                let f = flexmb_lie::join(&Vec3::zeros(), &(ek * wg));
+                mx * n.vdot - se3::ad(&n.v).transpose() * (mx * n.v) - f
             }
             Group::R3xSO3 => {
                 let (ud, omd) = split(&n.vdot);
                 let om = n.v.fixed_rows::<3>(3).into_owned();
                 let omt = hat(&om);
                 let c = -xt * omd + omt * (omt * self.com);
-                let f_g = (ud + n.q.r * c) * m - g;
+                let f_g = (ud + n.q.r * c) * m - ctx.model.gravity * (m * ctx.gravity_scale);
                 let b = n.q.r.transpose() * f_g;
-                let jc = self.inertia;
-                flexmb_lie::join(&f_g, &(xt * b + jc * omd + omt * (jc * om)))
+                let c_x = -ek * omd + omt * (omt * e);
+                let f_x = n.q.r * c_x * m;
+                flexmb_lie::join(&f_x, &(ek * b + xt * (n.q.r.transpose() * f_x)))
             }
-        }
-    }
-
-    /// Residual, mass matrix, C_t and K_t of the body (unit mass: their derivative wrt m).
-    pub(crate) fn local(
-        &self,
-        ctx: &Context,
-        n: &NodeState,
-        unit_mass: bool,
-    ) -> (Vec6, Mat6, Mat6, Mat6) {
-        match ctx.group {
-            Group::SE3 => self.residual_se3(ctx, n, unit_mass),
-            Group::R3xSO3 => self.residual_r3so3(ctx, n, unit_mass),
         }
     }
 }
@@ -201,30 +228,12 @@ impl ElementKernel for RigidBody {
             r.fixed_rows_mut::<6>(0).copy_from(&self.residual(ctx, n));
             return;
         }
-        let (res, mm, c, k) = self.local(ctx, n, false);
+        let (res, mm, c, k) = self.local(ctx, n);
         r.fixed_rows_mut::<6>(0).copy_from(&res);
         if let Some((coef, s)) = s {
             s.fill(0.0);
             let blk = mm * coef.m + c * coef.c + k * n.t * coef.k;
             s.fixed_view_mut::<6, 6>(0, 0).copy_from(&blk);
-        }
-    }
-
-    fn parameter_derivative(
-        &self,
-        ctx: &Context,
-        param: &Parameter,
-        nodes: &[NodeState; 2],
-        dr: &mut Vec12,
-    ) -> bool {
-        match param {
-            Parameter::BodyMass(name) if *name == self.name => {
-                let (res, ..) = self.local(ctx, &nodes[0], true);
-                dr.fill(0.0);
-                dr.fixed_rows_mut::<6>(0).copy_from(&res);
-                true
-            }
-            _ => false,
         }
     }
 
@@ -237,5 +246,48 @@ impl ElementKernel for RigidBody {
 
     fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
         -self.mass * ctx.gravity_scale * ctx.model.gravity.dot(&self.com_position(&nodes[0]))
+    }
+}
+
+impl ElementParameters for RigidBody {
+    type Param = BodyParam;
+
+    fn parameter_derivative(
+        &self,
+        ctx: &Context,
+        p: BodyParam,
+        nodes: &[NodeState; 2],
+        dr: &mut Vec12,
+    ) -> DerivativeMethod {
+        let n = &nodes[0];
+        let d = match p {
+            BodyParam::Mass => residual_of(ctx, n, 1.0, &self.com, &Mat3::zeros()),
+            BodyParam::Inertia(k) => {
+                let (i, j) = VOIGT[k];
+                let mut e = Mat3::zeros();
+                e[(i, j)] = 1.0;
+                e[(j, i)] = 1.0;
+                residual_of(ctx, n, 0.0, &self.com, &e)
+            }
+            BodyParam::Com(k) => self.com_derivative(ctx, n, k),
+        };
+        dr.fill(0.0);
+        dr.fixed_rows_mut::<6>(0).copy_from(&d);
+        DerivativeMethod::Analytic
+    }
+
+    fn gravity_derivative(&self, ctx: &Context, k: usize, nodes: &[NodeState; 2], dr: &mut Vec12) {
+        let n = &nodes[0];
+        let mut w = Vec3::zeros();
+        w[k] = -self.mass * ctx.gravity_scale;
+        let wb = n.q.r.transpose() * w;
+        let xt = hat(&self.com);
+        let force = match ctx.group {
+            Group::SE3 => wb,
+            Group::R3xSO3 => w,
+        };
+        dr.fill(0.0);
+        dr.fixed_rows_mut::<3>(0).copy_from(&force);
+        dr.fixed_rows_mut::<3>(3).copy_from(&(xt * wb));
     }
 }

@@ -8,8 +8,16 @@
 //! K_p = g (k g + c H^T v_p)^T + T H,      C_p = c g g^T,     ldot = g . v_p
 //! ```
 //! (physical coordinates, see [`super::physical`]). Géradin & Cardona 2001, Sect. 6.3.
+//!
+//! **Parameter derivatives** ([`SpringParam`]): `dr_p/dk = (l - l0) g`, `dr_p/dc = ldot g`,
+//! `dr_p/dl0 = -k g`; the attachment points by the finite-difference default
+//! ([`super::central_difference`]).
 
-use super::{physical, Coefficients, Context, ElementKernel, Mat12, NodeState, Parameter, Vec12};
+use super::{
+    central_difference, physical, Coefficients, Context, DerivativeMethod, ElementKernel,
+    ElementParameters, Mat12, NodeState, Vec12,
+};
+use crate::model::parameters::SpringParam;
 use crate::model::{NodeId, SpringDamper};
 use flexmb_lie::{so3::hat, Mat3, Vec3};
 use nalgebra::SMatrix;
@@ -92,18 +100,36 @@ impl ElementKernel for SpringDamper {
         );
     }
 
+    fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
+        let e = self.geometry(ctx, nodes).l - self.rest_length;
+        0.5 * self.stiffness * e * e
+    }
+}
+
+impl ElementParameters for SpringDamper {
+    type Param = SpringParam;
+
     fn parameter_derivative(
         &self,
         ctx: &Context,
-        param: &Parameter,
+        p: SpringParam,
         nodes: &[NodeState; 2],
         dr: &mut Vec12,
-    ) -> bool {
+    ) -> DerivativeMethod {
         let geo = self.geometry(ctx, nodes);
-        let dt = match param {
-            Parameter::SpringStiffness(n) if *n == self.name => geo.l - self.rest_length,
-            Parameter::SpringDamping(n) if *n == self.name => geo.ldot,
-            _ => return false,
+        let dt = match p {
+            SpringParam::Stiffness => geo.l - self.rest_length,
+            SpringParam::Damping => geo.ldot,
+            SpringParam::RestLength => -self.stiffness,
+            SpringParam::PointA(_) | SpringParam::PointB(_) => {
+                let model_nodes = &ctx.model.nodes;
+                let at = p.get(self, model_nodes);
+                // a typical length: the spring's, or the point's distance from the origin
+                let scale = self.rest_length.max(geo.l).max(at.abs());
+                let scale = if scale > 1e-300 { scale } else { 1.0 };
+                let set = |s: &mut SpringDamper, v: f64| p.set(s, model_nodes, v);
+                return central_difference(self, ctx, nodes, (at, scale), set, dr);
+            }
         };
         physical::to_group(
             ctx.group,
@@ -115,11 +141,6 @@ impl ElementKernel for SpringDamper {
             dr,
             None,
         );
-        true
-    }
-
-    fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        let e = self.geometry(ctx, nodes).l - self.rest_length;
-        0.5 * self.stiffness * e * e
+        DerivativeMethod::Analytic
     }
 }

@@ -20,9 +20,10 @@
 //! `q -> q exp(w)` form the constraint matrix `B(q)` of the equations of motion
 //! (Brüls & Cardona 2010, Eq. (37)).
 
+pub mod parameters;
 pub mod primitives;
 
-use crate::elements::{Mat12, NodeState, Parameter, Vec12};
+use crate::elements::{Mat12, NodeState, Vec12};
 use crate::model::{Joint, JointKind, NodeId};
 use flexmb_lie::{so3::hat, Frame, Group, Vec3};
 use primitives::{dot1, dot1_into, dot2, dot2_into, Primitive};
@@ -406,8 +407,8 @@ pub fn evaluate_joint(
 
 /// The capability set every constraint offers, mirroring [`crate::elements::ElementKernel`]:
 /// its nodes and rows, the rows' values, gradients and gradient derivatives (what the
-/// residual and the iteration matrix need), and derivatives with respect to named model
-/// parameters (what sensitivity analysis needs). Simulation and sensitivities share it.
+/// residual and the iteration matrix need). Derivatives with respect to model parameters
+/// are the capability [`parameters::ConstraintParameters`].
 pub trait ConstraintKernel {
     /// The two nodes (`None` = ground).
     fn nodes(&self) -> [Option<NodeId>; 2];
@@ -423,19 +424,6 @@ pub trait ConstraintKernel {
         lambda: &[f64],
         k: Option<&mut Mat12>,
     ) -> JointValues;
-    /// `dPhi/dp` (per row) and `d(B^T lambda)/dp` (12); `false` if independent of `param`.
-    /// No joint parameter is differentiable yet (joint geometry will be).
-    fn parameter_derivative(
-        &self,
-        _param: &Parameter,
-        _nodes: &[NodeState; 2],
-        _t: f64,
-        _lambda: &[f64],
-        _dphi: &mut [f64],
-        _dforce: &mut Vec12,
-    ) -> bool {
-        false
-    }
 }
 
 impl ConstraintKernel for Joint {

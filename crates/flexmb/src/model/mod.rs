@@ -9,9 +9,11 @@
 //! Units are SI throughout (m, kg, s, N, rad) unless a model chooses consistent others.
 
 pub mod limits;
+pub mod parameters;
 mod time_function;
 mod validate;
 
+pub use parameters::{ParamId, ParamKind, ParamRole, Parameters};
 pub use time_function::TimeFunction;
 pub(crate) use validate::{clip, QUOTED};
 
@@ -209,11 +211,6 @@ pub struct Beam {
     pub length: f64,
     /// How the inertia is distributed over the nodes.
     pub mass_kind: BeamMass,
-    /// Element mass matrix in the nodes' body velocities `[v_a; v_b]` (12 x 12, constant),
-    /// computed from `section`, `d0`, `length`, the offsets and `mass_kind` by [`Beam::new`]
-    /// (call [`Beam::update_mass`] after changing any of them; [`Model::validate`] reports a
-    /// stale one).
-    pub(crate) mass: crate::elements::Mat12,
 }
 
 /// Distribution of a beam element's inertia (see [`crate::elements::beam`]).
@@ -230,8 +227,8 @@ pub enum BeamMass {
 
 impl Beam {
     /// A beam element between `nodes` whose section frames at the ends are the node frames
-    /// rotated by `offset_a`, `offset_b`, with reference relative motion `d0`; the length and
-    /// the mass matrix follow.
+    /// rotated by `offset_a`, `offset_b`, with reference relative motion `d0`; the length
+    /// follows.
     pub fn new(
         name: &str,
         nodes: [NodeId; 2],
@@ -240,29 +237,17 @@ impl Beam {
         d0: flexmb_lie::Vec6,
         mass_kind: BeamMass,
     ) -> Self {
-        let mut beam = Self {
+        Self {
             name: name.to_string(),
             nodes,
             section,
             offset_a,
             offset_b,
             d0,
-            length: crate::elements::beam::arc_length(&d0),
+            // the SE(3) interpolation travels the translation part of d_0 at constant speed
+            length: d0.fixed_rows::<3>(0).norm(),
             mass_kind,
-            mass: crate::elements::Mat12::zeros(),
-        };
-        beam.update_mass();
-        beam
-    }
-
-    /// Recomputes the mass matrix from the section, the geometry and `mass_kind`.
-    pub fn update_mass(&mut self) {
-        self.mass = crate::elements::beam::mass_matrix(self);
-    }
-
-    /// The element mass matrix in the nodes' body velocities `[v_a; v_b]`.
-    pub fn mass(&self) -> &crate::elements::Mat12 {
-        &self.mass
+        }
     }
 }
 

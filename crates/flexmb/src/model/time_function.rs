@@ -99,6 +99,70 @@ impl TimeFunction {
     pub fn value(&self, t: f64) -> f64 {
         self.eval(t).0
     }
+
+    /// The coefficients `f` is linear in (its amplitudes), by their key in the model file:
+    /// `value` (constant, ramp, step), `slope` and `offset` (linear), `amplitude` and `offset`
+    /// (sine), `points.<i>.1` (the value of table point `i`), `omega` (spin-up). `f`, `f'`
+    /// and `f''` are linear in them jointly; the other fields (times, frequency, phase) are
+    /// not amplitudes.
+    pub fn amplitude_keys(&self) -> Vec<String> {
+        match self {
+            TimeFunction::Constant { .. }
+            | TimeFunction::Ramp { .. }
+            | TimeFunction::Step { .. } => vec!["value".into()],
+            TimeFunction::Linear { .. } => vec!["slope".into(), "offset".into()],
+            TimeFunction::Sine { .. } => vec!["amplitude".into(), "offset".into()],
+            TimeFunction::Table { points } => {
+                (0..points.len()).map(|i| format!("points.{i}.1")).collect()
+            }
+            TimeFunction::SpinUp { .. } => vec!["omega".into()],
+        }
+    }
+
+    /// The amplitudes in the order of [`TimeFunction::amplitude_keys`], mutably.
+    fn amplitudes_mut(&mut self) -> Vec<&mut f64> {
+        match self {
+            TimeFunction::Constant { value }
+            | TimeFunction::Ramp { value, .. }
+            | TimeFunction::Step { value, .. } => vec![value],
+            TimeFunction::Linear { slope, offset, .. } => vec![slope, offset],
+            TimeFunction::Sine {
+                amplitude, offset, ..
+            } => vec![amplitude, offset],
+            TimeFunction::Table { points } => points.iter_mut().map(|p| &mut p.1).collect(),
+            TimeFunction::SpinUp { omega, .. } => vec![omega],
+        }
+    }
+
+    /// Amplitude `k` (see [`TimeFunction::amplitude_keys`]).
+    pub fn amplitude(&self, k: usize) -> f64 {
+        match self {
+            TimeFunction::Constant { value }
+            | TimeFunction::Ramp { value, .. }
+            | TimeFunction::Step { value, .. } => [*value][k],
+            TimeFunction::Linear { slope, offset, .. } => [*slope, *offset][k],
+            TimeFunction::Sine {
+                amplitude, offset, ..
+            } => [*amplitude, *offset][k],
+            TimeFunction::Table { points } => points[k].1,
+            TimeFunction::SpinUp { omega, .. } => [*omega][k],
+        }
+    }
+
+    /// Sets amplitude `k` (see [`TimeFunction::amplitude_keys`]).
+    pub fn set_amplitude(&mut self, k: usize, value: f64) {
+        *self.amplitudes_mut()[k] = value;
+    }
+
+    /// `(df, df', df'')/da_k` at time `t`: since `f` is linear in its amplitudes, the function
+    /// itself with amplitude `k` set to 1 and the others to 0.
+    pub fn amplitude_derivative(&self, k: usize, t: f64) -> (f64, f64, f64) {
+        let mut unit = self.clone();
+        for (i, a) in unit.amplitudes_mut().into_iter().enumerate() {
+            *a = if i == k { 1.0 } else { 0.0 };
+        }
+        unit.eval(t)
+    }
 }
 
 fn table(points: &[(f64, f64)], t: f64) -> (f64, f64, f64) {
@@ -162,6 +226,64 @@ mod tests {
             },
             &[0.5, 3.0],
         );
+    }
+
+    #[test]
+    fn amplitude_derivatives_match_differences() {
+        let functions = [
+            TimeFunction::Constant { value: 2.0 },
+            TimeFunction::Linear {
+                slope: 0.6,
+                start: 0.2,
+                offset: -1.0,
+            },
+            TimeFunction::Ramp {
+                t0: 0.1,
+                t1: 2.0,
+                value: 3.0,
+            },
+            TimeFunction::Step {
+                t0: 0.5,
+                value: 4.0,
+            },
+            TimeFunction::Sine {
+                amplitude: 2.0,
+                frequency: 0.7,
+                phase: 0.3,
+                offset: 1.0,
+            },
+            TimeFunction::Table {
+                points: vec![(0.0, 1.0), (1.0, 5.0), (2.0, -1.0)],
+            },
+            TimeFunction::SpinUp {
+                omega: 6.0,
+                duration: 1.5,
+            },
+        ];
+        for f in functions {
+            let keys = f.amplitude_keys();
+            for k in 0..keys.len() {
+                for t in [0.05, 0.8, 1.3, 2.5] {
+                    let a = f.amplitude(k);
+                    let e = 1e-6 * (1.0 + a.abs());
+                    let at = |v: f64| {
+                        let mut g = f.clone();
+                        g.set_amplitude(k, v);
+                        g.eval(t)
+                    };
+                    let (p, m) = (at(a + e), at(a - e));
+                    let d = f.amplitude_derivative(k, t);
+                    let fd = [(p.0 - m.0), (p.1 - m.1), (p.2 - m.2)].map(|x| x / (2.0 * e));
+                    for (i, (x, y)) in [d.0, d.1, d.2].iter().zip(fd).enumerate() {
+                        assert!(
+                            (x - y).abs() < 1e-7 * (1.0 + y.abs()),
+                            "{f:?}, {}: derivative {i} at {t}: {x} vs {y}",
+                            keys[k]
+                        );
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -1,0 +1,735 @@
+//! Parameters by path: every numeric model parameter has one dense id ([`ParamId`]) and one
+//! path, built once from a [`Model`] by [`Parameters::new`].
+//!
+//! A path is what a user writes with `--set` on the model file for the same quantity
+//! (`body.top.mass`, `model.gravity.2`; see docs/model-format.md, "Overrides"), where the
+//! file holds the quantity the model stores. Where the model stores it in other terms, the
+//! path is named after the model's quantity and the table says so.
+//!
+//! | item | path | quantity \[unit\] | file `--set` |
+//! |---|---|---|---|
+//! | model | `model.gravity.<k>` | gravity `g_k`, inertial [m/s^2] | same |
+//! | node | `node.<n>.velocity.<k>` | initial velocity of the origin, inertial [m/s] | same for a `[[node]]` |
+//! | node | `node.<n>.angular_velocity_body.<k>` | initial angular velocity, node frame [rad/s] | same for a `[[node]]` (the model stores the node-frame value) |
+//! | body | `body.<b>.mass` | `m` \[kg\] | same |
+//! | body | `body.<b>.com.<k>` | centre of mass, node frame \[m\] | same |
+//! | body | `body.<b>.inertia.<k>` | `J_c`, Voigt order: 0 `Ixx`, 1 `Iyy`, 2 `Izz`, 3 `Iyz`, 4 `Ixz`, 5 `Ixy` [kg m^2]; a product sets both symmetric entries | 0 to 2 as `inertia = [Ixx, Iyy, Izz]` |
+//! | beam | `beam.<r>.section.{EA, GA2, GA3, GJ, EI2, EI3}` | diagonal of the sectional stiffness `C` | same with the sectional-property form |
+//! | beam | `beam.<r>.section.stiffness.<i>.<j>`, `i < j` | coupling `C_ij = C_ji` | the matrix form (sets one entry there) |
+//! | beam | `beam.<r>.section.rhoA` | mass per length [kg/m] | same with the sectional-property form |
+//! | beam | `beam.<r>.section.{rhoJ, rhoI2, rhoI3}` | diagonal of the rotary inertia per length [kg m] | same with the sectional-property form |
+//! | beam | `beam.<r>.section.rotary_inertia.<i>.<j>`, `i < j` | coupling `J_ij = J_ji` | the matrix form |
+//! | beam | `beam.<r>.damping.{mass, stiffness}` | Rayleigh `alpha` \[1/s\], `beta` \[s\] | same |
+//! | joint | `joint.<j>.position.<k>` | joint point at t = 0, inertial \[m\]; sets both joint frames' points | same |
+//! | joint | `joint.<j>.drive.<a>` | drive amplitude `a` ([`super::TimeFunction::amplitude_keys`]) | same |
+//! | load | `load.<l>.force.<k>`, `load.<l>.torque.<k>` | force \[N\], torque [N m], in the load's frame | same |
+//! | load | `load.<l>.function.<a>` | amplitude `a` of the load's time function | same |
+//! | spring | `spring.<s>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `l0` \[m\] | same |
+//! | spring | `spring.<s>.point_a.<k>`, `spring.<s>.point_b.<k>` | attachment point at t = 0, inertial \[m\] | same |
+//!
+//! Components `<k>` are 0, 1, 2 (x, y, z); matrix indices follow the strain order
+//! `(axial, shear 2, shear 3, torsion, bending 2, bending 3)` for `C` and `(x, y, z)` for `J`.
+//! Time-like fields of time functions (`t0`, `frequency`, `phase`, ...), node positions and
+//! orientations, joint axes, and the geometry of beams are not parameters.
+//!
+//! **Names.** An item is named by its name when that name is non-empty, not all digits and
+//! unique among the items of its kind; otherwise by its 0-based index in the model's list
+//! (`body.3.mass`), which for items read from a file in file order is also what `--set`
+//! accepts. Beam elements named `<r>[<i>]` (how a file-level `[[beam]]` `r`, or
+//! [`Model::add_straight_beam`], names its elements) form the beam `r`, whose parameters
+//! drive all of its elements, when they all have the same section; elements with other
+//! names, or of a beam whose elements differ, are beams of their own, named by the element's
+//! name (`beam.rod[2].section.EA`), or by its index in [`Model::beams`] under the rule
+//! above. Distributed beam loads are the nodal loads the model holds (`load.snow@roof.3`).
+//!
+//! **Roles.** Node velocities enter only the initial state ([`ParamRole::InitialState`]);
+//! every other parameter enters the residual of the equations of motion or the constraints
+//! ([`ParamRole::Residual`]).
+
+use super::{BeamSection, JointId};
+use super::{Joint, Load, Model, Node, NodeId, RigidBody, SpringDamper};
+use flexmb_lie::Vec3;
+use std::collections::HashMap;
+
+/// Dense index of a parameter in [`Parameters`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ParamId(pub u32);
+
+/// Where a parameter enters the equations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParamRole {
+    /// The residual of the equations of motion or of the constraints.
+    Residual,
+    /// Only the initial state (initial velocities).
+    InitialState,
+}
+
+/// Symmetric 3 x 3 components in Voigt order.
+pub const VOIGT: [(usize, usize); 6] = [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)];
+/// File keys of the diagonal of the sectional stiffness.
+const STIFFNESS_KEYS: [&str; 6] = ["EA", "GA2", "GA3", "GJ", "EI2", "EI3"];
+/// File keys of the diagonal of the sectional rotary inertia.
+const ROTARY_KEYS: [&str; 3] = ["rhoJ", "rhoI2", "rhoI3"];
+
+/// A parameter of a node (initial state only).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NodeParam {
+    /// Component of the initial velocity, inertial [m/s].
+    Velocity(usize),
+    /// Component of the initial angular velocity, node frame [rad/s].
+    AngularVelocity(usize),
+}
+
+/// A parameter of a rigid body.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BodyParam {
+    /// Mass \[kg\].
+    Mass,
+    /// Component of the centre of mass, node frame \[m\].
+    Com(usize),
+    /// Component of the inertia about the centre of mass in Voigt order ([`VOIGT`]) [kg m^2].
+    Inertia(usize),
+}
+
+/// A parameter of a beam section (all elements of a beam share it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SectionParam {
+    /// Sectional stiffness entry `(i, j)`, `i <= j` (both symmetric entries).
+    Stiffness(usize, usize),
+    /// Mass per length [kg/m].
+    MassPerLength,
+    /// Rotary inertia per length, entry `(i, j)`, `i <= j` [kg m].
+    RotaryInertia(usize, usize),
+    /// Rayleigh mass-proportional coefficient `alpha` \[1/s\].
+    DampingMass,
+    /// Rayleigh stiffness-proportional coefficient `beta` \[s\].
+    DampingStiffness,
+}
+
+/// A parameter of a joint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JointParam {
+    /// Component of the joint point at t = 0, inertial \[m\].
+    Position(usize),
+    /// Amplitude of the drive ([`super::TimeFunction::amplitude_keys`]).
+    Drive(usize),
+}
+
+/// A parameter of an applied load.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LoadParam {
+    /// Force component \[N\], in the load's frame.
+    Force(usize),
+    /// Torque component [N m], in the load's frame.
+    Torque(usize),
+    /// Amplitude of the time function ([`super::TimeFunction::amplitude_keys`]).
+    Amplitude(usize),
+}
+
+/// A parameter of a spring-damper.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpringParam {
+    /// Stiffness [N/m].
+    Stiffness,
+    /// Damping [N s/m].
+    Damping,
+    /// Rest length \[m\].
+    RestLength,
+    /// Component of attachment point A at t = 0, inertial \[m\].
+    PointA(usize),
+    /// Component of attachment point B at t = 0, inertial \[m\].
+    PointB(usize),
+}
+
+/// What a parameter is: its item and which of the item's quantities.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParamKind {
+    /// Component of gravity [m/s^2].
+    Gravity(usize),
+    Node(NodeId, NodeParam),
+    /// Index in [`Model::bodies`].
+    Body(usize, BodyParam),
+    /// A beam of [`Parameters::beam_elements`].
+    Beam(usize, SectionParam),
+    Joint(JointId, JointParam),
+    /// Index in [`Model::loads`].
+    Load(usize, LoadParam),
+    /// Index in [`Model::springs`].
+    Spring(usize, SpringParam),
+}
+
+/// A path that names no parameter.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown parameter '{path}'{}", near_list(.near))]
+pub struct UnknownParameter {
+    pub path: String,
+    /// The closest paths of the registry (by edit distance, else by common prefix).
+    pub near: Vec<String>,
+}
+
+fn near_list(near: &[String]) -> String {
+    if near.is_empty() {
+        " (the model has no parameters)".into()
+    } else {
+        let quoted: Vec<String> = near.iter().map(|p| format!("'{p}'")).collect();
+        format!(" (near: {})", quoted.join(", "))
+    }
+}
+
+/// The registry of a model's parameters (see the module documentation).
+#[derive(Clone, Debug)]
+pub struct Parameters {
+    /// Path and kind of each parameter, by id.
+    entries: Vec<(String, ParamKind)>,
+    by_path: HashMap<String, ParamId>,
+    /// Elements of each beam (indices in [`Model::beams`]).
+    beams: Vec<Vec<usize>>,
+}
+
+impl Parameters {
+    /// The registry of `model`'s parameters, in the order gravity, nodes, bodies, beams,
+    /// joints, loads, springs.
+    pub fn new(model: &Model) -> Self {
+        let mut reg = Self {
+            entries: Vec::new(),
+            by_path: HashMap::new(),
+            beams: Vec::new(),
+        };
+        for k in 0..3 {
+            reg.push(format!("model.gravity.{k}"), ParamKind::Gravity(k));
+        }
+        let names = segments(model.nodes.iter().map(|n| n.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            let node = NodeId(i);
+            for k in 0..3 {
+                let p = NodeParam::Velocity(k);
+                reg.push(
+                    format!("node.{name}.velocity.{k}"),
+                    ParamKind::Node(node, p),
+                );
+            }
+            for k in 0..3 {
+                let p = NodeParam::AngularVelocity(k);
+                let path = format!("node.{name}.angular_velocity_body.{k}");
+                reg.push(path, ParamKind::Node(node, p));
+            }
+        }
+        let names = segments(model.bodies.iter().map(|b| b.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            let mut add =
+                |key: String, p| reg.push(format!("body.{name}.{key}"), ParamKind::Body(i, p));
+            add("mass".into(), BodyParam::Mass);
+            for k in 0..3 {
+                add(format!("com.{k}"), BodyParam::Com(k));
+            }
+            for k in 0..6 {
+                add(format!("inertia.{k}"), BodyParam::Inertia(k));
+            }
+        }
+        for (name, elements) in beam_items(model) {
+            let item = reg.beams.len();
+            reg.beams.push(elements);
+            for p in SectionParam::all() {
+                reg.push(format!("beam.{name}.{}", p.key()), ParamKind::Beam(item, p));
+            }
+        }
+        let names = segments(model.joints.iter().map(|j| j.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            let joint = JointId(i);
+            for k in 0..3 {
+                let p = JointParam::Position(k);
+                reg.push(
+                    format!("joint.{name}.position.{k}"),
+                    ParamKind::Joint(joint, p),
+                );
+            }
+            if let Some(f) = &model.joints[i].drive {
+                for (a, key) in f.amplitude_keys().into_iter().enumerate() {
+                    let p = ParamKind::Joint(joint, JointParam::Drive(a));
+                    reg.push(format!("joint.{name}.drive.{key}"), p);
+                }
+            }
+        }
+        let names = segments(model.loads.iter().map(|l| l.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            for k in 0..3 {
+                let p = ParamKind::Load(i, LoadParam::Force(k));
+                reg.push(format!("load.{name}.force.{k}"), p);
+            }
+            for k in 0..3 {
+                let p = ParamKind::Load(i, LoadParam::Torque(k));
+                reg.push(format!("load.{name}.torque.{k}"), p);
+            }
+            let keys = model.loads[i].function.amplitude_keys();
+            for (a, key) in keys.into_iter().enumerate() {
+                let p = ParamKind::Load(i, LoadParam::Amplitude(a));
+                reg.push(format!("load.{name}.function.{key}"), p);
+            }
+        }
+        let names = segments(model.springs.iter().map(|s| s.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            let mut add = |key: String, p| {
+                reg.push(format!("spring.{name}.{key}"), ParamKind::Spring(i, p));
+            };
+            add("stiffness".into(), SpringParam::Stiffness);
+            add("damping".into(), SpringParam::Damping);
+            add("rest_length".into(), SpringParam::RestLength);
+            for k in 0..3 {
+                add(format!("point_a.{k}"), SpringParam::PointA(k));
+            }
+            for k in 0..3 {
+                add(format!("point_b.{k}"), SpringParam::PointB(k));
+            }
+        }
+        reg
+    }
+
+    fn push(&mut self, path: String, kind: ParamKind) {
+        let id = ParamId(self.entries.len() as u32);
+        let previous = self.by_path.insert(path.clone(), id);
+        debug_assert!(previous.is_none(), "two parameters named '{path}'");
+        self.entries.push((path, kind));
+    }
+
+    /// Number of parameters.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Whether there is no parameter (never for a model: gravity is always one).
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Every id, in order.
+    pub fn ids(&self) -> impl Iterator<Item = ParamId> {
+        (0..self.entries.len() as u32).map(ParamId)
+    }
+
+    /// The parameter of a path; an unknown path's error names the closest paths.
+    pub fn id(&self, path: &str) -> Result<ParamId, UnknownParameter> {
+        self.by_path
+            .get(path)
+            .copied()
+            .ok_or_else(|| UnknownParameter {
+                path: path.to_string(),
+                near: self.near(path),
+            })
+    }
+
+    /// The path of a parameter.
+    pub fn path(&self, id: ParamId) -> &str {
+        &self.entries[id.0 as usize].0
+    }
+
+    /// What a parameter is.
+    pub fn kind(&self, id: ParamId) -> ParamKind {
+        self.entries[id.0 as usize].1
+    }
+
+    /// Where a parameter enters the equations.
+    pub fn role(&self, id: ParamId) -> ParamRole {
+        match self.kind(id) {
+            ParamKind::Node(..) => ParamRole::InitialState,
+            _ => ParamRole::Residual,
+        }
+    }
+
+    /// The elements (indices in [`Model::beams`]) of beam `item` of [`ParamKind::Beam`].
+    pub fn beam_elements(&self, item: usize) -> &[usize] {
+        &self.beams[item]
+    }
+
+    /// The value of a parameter in `model` (of a beam: that of its first element, which all
+    /// share).
+    pub fn value(&self, model: &Model, id: ParamId) -> f64 {
+        match self.kind(id) {
+            ParamKind::Gravity(k) => model.gravity[k],
+            ParamKind::Node(n, p) => p.get(&model.nodes[n.0]),
+            ParamKind::Body(i, p) => p.get(&model.bodies[i]),
+            ParamKind::Beam(item, p) => p.get(&model.beams[self.beams[item][0]].section),
+            ParamKind::Joint(j, p) => p.get(&model.joints[j.0], &model.nodes),
+            ParamKind::Load(i, p) => p.get(&model.loads[i]),
+            ParamKind::Spring(i, p) => p.get(&model.springs[i], &model.nodes),
+        }
+    }
+
+    /// Sets a parameter in `model`, keeping it consistent: both symmetric entries of a
+    /// coupling, every element of a beam, both joint frames, points converted to their node's
+    /// frame. `model` must be the model the registry was built from (or a copy of it).
+    pub fn set(&self, model: &mut Model, id: ParamId, value: f64) {
+        match self.kind(id) {
+            ParamKind::Gravity(k) => model.gravity[k] = value,
+            ParamKind::Node(n, p) => p.set(&mut model.nodes[n.0], value),
+            ParamKind::Body(i, p) => p.set(&mut model.bodies[i], value),
+            ParamKind::Beam(item, p) => {
+                for &e in &self.beams[item] {
+                    p.set(&mut model.beams[e].section, value);
+                }
+            }
+            ParamKind::Joint(j, p) => p.set(&mut model.joints[j.0], &model.nodes, value),
+            ParamKind::Load(i, p) => p.set(&mut model.loads[i], value),
+            ParamKind::Spring(i, p) => p.set(&mut model.springs[i], &model.nodes, value),
+        }
+    }
+
+    /// Up to 3 paths within a small edit distance of `path`, else up to 5 sharing its
+    /// longest prefix.
+    fn near(&self, path: &str) -> Vec<String> {
+        let bound = (path.len() / 5).clamp(2, 4);
+        let mut close: Vec<(usize, &str)> = self
+            .entries
+            .iter()
+            .filter_map(|(p, _)| edit_distance(path, p, bound).map(|d| (d, p.as_str())))
+            .collect();
+        close.sort();
+        if !close.is_empty() {
+            return close.iter().take(3).map(|(_, p)| p.to_string()).collect();
+        }
+        let common = |p: &str| {
+            path.bytes()
+                .zip(p.bytes())
+                .take_while(|(a, b)| a == b)
+                .count()
+        };
+        let best = self
+            .entries
+            .iter()
+            .map(|(p, _)| common(p))
+            .max()
+            .unwrap_or(0);
+        self.entries
+            .iter()
+            .filter(|(p, _)| common(p) == best)
+            .take(5)
+            .map(|(p, _)| p.clone())
+            .collect()
+    }
+}
+
+/// Levenshtein distance of `a` and `b` if at most `bound` (by bytes).
+fn edit_distance(a: &str, b: &str, bound: usize) -> Option<usize> {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len().abs_diff(b.len()) > bound {
+        return None;
+    }
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.iter().enumerate() {
+        let mut diag = row[0];
+        row[0] = i + 1;
+        let mut smallest = row[0];
+        for (j, cb) in b.iter().enumerate() {
+            let next = (diag + usize::from(ca != cb))
+                .min(row[j] + 1)
+                .min(row[j + 1] + 1);
+            diag = row[j + 1];
+            row[j + 1] = next;
+            smallest = smallest.min(next);
+        }
+        if smallest > bound {
+            return None;
+        }
+    }
+    (row[b.len()] <= bound).then_some(row[b.len()])
+}
+
+/// The path segment of each item: its name if non-empty, not all digits and unique among
+/// `names`, else its index.
+fn segments<'a>(names: impl Iterator<Item = &'a str> + Clone) -> Vec<String> {
+    let mut count: HashMap<&str, usize> = HashMap::new();
+    for n in names.clone() {
+        *count.entry(n).or_default() += 1;
+    }
+    names
+        .enumerate()
+        .map(|(i, n)| {
+            if plain_name(n) && count[n] == 1 {
+                n.to_string()
+            } else {
+                i.to_string()
+            }
+        })
+        .collect()
+}
+
+fn plain_name(name: &str) -> bool {
+    !name.is_empty() && !name.bytes().all(|c| c.is_ascii_digit())
+}
+
+/// `r` for an element named `r[i]`, the whole name otherwise.
+fn beam_key(name: &str) -> &str {
+    let Some(body) = name.strip_suffix(']') else {
+        return name;
+    };
+    match body.rsplit_once('[') {
+        Some((prefix, digits))
+            if plain_name(prefix)
+                && !digits.is_empty()
+                && digits.bytes().all(|c| c.is_ascii_digit()) =>
+        {
+            prefix
+        }
+        _ => name,
+    }
+}
+
+/// The beams of the registry, `(path segment, elements)`, in order of first element.
+fn beam_items(model: &Model) -> Vec<(String, Vec<usize>)> {
+    let mut groups: Vec<(&str, Vec<usize>)> = Vec::new();
+    let mut slot: HashMap<&str, usize> = HashMap::new();
+    for (e, b) in model.beams.iter().enumerate() {
+        let key = beam_key(&b.name);
+        let k = *slot.entry(key).or_insert_with(|| {
+            groups.push((key, Vec::new()));
+            groups.len() - 1
+        });
+        groups[k].1.push(e);
+    }
+    // A beam whose elements differ in section is one beam per element.
+    let mut items: Vec<(&str, Vec<usize>)> = Vec::new();
+    for (key, elements) in groups {
+        let first = &model.beams[elements[0]].section;
+        if elements.iter().all(|&e| model.beams[e].section == *first) {
+            items.push((key, elements));
+        } else {
+            items.extend(
+                elements
+                    .into_iter()
+                    .map(|e| (model.beams[e].name.as_str(), vec![e])),
+            );
+        }
+    }
+    // A name that is not plain or not unique: one beam per element, named by its index.
+    let mut count: HashMap<&str, usize> = HashMap::new();
+    for (key, _) in &items {
+        *count.entry(key).or_default() += 1;
+    }
+    let mut out = Vec::new();
+    for (key, elements) in items {
+        if plain_name(key) && count[key] == 1 {
+            out.push((key.to_string(), elements));
+        } else {
+            out.extend(elements.into_iter().map(|e| (e.to_string(), vec![e])));
+        }
+    }
+    out
+}
+
+impl NodeParam {
+    pub fn get(self, node: &Node) -> f64 {
+        match self {
+            NodeParam::Velocity(k) => node.velocity[k],
+            NodeParam::AngularVelocity(k) => node.angular_velocity[k],
+        }
+    }
+
+    pub fn set(self, node: &mut Node, value: f64) {
+        match self {
+            NodeParam::Velocity(k) => node.velocity[k] = value,
+            NodeParam::AngularVelocity(k) => node.angular_velocity[k] = value,
+        }
+    }
+}
+
+impl BodyParam {
+    pub fn get(self, body: &RigidBody) -> f64 {
+        match self {
+            BodyParam::Mass => body.mass,
+            BodyParam::Com(k) => body.com[k],
+            BodyParam::Inertia(k) => body.inertia[VOIGT[k]],
+        }
+    }
+
+    pub fn set(self, body: &mut RigidBody, value: f64) {
+        match self {
+            BodyParam::Mass => body.mass = value,
+            BodyParam::Com(k) => body.com[k] = value,
+            BodyParam::Inertia(k) => {
+                let (i, j) = VOIGT[k];
+                body.inertia[(i, j)] = value;
+                body.inertia[(j, i)] = value;
+            }
+        }
+    }
+}
+
+impl SectionParam {
+    /// Every section parameter, in registry order.
+    pub fn all() -> Vec<SectionParam> {
+        let mut out: Vec<SectionParam> = (0..6).map(|i| SectionParam::Stiffness(i, i)).collect();
+        for i in 0..6 {
+            for j in i + 1..6 {
+                out.push(SectionParam::Stiffness(i, j));
+            }
+        }
+        out.push(SectionParam::MassPerLength);
+        out.extend((0..3).map(|i| SectionParam::RotaryInertia(i, i)));
+        out.extend([(1, 2), (0, 2), (0, 1)].map(|(i, j)| SectionParam::RotaryInertia(i, j)));
+        out.push(SectionParam::DampingMass);
+        out.push(SectionParam::DampingStiffness);
+        out
+    }
+
+    /// The path after the beam's name.
+    pub fn key(self) -> String {
+        match self {
+            SectionParam::Stiffness(i, j) if i == j => format!("section.{}", STIFFNESS_KEYS[i]),
+            SectionParam::Stiffness(i, j) => format!("section.stiffness.{i}.{j}"),
+            SectionParam::MassPerLength => "section.rhoA".into(),
+            SectionParam::RotaryInertia(i, j) if i == j => {
+                format!("section.{}", ROTARY_KEYS[i])
+            }
+            SectionParam::RotaryInertia(i, j) => format!("section.rotary_inertia.{i}.{j}"),
+            SectionParam::DampingMass => "damping.mass".into(),
+            SectionParam::DampingStiffness => "damping.stiffness".into(),
+        }
+    }
+
+    pub fn get(self, s: &BeamSection) -> f64 {
+        match self {
+            SectionParam::Stiffness(i, j) => s.stiffness[(i, j)],
+            SectionParam::MassPerLength => s.mass_per_length,
+            SectionParam::RotaryInertia(i, j) => s.rotary_inertia[(i, j)],
+            SectionParam::DampingMass => s.damping_mass,
+            SectionParam::DampingStiffness => s.damping_stiffness,
+        }
+    }
+
+    pub fn set(self, s: &mut BeamSection, value: f64) {
+        match self {
+            SectionParam::Stiffness(i, j) => {
+                s.stiffness[(i, j)] = value;
+                s.stiffness[(j, i)] = value;
+            }
+            SectionParam::MassPerLength => s.mass_per_length = value,
+            SectionParam::RotaryInertia(i, j) => {
+                s.rotary_inertia[(i, j)] = value;
+                s.rotary_inertia[(j, i)] = value;
+            }
+            SectionParam::DampingMass => s.damping_mass = value,
+            SectionParam::DampingStiffness => s.damping_stiffness = value,
+        }
+    }
+}
+
+/// A point given in the frame of `node` (inertial for the ground), in inertial coordinates
+/// at t = 0.
+fn to_inertial(nodes: &[Node], node: Option<NodeId>, p: &Vec3) -> Vec3 {
+    match node {
+        Some(n) => nodes[n.0].frame.point(p),
+        None => *p,
+    }
+}
+
+/// An inertial point at t = 0 in the frame of `node` (as the model-file reader converts it).
+fn to_node_frame(nodes: &[Node], node: Option<NodeId>, p: &Vec3) -> Vec3 {
+    match node {
+        Some(n) => nodes[n.0].frame.inverse().point(p),
+        None => *p,
+    }
+}
+
+impl JointParam {
+    /// The value; `nodes` are the model's nodes (their initial frames).
+    pub fn get(self, joint: &Joint, nodes: &[Node]) -> f64 {
+        match self {
+            JointParam::Position(k) => to_inertial(nodes, joint.node_a, &joint.frame_a.x)[k],
+            JointParam::Drive(a) => joint.drive.as_ref().map_or(0.0, |f| f.amplitude(a)),
+        }
+    }
+
+    /// Sets the value: a position places both joint frames' points at the new point (the
+    /// joint frames coincide at t = 0), in their nodes' frames.
+    pub fn set(self, joint: &mut Joint, nodes: &[Node], value: f64) {
+        match self {
+            JointParam::Position(k) => {
+                let mut p = to_inertial(nodes, joint.node_a, &joint.frame_a.x);
+                p[k] = value;
+                joint.frame_a.x = to_node_frame(nodes, joint.node_a, &p);
+                joint.frame_b.x = to_node_frame(nodes, joint.node_b, &p);
+            }
+            JointParam::Drive(a) => {
+                if let Some(f) = &mut joint.drive {
+                    f.set_amplitude(a, value);
+                }
+            }
+        }
+    }
+}
+
+impl LoadParam {
+    pub fn get(self, load: &Load) -> f64 {
+        match self {
+            LoadParam::Force(k) => load.force[k],
+            LoadParam::Torque(k) => load.torque[k],
+            LoadParam::Amplitude(a) => load.function.amplitude(a),
+        }
+    }
+
+    pub fn set(self, load: &mut Load, value: f64) {
+        match self {
+            LoadParam::Force(k) => load.force[k] = value,
+            LoadParam::Torque(k) => load.torque[k] = value,
+            LoadParam::Amplitude(a) => load.function.set_amplitude(a, value),
+        }
+    }
+}
+
+impl SpringParam {
+    /// The value; `nodes` are the model's nodes (their initial frames).
+    pub fn get(self, spring: &SpringDamper, nodes: &[Node]) -> f64 {
+        match self {
+            SpringParam::Stiffness => spring.stiffness,
+            SpringParam::Damping => spring.damping,
+            SpringParam::RestLength => spring.rest_length,
+            SpringParam::PointA(k) => to_inertial(nodes, spring.node_a, &spring.point_a)[k],
+            SpringParam::PointB(k) => to_inertial(nodes, spring.node_b, &spring.point_b)[k],
+        }
+    }
+
+    /// Sets the value (points converted to their node's frame).
+    pub fn set(self, spring: &mut SpringDamper, nodes: &[Node], value: f64) {
+        let point = |node, p: &mut Vec3, k: usize| {
+            let mut x = to_inertial(nodes, node, p);
+            x[k] = value;
+            *p = to_node_frame(nodes, node, &x);
+        };
+        match self {
+            SpringParam::Stiffness => spring.stiffness = value,
+            SpringParam::Damping => spring.damping = value,
+            SpringParam::RestLength => spring.rest_length = value,
+            SpringParam::PointA(k) => point(spring.node_a, &mut spring.point_a, k),
+            SpringParam::PointB(k) => point(spring.node_b, &mut spring.point_b, k),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn beam_keys_strip_the_element_index_only() {
+        assert_eq!(beam_key("rod[12]"), "rod");
+        assert_eq!(beam_key("a[b][3]"), "a[b]");
+        assert_eq!(beam_key("rod"), "rod");
+        assert_eq!(beam_key("rod[]"), "rod[]");
+        assert_eq!(beam_key("[3]"), "[3]");
+        assert_eq!(beam_key("7[3]"), "7[3]");
+        assert_eq!(beam_key("rod[x]"), "rod[x]");
+    }
+
+    #[test]
+    fn edit_distance_is_bounded() {
+        assert_eq!(edit_distance("body.top.mas", "body.top.mass", 2), Some(1));
+        assert_eq!(edit_distance("body.tpo.mass", "body.top.mass", 2), Some(2));
+        assert_eq!(edit_distance("abc", "xyz", 2), None);
+        assert_eq!(edit_distance("", "ab", 2), Some(2));
+    }
+
+    #[test]
+    fn names_fall_back_to_indices() {
+        let s = segments(["a", "", "12", "b", "a", "c"].into_iter());
+        assert_eq!(s, ["0", "1", "2", "b", "4", "c"]);
+    }
+}

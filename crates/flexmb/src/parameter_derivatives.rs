@@ -1,0 +1,337 @@
+//! Derivatives of the equations with respect to model parameters ([`Parameters`]).
+//!
+//! At given node kinematics `(q, v, vdot)` (one [`NodeState`] per model node, tangent
+//! operators identity), time `t`, multipliers `lambda` (one per constraint row, unscaled) and
+//! load factor, the unscaled equations of the time step and of statics are (Brüls & Cardona
+//! 2010, Eq. (37); velocity level: Arnold, Brüls & Cardona 2015, Sect. 3)
+//!
+//! ```text
+//! R(p)   = r(q, v, vdot, t; p) + B(q; p)^T lambda      6 per node: equilibrium
+//! Phi(p) = Phi(q, t; p)                                n_rows: position level
+//! psi(p) = B(q; p) v + Phi_t(q, t; p)                  n_rows: velocity level (stabilized index 2)
+//! ```
+//!
+//! with `r = M vdot - hat(v)^T M v + g_int(q, v) - g_ext(q, t)` the sum of the force elements'
+//! residuals (gravity and applied loads times the load factor) and the constraint rows in the
+//! order of [`crate::joints::rows`], joint after joint (the rows of
+//! `crate::data::Layout::joint_row_start`). Each is a sum of local terms,
+//!
+//! ```text
+//! dR/dp   = sum_e L_e^T dr_e/dp + sum_j L_j^T d(B_j^T lambda_j)/dp,
+//! dPhi/dp = [ dPhi_j/dp ]_j,     dpsi/dp = [ dB_j/dp v_j + dPhi_t,j/dp ]_j,
+//! ```
+//!
+//! `L_e` gathering an element's two nodes: a parameter reaches only its own item (a body, the
+//! elements of a beam, a spring, a load, a joint), except gravity, which reaches every body
+//! and beam element. The local derivatives are the capabilities
+//! [`ElementParameters`] and [`ConstraintParameters`]: analytic for body mass, centre of mass
+//! and inertia, spring stiffness, damping and rest length, every beam section quantity, load
+//! components and amplitudes, drive amplitudes and gravity; a central difference on a
+//! perturbed copy of the one element or joint for spring attachment points and joint
+//! positions ([`DerivativeMethod`] says which). Node velocities
+//! ([`crate::model::ParamRole::InitialState`]) enter the initial state only: their
+//! derivatives here are zero.
+//!
+//! [`residual_derivative`] gives the columns of `dR/dp` one parameter at a time;
+//! [`residual_derivative_transpose`] the products `J_p^T w` for every parameter at once (what
+//! an adjoint needs); [`constraint_force_derivative`] the term `d(B^T w)/dp` alone (the
+//! configuration update `q_n exp(dq + B(q_n)^T zeta)` of the stabilized step has it).
+//!
+//! # References
+//! - O. Brüls, A. Cardona, On the use of Lie group time integrators in multibody dynamics,
+//!   J. Comput. Nonlinear Dyn. 5 (2010), Eq. (37).
+//! - M. Arnold, O. Brüls, A. Cardona, Error analysis of generalized-alpha Lie group time
+//!   integration methods for constrained mechanical systems, Numer. Math. 129 (2015), Sect. 3.
+
+use crate::elements::{Context, DerivativeMethod, ElementParameters, NodeState, Vec12};
+use crate::joints::parameters::{ConstraintParameters, JointDerivative};
+use crate::joints::{self, Row};
+use crate::model::{Model, NodeId, ParamId, ParamKind, Parameters};
+
+/// One local term of a derivative.
+enum Piece<'a> {
+    /// `dr_e/dp` of an element on two node slots.
+    Element([Option<NodeId>; 2], &'a Vec12),
+    /// The derivatives of joint `j`'s rows.
+    Joint(usize, &'a JointDerivative),
+}
+
+/// Where the derivatives are taken.
+struct At<'a> {
+    model: &'a Model,
+    nodes: &'a [NodeState],
+    t: f64,
+    lambda: &'a [f64],
+    load_factor: f64,
+}
+
+impl At<'_> {
+    fn context(&self) -> Context<'_> {
+        Context {
+            model: self.model,
+            group: self.model.group,
+            t: self.t,
+            gravity_scale: self.load_factor,
+            load_scale: self.load_factor,
+        }
+    }
+
+    /// The kinematics of two node slots (identity frame at rest for the ground).
+    fn pair(&self, slots: [Option<NodeId>; 2]) -> [NodeState; 2] {
+        let ground = NodeState::ground(Default::default());
+        slots.map(|s| s.map_or(ground, |n| self.nodes[n.0]))
+    }
+}
+
+/// First row of each joint, and the total number of rows.
+fn row_starts(model: &Model) -> (Vec<usize>, Vec<Vec<Row>>, usize) {
+    let rows: Vec<Vec<Row>> = model.joints.iter().map(joints::rows).collect();
+    let mut starts = Vec::with_capacity(rows.len());
+    let mut n = 0;
+    for r in &rows {
+        starts.push(n);
+        n += r.len();
+    }
+    (starts, rows, n)
+}
+
+/// Visits the local terms of the derivative with respect to `id`; `joints_only` skips the
+/// force elements. `rows` and `starts` as from [`row_starts`] (may be empty if `id` is not a
+/// joint parameter).
+fn visit(
+    at: &At,
+    params: &Parameters,
+    id: ParamId,
+    (rows, starts): (&[Vec<Row>], &[usize]),
+    joints_only: bool,
+    sink: &mut dyn FnMut(Piece),
+) -> DerivativeMethod {
+    let model = at.model;
+    let ctx = at.context();
+    let mut dr = Vec12::zeros();
+    let mut element = |e: &dyn Fn(&[NodeState; 2], &mut Vec12) -> DerivativeMethod,
+                       slots: [Option<NodeId>; 2]| {
+        let method = e(&at.pair(slots), &mut dr);
+        sink(Piece::Element(slots, &dr));
+        method
+    };
+    if joints_only && !matches!(params.kind(id), ParamKind::Joint(..)) {
+        return DerivativeMethod::Analytic;
+    }
+    match params.kind(id) {
+        ParamKind::Gravity(k) => {
+            for b in &model.bodies {
+                let d = |n: &[NodeState; 2], out: &mut Vec12| {
+                    b.gravity_derivative(&ctx, k, n, out);
+                    DerivativeMethod::Analytic
+                };
+                element(&d, [Some(b.node), None]);
+            }
+            for b in &model.beams {
+                let d = |n: &[NodeState; 2], out: &mut Vec12| {
+                    b.gravity_derivative(&ctx, k, n, out);
+                    DerivativeMethod::Analytic
+                };
+                element(&d, [Some(b.nodes[0]), Some(b.nodes[1])]);
+            }
+            DerivativeMethod::Analytic
+        }
+        ParamKind::Node(..) => DerivativeMethod::Analytic,
+        ParamKind::Body(i, p) => {
+            let b = &model.bodies[i];
+            let d = |n: &[NodeState; 2], out: &mut Vec12| b.parameter_derivative(&ctx, p, n, out);
+            element(&d, [Some(b.node), None])
+        }
+        ParamKind::Beam(item, p) => {
+            let mut method = DerivativeMethod::Analytic;
+            for &e in params.beam_elements(item) {
+                let b = &model.beams[e];
+                let d =
+                    |n: &[NodeState; 2], out: &mut Vec12| b.parameter_derivative(&ctx, p, n, out);
+                method = element(&d, [Some(b.nodes[0]), Some(b.nodes[1])]);
+            }
+            method
+        }
+        ParamKind::Load(i, p) => {
+            let l = &model.loads[i];
+            let d = |n: &[NodeState; 2], out: &mut Vec12| l.parameter_derivative(&ctx, p, n, out);
+            element(&d, [Some(l.node), None])
+        }
+        ParamKind::Spring(i, p) => {
+            let s = &model.springs[i];
+            let d = |n: &[NodeState; 2], out: &mut Vec12| s.parameter_derivative(&ctx, p, n, out);
+            element(&d, [s.node_a, s.node_b])
+        }
+        ParamKind::Joint(j, p) => {
+            let joint = &model.joints[j.0];
+            let (rows, start) = (&rows[j.0], starts[j.0]);
+            let nodes = at.pair([joint.node_a, joint.node_b]);
+            let lambda = &at.lambda[start..start + rows.len()];
+            let (d, method) = joint.parameter_derivative(model, rows, p, &nodes, at.t, lambda);
+            sink(Piece::Joint(j.0, &d));
+            method
+        }
+    }
+}
+
+/// `dR/dp` of the unscaled equations (module documentation) for one parameter, at the node
+/// kinematics `nodes` (one per model node, tangent operators identity), time `t` (the load
+/// factor in statics), multipliers `lambda` (`n_rows`, unscaled; rows left out as redundant
+/// carry 0) and `load_factor` (1 in dynamics). Overwrites `dr` (6 per node: equilibrium rows
+/// `r + B^T lambda`), `dphi` (`n_rows`: position-level `Phi`) and `dpsi` (`n_rows`:
+/// velocity-level `B v + Phi_t`; may be empty, then not computed). Returns how the local
+/// derivatives were obtained.
+pub fn residual_derivative(
+    model: &Model,
+    params: &Parameters,
+    id: ParamId,
+    nodes: &[NodeState],
+    t: f64,
+    lambda: &[f64],
+    load_factor: f64,
+    dr: &mut [f64],
+    dphi: &mut [f64],
+    dpsi: &mut [f64],
+) -> DerivativeMethod {
+    assert_eq!(dr.len(), 6 * model.nodes.len(), "dr: 6 per node");
+    let (starts, rows, n_rows) = match params.kind(id) {
+        ParamKind::Joint(..) => row_starts(model),
+        _ => (Vec::new(), Vec::new(), dphi.len()),
+    };
+    assert_eq!(dphi.len(), n_rows, "dphi: one per constraint row");
+    assert!(
+        dpsi.is_empty() || dpsi.len() == n_rows,
+        "dpsi: one per constraint row, or none"
+    );
+    dr.fill(0.0);
+    dphi.fill(0.0);
+    dpsi.fill(0.0);
+    let at = At {
+        model,
+        nodes,
+        t,
+        lambda,
+        load_factor,
+    };
+    let mut sink = |piece: Piece| match piece {
+        Piece::Element(slots, d) => scatter(dr, slots, d),
+        Piece::Joint(j, d) => {
+            let joint = &model.joints[j];
+            scatter(dr, [joint.node_a, joint.node_b], &d.dforce);
+            let s = starts[j];
+            dphi[s..s + d.n_rows].copy_from_slice(&d.dphi[..d.n_rows]);
+            if !dpsi.is_empty() {
+                dpsi[s..s + d.n_rows].copy_from_slice(&d.dpsi[..d.n_rows]);
+            }
+        }
+    };
+    visit(&at, params, id, (&rows, &starts), false, &mut sink)
+}
+
+/// `d(B(q; p)^T w)/dp` (6 per node, overwritten) for one parameter at the configurations of
+/// `nodes` and time `t`, `w` one weight per constraint row: the constraint forces alone.
+pub fn constraint_force_derivative(
+    model: &Model,
+    params: &Parameters,
+    id: ParamId,
+    nodes: &[NodeState],
+    t: f64,
+    w: &[f64],
+    dforce: &mut [f64],
+) {
+    assert_eq!(dforce.len(), 6 * model.nodes.len(), "dforce: 6 per node");
+    dforce.fill(0.0);
+    if !matches!(params.kind(id), ParamKind::Joint(..)) {
+        return;
+    }
+    let (starts, rows, _) = row_starts(model);
+    let at = At {
+        model,
+        nodes,
+        t,
+        lambda: w,
+        load_factor: 1.0,
+    };
+    let mut sink = |piece: Piece| {
+        if let Piece::Joint(j, d) = piece {
+            let joint = &model.joints[j];
+            scatter(dforce, [joint.node_a, joint.node_b], &d.dforce);
+        }
+    };
+    visit(&at, params, id, (&rows, &starts), true, &mut sink);
+}
+
+/// `J_p^T w` for every parameter: `grad[k] = w_r . dR/dp_k + w_phi . dPhi/dp_k + w_psi .
+/// dpsi/dp_k` (`grad`: one per parameter, overwritten), with the arguments of
+/// [`residual_derivative`]; `w_r` 6 per node, `w_phi` and `w_psi` one per constraint row
+/// (`w_psi` may be empty: no velocity-level rows). Costs one local derivative per parameter
+/// and item, never a dense column.
+pub fn residual_derivative_transpose(
+    model: &Model,
+    params: &Parameters,
+    nodes: &[NodeState],
+    t: f64,
+    lambda: &[f64],
+    load_factor: f64,
+    (w_r, w_phi, w_psi): (&[f64], &[f64], &[f64]),
+    grad: &mut [f64],
+) {
+    let (starts, rows, n_rows) = row_starts(model);
+    assert_eq!(w_r.len(), 6 * model.nodes.len(), "w_r: 6 per node");
+    assert_eq!(w_phi.len(), n_rows, "w_phi: one per constraint row");
+    assert!(
+        w_psi.is_empty() || w_psi.len() == n_rows,
+        "w_psi: one per row, or none"
+    );
+    assert_eq!(grad.len(), params.len(), "grad: one per parameter");
+    let at = At {
+        model,
+        nodes,
+        t,
+        lambda,
+        load_factor,
+    };
+    for id in params.ids() {
+        let mut sum = 0.0;
+        let mut sink = |piece: Piece| match piece {
+            Piece::Element(slots, d) => sum += gather_dot(w_r, slots, d),
+            Piece::Joint(j, d) => {
+                let joint = &model.joints[j];
+                sum += gather_dot(w_r, [joint.node_a, joint.node_b], &d.dforce);
+                let s = starts[j];
+                for r in 0..d.n_rows {
+                    sum += w_phi[s + r] * d.dphi[r];
+                    if !w_psi.is_empty() {
+                        sum += w_psi[s + r] * d.dpsi[r];
+                    }
+                }
+            }
+        };
+        visit(&at, params, id, (&rows, &starts), false, &mut sink);
+        grad[id.0 as usize] = sum;
+    }
+}
+
+/// Adds a local 12-vector to the rows of its node slots.
+fn scatter(out: &mut [f64], slots: [Option<NodeId>; 2], d: &Vec12) {
+    for (k, slot) in slots.iter().enumerate() {
+        if let Some(n) = slot {
+            for i in 0..6 {
+                out[6 * n.0 + i] += d[6 * k + i];
+            }
+        }
+    }
+}
+
+/// `w . L^T d` for a local 12-vector on two node slots.
+fn gather_dot(w: &[f64], slots: [Option<NodeId>; 2], d: &Vec12) -> f64 {
+    let mut sum = 0.0;
+    for (k, slot) in slots.iter().enumerate() {
+        if let Some(n) = slot {
+            for i in 0..6 {
+                sum += w[6 * n.0 + i] * d[6 * k + i];
+            }
+        }
+    }
+    sum
+}

@@ -1,0 +1,477 @@
+//! Every parameter derivative `dR/dp` of `flexmb::parameter_derivatives` against central
+//! differences of the equations themselves, the parameter moved by `Parameters::set` on a
+//! copy of the whole model (the path a user takes), at random node kinematics on the manifold
+//! (configurations `exp` of random algebra vectors, as in `tangents_match_finite_differences`).
+//! Every parameter kind of the registry is checked, on both groups where it exists.
+
+use flexmb::elements::{Context, DerivativeMethod, ElementKernel, ElementRef, NodeState, Vec12};
+use flexmb::joints;
+use flexmb::model::parameters::{
+    BodyParam, JointParam, LoadParam, NodeParam, SectionParam, SpringParam,
+};
+use flexmb::model::{
+    BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, ParamId, ParamKind,
+    Parameters, SpringDamper, TimeFunction,
+};
+use flexmb::parameter_derivatives::{
+    constraint_force_derivative, residual_derivative, residual_derivative_transpose,
+};
+use flexmb_lie::{Frame, Group, Mat3, Mat6, Vec3, Vec6};
+use std::collections::BTreeSet;
+
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+    fn v3(&mut self, s: f64) -> Vec3 {
+        Vec3::new(self.next(), self.next(), self.next()) * s
+    }
+    fn v6(&mut self, s: f64) -> Vec6 {
+        let (a, b) = (self.v3(s), self.v3(s));
+        flexmb_lie::join(&a, &b)
+    }
+}
+
+/// Where the equations are evaluated.
+struct Point {
+    nodes: Vec<NodeState>,
+    t: f64,
+    lambda: Vec<f64>,
+    load_factor: f64,
+}
+
+/// The unscaled equations `(r + B^T lambda, Phi, B v + Phi_t)` of `model` at `at`: the sum of
+/// the element kernels (with their mass matrices as the assembly builds them) and the joint
+/// rows, in joint order.
+fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let ctx = Context {
+        model,
+        group: model.group,
+        t: at.t,
+        gravity_scale: at.load_factor,
+        load_scale: at.load_factor,
+    };
+    let pair = |slots: [Option<NodeId>; 2]| {
+        slots.map(|s| s.map_or(NodeState::ground(Frame::identity()), |n| at.nodes[n.0]))
+    };
+    let mut r = vec![0.0; 6 * model.nodes.len()];
+    let mut add = |slots: [Option<NodeId>; 2], local: &Vec12| {
+        for (k, s) in slots.iter().enumerate() {
+            if let Some(n) = s {
+                for i in 0..6 {
+                    r[6 * n.0 + i] += local[6 * k + i];
+                }
+            }
+        }
+    };
+    for e in ElementRef::all(model) {
+        let kernel = e.kernel(model);
+        let mut local = Vec12::zeros();
+        kernel.evaluate(&ctx, &pair(kernel.nodes()), &mut local, None);
+        add(kernel.nodes(), &local);
+    }
+    let (mut phi, mut psi) = (vec![], vec![]);
+    for joint in &model.joints {
+        let rows = joints::rows(joint);
+        let slots = [joint.node_a, joint.node_b];
+        let nodes = pair(slots);
+        let lambda = &at.lambda[phi.len()..phi.len() + rows.len()];
+        let jv = joints::evaluate_joint(model.group, joint, &rows, &nodes, at.t, lambda, None);
+        let mut v = Vec12::zeros();
+        for (k, s) in slots.iter().enumerate() {
+            if s.is_some() {
+                v.fixed_rows_mut::<6>(6 * k).copy_from(&nodes[k].v);
+            }
+        }
+        let mut force = Vec12::zeros();
+        for i in 0..rows.len() {
+            phi.push(jv.phi[i]);
+            psi.push(jv.b[i].dot(&v) + jv.phi_t[i]);
+            force += jv.b[i] * lambda[i];
+        }
+        add(slots, &force);
+    }
+    (r, phi, psi)
+}
+
+fn n_rows(model: &Model) -> usize {
+    model.joints.iter().map(|j| joints::rows(j).len()).sum()
+}
+
+/// Random node kinematics near the model's initial configuration (beams: near their
+/// reference shape), multipliers and a load factor other than 1.
+fn point(model: &Model, rng: &mut Lcg, spread: f64) -> Point {
+    let nodes = model
+        .nodes
+        .iter()
+        .map(|n| NodeState {
+            q: model.group.integrate(&n.frame, &rng.v6(spread)),
+            v: rng.v6(2.0),
+            vdot: rng.v6(3.0),
+            t: Mat6::identity(),
+        })
+        .collect();
+    Point {
+        nodes,
+        t: 0.37,
+        lambda: (0..n_rows(model)).map(|_| rng.next() * 10.0).collect(),
+        load_factor: 0.8,
+    }
+}
+
+/// The kind of a parameter, its item's name replaced by a placeholder.
+fn pattern(params: &Parameters, id: ParamId) -> String {
+    let item = match params.kind(id) {
+        ParamKind::Gravity(_) => return "model.gravity.<k>".into(),
+        ParamKind::Node(_, p) => match p {
+            NodeParam::Velocity(_) => "node.<n>.velocity.<k>",
+            NodeParam::AngularVelocity(_) => "node.<n>.angular_velocity_body.<k>",
+        },
+        ParamKind::Body(_, p) => match p {
+            BodyParam::Mass => "body.<b>.mass",
+            BodyParam::Com(_) => "body.<b>.com.<k>",
+            BodyParam::Inertia(_) => "body.<b>.inertia.<k>",
+        },
+        ParamKind::Beam(_, p) => match p {
+            SectionParam::Stiffness(i, j) if i == j => "beam.<r>.section.<C_ii>",
+            SectionParam::Stiffness(..) => "beam.<r>.section.stiffness.<i>.<j>",
+            SectionParam::MassPerLength => "beam.<r>.section.rhoA",
+            SectionParam::RotaryInertia(i, j) if i == j => "beam.<r>.section.<J_ii>",
+            SectionParam::RotaryInertia(..) => "beam.<r>.section.rotary_inertia.<i>.<j>",
+            SectionParam::DampingMass => "beam.<r>.damping.mass",
+            SectionParam::DampingStiffness => "beam.<r>.damping.stiffness",
+        },
+        ParamKind::Joint(_, p) => match p {
+            JointParam::Position(_) => "joint.<j>.position.<k>",
+            JointParam::Drive(_) => "joint.<j>.drive.<amplitude>",
+        },
+        ParamKind::Load(_, p) => match p {
+            LoadParam::Force(_) => "load.<l>.force.<k>",
+            LoadParam::Torque(_) => "load.<l>.torque.<k>",
+            LoadParam::Amplitude(_) => "load.<l>.function.<amplitude>",
+        },
+        ParamKind::Spring(_, p) => match p {
+            SpringParam::Stiffness => "spring.<s>.stiffness",
+            SpringParam::Damping => "spring.<s>.damping",
+            SpringParam::RestLength => "spring.<s>.rest_length",
+            SpringParam::PointA(_) => "spring.<s>.point_a.<k>",
+            SpringParam::PointB(_) => "spring.<s>.point_b.<k>",
+        },
+    };
+    item.into()
+}
+
+/// What the checks saw: the kinds checked, those by finite differences, the largest error.
+#[derive(Default)]
+struct Seen {
+    kinds: BTreeSet<String>,
+    by_differences: BTreeSet<String>,
+    worst: f64,
+}
+
+/// Largest entry of `a - b` relative to the largest of `b`.
+fn relative_error(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let scale = b.iter().chain(a).fold(0.0f64, |m, x| m.max(x.abs()));
+    let diff = a
+        .iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    (diff, scale)
+}
+
+/// The shared checker: every parameter of `model` at `at`, analytic against central
+/// differences through `Parameters::set`; also `J_p^T w` against the columns and the
+/// constraint-force term against the columns of joint parameters.
+fn check_model(name: &str, model: &Model, at: &Point, seen: &mut Seen) {
+    let params = Parameters::new(model);
+    let (nd, nr) = (6 * model.nodes.len(), n_rows(model));
+    let mut rng = Lcg(99);
+    let w_r: Vec<f64> = (0..nd).map(|_| rng.next()).collect();
+    let w_phi: Vec<f64> = (0..nr).map(|_| rng.next()).collect();
+    let w_psi: Vec<f64> = (0..nr).map(|_| rng.next()).collect();
+    let mut grad = vec![0.0; params.len()];
+    residual_derivative_transpose(
+        model,
+        &params,
+        &at.nodes,
+        at.t,
+        &at.lambda,
+        at.load_factor,
+        (&w_r, &w_phi, &w_psi),
+        &mut grad,
+    );
+    for id in params.ids() {
+        let path = params.path(id);
+        let (mut dr, mut dphi, mut dpsi) = (vec![0.0; nd], vec![0.0; nr], vec![0.0; nr]);
+        let method = residual_derivative(
+            model,
+            &params,
+            id,
+            &at.nodes,
+            at.t,
+            &at.lambda,
+            at.load_factor,
+            &mut dr,
+            &mut dphi,
+            &mut dpsi,
+        );
+        let kind = pattern(&params, id);
+        if method == DerivativeMethod::FiniteDifference {
+            seen.by_differences.insert(kind.clone());
+        }
+        seen.kinds.insert(kind);
+
+        let p = params.value(model, id);
+        let h = 1e-6 * p.abs().max(1.0);
+        let eval = |v: f64| {
+            let mut copy = model.clone();
+            params.set(&mut copy, id, v);
+            equations(&copy, at)
+        };
+        let (plus, minus) = (eval(p + h), eval(p - h));
+        let fd = |a: &[f64], b: &[f64]| -> Vec<f64> {
+            a.iter().zip(b).map(|(x, y)| (x - y) / (2.0 * h)).collect()
+        };
+        let analytic: Vec<f64> = [&dr[..], &dphi, &dpsi].concat();
+        let differences = [
+            fd(&plus.0, &minus.0),
+            fd(&plus.1, &minus.1),
+            fd(&plus.2, &minus.2),
+        ];
+        let differences = differences.concat();
+        let (diff, scale) = relative_error(&analytic, &differences);
+        if scale < 1e-12 {
+            // independent of the parameter at this point (initial-state parameters)
+            assert!(
+                diff == 0.0,
+                "{name}: {path}: {analytic:?} vs {differences:?}"
+            );
+        } else {
+            let error = diff / scale;
+            seen.worst = seen.worst.max(error);
+            assert!(
+                error < 1e-6,
+                "{name}: {path} ({method:?}): relative error {error:.3e}\nanalytic {analytic:?}\ndifferences {differences:?}"
+            );
+        }
+
+        let dot = |w: &[f64], d: &[f64]| w.iter().zip(d).map(|(a, b)| a * b).sum::<f64>();
+        let column = dot(&w_r, &dr) + dot(&w_phi, &dphi) + dot(&w_psi, &dpsi);
+        let g = grad[id.0 as usize];
+        assert!(
+            (g - column).abs() <= 1e-12 * (1.0 + column.abs()),
+            "{name}: {path}: J_p^T w {g} vs the column {column}"
+        );
+
+        let mut dforce = vec![0.0; nd];
+        constraint_force_derivative(model, &params, id, &at.nodes, at.t, &at.lambda, &mut dforce);
+        if matches!(params.kind(id), ParamKind::Joint(..)) {
+            assert_eq!(dforce, dr, "{name}: {path}: d(B^T lambda)/dp");
+        } else {
+            assert!(dforce.iter().all(|x| *x == 0.0), "{name}: {path}");
+        }
+    }
+}
+
+/// Two bodies (offset centres of mass, full inertias), springs between them and to the
+/// ground, a dead load with a sine and a follower load with a table, gravity, a revolute
+/// joint between the bodies, a driven revolute and a driven prismatic joint to the ground.
+fn mechanism(group: Group) -> Model {
+    let mut m = Model::new(group);
+    m.gravity = Vec3::new(0.3, -9.81, 1.2);
+    let a = m.add_node("a", Frame::new(Vec3::new(0.1, 0.2, -0.3), Mat3::identity()));
+    let b = m.add_node(
+        "b",
+        flexmb_lie::se3::exp(&Vec6::new(1.0, -0.4, 0.2, 0.3, -0.5, 0.7)),
+    );
+    m.nodes[b.0].velocity = Vec3::new(0.5, 0.0, 1.0);
+    let c = m.add_node("c", Frame::new(Vec3::new(-0.5, 0.4, 0.1), Mat3::identity()));
+    let inertia = Mat3::new(0.3, 0.01, -0.02, 0.01, 0.4, 0.03, -0.02, 0.03, 0.5);
+    m.add_body("body_a", a, 2.5, Vec3::new(0.3, -0.7, 0.2), inertia);
+    m.add_body("body_b", b, 1.5, Vec3::new(-0.1, 0.2, 0.4), inertia * 2.0);
+    m.add_body("body_c", c, 0.8, Vec3::new(0.0, 0.1, 0.0), inertia);
+    m.springs.push(SpringDamper {
+        name: "s".into(),
+        node_a: Some(a),
+        node_b: Some(b),
+        point_a: Vec3::new(0.2, 0.1, -0.3),
+        point_b: Vec3::new(-0.1, 0.4, 0.2),
+        stiffness: 120.0,
+        damping: 3.5,
+        rest_length: 0.4,
+    });
+    m.springs.push(SpringDamper {
+        name: "tether".into(),
+        node_a: None,
+        node_b: Some(b),
+        point_a: Vec3::new(1.0, 2.0, 0.5),
+        point_b: Vec3::new(0.1, 0.0, 0.3),
+        stiffness: 50.0,
+        damping: 0.5,
+        rest_length: 1.0,
+    });
+    m.loads.push(Load {
+        name: "push".into(),
+        node: a,
+        force: Vec3::new(1.0, -2.0, 3.0),
+        torque: Vec3::new(-0.5, 0.7, 0.2),
+        frame: LoadFrame::Inertial,
+        function: TimeFunction::Sine {
+            amplitude: 2.0,
+            frequency: 1.0,
+            phase: 0.3,
+            offset: 0.5,
+        },
+    });
+    m.loads.push(Load {
+        name: "follow".into(),
+        node: b,
+        force: Vec3::new(0.0, 4.0, -1.0),
+        torque: Vec3::new(0.3, 0.0, 0.9),
+        frame: LoadFrame::Body,
+        function: TimeFunction::Table {
+            points: vec![(0.0, 0.0), (0.5, 2.0), (1.0, -1.0)],
+        },
+    });
+    let axis = flexmb_lie::so3::exp(&Vec3::new(0.3, 0.2, -0.4));
+    m.add_joint(
+        "pivot",
+        JointKind::Revolute,
+        Some(a),
+        Some(b),
+        Vec3::new(0.4, -0.2, 0.3),
+        axis,
+        None,
+    );
+    let motor = m.add_joint(
+        "motor",
+        JointKind::Revolute,
+        None,
+        Some(a),
+        Vec3::new(0.1, 0.2, -0.3),
+        Mat3::identity(),
+        None,
+    );
+    m.joints[motor.0].drive = Some(TimeFunction::Sine {
+        amplitude: 0.4,
+        frequency: 0.5,
+        phase: 0.1,
+        offset: 0.2,
+    });
+    let slider = m.add_joint(
+        "slider",
+        JointKind::Prismatic,
+        None,
+        Some(c),
+        Vec3::new(-0.5, 0.4, 0.1),
+        axis,
+        None,
+    );
+    m.joints[slider.0].drive = Some(TimeFunction::Linear {
+        slope: 0.6,
+        start: 0.1,
+        offset: -0.05,
+    });
+    m
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_bodies_springs_loads_and_joints() {
+    let mut seen = Seen::default();
+    let mut rng = Lcg(5);
+    for group in [Group::R3xSO3, Group::SE3] {
+        let model = mechanism(group);
+        for _ in 0..2 {
+            let at = point(&model, &mut rng, 1.0);
+            check_model(&format!("mechanism on {group:?}"), &model, &at, &mut seen);
+        }
+    }
+    println!("worst relative error {:.2e}", seen.worst);
+}
+
+/// A straight 2-element beam on SE(3) (full section with couplings, damping), clamped at one
+/// end by a fixed joint, a tip body, gravity.
+fn beam(mass_kind: BeamMass) -> Model {
+    let mut m = Model::new(Group::SE3);
+    m.gravity = Vec3::new(0.3, -9.81, 1.2);
+    let mut c = Mat6::from_diagonal(&Vec6::new(1e3, 4e2, 5e2, 30.0, 40.0, 60.0));
+    for (i, j, v) in [(0, 4, 15.0), (3, 5, 5.0), (1, 2, -20.0)] {
+        c[(i, j)] = v;
+        c[(j, i)] = v;
+    }
+    let section = BeamSection {
+        stiffness: c,
+        mass_per_length: 2.0,
+        rotary_inertia: Mat3::new(0.3, 0.01, 0.0, 0.01, 0.2, 0.02, 0.0, 0.02, 0.1),
+        damping_mass: 0.7,
+        damping_stiffness: 0.03,
+    };
+    let root = m.add_node("root", Frame::identity());
+    let end = Vec3::new(1.2, 0.5, -0.3);
+    let ids = m.add_straight_beam("rod", root, end, None, 2, &Vec3::z(), &section);
+    for b in &mut m.beams {
+        b.mass_kind = mass_kind;
+    }
+    m.add_body(
+        "tip",
+        ids[2],
+        0.5,
+        Vec3::new(0.1, 0.0, 0.0),
+        Mat3::identity() * 0.01,
+    );
+    m.add_joint(
+        "clamp",
+        JointKind::Fixed,
+        None,
+        Some(root),
+        Vec3::zeros(),
+        Mat3::identity(),
+        None,
+    );
+    m
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_a_two_element_beam() {
+    let mut seen = Seen::default();
+    let mut rng = Lcg(6);
+    for kind in [BeamMass::Lumped, BeamMass::Consistent] {
+        let model = beam(kind);
+        let params = Parameters::new(&model);
+        assert_eq!(
+            params.beam_elements(0),
+            [0, 1],
+            "one beam 'rod' of two elements"
+        );
+        let at = point(&model, &mut rng, 0.2);
+        check_model(&format!("{kind:?} beam"), &model, &at, &mut seen);
+    }
+    println!("worst relative error {:.2e}", seen.worst);
+}
+
+#[test]
+fn parameter_kinds_by_finite_differences_are_the_listed_ones() {
+    // Every kind of parameter occurs in the test models above, and these, and only these,
+    // use the finite-difference default: a new one shows up here.
+    let mut seen = Seen::default();
+    let mut rng = Lcg(7);
+    let at = point(&mechanism(Group::SE3), &mut rng, 1.0);
+    check_model("mechanism", &mechanism(Group::SE3), &at, &mut seen);
+    let at = point(&beam(BeamMass::Lumped), &mut rng, 0.2);
+    check_model("beam", &beam(BeamMass::Lumped), &at, &mut seen);
+    let by_differences: Vec<&str> = seen.by_differences.iter().map(String::as_str).collect();
+    assert_eq!(
+        by_differences,
+        [
+            "joint.<j>.position.<k>",
+            "spring.<s>.point_a.<k>",
+            "spring.<s>.point_b.<k>"
+        ]
+    );
+    assert_eq!(seen.kinds.len(), 23, "kinds checked: {:#?}", seen.kinds);
+}
