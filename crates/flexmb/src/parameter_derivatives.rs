@@ -95,73 +95,67 @@ fn row_starts(model: &Model) -> (Vec<usize>, Vec<Vec<Row>>, usize) {
     (starts, rows, n)
 }
 
-/// Visits the local terms of the derivative with respect to `id`; `joints_only` skips the
-/// force elements. `rows` and `starts` as from [`row_starts`] (may be empty if `id` is not a
-/// joint parameter).
+/// What an element's derivative is taken with respect to.
+enum Wrt<P> {
+    /// One of its own parameters.
+    Own(P),
+    /// Component `k` of gravity.
+    Gravity(usize),
+}
+
+/// One element's term: its derivative at the kinematics of its nodes, to `sink`.
+fn element_term<E: ElementParameters>(
+    at: &At,
+    e: &E,
+    wrt: Wrt<E::Param>,
+    sink: &mut dyn FnMut(Piece),
+) -> DerivativeMethod {
+    let ctx = at.context();
+    let slots = e.nodes();
+    let nodes = at.pair(slots);
+    let mut d = Vec12::zeros();
+    let method = match wrt {
+        Wrt::Own(p) => e.parameter_derivative(&ctx, p, &nodes, &mut d),
+        Wrt::Gravity(k) => {
+            e.gravity_derivative(&ctx, k, &nodes, &mut d);
+            DerivativeMethod::Analytic
+        }
+    };
+    sink(Piece::Element(slots, &d));
+    method
+}
+
+/// Visits the local terms of the derivative with respect to `id`. `rows` and `starts` as
+/// from [`row_starts`] (may be empty if `id` is not a joint parameter).
 fn visit(
     at: &At,
     params: &Parameters,
     id: ParamId,
     (rows, starts): (&[Vec<Row>], &[usize]),
-    joints_only: bool,
     sink: &mut dyn FnMut(Piece),
 ) -> DerivativeMethod {
     let model = at.model;
-    let ctx = at.context();
-    let mut dr = Vec12::zeros();
-    let mut element = |e: &dyn Fn(&[NodeState; 2], &mut Vec12) -> DerivativeMethod,
-                       slots: [Option<NodeId>; 2]| {
-        let method = e(&at.pair(slots), &mut dr);
-        sink(Piece::Element(slots, &dr));
-        method
-    };
-    if joints_only && !matches!(params.kind(id), ParamKind::Joint(..)) {
-        return DerivativeMethod::Analytic;
-    }
     match params.kind(id) {
         ParamKind::Gravity(k) => {
             for b in &model.bodies {
-                let d = |n: &[NodeState; 2], out: &mut Vec12| {
-                    b.gravity_derivative(&ctx, k, n, out);
-                    DerivativeMethod::Analytic
-                };
-                element(&d, [Some(b.node), None]);
+                element_term(at, b, Wrt::Gravity(k), sink);
             }
             for b in &model.beams {
-                let d = |n: &[NodeState; 2], out: &mut Vec12| {
-                    b.gravity_derivative(&ctx, k, n, out);
-                    DerivativeMethod::Analytic
-                };
-                element(&d, [Some(b.nodes[0]), Some(b.nodes[1])]);
+                element_term(at, b, Wrt::Gravity(k), sink);
             }
             DerivativeMethod::Analytic
         }
         ParamKind::Node(..) => DerivativeMethod::Analytic,
-        ParamKind::Body(i, p) => {
-            let b = &model.bodies[i];
-            let d = |n: &[NodeState; 2], out: &mut Vec12| b.parameter_derivative(&ctx, p, n, out);
-            element(&d, [Some(b.node), None])
-        }
+        ParamKind::Body(i, p) => element_term(at, &model.bodies[i], Wrt::Own(p), sink),
         ParamKind::Beam(item, p) => {
             let mut method = DerivativeMethod::Analytic;
             for &e in params.beam_elements(item) {
-                let b = &model.beams[e];
-                let d =
-                    |n: &[NodeState; 2], out: &mut Vec12| b.parameter_derivative(&ctx, p, n, out);
-                method = element(&d, [Some(b.nodes[0]), Some(b.nodes[1])]);
+                method = element_term(at, &model.beams[e], Wrt::Own(p), sink);
             }
             method
         }
-        ParamKind::Load(i, p) => {
-            let l = &model.loads[i];
-            let d = |n: &[NodeState; 2], out: &mut Vec12| l.parameter_derivative(&ctx, p, n, out);
-            element(&d, [Some(l.node), None])
-        }
-        ParamKind::Spring(i, p) => {
-            let s = &model.springs[i];
-            let d = |n: &[NodeState; 2], out: &mut Vec12| s.parameter_derivative(&ctx, p, n, out);
-            element(&d, [s.node_a, s.node_b])
-        }
+        ParamKind::Load(i, p) => element_term(at, &model.loads[i], Wrt::Own(p), sink),
+        ParamKind::Spring(i, p) => element_term(at, &model.springs[i], Wrt::Own(p), sink),
         ParamKind::Joint(j, p) => {
             let joint = &model.joints[j.0];
             let (rows, start) = (&rows[j.0], starts[j.0]);
@@ -225,7 +219,7 @@ pub fn residual_derivative(
             }
         }
     };
-    visit(&at, params, id, (&rows, &starts), false, &mut sink)
+    visit(&at, params, id, (&rows, &starts), &mut sink)
 }
 
 /// `d(B(q; p)^T w)/dp` (6 per node, overwritten) for one parameter at the configurations of
@@ -258,7 +252,7 @@ pub fn constraint_force_derivative(
             scatter(dforce, [joint.node_a, joint.node_b], &d.dforce);
         }
     };
-    visit(&at, params, id, (&rows, &starts), true, &mut sink);
+    visit(&at, params, id, (&rows, &starts), &mut sink);
 }
 
 /// `J_p^T w` for every parameter: `grad[k] = w_r . dR/dp_k + w_phi . dPhi/dp_k + w_psi .
@@ -307,7 +301,7 @@ pub fn residual_derivative_transpose(
                 }
             }
         };
-        visit(&at, params, id, (&rows, &starts), false, &mut sink);
+        visit(&at, params, id, (&rows, &starts), &mut sink);
         grad[id.0 as usize] = sum;
     }
 }

@@ -330,14 +330,7 @@ impl ElementKernel for BeamElement<'_> {
     }
 
     fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        let b = self.beam;
-        let st = b.state(nodes);
-        let half_mass = 0.5 * b.length * b.section.mass_per_length * ctx.gravity_scale;
-        let gravity: f64 = nodes
-            .iter()
-            .map(|n| -half_mass * ctx.model.gravity.dot(&n.q.x))
-            .sum();
-        0.5 * b.length * st.strain.dot(&st.stress) + gravity
+        self.beam.potential_energy(ctx, nodes)
     }
 }
 
@@ -372,12 +365,13 @@ impl ElementKernel for Beam {
     }
 
     fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        let mass = Mat12::zeros(); // not used by the potential energy
-        BeamElement {
-            beam: self,
-            mass: &mass,
-        }
-        .potential_energy(ctx, nodes)
+        let st = self.state(nodes);
+        let half_mass = 0.5 * self.length * self.section.mass_per_length * ctx.gravity_scale;
+        let gravity: f64 = nodes
+            .iter()
+            .map(|n| -half_mass * ctx.model.gravity.dot(&n.q.x))
+            .sum();
+        0.5 * self.length * st.strain.dot(&st.stress) + gravity
     }
 }
 

@@ -141,10 +141,8 @@ impl ElementRef {
     /// All force elements of a model (beam mass matrices computed here).
     pub fn all(model: &Model) -> Vec<ElementRef> {
         let mut out: Vec<ElementRef> = (0..model.bodies.len()).map(ElementRef::Body).collect();
-        out.extend(
-            (model.beams.iter().enumerate())
-                .map(|(i, b)| ElementRef::Beam(i, Arc::new(beam::mass_matrix(b)))),
-        );
+        let beams = model.beams.iter().enumerate();
+        out.extend(beams.map(|(i, b)| ElementRef::Beam(i, Arc::new(beam::mass_matrix(b)))));
         out.extend((0..model.loads.len()).map(ElementRef::Load));
         out.extend((0..model.springs.len()).map(ElementRef::Spring));
         out

@@ -5,6 +5,7 @@
 //! [`crate::State`]; everything derived, and all scratch memory, in [`crate::Data`].
 //! Items refer to each other through typed ids ([`NodeId`], [`JointId`]); joints, loads and
 //! sensors attach to frames fixed on nodes, never to degree-of-freedom numbers.
+//! [`Parameters`] names every numeric parameter of a model by a path and sets it.
 //!
 //! Units are SI throughout (m, kg, s, N, rad) unless a model chooses consistent others.
 

@@ -356,7 +356,8 @@ impl Parameters {
 
     /// Sets a parameter in `model`, keeping it consistent: both symmetric entries of a
     /// coupling, every element of a beam, both joint frames, points converted to their node's
-    /// frame. `model` must be the model the registry was built from (or a copy of it).
+    /// frame. `model` must be the model the registry was built from (or a copy of it). The
+    /// value is not checked: [`Model::validate`] does.
     pub fn set(&self, model: &mut Model, id: ParamId, value: f64) {
         match self.kind(id) {
             ParamKind::Gravity(k) => model.gravity[k] = value,
