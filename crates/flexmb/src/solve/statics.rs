@@ -39,7 +39,7 @@ use std::sync::Arc;
 const ARC_LENGTH_MIN: f64 = 1e-6;
 
 /// How the load factor is controlled.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum StaticMethod {
     /// Prescribed load factor, adaptive increments.
     LoadControl,
@@ -52,7 +52,7 @@ pub enum StaticMethod {
 }
 
 /// Settings of a static analysis.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StaticSettings {
     /// Final load factor (the loads and gravity of the model are multiplied by it).
     pub load_factor: f64,
@@ -206,7 +206,7 @@ impl Default for StaticSettings {
 }
 
 /// Work done by a static analysis.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StaticStats {
     pub steps: usize,
     pub newton_iterations: usize,
