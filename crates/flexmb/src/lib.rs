@@ -23,7 +23,8 @@
 //! | [`output`] | `sensors.csv` and `summary.json` |
 //!
 //! The convenient API: build or read a [`Model`], then
-//! `Simulation::new(&model, settings)?.run(&mut |sim| { ... })`.
+//! `Simulation::new(&model, settings)?.run(&mut |s: &observe::Sample| { ... })`, or step by
+//! step with [`Simulation::step`].
 
 pub mod assembly;
 pub mod data;
