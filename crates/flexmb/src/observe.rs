@@ -26,6 +26,8 @@ pub struct Sample<'a> {
 /// One accepted step of a dynamic run.
 #[derive(Clone, Copy)]
 pub struct StepRecord<'a> {
+    /// The simulation after the step (e.g. for [`crate::solve::Simulation::memory`]).
+    pub simulation: &'a crate::solve::Simulation,
     /// Number of the step (1 for the first).
     pub index: usize,
     /// The state at the start of the step, `s_n`.

@@ -345,17 +345,13 @@ pub struct Simulation {
     started: bool,
 }
 
-/// The memory of a dynamic run at a step boundary: with the model and the settings,
-/// everything the next steps depend on, so that a run resumed from it
-/// ([`Simulation::resume`]) takes the same steps as the run that wrote it, bit for bit. That
-/// includes the factorized iteration matrix, which later steps may reuse: its values are
-/// kept and factorized again.
+/// The memory of a simulation at a step boundary: with the model and the settings,
+/// everything the next steps depend on, so that a simulation restored from it
+/// ([`Simulation::restore`]) takes the same steps as the one it was taken from, bit for
+/// bit. That includes the factorized iteration matrix, which later steps may reuse: its
+/// values are kept and factorized again.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Checkpoint {
-    /// Format version ([`Checkpoint::VERSION`]).
-    pub version: u32,
-    pub model: Model,
-    pub settings: DynamicSettings,
+pub struct Memory {
     pub state: State,
     pub stats: Stats,
     pub verification: Option<Verification>,
@@ -368,6 +364,16 @@ pub struct Checkpoint {
     newton: NewtonMemory,
     /// The held iteration matrix (values in pattern order).
     matrix: Option<Vec<f64>>,
+}
+
+/// A self-contained checkpoint of a dynamic run: model, settings and [`Memory`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Checkpoint {
+    /// Format version ([`Checkpoint::VERSION`]).
+    pub version: u32,
+    pub model: Model,
+    pub settings: DynamicSettings,
+    pub memory: Memory,
 }
 
 impl Checkpoint {
@@ -515,13 +521,10 @@ impl Simulation {
         result
     }
 
-    /// The memory of the run now (call it between steps).
-    pub fn checkpoint(&self) -> Checkpoint {
+    /// The memory of the run now (between steps).
+    pub fn memory(&self) -> Memory {
         let layout = &self.data.layout;
-        Checkpoint {
-            version: Checkpoint::VERSION,
-            model: (*self.model).clone(),
-            settings: self.settings,
+        Memory {
             state: self.state.clone(),
             stats: self.stats,
             verification: self.verification.clone(),
@@ -537,9 +540,18 @@ impl Simulation {
         }
     }
 
+    /// A self-contained checkpoint of the run now (between steps).
+    pub fn checkpoint(&self) -> Checkpoint {
+        Checkpoint {
+            version: Checkpoint::VERSION,
+            model: (*self.model).clone(),
+            settings: self.settings,
+            memory: self.memory(),
+        }
+    }
+
     /// A run resumed from a checkpoint: it goes on exactly as the run that wrote it would
-    /// have. `t_end` may be later than the checkpoint's (the run is extended); nothing else
-    /// of the settings may differ.
+    /// have. `t_end` may be later than the checkpoint's (the run is extended).
     pub fn resume(checkpoint: Checkpoint, t_end: f64) -> Result<Self, SolveError> {
         let c = checkpoint;
         if c.version != Checkpoint::VERSION {
@@ -549,15 +561,27 @@ impl Simulation {
                 Checkpoint::VERSION
             )));
         }
-        let mut settings = c.settings;
-        if t_end < c.state.t {
+        if t_end < c.memory.state.t {
             return Err(SolveError::Checkpoint(format!(
                 "t_end = {t_end} is before the checkpoint's time {}",
-                c.state.t
+                c.memory.state.t
             )));
         }
-        settings.t_end = t_end;
-        let model = Arc::new(c.model);
+        let settings = DynamicSettings {
+            t_end,
+            ..c.settings
+        };
+        Self::restore(Arc::new(c.model), settings, c.memory)
+    }
+
+    /// A simulation of `model` with `settings` restored to a memory taken from one of the
+    /// same model and settings ([`Simulation::memory`]).
+    pub fn restore(
+        model: Arc<Model>,
+        settings: DynamicSettings,
+        memory: Memory,
+    ) -> Result<Self, SolveError> {
+        let c = memory;
         model.validate()?;
         settings.check()?;
         let (_, warnings) = prepare_layout(&model);
@@ -694,6 +718,7 @@ impl Simulation {
             if wants_steps {
                 self.step_unknowns(&mut unknowns);
                 let record = StepRecord {
+                    simulation: self,
                     index: self.stats.steps,
                     start: &self.integrator.saved,
                     unknowns: &unknowns,
@@ -721,9 +746,10 @@ impl Simulation {
         }
     }
 
-    /// The converged unknowns of the last step in the layout of the Newton vector:
+    /// The converged unknowns of the last step (call it after [`Simulation::step`]) in the
+    /// layout of the Newton vector:
     /// increments, scaled multipliers `mu = s lambda` and stabilization unknowns.
-    fn step_unknowns(&self, x: &mut Vec<f64>) {
+    pub fn step_unknowns(&self, x: &mut Vec<f64>) {
         let layout = &self.data.layout;
         let it = &self.integrator;
         let h = self.state.t - it.saved.t;

@@ -8,6 +8,7 @@ pub mod linear;
 pub mod newton;
 pub mod statics;
 pub mod step;
+pub mod trajectory;
 
 pub use dynamics::{DynamicSettings, Formulation, IntoShared, Scheme, Simulation, Stats, StepInfo};
 pub use generalized_alpha::GaParameters;
