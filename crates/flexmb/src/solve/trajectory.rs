@@ -122,7 +122,7 @@ impl Observer for Trajectory {
 
     fn step(&mut self, record: &StepRecord) -> Result<(), String> {
         self.steps = record.index;
-        if record.index % self.every == 0 {
+        if record.index.is_multiple_of(self.every) {
             self.checkpoints.push(record.simulation.memory());
         }
         Ok(())
