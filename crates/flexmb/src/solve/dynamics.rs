@@ -20,18 +20,23 @@
 //! index-3 form without numerical damping (`rho_inf = 1`), at the cost of `m` more unknowns;
 //! [`Formulation::Auto`] uses it for `rho_inf >= 0.95`.
 //!
-//! The step reads as a checklist: `predict`, then repeat { `update_configuration`,
-//! `assemble` (residual and iteration matrix), `factorize`, `solve`, `correct`, judge the
-//! weighted corrections with [`Convergence`] } until the accepted iterate's error is within
-//! the tolerance (see [`super::newton`]: a correction from a reused matrix is never taken
-//! for the error), then `finish_step` (configuration and algorithmic acceleration). A failed
-//! step is retried first with a fresh iteration matrix if it used a reused one, then with
-//! redundant constraint rows chosen again if they change ([`initial::reselect_redundant_rows`]),
-//! then with a quarter of the step size down to `h_min`; the run stops with a diagnosis
-//! (step, time, the worst equation and its node or joint) below `h_min` or when step
-//! reductions keep coming back (more than 100 plus one per 10 accepted steps). The output
-//! callback is called at every output time, so what was computed is never lost; output
-//! times and `t_end` are reached exactly, by steps never shorter than `h / 2`.
+//! One attempt at a step reads as a checklist ([`Simulation::step`]): [`step::predict`],
+//! then the [`NewtonSolver`] iterates on `StepSystem` { [`step::total_increments`] and
+//! [`step::kinematics`] (`q = q_n exp(dq + B_n^T zeta)`, `T`), [`assemble`] (residual and,
+//! when the matrix is rebuilt, iteration matrix), factorize, solve, [`step::correct`], judge
+//! the weighted corrections with [`super::newton::Convergence`] } until the accepted
+//! iterate's error is within the tolerance (a correction from a reused matrix is never taken
+//! for the error), then [`step::finish`] (configuration and algorithmic acceleration). A
+//! failed attempt is repeated first with a fresh iteration matrix if it used a reused one
+//! (the solver's policy), then with redundant constraint rows chosen again if they change
+//! ([`initial::reselect_redundant_rows`]), then with a quarter of the step size down to
+//! `h_min` (`StepControl`); the step fails with a diagnosis (step, time, the worst
+//! equation and its node or joint) below `h_min` or when step reductions keep coming back
+//! (more than 100 plus one per 10 accepted steps). [`Simulation::run`] reports to its
+//! observer at every output time, so what was computed is never lost; output times and
+//! `t_end` are reached exactly, by steps never shorter than `h / 2` (`StepClock`).
+//! [`Simulation::memory`] and [`Simulation::restore`] take and restore everything the next
+//! steps depend on, bit for bit.
 
 use super::generalized_alpha::GaParameters;
 use super::initial::{self, initial_accelerations, mass_scale, prepare_layout};
