@@ -5,21 +5,11 @@
 
 mod common;
 
-use flexmb::input::{read_model_file, Analysis};
 use flexmb::observe::Sample;
 use flexmb::solve::dynamics::Checkpoint;
 use flexmb::{Simulation, SolveError, State};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-
-fn simulation(file: &str, overrides: &[&str]) -> Simulation {
-    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    let mf = read_model_file(&common::example(file), &overrides).expect("model file");
-    let Analysis::Dynamic(settings) = mf.analysis else {
-        panic!("{file} is dynamic")
-    };
-    Simulation::new(mf.model, settings).expect("starts")
-}
 
 /// The states at the output times of a whole run.
 fn outputs(sim: &mut Simulation) -> Vec<State> {
@@ -33,11 +23,11 @@ fn outputs(sim: &mut Simulation) -> Vec<State> {
 }
 
 fn check(file: &str, overrides: &[&str]) {
-    let whole = outputs(&mut simulation(file, overrides));
+    let whole = outputs(&mut common::example_simulation(file, overrides));
     let t_end = whole.last().expect("outputs").t;
     let mid = 0.5 * t_end;
     // Interrupted once an output at or after mid-time is written.
-    let mut sim = simulation(file, overrides);
+    let mut sim = common::example_simulation(file, overrides);
     let flag = Arc::new(AtomicBool::new(false));
     sim.interrupt = Some(flag.clone());
     let mut first = Vec::new();

@@ -5,21 +5,11 @@
 
 mod common;
 
-use flexmb::input::{read_model_file, Analysis};
 use flexmb::observe::Observers;
 use flexmb::solve::linear::LinearSolver;
 use flexmb::solve::step::StepFunction;
 use flexmb::solve::trajectory::{Trajectory, TrajectoryStep};
-use flexmb::{Data, Simulation};
-
-fn simulation(file: &str, overrides: &[&str]) -> Simulation {
-    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    let mf = read_model_file(&common::example(file), &overrides).expect("model file");
-    let Analysis::Dynamic(settings) = mf.analysis else {
-        panic!("{file} is dynamic")
-    };
-    Simulation::new(mf.model, settings).expect("starts")
-}
+use flexmb::Data;
 
 fn backward(t: &Trajectory) -> Vec<TrajectoryStep> {
     let mut out = Vec::new();
@@ -32,7 +22,7 @@ fn backward(t: &Trajectory) -> Vec<TrajectoryStep> {
 }
 
 fn check(file: &str, overrides: &[&str]) {
-    let mut sim = simulation(file, overrides);
+    let mut sim = common::example_simulation(file, overrides);
     let mut all = Trajectory::new(&sim, 1);
     let mut sparse = Trajectory::new(&sim, 7);
     sim.run(&mut Observers(vec![&mut all, &mut sparse]))

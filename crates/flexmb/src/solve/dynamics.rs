@@ -881,16 +881,9 @@ impl Simulation {
             }
             None => {}
         }
-        if let Some(check) = newton.check {
-            let (model, layout) = (&self.model, &self.data.layout);
-            self.verification
-                .get_or_insert_with(Verification::default)
-                .record(check.error, t_new, || {
-                    check
-                        .worst
-                        .map(|i| layout.describe_unknown(model, i))
-                        .unwrap_or_default()
-                });
+        if let Some(check) = &newton.check {
+            let layout = &self.data.layout;
+            Verification::add(&mut self.verification, check, t_new, layout, &self.model);
         }
         self.watch_redundant_rows();
         if self.stats.steps == 1 || h < self.stats.smallest_step {

@@ -232,6 +232,24 @@ impl Verification {
         })
     }
 
+    /// Records what the verify mode measured at the step (or load step) ending at `at`,
+    /// starting the record if there is none.
+    pub fn add(
+        slot: &mut Option<Self>,
+        check: &Check,
+        at: f64,
+        layout: &crate::data::Layout,
+        model: &crate::model::Model,
+    ) {
+        slot.get_or_insert_with(Self::default)
+            .record(check.error, at, || {
+                check
+                    .worst
+                    .map(|i| layout.describe_unknown(model, i))
+                    .unwrap_or_default()
+            });
+    }
+
     /// Records the check of one step: its estimated error (NaN when no estimate could be
     /// made), where it is, and the equation (evaluated only if the step is the worst so far).
     pub fn record(&mut self, error: f64, at: f64, worst_equation: impl FnOnce() -> String) {

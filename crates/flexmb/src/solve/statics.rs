@@ -645,16 +645,9 @@ impl Statics {
         }
         self.state.lambda = lambda;
         self.state.t = reached;
-        if let Some(check) = info.check {
-            let (model, layout) = (&self.model, &self.data.layout);
-            self.verification
-                .get_or_insert_with(Verification::default)
-                .record(check.error, reached, || {
-                    check
-                        .worst
-                        .map(|i| layout.describe_unknown(model, i))
-                        .unwrap_or_default()
-                });
+        if let Some(check) = &info.check {
+            let layout = &self.data.layout;
+            Verification::add(&mut self.verification, check, reached, layout, &self.model);
         }
         Ok((info.final_iterations, arc, dq))
     }
