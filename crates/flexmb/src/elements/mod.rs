@@ -1,4 +1,5 @@
-//! Force elements: rigid bodies (inertia and gravity), applied loads, spring-dampers.
+//! Force elements: rigid bodies (inertia and gravity), geometrically exact beams on SE(3)
+//! (two nodes, [`beam`]), applied loads, spring-dampers.
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
@@ -14,9 +15,11 @@
 //! S = c_m M + c_c C_t + c_k K_t T,     M = dr/dvdot, C_t = dr/dv, K_t = dr/dw (q -> q exp(w)),
 //! ```
 //!
-//! where `T` is the tangent operator of each node's increment, and derivatives of `r` with
-//! respect to named model parameters for sensitivity analysis. One trait,
-//! [`ElementKernel`], serves simulation, statics and sensitivities.
+//! where `T` is the tangent operator of each node's increment. One trait, [`ElementKernel`],
+//! serves the dynamic step, statics, the initial accelerations and the step function of
+//! [`crate::solve::step`]. Its [`ElementKernel::parameter_derivative`] (`dr/dp` for a
+//! [`Parameter`]) is implemented for body mass and spring stiffness and damping and checked
+//! against finite differences, but no solver calls it yet.
 //!
 //! Elements written most naturally in "physical" coordinates (inertial translation
 //! variation, body rotation variation) are converted to the group's coordinates by
