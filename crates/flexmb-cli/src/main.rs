@@ -2,6 +2,8 @@
 //!
 //! ```text
 //! flexmb run MODEL.toml --out DIR [--set key.path=value ...] [--quiet] [--verify]
+//!                       [--checkpoint-interval T]
+//! flexmb run MODEL.toml --resume DIR [--set ...]
 //! flexmb check MODEL.toml [--set ...]
 //! ```
 //!

@@ -35,6 +35,8 @@ pub struct StepRecord<'a> {
     /// The converged unknowns `x_{n+1}` in the layout of the Newton vector (scaled
     /// multipliers `mu = s lambda`; see [`crate::solve::step`]).
     pub unknowns: &'a [f64],
+    /// The constraint rows left out as redundant in the step (the layout of `unknowns`).
+    pub redundant_rows: &'a [usize],
     /// The state at the end, `s_{n+1}`.
     pub end: &'a State,
     pub info: &'a StepInfo,

@@ -5,6 +5,7 @@
 
 mod common;
 
+use flexmb::data::Layout;
 use flexmb::observe::Observers;
 use flexmb::solve::linear::LinearSolver;
 use flexmb::solve::step::StepFunction;
@@ -22,7 +23,11 @@ fn backward(t: &Trajectory) -> Vec<TrajectoryStep> {
 }
 
 fn check(file: &str, overrides: &[&str]) {
-    let mut sim = common::example_simulation(file, overrides);
+    check_simulation(file, common::example_simulation(file, overrides));
+}
+
+/// Returns how many times the redundant rows changed along the run.
+fn check_simulation(file: &str, mut sim: flexmb::Simulation) -> usize {
     let mut all = Trajectory::new(&sim, 1);
     let mut sparse = Trajectory::new(&sim, 7);
     sim.run(&mut Observers(vec![&mut all, &mut sparse]))
@@ -44,10 +49,19 @@ fn check(file: &str, overrides: &[&str]) {
     );
     let indices: Vec<usize> = a.iter().map(|s| s.index).collect();
     assert_eq!(indices, (1..=n).rev().collect::<Vec<_>>());
-    // Each step against the step function.
-    let mut data = Data::new(&sim.model, sim.data.layout.clone()).expect("data");
-    for s in a.iter().step_by(5) {
-        let f = StepFunction::new(&sim.model, &sim.data.layout, &s.start, &sim.settings, s.h);
+    // Each step against the step function, in the layout of its own redundant rows.
+    let rows_changed: Vec<&TrajectoryStep> = a
+        .windows(2)
+        .filter(|w| w[0].redundant_rows != w[1].redundant_rows)
+        .map(|w| &w[0])
+        .collect();
+    let changes = rows_changed.len();
+    for s in a.iter().step_by(5).chain(rows_changed) {
+        let mut layout = Layout::new(&sim.model);
+        layout.stabilized = sim.settings.stabilized();
+        layout.deactivate_rows(&sim.model, &s.redundant_rows);
+        let mut data = Data::new(&sim.model, layout.clone()).expect("data");
+        let f = StepFunction::new(&sim.model, &layout, &s.start, &sim.settings, s.h);
         let end = f.end_state(&s.unknowns);
         for (p, q) in end.q.iter().zip(&s.end.q) {
             assert!(
@@ -73,7 +87,7 @@ fn check(file: &str, overrides: &[&str]) {
         solver.factorize(&values).expect("regular");
         let mut dx: Vec<f64> = r.iter().map(|v| -v).collect();
         solver.solve_in_place(&mut dx);
-        let nd = sim.data.layout.n_dofs;
+        let nd = layout.n_dofs;
         let dq = dx[..nd].iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let q = s.unknowns[..nd].iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let rtol = sim.settings.newton.rtol;
@@ -83,6 +97,7 @@ fn check(file: &str, overrides: &[&str]) {
             s.index
         );
     }
+    changes
 }
 
 #[test]
@@ -95,5 +110,24 @@ fn checkpointed_trajectory_replays_a_stabilized_chain_exactly() {
     check(
         "chain_10.toml",
         &["solver.t_end=0.1", "solver.formulation=index2"],
+    );
+}
+
+/// The Bricard mechanism with each rod's node at its first joint chooses its redundant rows
+/// again at t = 1.152 s: the steps around it keep the layout they were taken in.
+#[test]
+fn checkpointed_trajectory_replays_steps_across_a_change_of_redundant_rows() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/bricard_nodes_at_joints.toml");
+    let mf = flexmb::input::read_model_file(&path, &["solver.t_end=1.2".to_string()])
+        .expect("model file");
+    let flexmb::input::Analysis::Dynamic(settings) = mf.analysis else {
+        unreachable!()
+    };
+    let sim = flexmb::Simulation::new(mf.model, settings).expect("starts");
+    let changes = check_simulation("bricard_nodes_at_joints.toml", sim);
+    assert_eq!(
+        changes, 1,
+        "the rows are chosen again once before t = 1.2 s"
     );
 }

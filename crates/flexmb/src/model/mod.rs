@@ -1,6 +1,6 @@
 //! The model: the immutable description of a multibody system.
 //!
-//! A [`Model`] holds what a user writes in a model file (nodes, bodies, joints, loads, springs,
+//! A [`Model`] holds what a user writes in a model file (nodes, bodies, beam elements, joints, loads, springs,
 //! sensors) and never changes during a run. Everything that changes lives in
 //! [`crate::State`]; everything derived, and all scratch memory, in [`crate::Data`].
 //! Items refer to each other through typed ids ([`NodeId`], [`JointId`]); joints, loads and

@@ -404,6 +404,11 @@ struct Integrator {
     nodes: Vec<NodeState>,
     /// Round-off floor of the scaled multipliers' tolerance (`n_active`).
     mu_floor: Vec<f64>,
+    /// The converged unknowns of the last accepted step, in its layout.
+    unknowns: Vec<f64>,
+    /// The rows left out as redundant in the last accepted step (the rows may be chosen
+    /// again right after it).
+    redundant_rows: Vec<usize>,
 }
 
 /// Start of the previous accepted step (`h = 0` when there is none).
@@ -711,7 +716,6 @@ impl Simulation {
             self.started = true;
         }
         let wants_steps = observer.wants_steps();
-        let mut unknowns = Vec::new();
         while self.state.t < self.settings.t_end.min(t_stop) {
             if interrupted(&self.interrupt) {
                 return Err(SolveError::Interrupted {
@@ -721,12 +725,12 @@ impl Simulation {
             let target = self.control.target(&self.settings);
             let info = self.step()?;
             if wants_steps {
-                self.step_unknowns(&mut unknowns);
                 let record = StepRecord {
                     simulation: self,
                     index: self.stats.steps,
                     start: &self.integrator.saved,
-                    unknowns: &unknowns,
+                    unknowns: &self.integrator.unknowns,
+                    redundant_rows: &self.integrator.redundant_rows,
                     end: &self.state,
                     info: &info,
                 };
@@ -751,10 +755,14 @@ impl Simulation {
         }
     }
 
-    /// The converged unknowns of the last step (call it after [`Simulation::step`]) in the
-    /// layout of the Newton vector:
-    /// increments, scaled multipliers `mu = s lambda` and stabilization unknowns.
-    pub fn step_unknowns(&self, x: &mut Vec<f64>) {
+    /// The converged unknowns of the last accepted step in the layout of its Newton vector
+    /// (increments, scaled multipliers `mu = s lambda` and stabilization unknowns), and the
+    /// constraint rows that were left out as redundant in it.
+    pub fn last_step(&self) -> (&[f64], &[usize]) {
+        (&self.integrator.unknowns, &self.integrator.redundant_rows)
+    }
+
+    fn step_unknowns_into(&self, x: &mut Vec<f64>) {
         let layout = &self.data.layout;
         let it = &self.integrator;
         let h = self.state.t - it.saved.t;
@@ -885,6 +893,15 @@ impl Simulation {
             let layout = &self.data.layout;
             Verification::add(&mut self.verification, check, t_new, layout, &self.model);
         }
+        // What the step was, in its own layout (the rows may be chosen again now).
+        let mut unknowns = std::mem::take(&mut self.integrator.unknowns);
+        self.step_unknowns_into(&mut unknowns);
+        self.integrator.unknowns = unknowns;
+        let layout = &self.data.layout;
+        self.integrator.redundant_rows.clear();
+        self.integrator
+            .redundant_rows
+            .extend((0..layout.n_rows).filter(|&r| layout.row_unknown[r].is_none()));
         self.watch_redundant_rows();
         if self.stats.steps == 1 || h < self.stats.smallest_step {
             self.stats.smallest_step = h;
@@ -936,7 +953,6 @@ impl Simulation {
         for &row in &redundant {
             self.state.lambda[row] = 0.0;
         }
-        self.integrator.saved.clone_from(&self.state);
         self.integrator.previous.h = 0.0;
         self.newton.forget_matrix();
         self.redundancy.pivot_reference = None;
@@ -1124,7 +1140,10 @@ impl NonlinearSystem for StepSystem<'_> {
     }
 
     fn exact_matrix(&self) -> bool {
-        // The stabilized rows omit the O(h) derivative of B(q) v with respect to q.
+        // The stabilized form's iteration matrix is an approximation: it omits the O(h)
+        // derivative of B(q) v with respect to q, the equilibrium rows' dependence on zeta
+        // (through q), and the T in B T B(q_n)^T ([`step::StepFunction::jacobian`] has them
+        // all). Index 3: the matrix is exact.
         self.b_start.is_empty()
     }
 

@@ -28,6 +28,9 @@ pub struct TrajectoryStep {
     pub start: State,
     /// The converged unknowns `x_{n+1}` (layout of the Newton vector).
     pub unknowns: Vec<f64>,
+    /// The constraint rows left out as redundant in the step (with the model, they give
+    /// the layout of `unknowns`).
+    pub redundant_rows: Vec<usize>,
     /// The state at the end, `s_{n+1}`.
     pub end: State,
 }
@@ -83,13 +86,13 @@ impl Trajectory {
         for i in 1..=count {
             let start = sim.state.clone();
             let info = sim.step()?;
-            let mut unknowns = Vec::new();
-            sim.step_unknowns(&mut unknowns);
+            let (unknowns, redundant_rows) = sim.last_step();
             out.push(TrajectoryStep {
                 index: first + i,
                 h: info.h,
                 start,
-                unknowns,
+                unknowns: unknowns.to_vec(),
+                redundant_rows: redundant_rows.to_vec(),
                 end: sim.state.clone(),
             });
         }
