@@ -2,6 +2,8 @@
 //!
 //! ```text
 //! flexmb run MODEL.toml --out DIR [--set key.path=value ...] [--quiet] [--verify]
+//!                       [--checkpoint-interval T]
+//! flexmb run MODEL.toml --resume DIR [--set ...]
 //! flexmb check MODEL.toml [--set ...]
 //! ```
 //!
@@ -78,6 +80,15 @@ enum Command {
         /// one more factorization per step.
         #[arg(long)]
         verify: bool,
+        /// Dynamic analysis: write DIR/checkpoint.json every T seconds of simulated time and
+        /// at the end (a run stopped by a signal always writes one).
+        #[arg(long, value_name = "T")]
+        checkpoint_interval: Option<f64>,
+        /// Go on with the run in DIR from its checkpoint.json (the same model and settings;
+        /// t_end may be later): its result files are continued as the run would have written
+        /// them.
+        #[arg(long, value_name = "DIR", conflicts_with = "out")]
+        resume: Option<PathBuf>,
     },
     /// Read and check a model file (syntax, references, physics, initial conditions).
     Check {
@@ -96,7 +107,30 @@ fn main() {
                 set,
                 quiet,
                 verify,
-            } => run(&model, &out, &set, quiet, verify),
+                checkpoint_interval,
+                resume,
+            } => match checkpoint_interval {
+                Some(t) if !(t.is_finite() && t > 0.0) => {
+                    tell(format_args!(
+                        "error: --checkpoint-interval must be a positive number of seconds, got {t}"
+                    ));
+                    exit::USAGE
+                }
+                _ => {
+                    let options = flexmb::driver::RunOptions {
+                        checkpoint_interval,
+                        resume: resume.is_some(),
+                    };
+                    run(
+                        &model,
+                        resume.as_deref().unwrap_or(&out),
+                        &set,
+                        quiet,
+                        verify,
+                        options,
+                    )
+                }
+            },
             Command::Check { model, set } => check(&model, &set),
         },
         Err(e) => {
@@ -113,7 +147,14 @@ fn main() {
 }
 
 /// `flexmb run`: takes over the output directory, reads the model and runs it.
-fn run(model: &Path, out: &Path, set: &[String], quiet: bool, verify: bool) -> i32 {
+fn run(
+    model: &Path,
+    out: &Path,
+    set: &[String],
+    quiet: bool,
+    verify: bool,
+    options: flexmb::driver::RunOptions,
+) -> i32 {
     let interrupt = match signals::Interrupt::install() {
         Ok(i) => Some(i),
         Err(e) => {
@@ -123,8 +164,13 @@ fn run(model: &Path, out: &Path, set: &[String], quiet: bool, verify: bool) -> i
             None
         }
     };
-    // From here on summary.json describes this run.
-    let dir = match OutputDir::prepare(out).and_then(|dir| {
+    // From here on summary.json describes this run (a resumed run goes on in its directory).
+    let taken = if options.resume {
+        OutputDir::reopen(out)
+    } else {
+        OutputDir::prepare(out)
+    };
+    let dir = match taken.and_then(|dir| {
         dir.write_summary(&Summary::default())?;
         Ok(dir)
     }) {
@@ -158,6 +204,7 @@ fn run(model: &Path, out: &Path, set: &[String], quiet: bool, verify: bool) -> i
     let result = flexmb::driver::run(
         &file,
         &dir,
+        options,
         &mut |t, t_end| {
             bar.set_position((1000.0 * t / t_end).round() as u64);
             bar.set_message(format!("t = {t:.4} s"));

@@ -4,7 +4,7 @@ use crate::so3;
 use crate::{Mat3, Vec3};
 
 /// Position `x` (inertial frame) and rotation `r` (body to inertial) of a node.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Frame {
     /// Position of the frame origin in the inertial frame.
     pub x: Vec3,

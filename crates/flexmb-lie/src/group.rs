@@ -3,7 +3,7 @@
 use crate::{join, se3, so3, split, Frame, Mat6, Vec6};
 
 /// The Lie group a node configuration lives on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum Group {
     /// `R3 x SO(3)`: translation velocity in the inertial frame, rotation in the body frame.
     R3xSO3,

@@ -1,6 +1,7 @@
-//! Derived quantities and scratch memory, built once per model with [`Data::new`].
+//! The numbering of the Newton unknowns ([`Layout`]) and, for one layout, the derived
+//! quantities and workspaces of the solvers ([`Data`]).
 //!
-//! [`Layout`] numbers the unknowns of the Newton iteration:
+//! [`Layout`] numbers the unknowns of the Newton iteration in three blocks ([`Block`]):
 //!
 //! ```text
 //! [ node 0 (6) | ... | node n-1 (6) | multipliers (n_active) | stabilization (n_active) ]
@@ -8,12 +9,24 @@
 //!
 //! The last block exists only in the stabilized index-2 formulation (see
 //! [`crate::solve::dynamics`]): one unknown `zeta` per active row, with the velocity-level
-//! constraint as its equation.
+//! constraint as its equation. [`Layout::unknown`] names an index as an [`UnknownId`] (a
+//! node component, a joint row's multiplier or stabilization unknown), which failures carry
+//! and [`Layout::describe`] puts in words.
+//!
+//! [`Data::new`] builds, for a model and a layout, the sparsity pattern of the iteration
+//! matrix, the linear solver (with the symbolic analysis of the sparse backend) and the
+//! workspaces: matrix values in pattern order, residual, correction, `Phi`, rows of `B`,
+//! nodal masses. It is built again whenever the layout changes (the stabilized form after
+//! the initial accelerations, redundant rows chosen again during a run, a restored
+//! checkpoint). `Data` holds no iterate: the system being solved holds it and passes it to
+//! [`crate::assembly::assemble`] as an [`crate::assembly::Iterate`].
 //!
 //! Each node's 6 entries are a vector in the Lie algebra (translation, then rotation).
 //! Constraint rows that are redundant (linearly dependent on others, e.g. in an
-//! over-constrained closed loop) are detected at start and left out of the unknowns; their
-//! multipliers stay zero and the others carry the load (a valid, least-constrained set).
+//! over-constrained closed loop) are left out of the unknowns: found at the start, and
+//! chosen again as the mechanism moves ([`crate::solve::initial::reselect_redundant_rows`]);
+//! their multipliers stay zero and the others carry the load (a valid, least-constrained
+//! set).
 
 use crate::elements::ElementRef;
 use crate::joints::{self, Row};

@@ -14,8 +14,11 @@
 
 use crate::input::{Analysis, ModelFile};
 use crate::observe::{Observer, Observers, Sample};
-use crate::output::{ErrorKind, OutputDir, OutputError, ResultFiles, Status, Summary};
+use crate::output::{
+    ErrorKind, OutputDir, OutputError, ResultFiles, Status, Summary, CHECKPOINT_FILE,
+};
 use crate::sensors::SensorEvaluator;
+use crate::solve::dynamics::Checkpoint;
 use crate::solve::{DynamicSettings, Simulation, StaticSettings, Statics};
 use crate::SolveError;
 use std::sync::atomic::AtomicBool;
@@ -30,6 +33,31 @@ pub struct Report {
     pub unwritten: Option<OutputError>,
 }
 
+/// How a run is carried out, besides its model file.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RunOptions {
+    /// Dynamic analysis: write `checkpoint.json` every this much simulated time \[s\] and
+    /// at the end. A dynamic run stopped by the interrupt flag always writes one.
+    pub checkpoint_interval: Option<f64>,
+    /// Go on from the `checkpoint.json` of `out` (opened with [`OutputDir::reopen`]): the
+    /// result files are cut back to the steps it recorded and the run continues them, as
+    /// the run that wrote it would have (bit for bit). The model must be the same and so
+    /// must the solver settings, except a later `t_end`.
+    pub resume: bool,
+}
+
+/// What `checkpoint.json` holds: the simulation's memory and where the result files stood.
+#[derive(serde::Serialize, serde::Deserialize)]
+pub struct RunCheckpoint {
+    pub checkpoint: Checkpoint,
+    /// Result files and their lengths in bytes.
+    pub files: Vec<(String, u64)>,
+    /// Output steps written.
+    pub outputs: usize,
+    /// Memory of the sensors (unwrapped angles).
+    pub sensors: SensorEvaluator,
+}
+
 /// Runs the analysis a model file declares into `out`. `progress(t, t_end)` is called at
 /// every output step; `interrupt`, when set (e.g. by a signal handler), stops the run before
 /// its next step with status `interrupted`. A result file that cannot be written ends the
@@ -37,6 +65,7 @@ pub struct Report {
 pub fn run(
     file: &ModelFile,
     out: &OutputDir,
+    options: RunOptions,
     progress: &mut dyn FnMut(f64, f64),
     interrupt: Option<Arc<AtomicBool>>,
 ) -> Report {
@@ -62,7 +91,14 @@ pub fn run(
         };
     }
     let ended = match &file.analysis {
-        Analysis::Dynamic(settings) => run_dynamic(model, settings, out, progress, interrupt),
+        Analysis::Dynamic(settings) => {
+            run_dynamic(model, settings, out, options, progress, interrupt)
+        }
+        Analysis::Static(_) if options.resume || options.checkpoint_interval.is_some() => {
+            Ended::rejected(SolveError::Checkpoint(
+                "only a dynamic analysis has checkpoints".into(),
+            ))
+        }
         Analysis::Static(settings) => run_static(model, settings, out, progress, interrupt),
     };
     let output_seconds = ended.output_seconds;
@@ -172,6 +208,21 @@ struct Outputs<'m> {
 }
 
 impl<'m> Outputs<'m> {
+    /// The files of a resumed run, where its checkpoint left them.
+    fn reopen(
+        out: &OutputDir,
+        model: &'m crate::Model,
+        saved: &RunCheckpoint,
+    ) -> Result<Self, OutputError> {
+        Ok(Self {
+            model,
+            sensors: saved.sensors.clone(),
+            files: ResultFiles::reopen(out, &saved.files)?,
+            rows: saved.outputs,
+            seconds: 0.0,
+        })
+    }
+
     /// Creates the files; `first` names the first column (`time` or `load_factor`).
     fn create(out: &OutputDir, first: &str, model: &'m crate::Model) -> Result<Self, OutputError> {
         let names = SensorEvaluator::names(model);
@@ -292,29 +343,122 @@ fn run_static(
     Ended::of_run(work, result, outputs, error)
 }
 
-/// Dynamic analysis: `sensors.csv` has the time in its first column.
+/// The simulation and result files of a dynamic run: new, or resumed from the checkpoint
+/// in `out`.
+fn start_dynamic<'m>(
+    model: &'m crate::Model,
+    settings: &DynamicSettings,
+    out: &OutputDir,
+    options: RunOptions,
+) -> Result<(Simulation, Result<Outputs<'m>, OutputError>), SolveError> {
+    if !options.resume {
+        let sim = Simulation::new(model, *settings)?;
+        return Ok((sim, Outputs::create(out, "time", model)));
+    }
+    let bad = |m: String| SolveError::Checkpoint(m);
+    let path = out.file(CHECKPOINT_FILE);
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| bad(format!("{}: cannot read: {e}", path.display())))?;
+    let saved: RunCheckpoint = serde_json::from_str(&text).map_err(|e| {
+        bad(format!(
+            "{}: not a checkpoint of this version: {e}",
+            path.display()
+        ))
+    })?;
+    if saved.checkpoint.model != *model {
+        return Err(bad(format!(
+            "{}: the model differs from the one the checkpoint was written with",
+            path.display()
+        )));
+    }
+    let mut written = saved.checkpoint.settings;
+    written.t_end = settings.t_end;
+    if written != *settings {
+        return Err(bad(format!(
+            "{}: the solver settings differ from those the checkpoint was written with (only t_end may change)",
+            path.display()
+        )));
+    }
+    let sim = Simulation::resume(saved.checkpoint.clone(), settings.t_end)?;
+    Ok((sim, Outputs::reopen(out, model, &saved)))
+}
+
+/// Writes the checkpoint of a dynamic run and of its result files.
+fn write_checkpoint(
+    out: &OutputDir,
+    sim: &Simulation,
+    outputs: &Outputs,
+) -> Result<(), OutputError> {
+    let saved = RunCheckpoint {
+        checkpoint: sim.checkpoint(),
+        files: outputs.files.lengths(),
+        outputs: outputs.rows,
+        sensors: outputs.sensors.clone(),
+    };
+    let text = serde_json::to_string(&saved).expect("a checkpoint (numbers, strings) serializes");
+    out.write_checkpoint(&text)
+}
+
+/// Dynamic analysis: `sensors.csv` has the time in its first column. The run goes in
+/// stretches between checkpoints when asked to write them.
 fn run_dynamic(
     model: &crate::Model,
     settings: &DynamicSettings,
     out: &OutputDir,
+    options: RunOptions,
     progress: &mut dyn FnMut(f64, f64),
     interrupt: Option<Arc<AtomicBool>>,
 ) -> Ended {
-    let mut sim = match Simulation::new(model, *settings) {
-        Ok(sim) => sim,
+    let (mut sim, outputs) = match start_dynamic(model, settings, out, options) {
+        Ok(started) => started,
         Err(e) => return Ended::rejected(e),
     };
     sim.interrupt = interrupt;
-    let progress = Progress {
+    let t_end = settings.t_end;
+    let mut progress = Progress {
         report: progress,
-        end: settings.t_end,
+        end: t_end,
     };
-    let (result, outputs, error) = observed(out, "time", model, progress, |o| sim.run(o));
+    let (result, outputs, error) = match outputs {
+        Ok(outputs) => {
+            let mut sink = ResultSink {
+                outputs,
+                error: None,
+            };
+            let result = loop {
+                let stop = options.checkpoint_interval.map_or(t_end, |i| {
+                    let next = ((sim.state.t / i).floor() + 1.0) * i;
+                    if next > sim.state.t {
+                        next
+                    } else {
+                        next + i
+                    }
+                });
+                let result = sim.run_until(stop, &mut Observers(vec![&mut sink, &mut progress]));
+                let checkpoint = match &result {
+                    Ok(_) => options.checkpoint_interval.is_some(),
+                    Err(e) => matches!(e, SolveError::Interrupted { .. }),
+                };
+                if checkpoint && sink.error.is_none() {
+                    if let Err(e) = write_checkpoint(out, &sim, &sink.outputs) {
+                        sink.error = Some(e);
+                    }
+                }
+                if result.is_err() || sink.error.is_some() || sim.state.t >= t_end {
+                    break result;
+                }
+            };
+            let notes = sim.notes();
+            sim.warnings.extend(notes);
+            (result.map(|_| ()), Some(sink.outputs), sink.error)
+        }
+        Err(e) => (Ok(()), None, Some(e)),
+    };
     let work = Work {
         steps: sim.stats.steps,
         newton_iterations: sim.stats.newton_iterations,
         rejected_steps: sim.stats.rejected_steps,
-        factorizations: sim.data.solver.factorizations(),
+        factorizations: sim.stats.factorizations,
         outputs: outputs.as_ref().map_or(0, |o| o.rows),
         reached: sim.state.t,
         unknowns: sim.data.layout.n_unknowns(),

@@ -1,30 +1,35 @@
 //! # flexmb: finite-element flexible multibody dynamics on Lie groups
 //!
-//! flexmb assembles rigid bodies, kinematic joints, springs and applied loads into one
-//! monolithic index-3 DAE whose nodes live on a Lie group (R3xSO(3) or SE(3)), and integrates
-//! it with the Lie group generalized-alpha method (Brüls & Cardona 2010; Arnold & Brüls
-//! 2007). Newton iterates on vectors of the Lie algebra: no rotation parameterization, no
-//! singularity.
+//! flexmb assembles rigid bodies, geometrically exact beams, kinematic joints, springs and
+//! applied loads into one monolithic index-3 DAE whose nodes live on a Lie group (R3xSO(3)
+//! or SE(3)), and integrates it with the Lie group generalized-alpha method (Brüls & Cardona
+//! 2010; Arnold & Brüls 2007), in index-3 or stabilized index-2 form; static equilibrium is
+//! followed by load control, arc length or a pseudo-dynamic run. Newton iterates on vectors
+//! of the Lie algebra: no rotation parameterization, no singularity.
 //!
-//! Layout of the crate (one concept per module):
+//! Layout of the crate (one concept per module; `docs/architecture.md` follows one step
+//! through them):
 //!
 //! | module | what lives there |
 //! |---|---|
-//! | [`model`] | the immutable [`Model`]: nodes, bodies, joints, loads, springs, sensors; [`model::Parameters`], its parameters by path |
+//! | [`model`] | the immutable [`Model`]: nodes, bodies, beams, joints, loads, springs, sensors; [`model::Parameters`], its parameters by path |
 //! | [`state`] | the [`State`]: q, v, vdot, a, lambda |
-//! | [`data`] | [`Data`]: numbering of unknowns, sparsity pattern, scratch, linear solver |
+//! | [`data`] | [`data::Layout`] (the blocks of the Newton vector, typed [`data::UnknownId`]) and [`Data`]: sparsity pattern, matrix values, residual, linear solver |
 //! | [`elements`] | force elements (rigid body, beam, load, spring) behind small capability traits |
 //! | [`joints`] | holonomic constraints built from two primitives |
-//! | [`assembly`] | the Newton system from element and joint contributions |
+//! | [`assembly`] | the residual and iteration matrix at an explicit iterate, in one traversal |
 //! | [`parameter_derivatives`] | derivatives of the equations with respect to model parameters |
-//! | [`solve`] | generalized-alpha, initial conditions, Newton, linear solver |
+//! | [`solve`] | the Newton solver, the generalized-alpha step as functions, dynamics (step control, checkpoints), statics (load control, arc length, pseudo-dynamic), initial conditions, the trajectory for a backward sweep, the linear solver |
 //! | [`sensors`] | output channels |
 //! | [`input`] | the TOML model file |
 //! | [`observe`] | observers: what a run reports to at its output points and steps |
-//! | [`output`] | `sensors.csv` and `summary.json` |
+//! | [`output`] | result files: `sensors.csv`, `nodes.csv`, `beams.csv`, `summary.json`, `checkpoint.json` |
+//! | [`driver`] | the run of a model file into an output directory (`flexmb run`) |
+//! | [`error`] | typed errors with their diagnosis |
 //!
 //! The convenient API: build or read a [`Model`], then
-//! `Simulation::new(&model, settings)?.run(&mut |sim| { ... })`.
+//! `Simulation::new(&model, settings)?.run(&mut |s: &observe::Sample| { ... })`, or step by
+//! step with [`Simulation::step`].
 
 pub mod assembly;
 pub mod data;

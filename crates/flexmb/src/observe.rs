@@ -26,6 +26,8 @@ pub struct Sample<'a> {
 /// One accepted step of a dynamic run.
 #[derive(Clone, Copy)]
 pub struct StepRecord<'a> {
+    /// The simulation after the step (e.g. for [`crate::solve::Simulation::memory`]).
+    pub simulation: &'a crate::solve::Simulation,
     /// Number of the step (1 for the first).
     pub index: usize,
     /// The state at the start of the step, `s_n`.
@@ -33,6 +35,8 @@ pub struct StepRecord<'a> {
     /// The converged unknowns `x_{n+1}` in the layout of the Newton vector (scaled
     /// multipliers `mu = s lambda`; see [`crate::solve::step`]).
     pub unknowns: &'a [f64],
+    /// The constraint rows left out as redundant in the step (the layout of `unknowns`).
+    pub redundant_rows: &'a [usize],
     /// The state at the end, `s_{n+1}`.
     pub end: &'a State,
     pub info: &'a StepInfo,

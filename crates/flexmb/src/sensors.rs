@@ -50,7 +50,7 @@ pub fn energies(model: &Model, elements: &[ElementRef], state: &State) -> (f64, 
 }
 
 /// Evaluates sensors, keeping what unwrapping angles needs between calls.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SensorEvaluator {
     /// Last unwrapped joint angle per sensor.
     last_angle: Vec<Option<f64>>,

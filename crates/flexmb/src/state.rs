@@ -7,7 +7,7 @@ use flexmb_lie::{Frame, Group, Vec6};
 ///
 /// Shapes: `q, v, vdot, a` have one entry per node (`n_nodes`); `lambda` one per constraint
 /// row of every joint, in joint order (`n_rows`, rows removed as redundant stay 0).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct State {
     pub t: f64,
     /// Node configurations on the group.

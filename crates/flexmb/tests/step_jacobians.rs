@@ -6,7 +6,6 @@
 
 mod common;
 
-use flexmb::input::{read_model_file, Analysis};
 use flexmb::solve::step::{StartTangent, StepFunction};
 use flexmb::{Data, Simulation, State};
 use flexmb_lie::Vec6;
@@ -24,12 +23,7 @@ fn noise(seed: u64) -> impl FnMut() -> f64 {
 
 /// A simulation of an example file after `steps` steps.
 fn simulation(file: &str, overrides: &[&str], steps: usize) -> Simulation {
-    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    let mf = read_model_file(&common::example(file), &overrides).expect("model file");
-    let Analysis::Dynamic(settings) = mf.analysis else {
-        panic!("{file} is dynamic")
-    };
-    let mut sim = Simulation::new(mf.model, settings).expect("starts");
+    let mut sim = common::example_simulation(file, overrides);
     for _ in 0..steps {
         sim.step().expect("step");
     }

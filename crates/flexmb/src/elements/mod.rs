@@ -1,4 +1,5 @@
-//! Force elements: rigid bodies (inertia and gravity), applied loads, spring-dampers.
+//! Force elements: rigid bodies (inertia and gravity), geometrically exact beams on SE(3)
+//! (two nodes, [`beam`]), applied loads, spring-dampers.
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
@@ -15,10 +16,10 @@
 //! ```
 //!
 //! where `T` is the tangent operator of each node's increment. One trait, [`ElementKernel`],
-//! serves simulation and statics; a second, [`ElementParameters`], gives the derivatives
-//! `dr/dp` with respect to the element's own parameters
-//! ([`crate::model::parameters`]) that sensitivity analysis needs
-//! ([`crate::parameter_derivatives`]).
+//! serves the dynamic step, statics, the initial accelerations and the step function of
+//! [`crate::solve::step`]; a second, [`ElementParameters`], gives the derivatives `dr/dp` with
+//! respect to the element's own parameters ([`crate::model::parameters`]) that sensitivity
+//! analysis needs ([`crate::parameter_derivatives`]).
 //!
 //! Elements written most naturally in "physical" coordinates (inertial translation
 //! variation, body rotation variation) are converted to the group's coordinates by

@@ -1,6 +1,6 @@
 //! The model: the immutable description of a multibody system.
 //!
-//! A [`Model`] holds what a user writes in a model file (nodes, bodies, joints, loads, springs,
+//! A [`Model`] holds what a user writes in a model file (nodes, bodies, beam elements, joints, loads, springs,
 //! sensors) and never changes during a run. Everything that changes lives in
 //! [`crate::State`]; everything derived, and all scratch memory, in [`crate::Data`].
 //! Items refer to each other through typed ids ([`NodeId`], [`JointId`]); joints, loads and
@@ -21,15 +21,19 @@ pub(crate) use validate::{clip, QUOTED};
 use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
 
 /// Index of a node in [`Model::nodes`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 pub struct NodeId(pub usize);
 
 /// Index of a joint in [`Model::joints`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 pub struct JointId(pub usize);
 
 /// A node: a frame whose configuration is an unknown on the model's Lie group.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Node {
     pub name: String,
     /// Initial configuration (position in m, rotation body-to-inertial).
@@ -41,7 +45,7 @@ pub struct Node {
 }
 
 /// A rigid body attached to a node (the node is the body's reference frame).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RigidBody {
     pub name: String,
     pub node: NodeId,
@@ -54,7 +58,7 @@ pub struct RigidBody {
 }
 
 /// Kinds of kinematic joints. All but `Fixed` and `Spherical` use the joint frame's z axis.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum JointKind {
     /// All six relative motions blocked (clamp).
     Fixed,
@@ -89,7 +93,7 @@ impl JointKind {
 /// A holonomic joint between frame A (on `node_a`, or fixed in space when `None`) and frame B
 /// (on `node_b`). The joint frames coincide in the initial configuration, except for a
 /// universal joint, whose two z axes are perpendicular.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Joint {
     pub name: String,
     pub kind: JointKind,
@@ -106,7 +110,7 @@ pub struct Joint {
 }
 
 /// Frame in which an applied load is given.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum LoadFrame {
     /// Fixed direction in space (dead load).
     Inertial,
@@ -115,7 +119,7 @@ pub enum LoadFrame {
 }
 
 /// A force and torque applied at a node, scaled by a time function.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Load {
     pub name: String,
     pub node: NodeId,
@@ -129,7 +133,7 @@ pub struct Load {
 
 /// A linear spring-damper between two points, acting along the line joining them.
 /// `f = k (l - l0) + c l'` (tension positive).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SpringDamper {
     pub name: String,
     pub node_a: Option<NodeId>,
@@ -151,7 +155,7 @@ pub struct SpringDamper {
 /// `(epsilon_1, gamma_2, gamma_3, kappa_1, kappa_2, kappa_3)`: axial strain, two shear
 /// strains, torsion and two bending curvatures; the stiffness is then
 /// `diag(EA, GA_2, GA_3, GJ, EI_2, EI_3)` in the common case.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BeamSection {
     /// Sectional stiffness C (6 x 6, symmetric positive definite) [N, N m^2 blocks].
     pub stiffness: flexmb_lie::Mat6,
@@ -195,7 +199,7 @@ impl BeamSection {
 /// The element's section frames at its ends are the node frames composed with constant
 /// rotations `offset_a`, `offset_b` (identity when a node's frame already has x along the
 /// element), so nodes shared by members of different directions (an elbow) need no joint.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Beam {
     pub name: String,
     pub nodes: [NodeId; 2],
@@ -215,7 +219,7 @@ pub struct Beam {
 }
 
 /// Distribution of a beam element's inertia (see [`crate::elements::beam`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum BeamMass {
     /// Half of the element's mass and rotary inertia on each node, no coupling (the
     /// default: block-diagonal, cheaper, as accurate for this element).
@@ -253,14 +257,14 @@ impl Beam {
 }
 
 /// Frame in which a vector sensor reports its components.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SensorFrame {
     Inertial,
     Body,
 }
 
 /// What a sensor measures; each sensor gives one column of `sensors.csv`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum SensorKind {
     /// Position component of a point fixed on a node (point in the node frame) \[m\].
     Position {
@@ -319,14 +323,14 @@ pub enum SensorKind {
 }
 
 /// A named output channel.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Sensor {
     pub name: String,
     pub kind: SensorKind,
 }
 
 /// The immutable description of a multibody system.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Model {
     pub title: String,
     /// Lie group of every node configuration.

@@ -6,7 +6,7 @@
 use std::f64::consts::PI;
 
 /// A scalar function of time `f(t)`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum TimeFunction {
     /// `f = value`.
     Constant { value: f64 },

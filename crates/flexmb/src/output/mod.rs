@@ -34,11 +34,21 @@ pub const SENSORS_FILE: &str = "sensors.csv";
 pub const NODES_FILE: &str = "nodes.csv";
 /// Strains and stress resultants of every beam element, per output step.
 pub const BEAMS_FILE: &str = "beams.csv";
+/// The memory of a dynamic run, to resume it (`flexmb run --resume DIR`).
+pub const CHECKPOINT_FILE: &str = "checkpoint.json";
 /// Every result file a run may write. A run removes all of them from its output directory
-/// when it starts.
-pub const RESULT_FILES: [&str; 4] = [SUMMARY_FILE, SENSORS_FILE, NODES_FILE, BEAMS_FILE];
+/// when it starts (a resumed run keeps them and goes on writing).
+pub const RESULT_FILES: [&str; 5] = [
+    SUMMARY_FILE,
+    SENSORS_FILE,
+    NODES_FILE,
+    BEAMS_FILE,
+    CHECKPOINT_FILE,
+];
 /// Where a new summary is written before it is renamed over [`SUMMARY_FILE`].
 const SUMMARY_TEMP_FILE: &str = ".summary.json.tmp";
+/// Where a new checkpoint is written before it is renamed over [`CHECKPOINT_FILE`].
+const CHECKPOINT_TEMP_FILE: &str = ".checkpoint.json.tmp";
 
 /// Why the results could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -86,7 +96,10 @@ impl OutputDir {
         let dir = Self {
             path: path.to_path_buf(),
         };
-        for name in RESULT_FILES.iter().chain([&SUMMARY_TEMP_FILE]) {
+        for name in RESULT_FILES
+            .iter()
+            .chain([&SUMMARY_TEMP_FILE, &CHECKPOINT_TEMP_FILE])
+        {
             let file = dir.file(name);
             match std::fs::remove_file(&file) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
@@ -98,6 +111,18 @@ impl OutputDir {
             }
         }
         Ok(dir)
+    }
+
+    /// The output directory of an earlier run, to resume it: nothing is removed.
+    pub fn reopen(path: &Path) -> Result<Self, OutputError> {
+        if !path.is_dir() {
+            return Err(OutputError::NotADirectory {
+                path: path.to_path_buf(),
+            });
+        }
+        Ok(Self {
+            path: path.to_path_buf(),
+        })
     }
 
     pub fn path(&self) -> &Path {
@@ -113,11 +138,21 @@ impl OutputDir {
     /// directory, is synced to the disk and renamed over the old summary (the directory is
     /// then synced too), so `summary.json` is always either the old or the new summary.
     pub fn write_summary(&self, summary: &Summary) -> Result<(), OutputError> {
-        let temp = self.file(SUMMARY_TEMP_FILE);
-        let target = self.file(SUMMARY_FILE);
         let mut text = serde_json::to_string_pretty(summary)
             .expect("a summary (strings, numbers, lists) always serializes");
         text.push('\n');
+        self.replace(SUMMARY_FILE, SUMMARY_TEMP_FILE, &text)
+    }
+
+    /// Replaces `checkpoint.json` atomically, as [`OutputDir::write_summary`] does.
+    pub fn write_checkpoint(&self, text: &str) -> Result<(), OutputError> {
+        self.replace(CHECKPOINT_FILE, CHECKPOINT_TEMP_FILE, text)
+    }
+
+    /// Writes `text` to `name` through the temporary file `temp`, synced and renamed.
+    fn replace(&self, name: &str, temp: &str, text: &str) -> Result<(), OutputError> {
+        let temp = self.file(temp);
+        let target = self.file(name);
         let written = File::create(&temp)
             .and_then(|mut f| {
                 f.write_all(text.as_bytes())?;
@@ -217,6 +252,38 @@ impl CsvFile {
         }
     }
 
+    /// Opens an existing file and cuts it back to its first `len` bytes (the steps a
+    /// checkpoint recorded), to write on from there.
+    fn reopen(path: PathBuf, len: u64) -> Result<Self, OutputError> {
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&path)
+            .map_err(OutputError::io(&path, "cannot open"))?;
+        let size = file
+            .metadata()
+            .map_err(OutputError::io(&path, "cannot read"))?
+            .len();
+        if size < len {
+            return Err(OutputError::Io {
+                path,
+                action: "is shorter than the checkpoint recorded",
+                source: std::io::Error::from(std::io::ErrorKind::UnexpectedEof),
+            });
+        }
+        let mut csv = Self {
+            file,
+            path,
+            pending: String::new(),
+            len,
+        };
+        csv.file
+            .set_len(len)
+            .and_then(|()| csv.file.seek(SeekFrom::Start(len)).map(|_| ()))
+            .map_err(OutputError::io(&csv.path, "cannot cut back"))?;
+        Ok(csv)
+    }
+
     /// Cuts the file back to `len` bytes and writes on from there (best effort).
     fn truncate(&mut self, len: u64) {
         let _ = self.file.set_len(len);
@@ -268,6 +335,40 @@ impl ResultFiles {
             nodes,
             beams,
         })
+    }
+
+    /// The files of an earlier run, cut back to the lengths [`ResultFiles::lengths`]
+    /// returned when its checkpoint was written.
+    pub fn reopen(dir: &OutputDir, lengths: &[(String, u64)]) -> Result<Self, OutputError> {
+        let open = |name: &str| -> Result<Option<CsvFile>, OutputError> {
+            lengths
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|&(_, len)| CsvFile::reopen(dir.file(name), len))
+                .transpose()
+        };
+        let missing = |name: &str| OutputError::Io {
+            path: dir.file(name),
+            action: "is not in the checkpoint",
+            source: std::io::Error::from(std::io::ErrorKind::NotFound),
+        };
+        Ok(Self {
+            sensors: open(SENSORS_FILE)?.ok_or_else(|| missing(SENSORS_FILE))?,
+            nodes: open(NODES_FILE)?.ok_or_else(|| missing(NODES_FILE))?,
+            beams: open(BEAMS_FILE)?,
+        })
+    }
+
+    /// The name and length in bytes of each file (complete steps only).
+    pub fn lengths(&self) -> Vec<(String, u64)> {
+        let mut out = vec![
+            (SENSORS_FILE.to_string(), self.sensors.len),
+            (NODES_FILE.to_string(), self.nodes.len),
+        ];
+        if let Some(b) = &self.beams {
+            out.push((BEAMS_FILE.to_string(), b.len));
+        }
+        out
     }
 
     /// Appends the rows of one output step at `t`: the sensor values, the configuration of

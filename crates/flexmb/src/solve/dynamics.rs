@@ -20,24 +20,29 @@
 //! index-3 form without numerical damping (`rho_inf = 1`), at the cost of `m` more unknowns;
 //! [`Formulation::Auto`] uses it for `rho_inf >= 0.95`.
 //!
-//! The step reads as a checklist: `predict`, then repeat { `update_configuration`,
-//! `assemble` (residual and iteration matrix), `factorize`, `solve`, `correct`, judge the
-//! weighted corrections with [`Convergence`] } until the accepted iterate's error is within
-//! the tolerance (see [`super::newton`]: a correction from a reused matrix is never taken
-//! for the error), then `finish_step` (configuration and algorithmic acceleration). A failed
-//! step is retried first with a fresh iteration matrix if it used a reused one, then with
-//! redundant constraint rows chosen again if they change ([`initial::reselect_redundant_rows`]),
-//! then with a quarter of the step size down to `h_min`; the run stops with a diagnosis
-//! (step, time, the worst equation and its node or joint) below `h_min` or when step
-//! reductions keep coming back (more than 100 plus one per 10 accepted steps). The output
-//! callback is called at every output time, so what was computed is never lost; output
-//! times and `t_end` are reached exactly, by steps never shorter than `h / 2`.
+//! One attempt at a step reads as a checklist ([`Simulation::step`]): [`step::predict`],
+//! then the [`NewtonSolver`] iterates on `StepSystem` { [`step::total_increments`] and
+//! [`step::kinematics`] (`q = q_n exp(dq + B_n^T zeta)`, `T`), [`assemble`] (residual and,
+//! when the matrix is rebuilt, iteration matrix), factorize, solve, [`step::correct`], judge
+//! the weighted corrections with [`super::newton::Convergence`] } until the accepted
+//! iterate's error is within the tolerance (a correction from a reused matrix is never taken
+//! for the error), then [`step::finish`] (configuration and algorithmic acceleration). A
+//! failed attempt is repeated first with a fresh iteration matrix if it used a reused one
+//! (the solver's policy), then with redundant constraint rows chosen again if they change
+//! ([`initial::reselect_redundant_rows`]), then with a quarter of the step size down to
+//! `h_min` (`StepControl`); the step fails with a diagnosis (step, time, the worst
+//! equation and its node or joint) below `h_min` or when step reductions keep coming back
+//! (more than 100 plus one per 10 accepted steps). [`Simulation::run`] reports to its
+//! observer at every output time, so what was computed is never lost; output times and
+//! `t_end` are reached exactly, by steps never shorter than `h / 2` (`StepClock`).
+//! [`Simulation::memory`] and [`Simulation::restore`] take and restore everything the next
+//! steps depend on, bit for bit.
 
 use super::generalized_alpha::GaParameters;
 use super::initial::{self, initial_accelerations, mass_scale, prepare_layout};
 use super::newton::{
-    weighted_norm, MultiplierLimit, NewtonError, NewtonFailure, NewtonInfo, NewtonPolicy,
-    NewtonSettings, NewtonSolver, NonlinearSystem, Norms, Verification,
+    weighted_norm, MultiplierLimit, NewtonError, NewtonFailure, NewtonInfo, NewtonMemory,
+    NewtonPolicy, NewtonSettings, NewtonSolver, NonlinearSystem, Norms, Verification,
 };
 use super::step;
 use crate::assembly::{assemble, Iterate};
@@ -53,7 +58,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Which form of the constraints the integrator imposes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Formulation {
     /// Position-level constraints only (index 3).
     Index3,
@@ -65,7 +70,7 @@ pub enum Formulation {
 }
 
 /// The member of the generalized-alpha family to use.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Scheme {
     /// Chung & Hulbert's optimal parameters for `DynamicSettings::rho_inf`.
     GeneralizedAlpha,
@@ -108,7 +113,7 @@ impl Scheme {
 }
 
 /// Settings of a dynamic analysis.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DynamicSettings {
     /// Final time \[s\].
     pub t_end: f64,
@@ -249,7 +254,7 @@ impl DynamicSettings {
 }
 
 /// Work done by a solver, for summaries and for spotting cost changes in review.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Stats {
     pub steps: usize,
     pub newton_iterations: usize,
@@ -271,7 +276,7 @@ pub struct Stats {
 }
 
 /// What one accepted step did ([`Simulation::step`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepInfo {
     /// Time at the end of the step \[s\].
     pub t: f64,
@@ -341,6 +346,43 @@ pub struct Simulation {
     redundancy: RedundancyWatch,
     /// Largest nodal mass of the model \[kg\]: the equilibrium rows are divided by it.
     mass: f64,
+    /// Whether the start of the run was reported to an observer.
+    started: bool,
+}
+
+/// The memory of a simulation at a step boundary: with the model and the settings,
+/// everything the next steps depend on, so that a simulation restored from it
+/// ([`Simulation::restore`]) takes the same steps as the one it was taken from, bit for
+/// bit. That includes the factorized iteration matrix, which later steps may reuse: its
+/// values are kept and factorized again.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Memory {
+    pub state: State,
+    pub stats: Stats,
+    pub verification: Option<Verification>,
+    /// Constraint rows left out as redundant.
+    pub redundant_rows: Vec<usize>,
+    previous: Previous,
+    mu_floor: Vec<f64>,
+    control: StepControl,
+    redundancy: RedundancyWatch,
+    newton: NewtonMemory,
+    /// The held iteration matrix (values in pattern order).
+    matrix: Option<Vec<f64>>,
+}
+
+/// A self-contained checkpoint of a dynamic run: model, settings and [`Memory`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Checkpoint {
+    /// Format version ([`Checkpoint::VERSION`]).
+    pub version: u32,
+    pub model: Model,
+    pub settings: DynamicSettings,
+    pub memory: Memory,
+}
+
+impl Checkpoint {
+    pub const VERSION: u32 = 1;
 }
 
 /// The memory of the generalized-alpha integrator between steps, and its scratch.
@@ -362,19 +404,24 @@ struct Integrator {
     nodes: Vec<NodeState>,
     /// Round-off floor of the scaled multipliers' tolerance (`n_active`).
     mu_floor: Vec<f64>,
+    /// The converged unknowns of the last accepted step, in its layout.
+    unknowns: Vec<f64>,
+    /// The rows left out as redundant in the last accepted step (the rows may be chosen
+    /// again right after it).
+    redundant_rows: Vec<usize>,
 }
 
 /// Start of the previous accepted step (`h = 0` when there is none).
-#[derive(Clone, Debug, Default)]
-struct Previous {
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct Previous {
     h: f64,
     vdot: Vec<Vec6>,
     lambda: Vec<f64>,
 }
 
 /// Step-size control and the output schedule of a run.
-#[derive(Clone, Copy, Debug)]
-struct StepControl {
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct StepControl {
     clock: StepClock,
     /// Steps accepted since the step size last changed.
     successes: usize,
@@ -423,8 +470,8 @@ impl StepControl {
 }
 
 /// Watch on the redundant constraint rows (see [`Simulation::watch_redundant_rows`]).
-#[derive(Clone, Copy, Debug, Default)]
-struct RedundancyWatch {
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct RedundancyWatch {
     /// Smallest relative pivot of the first factorization after the rows were chosen.
     pivot_reference: Option<f64>,
     /// Time of the first re-selection.
@@ -450,13 +497,7 @@ impl Simulation {
             stabilized.stabilized = true;
             data = Data::new(&model, stabilized)?;
         }
-        let policy = NewtonPolicy {
-            settings: settings.newton,
-            regularized_solves: REGULARIZED_STEPS,
-            divergence_rate: 1.0,
-            diverge_after: 3,
-            exact_by_size: false,
-        };
+        let policy = Self::policy(&settings);
         Ok(Self {
             integrator: Integrator {
                 saved: state.clone(),
@@ -475,15 +516,148 @@ impl Simulation {
             interrupt: None,
             verification: None,
             redundancy: RedundancyWatch::default(),
+            started: false,
         })
     }
 
-    /// Runs to `t_end`, calling `output` at t = 0 and at every output time. Stops at the
-    /// first error of `output` or when a step cannot be completed even at `h_min`.
+    /// Runs to `t_end`, reporting to `observer` at the start (t = 0; not again when the run
+    /// goes on after an interruption or was resumed from a checkpoint), at every output time
+    /// and, if it asks, after every step. Stops at the first error of the observer, when
+    /// the interrupt flag is set, or when a step cannot be completed even at `h_min`; it can
+    /// be called again to go on.
     pub fn run(&mut self, observer: &mut dyn Observer) -> Result<Stats, SolveError> {
-        let result = self.run_steps(observer);
+        let result = self.run_until(self.settings.t_end, observer);
         self.warnings.extend(self.notes());
         result
+    }
+
+    /// The memory of the run now (between steps).
+    pub fn memory(&self) -> Memory {
+        let layout = &self.data.layout;
+        Memory {
+            state: self.state.clone(),
+            stats: self.stats,
+            verification: self.verification.clone(),
+            redundant_rows: (0..layout.n_rows)
+                .filter(|&r| layout.row_unknown[r].is_none())
+                .collect(),
+            previous: self.integrator.previous.clone(),
+            mu_floor: self.integrator.mu_floor.clone(),
+            control: self.control,
+            redundancy: self.redundancy,
+            newton: self.newton.memory(),
+            matrix: self.newton.holds_matrix().then(|| self.data.values.clone()),
+        }
+    }
+
+    /// A self-contained checkpoint of the run now (between steps).
+    pub fn checkpoint(&self) -> Checkpoint {
+        Checkpoint {
+            version: Checkpoint::VERSION,
+            model: (*self.model).clone(),
+            settings: self.settings,
+            memory: self.memory(),
+        }
+    }
+
+    /// A run resumed from a checkpoint: it goes on exactly as the run that wrote it would
+    /// have. `t_end` may be later than the checkpoint's (the run is extended).
+    pub fn resume(checkpoint: Checkpoint, t_end: f64) -> Result<Self, SolveError> {
+        let c = checkpoint;
+        if c.version != Checkpoint::VERSION {
+            return Err(SolveError::Checkpoint(format!(
+                "format version {} is not {}",
+                c.version,
+                Checkpoint::VERSION
+            )));
+        }
+        if t_end < c.memory.state.t {
+            return Err(SolveError::Checkpoint(format!(
+                "t_end = {t_end} is before the checkpoint's time {}",
+                c.memory.state.t
+            )));
+        }
+        let settings = DynamicSettings {
+            t_end,
+            ..c.settings
+        };
+        Self::restore(Arc::new(c.model), settings, c.memory)
+    }
+
+    /// A simulation of `model` with `settings` restored to a memory taken from one of the
+    /// same model and settings ([`Simulation::memory`]).
+    pub fn restore(
+        model: Arc<Model>,
+        settings: DynamicSettings,
+        memory: Memory,
+    ) -> Result<Self, SolveError> {
+        let c = memory;
+        model.validate()?;
+        settings.check()?;
+        let (_, warnings) = prepare_layout(&model);
+        let mut layout = Layout::new(&model);
+        layout.stabilized = settings.stabilized();
+        if c.redundant_rows.iter().any(|&r| r >= layout.n_rows) {
+            return Err(SolveError::Checkpoint(
+                "its redundant rows are not rows of the model".into(),
+            ));
+        }
+        layout.deactivate_rows(&model, &c.redundant_rows);
+        let mut data = Data::new(&model, layout)?;
+        let mut newton = NewtonSolver::new(Self::policy(&settings), settings.verify);
+        if let Some(values) = c.matrix {
+            if values.len() != data.values.len() {
+                return Err(SolveError::Checkpoint(
+                    "its iteration matrix does not fit the model".into(),
+                ));
+            }
+            data.values = values;
+            data.solver.factorize(&data.values)?;
+        }
+        newton.restore(&c.newton);
+        let n = model.nodes.len();
+        let consistent = c.state.q.len() == n
+            && c.state.v.len() == n
+            && c.state.vdot.len() == n
+            && c.state.a.len() == n
+            && c.state.lambda.len() == data.layout.n_rows;
+        if !consistent {
+            return Err(SolveError::Checkpoint(
+                "its state does not fit the model".into(),
+            ));
+        }
+        Ok(Self {
+            integrator: Integrator {
+                saved: c.state.clone(),
+                previous: c.previous,
+                mu_floor: c.mu_floor,
+                ..Default::default()
+            },
+            mass: mass_scale(&model),
+            model,
+            data,
+            state: c.state,
+            params: settings.scheme.parameters(settings.rho_inf),
+            newton,
+            control: c.control,
+            settings,
+            stats: c.stats,
+            warnings,
+            interrupt: None,
+            verification: c.verification,
+            redundancy: c.redundancy,
+            started: true,
+        })
+    }
+
+    fn policy(settings: &DynamicSettings) -> NewtonPolicy {
+        NewtonPolicy {
+            settings: settings.newton,
+            regularized_solves: REGULARIZED_STEPS,
+            divergence_rate: 1.0,
+            diverge_after: 3,
+            exact_by_size: false,
+        }
     }
 
     /// The next step of size `h` from the current state as a function of its unknowns
@@ -499,8 +673,9 @@ impl Simulation {
         )
     }
 
-    /// What the run should tell the user about the steps so far.
-    fn notes(&self) -> Vec<String> {
+    /// What the run should tell the user about the steps so far ([`Simulation::run`] adds
+    /// them to its warnings at its end).
+    pub fn notes(&self) -> Vec<String> {
         let mut notes = Vec::new();
         if self.stats.undetermined_multipliers > 0 {
             notes.push(format!(
@@ -526,13 +701,22 @@ impl Simulation {
         notes
     }
 
-    fn run_steps(&mut self, observer: &mut dyn Observer) -> Result<Stats, SolveError> {
-        observer
-            .output(&self.sample())
-            .map_err(SolveError::Output)?;
+    /// [`Simulation::run`] until the first step that ends at or after `t_stop` (a step
+    /// boundary: the steps are those of an uninterrupted run), without adding the notes.
+    pub fn run_until(
+        &mut self,
+        t_stop: f64,
+        observer: &mut dyn Observer,
+    ) -> Result<Stats, SolveError> {
+        if !self.started {
+            // The start (a resumed run was started by the run that wrote its checkpoint).
+            observer
+                .output(&self.sample())
+                .map_err(SolveError::Output)?;
+            self.started = true;
+        }
         let wants_steps = observer.wants_steps();
-        let mut unknowns = Vec::new();
-        while self.state.t < self.settings.t_end {
+        while self.state.t < self.settings.t_end.min(t_stop) {
             if interrupted(&self.interrupt) {
                 return Err(SolveError::Interrupted {
                     reached: self.state.t,
@@ -541,11 +725,12 @@ impl Simulation {
             let target = self.control.target(&self.settings);
             let info = self.step()?;
             if wants_steps {
-                self.step_unknowns(&mut unknowns);
                 let record = StepRecord {
+                    simulation: self,
                     index: self.stats.steps,
                     start: &self.integrator.saved,
-                    unknowns: &unknowns,
+                    unknowns: &self.integrator.unknowns,
+                    redundant_rows: &self.integrator.redundant_rows,
                     end: &self.state,
                     info: &info,
                 };
@@ -570,9 +755,14 @@ impl Simulation {
         }
     }
 
-    /// The converged unknowns of the last step in the layout of the Newton vector:
-    /// increments, scaled multipliers `mu = s lambda` and stabilization unknowns.
-    fn step_unknowns(&self, x: &mut Vec<f64>) {
+    /// The converged unknowns of the last accepted step in the layout of its Newton vector
+    /// (increments, scaled multipliers `mu = s lambda` and stabilization unknowns), and the
+    /// constraint rows that were left out as redundant in it.
+    pub fn last_step(&self) -> (&[f64], &[usize]) {
+        (&self.integrator.unknowns, &self.integrator.redundant_rows)
+    }
+
+    fn step_unknowns_into(&self, x: &mut Vec<f64>) {
         let layout = &self.data.layout;
         let it = &self.integrator;
         let h = self.state.t - it.saved.t;
@@ -699,17 +889,19 @@ impl Simulation {
             }
             None => {}
         }
-        if let Some(check) = newton.check {
-            let (model, layout) = (&self.model, &self.data.layout);
-            self.verification
-                .get_or_insert_with(Verification::default)
-                .record(check.error, t_new, || {
-                    check
-                        .worst
-                        .map(|i| layout.describe_unknown(model, i))
-                        .unwrap_or_default()
-                });
+        if let Some(check) = &newton.check {
+            let layout = &self.data.layout;
+            Verification::add(&mut self.verification, check, t_new, layout, &self.model);
         }
+        // What the step was, in its own layout (the rows may be chosen again now).
+        let mut unknowns = std::mem::take(&mut self.integrator.unknowns);
+        self.step_unknowns_into(&mut unknowns);
+        self.integrator.unknowns = unknowns;
+        let layout = &self.data.layout;
+        self.integrator.redundant_rows.clear();
+        self.integrator
+            .redundant_rows
+            .extend((0..layout.n_rows).filter(|&r| layout.row_unknown[r].is_none()));
         self.watch_redundant_rows();
         if self.stats.steps == 1 || h < self.stats.smallest_step {
             self.stats.smallest_step = h;
@@ -761,7 +953,6 @@ impl Simulation {
         for &row in &redundant {
             self.state.lambda[row] = 0.0;
         }
-        self.integrator.saved.clone_from(&self.state);
         self.integrator.previous.h = 0.0;
         self.newton.forget_matrix();
         self.redundancy.pivot_reference = None;
@@ -949,7 +1140,10 @@ impl NonlinearSystem for StepSystem<'_> {
     }
 
     fn exact_matrix(&self) -> bool {
-        // The stabilized rows omit the O(h) derivative of B(q) v with respect to q.
+        // The stabilized form's iteration matrix is an approximation: it omits the O(h)
+        // derivative of B(q) v with respect to q, the equilibrium rows' dependence on zeta
+        // (through q), and the T in B T B(q_n)^T ([`step::StepFunction::jacobian`] has them
+        // all). Index 3: the matrix is exact.
         self.b_start.is_empty()
     }
 
@@ -1029,8 +1223,8 @@ fn update_multiplier_floor(model: &Model, saved: &State, data: &mut Data, mu_flo
 /// steps before a target (an output time or the end) end exactly on it, and none is shorter
 /// than `h / 2` unless the whole interval is: a remainder below `h / 2` is shared with the
 /// step before it (two equal steps), a remainder within round-off of `h` is taken whole.
-#[derive(Clone, Copy, Debug)]
-struct StepClock {
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct StepClock {
     /// Current step size \[s\].
     h: f64,
     anchor: f64,

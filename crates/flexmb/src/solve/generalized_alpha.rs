@@ -12,7 +12,7 @@
 //! `alpha_m = 0`.
 
 /// The four numbers of the scheme.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GaParameters {
     pub alpha_m: f64,
     pub alpha_f: f64,

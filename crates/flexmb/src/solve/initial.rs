@@ -120,7 +120,7 @@ pub fn prepare_layout(model: &Model) -> (Layout, Vec<String>) {
 }
 
 /// Which rows to remove as redundant at the configuration `q`, keeping their number: the
-/// last of the pivot order of [`row_order`]; `None` when that is the set removed already.
+/// last of the pivot order of `row_order`; `None` when that is the set removed already.
 ///
 /// The rows found redundant at the start are independent of the others at the start only:
 /// as a closed loop moves, the self-stress of the loop (the left null vector of `B`) can

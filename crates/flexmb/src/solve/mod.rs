@@ -1,5 +1,10 @@
-//! Solvers: generalized-alpha time integration on the Lie group, consistent initial
-//! conditions, and the linear solver behind both.
+//! Solvers: one Newton iteration ([`newton`]) over the [`newton::NonlinearSystem`] trait
+//! serves the generalized-alpha step on the Lie group ([`dynamics`]: [`Simulation`], step
+//! control, checkpoints), static equilibrium by load control, arc length or a
+//! pseudo-dynamic run ([`statics`]) and the consistent initial accelerations ([`initial`]);
+//! [`step`] writes the step's relations as functions, with the step residual's exact
+//! Jacobian for derivatives; [`trajectory`] keeps a run for a backward sweep; [`linear`] is
+//! the sparse or dense LU behind all of them; [`generalized_alpha`] the scheme's parameters.
 
 pub mod dynamics;
 pub mod generalized_alpha;
@@ -8,6 +13,7 @@ pub mod linear;
 pub mod newton;
 pub mod statics;
 pub mod step;
+pub mod trajectory;
 
 pub use dynamics::{DynamicSettings, Formulation, IntoShared, Scheme, Simulation, Stats, StepInfo};
 pub use generalized_alpha::GaParameters;

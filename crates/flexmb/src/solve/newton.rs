@@ -44,7 +44,7 @@ use crate::data::Data;
 use crate::error::SettingsError;
 
 /// Tolerances and limits of the Newton iteration.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct NewtonSettings {
     /// Relative tolerance on the unknowns.
     pub rtol: f64,
@@ -208,7 +208,7 @@ impl Convergence {
 /// What the verify mode of an analysis found: every accepted step re-checked by a Newton
 /// correction from the accepted iterate with a freshly built matrix, whose weighted norm
 /// estimates the error left in the step in units of the tolerance (at most 1: within it).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Verification {
     /// Steps checked.
     pub steps: usize,
@@ -230,6 +230,24 @@ impl Verification {
                 self.max_error, self.t, self.worst_equation, self.steps
             )
         })
+    }
+
+    /// Records what the verify mode measured at the step (or load step) ending at `at`,
+    /// starting the record if there is none.
+    pub fn add(
+        slot: &mut Option<Self>,
+        check: &Check,
+        at: f64,
+        layout: &crate::data::Layout,
+        model: &crate::model::Model,
+    ) {
+        slot.get_or_insert_with(Self::default)
+            .record(check.error, at, || {
+                check
+                    .worst
+                    .map(|i| layout.describe_unknown(model, i))
+                    .unwrap_or_default()
+            });
     }
 
     /// Records the check of one step: its estimated error (NaN when no estimate could be
@@ -379,6 +397,15 @@ pub enum MultiplierLimit {
     RoundOff,
 }
 
+/// What [`NewtonSolver`] remembers between solves (a checkpoint's part).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NewtonMemory {
+    matrix: Option<(f64, f64)>,
+    age: usize,
+    fresh_only: bool,
+    regularized_solves: usize,
+}
+
 /// What a converged solve did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NewtonInfo {
@@ -459,6 +486,9 @@ pub struct NewtonSolver {
     regularized_solves: usize,
     /// Verify mode: every accepted iterate re-checked ([`NewtonInfo::check`]).
     verify: bool,
+    /// Values of the verify mode's matrix (kept apart, so that `data.values` always holds
+    /// the factorized matrix).
+    verify_values: Vec<f64>,
     /// The second factorization of the verify mode.
     verify_solver: Option<LinearSolver>,
 }
@@ -472,8 +502,33 @@ impl NewtonSolver {
             fresh_only: false,
             regularized_solves: 0,
             verify,
+            verify_values: Vec::new(),
             verify_solver: None,
         }
+    }
+
+    /// What the solver remembers between solves, for a checkpoint.
+    pub(crate) fn memory(&self) -> NewtonMemory {
+        NewtonMemory {
+            matrix: self.matrix,
+            age: self.age,
+            fresh_only: self.fresh_only,
+            regularized_solves: self.regularized_solves,
+        }
+    }
+
+    /// Restores what [`NewtonSolver::memory`] returned; the matrix it names must be
+    /// factorized in the data.
+    pub(crate) fn restore(&mut self, memory: &NewtonMemory) {
+        self.matrix = memory.matrix;
+        self.age = memory.age;
+        self.fresh_only = memory.fresh_only;
+        self.regularized_solves = memory.regularized_solves;
+    }
+
+    /// Whether a factorized matrix is held (its values are `data.values`).
+    pub fn holds_matrix(&self) -> bool {
+        self.matrix.is_some()
     }
 
     /// Forgets the factorized matrix (the data was rebuilt).
@@ -692,6 +747,21 @@ impl NewtonSolver {
     /// with the unknown of the largest weighted term. Where the multipliers are undetermined
     /// only the other blocks count.
     fn verify_solve<S: NonlinearSystem>(
+        &mut self,
+        sys: &mut S,
+        data: &mut Data,
+        regularization: f64,
+        undetermined: bool,
+    ) -> Check {
+        // `data.values` holds the factorized matrix, which the next solve may reuse.
+        self.verify_values.resize(data.values.len(), 0.0);
+        std::mem::swap(&mut data.values, &mut self.verify_values);
+        let check = self.verify_check(sys, data, regularization, undetermined);
+        std::mem::swap(&mut data.values, &mut self.verify_values);
+        check
+    }
+
+    fn verify_check<S: NonlinearSystem>(
         &mut self,
         sys: &mut S,
         data: &mut Data,

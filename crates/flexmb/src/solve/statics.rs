@@ -39,7 +39,7 @@ use std::sync::Arc;
 const ARC_LENGTH_MIN: f64 = 1e-6;
 
 /// How the load factor is controlled.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum StaticMethod {
     /// Prescribed load factor, adaptive increments.
     LoadControl,
@@ -52,7 +52,7 @@ pub enum StaticMethod {
 }
 
 /// Settings of a static analysis.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StaticSettings {
     /// Final load factor (the loads and gravity of the model are multiplied by it).
     pub load_factor: f64,
@@ -206,7 +206,7 @@ impl Default for StaticSettings {
 }
 
 /// Work done by a static analysis.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StaticStats {
     pub steps: usize,
     pub newton_iterations: usize,
@@ -265,10 +265,8 @@ struct ArcLength {
     load_derivative: Vec<f64>,
     /// `x_b = S^-1 (-dR/dlambda)`.
     xb: Vec<f64>,
-    /// Newton vector of the load step's correction (`x_a + dmu x_b`).
-    dmu: f64,
     /// Load-factor part of the last correction.
-    last_correction: Vec<f64>,
+    dmu: f64,
 }
 
 /// The scaling of statics: the iteration matrix `K_t T` with equilibrium rows times
@@ -415,9 +413,6 @@ impl NonlinearSystem for LoadStep<'_> {
         if let Some(arc) = &mut self.arc {
             arc.dlambda += arc.dmu;
             self.load_factor = arc.lambda0 + arc.dlambda;
-            arc.last_correction.clear();
-            arc.last_correction
-                .extend_from_slice(&data.correction[..nd]);
         }
         self.add_multipliers(&data.layout, &data.correction, 1.0);
     }
@@ -613,31 +608,28 @@ impl Statics {
         }
     }
 
-    /// Solves a load step's system from the last converged state; on success takes the
-    /// converged configuration and multipliers into the state. Returns the iterations and
-    /// the load increment and configuration increment of the step.
+    /// Solves a load step's system from the last converged state moved by `dq` (zero, or
+    /// the arc-length predictor); on success takes the converged configuration and
+    /// multipliers into the state. Returns the iterations, the arc-length part and the
+    /// configuration increment of the step.
     fn solve_step(
         &mut self,
         load_factor: f64,
+        dq: Vec<f64>,
         arc: Option<ArcLength>,
     ) -> Result<(usize, Option<ArcLength>, Vec<f64>), NewtonError> {
-        let nd = self.data.layout.n_dofs;
         let mut lambda = self.state.lambda.clone();
         let mut sys = LoadStep {
             model: &self.model,
             q0: &self.state.q,
             nodes: &mut self.nodes,
             lambda: &mut lambda,
-            dq: vec![0.0; nd],
+            dq,
             row_scale: self.row_scale,
             newton: self.settings.newton,
             load_factor,
             arc,
         };
-        if let Some(arc) = &sys.arc {
-            // The predictor moved the configuration along the tangent.
-            sys.dq.copy_from_slice(&arc.last_correction);
-        }
         let result = self.newton.solve(&mut sys, &mut self.data, 0.0);
         let work = match &result {
             Ok(info) | Err(NewtonFailure { info, .. }) => *info,
@@ -653,16 +645,9 @@ impl Statics {
         }
         self.state.lambda = lambda;
         self.state.t = reached;
-        if let Some(check) = info.check {
-            let (model, layout) = (&self.model, &self.data.layout);
-            self.verification
-                .get_or_insert_with(Verification::default)
-                .record(check.error, reached, || {
-                    check
-                        .worst
-                        .map(|i| layout.describe_unknown(model, i))
-                        .unwrap_or_default()
-                });
+        if let Some(check) = &info.check {
+            let layout = &self.data.layout;
+            Verification::add(&mut self.verification, check, reached, layout, &self.model);
         }
         Ok((info.final_iterations, arc, dq))
     }
@@ -670,7 +655,8 @@ impl Statics {
     /// Newton at a fixed load factor (load control). On success the state holds the
     /// converged configuration; returns the iterations.
     fn solve_at(&mut self, lambda: f64) -> Result<usize, NewtonError> {
-        self.solve_step(lambda, None)
+        let nd = self.data.layout.n_dofs;
+        self.solve_step(lambda, vec![0.0; nd], None)
             .map(|(iterations, _, _)| iterations)
     }
 
@@ -759,7 +745,6 @@ impl Statics {
                 load_derivative: Vec::new(),
                 xb: Vec::new(),
                 dmu: 0.0,
-                last_correction: Vec::new(),
             }),
         };
         predictor.assemble(&mut self.data, true, 0.0);
@@ -792,12 +777,13 @@ impl Statics {
         let dlam = sign * dl / norm_b.sqrt().max(1e-300);
         predictor.add_multipliers(&self.data.layout, &xb, dlam);
         arc.dlambda = dlam;
-        arc.last_correction = xb[..nd].iter().map(|b| dlam * b).collect();
+        // The predictor moves the configuration along the tangent.
+        let dq = xb[..nd].iter().map(|b| dlam * b).collect();
         let saved_lambda = std::mem::replace(&mut self.state.lambda, lambda);
         // Arc length has no divergence test: the constraint keeps the iterates bounded.
         let policy = self.newton.policy;
         self.newton.policy.diverge_after = usize::MAX;
-        let result = self.solve_step(lambda0 + dlam, Some(arc));
+        let result = self.solve_step(lambda0 + dlam, dq, Some(arc));
         self.newton.policy = policy;
         match result {
             Ok((iterations, Some(arc), dq)) => Ok((dq, arc.dlambda, iterations)),

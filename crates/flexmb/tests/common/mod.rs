@@ -145,3 +145,13 @@ pub fn run_static(name: &str, overrides: &[&str]) -> History {
         warnings: statics.warnings.clone(),
     }
 }
+
+/// A simulation of an example file, with `--set` overrides.
+pub fn example_simulation(file: &str, overrides: &[&str]) -> flexmb::Simulation {
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    let mf = flexmb::input::read_model_file(&example(file), &overrides).expect("model file");
+    let flexmb::input::Analysis::Dynamic(settings) = mf.analysis else {
+        panic!("{file} is a dynamic analysis")
+    };
+    flexmb::Simulation::new(mf.model, settings).expect("starts")
+}

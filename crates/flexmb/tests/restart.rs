@@ -1,0 +1,79 @@
+//! Restart: a run interrupted at mid-time, written to a checkpoint (through JSON) and
+//! resumed in a new simulation, gives bit for bit the states of the uninterrupted run at
+//! every output time after the checkpoint (the checkpoint keeps the integrator's memory,
+//! the step-size control and the factorized matrix that later steps reuse).
+
+mod common;
+
+use flexmb::observe::Sample;
+use flexmb::solve::dynamics::Checkpoint;
+use flexmb::{Simulation, SolveError, State};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// The states at the output times of a whole run.
+fn outputs(sim: &mut Simulation) -> Vec<State> {
+    let mut out = Vec::new();
+    sim.run(&mut |s: &Sample| {
+        out.push(s.state.clone());
+        Ok(())
+    })
+    .expect("runs");
+    out
+}
+
+fn check(file: &str, overrides: &[&str]) {
+    let whole = outputs(&mut common::example_simulation(file, overrides));
+    let t_end = whole.last().expect("outputs").t;
+    let mid = 0.5 * t_end;
+    // Interrupted once an output at or after mid-time is written.
+    let mut sim = common::example_simulation(file, overrides);
+    let flag = Arc::new(AtomicBool::new(false));
+    sim.interrupt = Some(flag.clone());
+    let mut first = Vec::new();
+    let result = sim.run(&mut |s: &Sample| {
+        first.push(s.state.clone());
+        if s.state.t >= mid {
+            flag.store(true, Ordering::Relaxed);
+        }
+        Ok(())
+    });
+    assert!(
+        matches!(result, Err(SolveError::Interrupted { .. })),
+        "{file}: {result:?}"
+    );
+    let json = serde_json::to_string(&sim.checkpoint()).expect("serializes");
+    drop(sim);
+    let checkpoint: Checkpoint = serde_json::from_str(&json).expect("reads back");
+    let mut resumed = Simulation::resume(checkpoint, t_end).expect("resumes");
+    let second = outputs(&mut resumed);
+    let joined: Vec<State> = first.into_iter().chain(second).collect();
+    let times = |v: &[State]| v.iter().map(|s| s.t).collect::<Vec<_>>();
+    assert_eq!(times(&joined), times(&whole), "{file}: output times");
+    for (a, b) in joined.iter().zip(&whole) {
+        assert_eq!(a, b, "{file}: state at t = {} differs", b.t);
+    }
+}
+
+#[test]
+fn resumed_heavy_top_matches_the_uninterrupted_run() {
+    check("heavy_top.toml", &["solver.t_end=0.5"]);
+}
+
+#[test]
+fn resumed_stabilized_run_matches_the_uninterrupted_run() {
+    check(
+        "heavy_top_r3so3.toml",
+        &["solver.t_end=0.5", "solver.formulation=index2"],
+    );
+}
+
+#[test]
+fn resumed_closed_loop_with_redundant_rows_matches_the_uninterrupted_run() {
+    check("bricard.toml", &["solver.t_end=2"]);
+}
+
+#[test]
+fn resumed_beam_run_matches_the_uninterrupted_run() {
+    check("spin_up.toml", &["solver.t_end=2"]);
+}
