@@ -6,6 +6,8 @@
 
 mod common;
 
+use flexmb::data::Layout;
+use flexmb::model::parameters::{ParamId, ParamRole, Parameters};
 use flexmb::solve::step::{StartTangent, StepFunction};
 use flexmb::{Data, Simulation, State};
 use flexmb_lie::Vec6;
@@ -146,6 +148,157 @@ fn check(name: &str, sim: &Simulation) {
             (left - right).abs() <= 1e-10 * left.abs().max(right.abs()).max(1e-12),
             "{name}: transposed product {right:e} against {left:e}"
         );
+    }
+}
+
+/// `dR/dp` (products with a vector and a transposed vector) against central differences of
+/// the step residual of the model with one parameter moved (through `Parameters::set`, at
+/// the same row scale), for every parameter that enters the residual, or every k-th of them
+/// to keep it to about 40; returns the paths checked.
+fn check_parameters(name: &str, sim: &Simulation) -> Vec<String> {
+    let h = sim.settings.h;
+    let layout = sim.data.layout.clone();
+    let redundant: Vec<usize> = (0..layout.n_rows)
+        .filter(|&r| layout.row_unknown[r].is_none())
+        .collect();
+    let f = sim.step_function(h);
+    let mass = f.step.mass;
+    let mut data = Data::new(&sim.model, layout.clone()).expect("data");
+    let params = Parameters::new(&sim.model);
+    let mut rand = noise(11);
+    let mut x = f.predict();
+    let x_scale = x.iter().fold(1e-3f64, |m, v| m.max(v.abs()));
+    for v in &mut x {
+        *v += 0.05 * x_scale * rand();
+    }
+    let residual_of = |model: &flexmb::Model| {
+        let mut l = Layout::new(model);
+        l.stabilized = layout.stabilized;
+        l.deactivate_rows(model, &redundant);
+        let mut d = Data::new(model, l.clone()).expect("data");
+        StepFunction::new(model, &l, &sim.state, &sim.settings, h)
+            .with_mass_scale(mass)
+            .residual(&x, &mut d)
+    };
+    let ids: Vec<ParamId> = params
+        .ids()
+        .filter(|&id| params.role(id) == ParamRole::Residual)
+        .collect();
+    let stride = ids.len().div_ceil(40).max(1);
+    let mut checked = Vec::new();
+    for &id in ids.iter().step_by(stride) {
+        let mut dp = vec![0.0; params.len()];
+        dp[id.0 as usize] = 1.0;
+        let jv = f.parameter_jvp(&x, &params, &dp, &mut data);
+        let value = params.value(&sim.model, id);
+        let eps = 1e-5 * value.abs().max(1.0);
+        let moved = |sign: f64| {
+            let mut m = (*sim.model).clone();
+            params.set(&mut m, id, value + sign * eps);
+            residual_of(&m)
+        };
+        // Damping coefficients are not negative: at 0 the derivative is the one from above
+        // (the residual is linear in them), taken by a forward difference.
+        let one_sided = value == 0.0 && params.path(id).contains(".damping.");
+        let (rp, rm) = if one_sided {
+            (moved(1.0), moved(0.0))
+        } else {
+            (moved(1.0), moved(-1.0))
+        };
+        let width = if one_sided { eps } else { 2.0 * eps };
+        let fd: Vec<f64> = rp.iter().zip(&rm).map(|(a, b)| (a - b) / width).collect();
+        let scale = fd.iter().chain(&jv).fold(0.0f64, |m, v| m.max(v.abs()));
+        let d = jv
+            .iter()
+            .zip(&fd)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        // Round-off of the differenced residual: a derivative far below the residual's size
+        // (a gravity component times the row scale) is compared to that floor.
+        let r_max = rp.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let floor = 100.0 * f64::EPSILON * r_max / eps;
+        // Joint positions and spring points are themselves differenced (the listed
+        // finite-difference default, `parameter_derivatives`) in rows that subtract node
+        // positions of metres: their round-off is about 1e-6 of the derivative.
+        let path = params.path(id);
+        let differenced = path.contains(".position.") || path.contains(".point_");
+        let relative = if differenced { 1e-5 } else { 1e-6 };
+        assert!(
+            d <= relative * scale + floor,
+            "{name}: dR/d {} differs from finite differences by {d:e} (scale {scale:e})",
+            params.path(id)
+        );
+        checked.push(params.path(id).to_string());
+    }
+    // <w, J_p dp> = <J_p^T w, dp>
+    let nu = layout.n_unknowns();
+    let w: Vec<f64> = (0..nu).map(|_| rand()).collect();
+    let dp: Vec<f64> = (0..params.len()).map(|_| rand()).collect();
+    let left: f64 = w
+        .iter()
+        .zip(f.parameter_jvp(&x, &params, &dp, &mut data))
+        .map(|(a, b)| a * b)
+        .sum();
+    let right: f64 = f
+        .parameter_vjp(&x, &params, &w, &mut data)
+        .iter()
+        .zip(&dp)
+        .map(|(a, b)| a * b)
+        .sum();
+    assert!(
+        (left - right).abs() <= 1e-10 * left.abs().max(right.abs()),
+        "{name}: transposed parameter product {right:e} against {left:e}"
+    );
+    checked
+}
+
+/// The kinds of parameters the checks above cover (a path without its item name and
+/// component), so that a kind cannot drop out unnoticed.
+fn kinds(paths: &[String]) -> std::collections::BTreeSet<String> {
+    paths
+        .iter()
+        .map(|p| {
+            let parts: Vec<&str> = p.split('.').collect();
+            // `model.gravity.k` has no item name; the others are `kind.name.field...`.
+            let skip = if parts[0] == "model" { 1 } else { 2 };
+            let mut k = vec![parts[0]];
+            k.extend(
+                parts
+                    .iter()
+                    .skip(skip)
+                    .filter(|s| s.parse::<usize>().is_err()),
+            );
+            k.join(".")
+        })
+        .collect()
+}
+
+#[test]
+fn step_parameter_derivatives_match_finite_differences() {
+    let mut paths = Vec::new();
+    for (file, overrides) in [
+        ("heavy_top.toml", &[][..]),
+        ("heavy_top_r3so3.toml", &[][..]),
+        ("chain_10.toml", &[][..]),
+        ("flexible_four_bar.toml", &[][..]),
+        ("heavy_top.toml", &["solver.formulation=index2"][..]),
+        ("slider_crank.toml", &[][..]),
+    ] {
+        let sim = simulation(file, overrides, 3);
+        paths.extend(check_parameters(file, &sim));
+    }
+    let covered = kinds(&paths);
+    for kind in [
+        "body.mass",
+        "body.inertia",
+        "body.com",
+        "joint.position",
+        "joint.drive.slope",
+        "model.gravity",
+        "beam.section.EA",
+        "beam.section.rhoA",
+        "beam.damping.stiffness",
+    ] {
+        assert!(covered.contains(kind), "{kind} not covered: {covered:?}");
     }
 }
 

@@ -18,8 +18,9 @@
 //!
 //! **Joint position** (finite-difference default). Central difference on two copies of the
 //! joint with the point moved by `+-h` ([`JointParam::set`], which places both joint frames'
-//! points), `h = FD_STEP max(|p_k|, L)` with `L` the largest distance of the joint's nodes
-//! from the point at t = 0 (1 if they are all at the point). `Phi` and `B` are linear in the
+//! points), `h = FD_STEP max(|p_k|, L, 1)` with `L` the largest distance of the joint's
+//! nodes from the point at t = 0 (a node at the point within round-off must not make the
+//! step vanish). `Phi` and `B` are linear in the
 //! point, so the difference is exact up to round-off.
 
 use super::primitives::dot1_into;
@@ -121,8 +122,9 @@ impl ConstraintParameters for Joint {
                     .flatten()
                     .map(|n| (model.nodes[n.0].frame.x - point).norm())
                     .fold(0.0, f64::max);
-                let scale = if reach > 1e-300 { reach } else { 1.0 };
-                let h = FD_STEP * at.abs().max(scale);
+                // Phi and B are linear in the point: the step need not be small, only not
+                // lost in round-off (nodes at the point give a reach of round-off size).
+                let h = FD_STEP * at.abs().max(reach).max(1.0);
                 let v = velocities(self, nodes);
                 let rows_at = |value: f64| {
                     let mut copy = self.clone();

@@ -328,6 +328,16 @@ impl<'a> StepFunction<'a> {
         }
     }
 
+    /// The same step with the row scale of a model whose largest nodal mass is `mass`. The
+    /// row scale `s = 1/(beta' m)` is a constant of the step function (the simulation's:
+    /// the nominal model's), not a function of the parameters: derivatives with respect to
+    /// the parameters are taken at fixed `s`, as the unknowns `mu = s lambda` are.
+    pub fn with_mass_scale(mut self, mass: f64) -> Self {
+        self.step.mass = mass;
+        self.step.scale = 1.0 / (self.step.bp * mass);
+        self
+    }
+
     /// The predictor of the step (no extrapolation): `vdot_{n+1} = vdot_n`,
     /// `mu = s lambda_n`, `zeta = 0`.
     pub fn predict(&self) -> Vec<f64> {
@@ -588,6 +598,162 @@ impl<'a> StepFunction<'a> {
         out.extend(p.f_vd.iter().map(|&(i, j, v)| (i, j, v * self.step.bp)));
         out.extend(p.f_mu.iter().copied());
         out
+    }
+
+    /// The inputs of [`crate::parameter_derivatives`] at the end of the step: node
+    /// kinematics (`T = I`) and the end state.
+    fn parameter_point(&self, x: &[f64]) -> (State, Vec<NodeState>) {
+        let (end, mut nodes, _) = self.end_nodes(x);
+        for n in &mut nodes {
+            n.t = Mat6::identity();
+        }
+        (end, nodes)
+    }
+
+    /// The stabilization unknowns of `x` as one weight per constraint row (0 for the rows
+    /// left out).
+    fn zeta_rows(&self, x: &[f64]) -> Vec<f64> {
+        let layout = self.layout;
+        let mut w = vec![0.0; layout.n_rows];
+        if layout.stabilized {
+            let base = layout.n_dofs + layout.n_active;
+            for (k, &row) in layout.active_rows.iter().enumerate() {
+                w[row] = x[base + k];
+            }
+        }
+        w
+    }
+
+    /// `(dR/dp) dp` at `x`, `dp` one entry per parameter of `params` (a
+    /// [`crate::model::parameters::Parameters`] of this model): `s dr/dp` on the
+    /// equilibrium rows, `dPhi/dp` on the constraint rows and `dpsi/dp / gamma'` on the
+    /// velocity-level rows (with `r + B^T lambda`, `Phi` and `psi = B v + Phi_t` at the end
+    /// of the step, [`crate::parameter_derivatives`]), and in the stabilized form the move
+    /// of `q_{n+1} = q_n exp(dq + B(q_n; p)^T zeta)`: `F_q T d(B(q_n)^T zeta)/dp`.
+    pub fn parameter_jvp(
+        &self,
+        x: &[f64],
+        params: &crate::model::parameters::Parameters,
+        dp: &[f64],
+        data: &mut crate::Data,
+    ) -> Vec<f64> {
+        use crate::parameter_derivatives::{constraint_force_derivative, residual_derivative};
+        let layout = self.layout;
+        let (nd, na) = (layout.n_dofs, layout.n_active);
+        let (end, nodes) = self.parameter_point(x);
+        let zeta = self.zeta_rows(x);
+        let mut dr = vec![0.0; nd];
+        let mut dphi = vec![0.0; layout.n_rows];
+        let mut dpsi = vec![0.0; if layout.stabilized { layout.n_rows } else { 0 }];
+        let mut dforce = vec![0.0; nd];
+        let mut out = vec![0.0; layout.n_unknowns()];
+        let mut dtotal = vec![0.0; nd];
+        for (id, &d) in params.ids().zip(dp) {
+            if d == 0.0 {
+                continue;
+            }
+            residual_derivative(
+                self.model,
+                params,
+                id,
+                &nodes,
+                end.t,
+                &end.lambda,
+                self.step.load_factor,
+                &mut dr,
+                &mut dphi,
+                &mut dpsi,
+            );
+            for i in 0..nd {
+                out[i] += d * self.step.scale * dr[i];
+            }
+            for (k, &row) in layout.active_rows.iter().enumerate() {
+                out[nd + k] += d * dphi[row];
+                if layout.stabilized {
+                    out[nd + na + k] += d * dpsi[row] / self.step.gp;
+                }
+            }
+            if layout.stabilized {
+                let model = self.model;
+                let (start_nodes, t) = (&self.start_nodes, self.start.t);
+                constraint_force_derivative(model, params, id, start_nodes, t, &zeta, &mut dforce);
+                for (a, b) in dtotal.iter_mut().zip(&dforce) {
+                    *a += d * b;
+                }
+            }
+        }
+        if layout.stabilized && dtotal.iter().any(|&v| v != 0.0) {
+            let p = self.partials(x, data);
+            for &(i, j, v) in &p.f_q {
+                let (n, c) = (j / 6, j % 6);
+                let moved = p.t[n]
+                    .row(c)
+                    .transpose()
+                    .dot(&Vec6::from_column_slice(&dtotal[6 * n..6 * n + 6]));
+                out[i] += v * moved;
+            }
+        }
+        out
+    }
+
+    /// `(dR/dp)^T w` at `x`: one entry per parameter of `params` (see
+    /// [`StepFunction::parameter_jvp`]).
+    pub fn parameter_vjp(
+        &self,
+        x: &[f64],
+        params: &crate::model::parameters::Parameters,
+        w: &[f64],
+        data: &mut crate::Data,
+    ) -> Vec<f64> {
+        use crate::parameter_derivatives::{
+            constraint_force_derivative, residual_derivative_transpose,
+        };
+        let layout = self.layout;
+        let (nd, na) = (layout.n_dofs, layout.n_active);
+        let (end, nodes) = self.parameter_point(x);
+        let w_r: Vec<f64> = w[..nd].iter().map(|v| v * self.step.scale).collect();
+        let mut w_phi = vec![0.0; layout.n_rows];
+        let mut w_psi = vec![0.0; if layout.stabilized { layout.n_rows } else { 0 }];
+        for (k, &row) in layout.active_rows.iter().enumerate() {
+            w_phi[row] = w[nd + k];
+            if layout.stabilized {
+                w_psi[row] = w[nd + na + k] / self.step.gp;
+            }
+        }
+        let mut grad = vec![0.0; params.len()];
+        residual_derivative_transpose(
+            self.model,
+            params,
+            &nodes,
+            end.t,
+            &end.lambda,
+            self.step.load_factor,
+            (&w_r, &w_phi, &w_psi),
+            &mut grad,
+        );
+        if layout.stabilized {
+            // u = (F_q T)^T w, then u . d(B(q_n)^T zeta)/dp for the joint parameters.
+            let p = self.partials(x, data);
+            let mut g = vec![0.0; nd];
+            for &(i, j, v) in &p.f_q {
+                g[j] += v * w[i];
+            }
+            let u: Vec<f64> = (0..nd / 6)
+                .flat_map(|n| {
+                    let un = p.t[n].transpose() * Vec6::from_column_slice(&g[6 * n..6 * n + 6]);
+                    un.iter().copied().collect::<Vec<_>>()
+                })
+                .collect();
+            let zeta = self.zeta_rows(x);
+            let mut dforce = vec![0.0; nd];
+            for (k, id) in params.ids().enumerate() {
+                let model = self.model;
+                let (start_nodes, t) = (&self.start_nodes, self.start.t);
+                constraint_force_derivative(model, params, id, start_nodes, t, &zeta, &mut dforce);
+                grad[k] += u.iter().zip(&dforce).map(|(a, b)| a * b).sum::<f64>();
+            }
+        }
+        grad
     }
 
     /// Coefficients of `v_{n+1}` and `vdot_{n+1}` in `(v_n, a_n, vdot_n)` at fixed `dq`.
