@@ -290,9 +290,12 @@ fn traverse<S: Sink>(
         let dofs = [layout.dof(slots[0]), layout.dof(slots[1])];
         let start = layout.joint_row_start[j];
         let rows = &layout.joint_rows[j];
-        let mut nodes = ground;
+        let nodes = if S::EVALUATE {
+            gather(it.nodes, slots, &ground)
+        } else {
+            ground
+        };
         if S::EVALUATE {
-            nodes = gather(it.nodes, slots, &ground);
             let active = [dofs[0].is_some(), dofs[1].is_some()];
             let lam = &it.lambda[start..start + rows.len()];
             let mut k = Mat12::zeros();

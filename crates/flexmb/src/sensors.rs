@@ -9,14 +9,20 @@ use flexmb_lie::Mat6;
 
 /// Node kinematics of a state (tangent operators identity).
 pub fn node_states(state: &State) -> Vec<NodeState> {
-    (0..state.q.len())
-        .map(|i| NodeState {
-            q: state.q[i],
-            v: state.v[i],
-            vdot: state.vdot[i],
-            t: Mat6::identity(),
-        })
-        .collect()
+    let mut out = Vec::new();
+    node_states_into(state, &mut out);
+    out
+}
+
+/// [`node_states`] into a reused buffer.
+pub fn node_states_into(state: &State, out: &mut Vec<NodeState>) {
+    out.clear();
+    out.extend((0..state.q.len()).map(|i| NodeState {
+        q: state.q[i],
+        v: state.v[i],
+        vdot: state.vdot[i],
+        t: Mat6::identity(),
+    }));
 }
 
 fn pair(nodes: &[NodeState], slots: [Option<crate::model::NodeId>; 2]) -> [NodeState; 2] {

@@ -51,7 +51,7 @@ use crate::elements::{NodeState, Vec12};
 use crate::error::{SettingsError, SolveError};
 use crate::model::Model;
 use crate::observe::{Observer, Sample, StepRecord};
-use crate::sensors::node_states;
+use crate::sensors::node_states_into;
 use crate::state::State;
 use flexmb_lie::Vec6;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -972,8 +972,7 @@ impl Simulation {
         let h = t_new - it.saved.t;
         let start = step::Start::new(self.params, h, self.mass, &self.settings, t_new);
         let stabilized = self.data.layout.stabilized;
-        it.nodes.clear();
-        it.nodes.extend(node_states(&it.saved));
+        node_states_into(&it.saved, &mut it.nodes);
         if stabilized {
             it.b_start.resize(self.data.layout.n_rows, Vec12::zeros());
             crate::assembly::constraint_rows(
