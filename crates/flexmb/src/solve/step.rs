@@ -109,6 +109,7 @@ impl Start {
 /// the solution does not depend on it), `lambda_{n+1}` likewise, and the `v` and increment
 /// that the scheme gives for them. Writes `state.v`, `state.vdot`, `state.lambda` (`state`
 /// holds `s_n` on entry) and `dq`.
+#[inline]
 pub fn predict(
     p: &GaParameters,
     h: f64,
@@ -141,6 +142,7 @@ pub fn predict(
 }
 
 /// `dq + B(q_n)^T zeta` into `total` in the stabilized formulation, `dq` otherwise.
+#[inline]
 pub fn total_increments(
     layout: &Layout,
     dq: &[f64],
@@ -164,6 +166,7 @@ pub fn total_increments(
 
 /// Node kinematics of the iterate: `q = q_n exp(total)`, `v` and `vdot` from `state` and,
 /// when `tangents`, the tangent operators `T(total)` (otherwise left as they are).
+#[inline]
 pub fn kinematics(
     group: Group,
     start: &State,
@@ -185,6 +188,7 @@ pub fn kinematics(
 
 /// Applies a Newton correction `dx`: `dq += dx`, `v += gamma' dx`, `vdot += beta' dx`,
 /// `lambda += dmu / s`, and `zeta += dzeta` in the stabilized formulation.
+#[inline]
 pub fn correct(
     layout: &Layout,
     dx: &[f64],
@@ -218,6 +222,7 @@ pub fn correct(
 /// End of the step: `q_{n+1} = q_n exp(total)` (re-orthonormalized) and the algorithmic
 /// acceleration `a_{n+1} = (alpha_f vdot_n + (1 - alpha_f) vdot_{n+1} - alpha_m a_n) /
 /// (1 - alpha_m)`.
+#[inline]
 pub fn finish(group: Group, p: &GaParameters, start: &State, total: &[f64], state: &mut State) {
     for i in 0..start.q.len() {
         let inc = Vec6::from_column_slice(&total[6 * i..6 * i + 6]);
