@@ -14,13 +14,8 @@ use flexmb_lie::Vec6;
 
 /// A deterministic pseudo-random sequence in [-1, 1].
 fn noise(seed: u64) -> impl FnMut() -> f64 {
-    let mut s = seed;
-    move || {
-        s = s
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-    }
+    let mut lcg = common::Lcg(seed);
+    move || lcg.next()
 }
 
 /// A simulation of an example file after `steps` steps.

@@ -11,31 +11,9 @@ use flexmb::model::{
 };
 use flexmb_lie::{Frame, Group, Mat3, Mat6, Vec3, Vec6};
 
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-    }
-    fn v3(&mut self, s: f64) -> Vec3 {
-        Vec3::new(self.next(), self.next(), self.next()) * s
-    }
-    fn v6(&mut self, s: f64) -> Vec6 {
-        let (a, b) = (self.v3(s), self.v3(s));
-        flexmb_lie::join(&a, &b)
-    }
-    fn node(&mut self, group: Group) -> NodeState {
-        NodeState {
-            q: group.exp(&self.v6(1.5)),
-            v: self.v6(2.0),
-            vdot: self.v6(3.0),
-            t: Mat6::identity(),
-        }
-    }
-}
+mod common;
+
+use common::Lcg;
 
 const EPS: f64 = 1e-6;
 

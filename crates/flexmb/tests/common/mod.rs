@@ -155,3 +155,39 @@ pub fn example_simulation(file: &str, overrides: &[&str]) -> flexmb::Simulation 
     };
     flexmb::Simulation::new(mf.model, settings).expect("starts")
 }
+
+/// A deterministic pseudo-random sequence (a linear congruential generator) for the tests'
+/// sample points and directions.
+pub struct Lcg(pub u64);
+
+impl Lcg {
+    /// The next number, uniform in [-1, 1].
+    pub fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+
+    /// A vector with components in [-s, s].
+    pub fn v3(&mut self, s: f64) -> flexmb_lie::Vec3 {
+        flexmb_lie::Vec3::new(self.next(), self.next(), self.next()) * s
+    }
+
+    /// A 6-vector with components in [-s, s].
+    pub fn v6(&mut self, s: f64) -> flexmb_lie::Vec6 {
+        let (a, b) = (self.v3(s), self.v3(s));
+        flexmb_lie::join(&a, &b)
+    }
+
+    /// Node kinematics away from the identity, with velocities and accelerations.
+    pub fn node(&mut self, group: flexmb_lie::Group) -> flexmb::elements::NodeState {
+        flexmb::elements::NodeState {
+            q: group.exp(&self.v6(1.5)),
+            v: self.v6(2.0),
+            vdot: self.v6(3.0),
+            t: flexmb_lie::Mat6::identity(),
+        }
+    }
+}
