@@ -379,6 +379,12 @@ fn start_dynamic<'m>(
             path.display()
         )));
     }
+    if saved.sensors.len() != model.sensors.len() {
+        return Err(bad(format!(
+            "{}: its sensor memory does not fit the model",
+            path.display()
+        )));
+    }
     let sim = Simulation::resume(saved.checkpoint.clone(), settings.t_end)?;
     Ok((sim, Outputs::reopen(out, model, &saved)))
 }
@@ -426,13 +432,14 @@ fn run_dynamic(
                 error: None,
             };
             let result = loop {
+                // The next multiple of the interval after now; an interval too small to
+                // advance the time (or not positive) leaves only the checkpoint at the end.
                 let stop = options.checkpoint_interval.map_or(t_end, |i| {
                     let next = ((sim.state.t / i).floor() + 1.0) * i;
-                    if next > sim.state.t {
-                        next
-                    } else {
-                        next + i
-                    }
+                    [next, next + i]
+                        .into_iter()
+                        .find(|&t| t > sim.state.t && i > 0.0)
+                        .unwrap_or(t_end)
                 });
                 let result = sim.run_until(stop, &mut Observers(vec![&mut sink, &mut progress]));
                 let checkpoint = match &result {

@@ -47,8 +47,8 @@ pub struct StepRecord<'a> {
 pub trait Observer {
     /// Called at every output point.
     fn output(&mut self, sample: &Sample) -> Result<(), String>;
-    /// Whether [`Observer::step`] should be called (building a [`StepRecord`] costs a copy
-    /// of the unknowns per step).
+    /// Whether [`Observer::step`] should be called (the simulation then keeps a copy of each
+    /// step's unknowns).
     fn wants_steps(&self) -> bool {
         false
     }

@@ -63,6 +63,15 @@ pub struct SensorEvaluator {
 }
 
 impl SensorEvaluator {
+    /// Sensors it keeps memory for.
+    pub fn len(&self) -> usize {
+        self.last_angle.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.last_angle.is_empty()
+    }
+
     pub fn new(model: &Model) -> Self {
         Self {
             last_angle: vec![None; model.sensors.len()],

@@ -77,3 +77,19 @@ fn resumed_closed_loop_with_redundant_rows_matches_the_uninterrupted_run() {
 fn resumed_beam_run_matches_the_uninterrupted_run() {
     check("spin_up.toml", &["solver.t_end=2"]);
 }
+
+/// A run extended past an end that is not an output time goes on to the next output time
+/// (none is skipped).
+#[test]
+fn extended_run_keeps_every_output_time() {
+    let mut sim = common::example_simulation("heavy_top.toml", &["solver.t_end=0.255"]);
+    outputs(&mut sim);
+    assert_eq!(sim.state.t, 0.255);
+    let mut resumed = Simulation::resume(sim.checkpoint(), 0.3).expect("resumes");
+    let times: Vec<f64> = outputs(&mut resumed).iter().map(|s| s.t).collect();
+    assert_eq!(times.len(), 5, "{times:?}");
+    assert!(
+        (times[0] - 0.26).abs() < 1e-12 && times[4] == 0.3,
+        "{times:?}"
+    );
+}

@@ -348,6 +348,9 @@ pub struct Simulation {
     mass: f64,
     /// Whether the start of the run was reported to an observer.
     started: bool,
+    /// Keep each accepted step's unknowns ([`Simulation::last_step`]): set by an observer
+    /// that wants steps, or by [`Simulation::keep_last_step`].
+    keep_steps: bool,
 }
 
 /// The memory of a simulation at a step boundary: with the model and the settings,
@@ -369,6 +372,11 @@ pub struct Memory {
     newton: NewtonMemory,
     /// The held iteration matrix (values in pattern order).
     matrix: Option<Vec<f64>>,
+}
+
+/// Whether a Newton memory names a factorized matrix whose values are not given.
+fn newton_holds_matrix_without_values(memory: &NewtonMemory, values: bool) -> bool {
+    memory.holds_matrix() && !values
 }
 
 /// A self-contained checkpoint of a dynamic run: model, settings and [`Memory`].
@@ -517,6 +525,7 @@ impl Simulation {
             verification: None,
             redundancy: RedundancyWatch::default(),
             started: false,
+            keep_steps: false,
         })
     }
 
@@ -594,7 +603,6 @@ impl Simulation {
         let c = memory;
         model.validate()?;
         settings.check()?;
-        let (_, warnings) = prepare_layout(&model);
         let mut layout = Layout::new(&model);
         layout.stabilized = settings.stabilized();
         if c.redundant_rows.iter().any(|&r| r >= layout.n_rows) {
@@ -605,6 +613,7 @@ impl Simulation {
         layout.deactivate_rows(&model, &c.redundant_rows);
         let mut data = Data::new(&model, layout)?;
         let mut newton = NewtonSolver::new(Self::policy(&settings), settings.verify);
+        let holds_values = c.matrix.is_some();
         if let Some(values) = c.matrix {
             if values.len() != data.values.len() {
                 return Err(SolveError::Checkpoint(
@@ -614,13 +623,22 @@ impl Simulation {
             data.values = values;
             data.solver.factorize(&data.values)?;
         }
+        if newton_holds_matrix_without_values(&c.newton, holds_values) {
+            return Err(SolveError::Checkpoint(
+                "it names an iteration matrix it does not hold".into(),
+            ));
+        }
         newton.restore(&c.newton);
         let n = model.nodes.len();
+        let rows = data.layout.n_rows;
         let consistent = c.state.q.len() == n
             && c.state.v.len() == n
             && c.state.vdot.len() == n
             && c.state.a.len() == n
-            && c.state.lambda.len() == data.layout.n_rows;
+            && c.state.lambda.len() == rows
+            && (c.previous.h == 0.0
+                || (c.previous.vdot.len() == n && c.previous.lambda.len() == rows))
+            && (!holds_values || c.mu_floor.len() == data.layout.n_active);
         if !consistent {
             return Err(SolveError::Checkpoint(
                 "its state does not fit the model".into(),
@@ -642,11 +660,12 @@ impl Simulation {
             control: c.control,
             settings,
             stats: c.stats,
-            warnings,
+            warnings: Vec::new(),
             interrupt: None,
             verification: c.verification,
             redundancy: c.redundancy,
             started: true,
+            keep_steps: false,
         })
     }
 
@@ -716,6 +735,7 @@ impl Simulation {
             self.started = true;
         }
         let wants_steps = observer.wants_steps();
+        self.keep_steps |= wants_steps;
         while self.state.t < self.settings.t_end.min(t_stop) {
             if interrupted(&self.interrupt) {
                 return Err(SolveError::Interrupted {
@@ -757,9 +777,16 @@ impl Simulation {
 
     /// The converged unknowns of the last accepted step in the layout of its Newton vector
     /// (increments, scaled multipliers `mu = s lambda` and stabilization unknowns), and the
-    /// constraint rows that were left out as redundant in it.
+    /// constraint rows that were left out as redundant in it; empty unless steps are kept
+    /// ([`Simulation::keep_last_step`]).
     pub fn last_step(&self) -> (&[f64], &[usize]) {
         (&self.integrator.unknowns, &self.integrator.redundant_rows)
+    }
+
+    /// Keep the unknowns of every accepted step for [`Simulation::last_step`] (a copy per
+    /// step; [`Simulation::run`] turns it on for an observer that wants steps).
+    pub fn keep_last_step(&mut self, keep: bool) {
+        self.keep_steps = keep;
     }
 
     fn step_unknowns_into(&self, x: &mut Vec<f64>) {
@@ -816,7 +843,10 @@ impl Simulation {
             match attempt {
                 Ok(newton) => {
                     self.accepted(&newton, h_try);
-                    if self.state.t == target && s.output_interval > 0.0 {
+                    // The next output time, once this one is reached (t_end, if it is not an
+                    // output time, is not one: a run extended past it goes on to it).
+                    let output_time = self.control.k_out as f64 * s.output_interval;
+                    if s.output_interval > 0.0 && self.state.t == output_time {
                         self.control.k_out += 1;
                     }
                     info.t = self.state.t;
@@ -893,15 +923,17 @@ impl Simulation {
             let layout = &self.data.layout;
             Verification::add(&mut self.verification, check, t_new, layout, &self.model);
         }
-        // What the step was, in its own layout (the rows may be chosen again now).
-        let mut unknowns = std::mem::take(&mut self.integrator.unknowns);
-        self.step_unknowns_into(&mut unknowns);
-        self.integrator.unknowns = unknowns;
-        let layout = &self.data.layout;
-        self.integrator.redundant_rows.clear();
-        self.integrator
-            .redundant_rows
-            .extend((0..layout.n_rows).filter(|&r| layout.row_unknown[r].is_none()));
+        if self.keep_steps {
+            // What the step was, in its own layout (the rows may be chosen again now).
+            let mut unknowns = std::mem::take(&mut self.integrator.unknowns);
+            self.step_unknowns_into(&mut unknowns);
+            self.integrator.unknowns = unknowns;
+            let layout = &self.data.layout;
+            self.integrator.redundant_rows.clear();
+            self.integrator
+                .redundant_rows
+                .extend((0..layout.n_rows).filter(|&r| layout.row_unknown[r].is_none()));
+        }
         self.watch_redundant_rows();
         if self.stats.steps == 1 || h < self.stats.smallest_step {
             self.stats.smallest_step = h;

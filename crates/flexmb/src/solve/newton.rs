@@ -212,12 +212,19 @@ impl Convergence {
 pub struct Verification {
     /// Steps checked.
     pub steps: usize,
-    /// Largest estimated error (NaN if a check found a singular matrix).
+    /// Largest estimated error (NaN if a check found a singular matrix; `null` in JSON).
+    #[serde(deserialize_with = "nan_from_null")]
     pub max_error: f64,
     /// Time (or load factor) of the step with the largest error.
     pub t: f64,
     /// The equation with the largest weighted correction at that step.
     pub worst_equation: String,
+}
+
+/// A number, or NaN for `null` (how JSON writes NaN).
+fn nan_from_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    use serde::Deserialize;
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 impl Verification {
@@ -406,6 +413,13 @@ pub struct NewtonMemory {
     regularized_solves: usize,
 }
 
+impl NewtonMemory {
+    /// Whether a factorized matrix is held.
+    pub fn holds_matrix(&self) -> bool {
+        self.matrix.is_some()
+    }
+}
+
 /// What a converged solve did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NewtonInfo {
@@ -556,10 +570,9 @@ impl NewtonSolver {
             let result = self.attempt(sys, data, key, &mut info);
             match result {
                 Ok(()) => return Ok(info),
-                Err(error) if info.reused_matrix => {
+                Err(_) if info.reused_matrix => {
                     // Iterations with a reused matrix may have led Newton astray: once more
                     // from the start, with fresh matrices.
-                    let _ = error;
                     info.retries += 1;
                     self.fresh_only = true;
                     sys.restart();
@@ -622,6 +635,7 @@ impl NewtonSolver {
                         regularization = REGULARIZATION;
                         self.regularized_solves = self.policy.regularized_solves;
                         sys.assemble(data, true, regularization);
+                        info.factorizations += 1;
                         factorized = data.solver.factorize(&data.values);
                     }
                     if let Err(e) = factorized {

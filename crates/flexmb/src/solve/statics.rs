@@ -252,6 +252,9 @@ struct LoadStep<'a> {
     load_factor: f64,
     /// Arc-length continuation: the constraint `|dq| = dl` and its state.
     arc: Option<ArcLength>,
+    /// The iterate's start `(dq, lambda, load factor, load increment)`, for a second
+    /// attempt with fresh matrices.
+    first: (Vec<f64>, Vec<f64>, f64, f64),
 }
 
 /// The arc-length part of a load step (Crisfield's cylindrical constraint).
@@ -419,6 +422,16 @@ impl NonlinearSystem for LoadStep<'_> {
 
     /// The increments' weighted correction; with arc length also the load factor's,
     /// `|dmu| / (rtol |dlambda| + atol)`.
+    fn restart(&mut self) {
+        let (dq, lambda, load_factor, dlambda) = &self.first;
+        self.dq.clone_from(dq);
+        self.lambda.clone_from(lambda);
+        self.load_factor = *load_factor;
+        if let Some(arc) = &mut self.arc {
+            arc.dlambda = *dlambda;
+        }
+    }
+
     fn norms(&self, data: &Data) -> Norms {
         let nd = data.layout.n_dofs;
         let newton = &self.newton;
@@ -469,6 +482,7 @@ impl Statics {
             newton: settings.newton,
             load_factor: 0.0,
             arc: None,
+            first: Default::default(),
         };
         start.assemble(&mut data, true, 0.0);
         let nd = data.layout.n_dofs;
@@ -619,6 +633,12 @@ impl Statics {
         arc: Option<ArcLength>,
     ) -> Result<(usize, Option<ArcLength>, Vec<f64>), NewtonError> {
         let mut lambda = self.state.lambda.clone();
+        let first = (
+            dq.clone(),
+            lambda.clone(),
+            load_factor,
+            arc.as_ref().map_or(0.0, |a| a.dlambda),
+        );
         let mut sys = LoadStep {
             model: &self.model,
             q0: &self.state.q,
@@ -628,6 +648,7 @@ impl Statics {
             row_scale: self.row_scale,
             newton: self.settings.newton,
             load_factor,
+            first,
             arc,
         };
         let result = self.newton.solve(&mut sys, &mut self.data, 0.0);
@@ -746,6 +767,7 @@ impl Statics {
                 xb: Vec::new(),
                 dmu: 0.0,
             }),
+            first: Default::default(),
         };
         predictor.assemble(&mut self.data, true, 0.0);
         if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {

@@ -495,7 +495,8 @@ impl<'a> StepFunction<'a> {
     }
 
     /// `d((B(q) v + Phi_t) / gamma')/dq` of the velocity-level rows: for row `r`,
-    /// `v^T dB_r^T/dq`, the joint's `K_c` with the unit multiplier on that row.
+    /// `v^T dB_r^T/dq` (the joint's `K_c` with the unit multiplier on that row) plus
+    /// `dPhi_t/dq = dB_r/dt` (nonzero for a driven angle).
     fn velocity_rows_configuration(&self, nodes: &[NodeState], end: &State, f_q: &mut Triplets) {
         let layout = self.layout;
         let ground = NodeState::ground(Default::default());
@@ -525,7 +526,10 @@ impl<'a> StepFunction<'a> {
                     &unit[..rows.len()],
                     Some(&mut kr),
                 );
-                let row = kr.transpose() * vloc / self.step.gp;
+                // d(Phi_t)/dq = dB/dt (a driven angle's Phi_t moves with q).
+                let b_t =
+                    crate::joints::evaluate_row(self.model.group, joint, rows[r], &pair, end.t).b_t;
+                let row = (kr.transpose() * vloc + b_t) / self.step.gp;
                 for (ka, n) in slots.iter().enumerate() {
                     if let Some(n) = n {
                         for c in 0..6 {

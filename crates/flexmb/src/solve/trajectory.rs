@@ -20,7 +20,7 @@ use std::sync::Arc;
 /// One step of a trajectory.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrajectoryStep {
-    /// Number of the step (1 for the first).
+    /// Number of the step in the run (1 for the first).
     pub index: usize,
     /// Step size \[s\].
     pub h: f64,
@@ -40,7 +40,9 @@ pub struct Trajectory {
     model: Arc<Model>,
     settings: DynamicSettings,
     every: usize,
-    /// The memory at the start of step `k every + 1`, for `k = 0, 1, ...`.
+    /// Steps the simulation had taken when the trajectory started.
+    first: usize,
+    /// The memory at the start of step `first + k every + 1`, for `k = 0, 1, ...`.
     checkpoints: Vec<Memory>,
     /// Steps recorded.
     steps: usize,
@@ -54,6 +56,7 @@ impl Trajectory {
             model: Arc::clone(&sim.model),
             settings: sim.settings,
             every: every.max(1),
+            first: sim.stats.steps,
             checkpoints: vec![sim.memory()],
             steps: 0,
         }
@@ -77,18 +80,20 @@ impl Trajectory {
     pub fn segment(&self, k: usize) -> Result<Vec<TrajectoryStep>, SolveError> {
         let first = k * self.every;
         let count = self.every.min(self.steps.saturating_sub(first));
+        let index0 = self.first + first;
         if count == 0 {
             return Ok(Vec::new());
         }
         let memory = self.checkpoints[k].clone();
         let mut sim = Simulation::restore(Arc::clone(&self.model), self.settings, memory)?;
+        sim.keep_last_step(true);
         let mut out = Vec::with_capacity(count);
         for i in 1..=count {
             let start = sim.state.clone();
             let info = sim.step()?;
             let (unknowns, redundant_rows) = sim.last_step();
             out.push(TrajectoryStep {
-                index: first + i,
+                index: index0 + i,
                 h: info.h,
                 start,
                 unknowns: unknowns.to_vec(),
@@ -124,8 +129,8 @@ impl Observer for Trajectory {
     }
 
     fn step(&mut self, record: &StepRecord) -> Result<(), String> {
-        self.steps = record.index;
-        if record.index.is_multiple_of(self.every) {
+        self.steps = record.index - self.first;
+        if self.steps.is_multiple_of(self.every) {
             self.checkpoints.push(record.simulation.memory());
         }
         Ok(())
