@@ -278,7 +278,6 @@ fn traverse<S: Sink>(
             }
         }
     }
-    let needs_h = sc.constraint_rhs == ConstraintRhs::Acceleration;
     let mut jv = joints::JointValues {
         n_rows: 0,
         phi: [0.0; joints::MAX_ROWS],
@@ -345,11 +344,10 @@ fn traverse<S: Sink>(
                 }
                 residual[c] = match sc.constraint_rhs {
                     ConstraintRhs::Position => jv.phi[ri],
-                    ConstraintRhs::Acceleration if needs_h => {
+                    ConstraintRhs::Acceleration => {
                         joints::evaluate_row(model.group, joint, rows[ri], &nodes, it.t)
                             .convective(&vloc)
                     }
-                    ConstraintRhs::Acceleration => unreachable!(),
                     ConstraintRhs::Velocity => b.dot(&vloc) + jv.phi_t[ri],
                 };
             }

@@ -34,7 +34,7 @@
 use super::generalized_alpha::GaParameters;
 use super::DynamicSettings;
 use crate::assembly::{ConstraintRhs, Scaling};
-use crate::data::Layout;
+use crate::data::{Block, Layout};
 use crate::elements::{Coefficients, NodeState, Vec12};
 use crate::joints::ConstraintKernel;
 use crate::model::Model;
@@ -366,14 +366,11 @@ impl<'a> StepFunction<'a> {
 
     /// `dq + B(q_n)^T zeta` of the unknowns `x`.
     fn total(&self, x: &[f64]) -> Vec<f64> {
-        let (nd, na) = (self.layout.n_dofs, self.layout.n_active);
-        let zeta = if self.layout.stabilized {
-            &x[nd + na..nd + 2 * na]
-        } else {
-            &[][..]
-        };
+        let layout = self.layout;
+        let zeta = &x[layout.block(Block::Stabilization)];
         let mut total = Vec::new();
-        total_increments(self.layout, &x[..nd], zeta, &self.b_start, &mut total);
+        let dq = &x[layout.block(Block::NodeIncrements)];
+        total_increments(layout, dq, zeta, &self.b_start, &mut total);
         total
     }
 
@@ -424,6 +421,11 @@ impl<'a> StepFunction<'a> {
         sc: &Scaling,
         matrix: bool,
     ) {
+        assert!(
+            data.layout.active_rows == self.layout.active_rows
+                && data.layout.stabilized == self.layout.stabilized,
+            "the data must be built for the step function's layout"
+        );
         let it = crate::assembly::Iterate {
             nodes,
             t: end.t,
@@ -548,8 +550,7 @@ impl<'a> StepFunction<'a> {
         if !layout.stabilized {
             return out;
         }
-        let (nd, na) = (layout.n_dofs, layout.n_active);
-        let zeta = &x[nd + na..nd + 2 * na];
+        let zeta = &x[layout.block(Block::Stabilization)];
         let ground = NodeState::ground(Default::default());
         for (j, joint) in self.model.joints.iter().enumerate() {
             let slots = [joint.node_a, joint.node_b];
@@ -624,11 +625,9 @@ impl<'a> StepFunction<'a> {
     fn zeta_rows(&self, x: &[f64]) -> Vec<f64> {
         let layout = self.layout;
         let mut w = vec![0.0; layout.n_rows];
-        if layout.stabilized {
-            let base = layout.n_dofs + layout.n_active;
-            for (k, &row) in layout.active_rows.iter().enumerate() {
-                w[row] = x[base + k];
-            }
+        let zeta = &x[layout.block(Block::Stabilization)];
+        for (&row, &z) in layout.active_rows.iter().zip(zeta) {
+            w[row] = z;
         }
         w
     }
