@@ -141,3 +141,36 @@ fn resume_refuses_the_checkpoint_of_another_model() {
     let stderr = String::from_utf8_lossy(&r.stderr);
     assert!(stderr.contains("the model differs"), "{stderr}");
 }
+
+/// A resumed run says what the run it continues said about the model (here the redundant
+/// rows of the Bricard mechanism's closed loop).
+#[test]
+fn a_resumed_run_keeps_the_notes_on_the_model() {
+    let bricard = repo("examples/bricard.toml");
+    let go = |args: &[&str], dir: &Path| {
+        let r = flexmb()
+            .args(["run", bricard.to_str().unwrap(), "--quiet"])
+            .args(args)
+            .arg(dir)
+            .output()
+            .expect("runs");
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    };
+    let whole = out_dir("resume-notes-whole");
+    go(&["--set", "solver.t_end=0.2", "--out"], &whole);
+    let part = out_dir("resume-notes-part");
+    go(
+        &[
+            "--set",
+            "solver.t_end=0.1",
+            "--checkpoint-interval",
+            "0.1",
+            "--out",
+        ],
+        &part,
+    );
+    go(&["--set", "solver.t_end=0.2", "--resume"], &part);
+    let warnings = summary(&whole)["warnings"].clone();
+    assert!(warnings.as_array().is_some_and(|w| !w.is_empty()));
+    assert_eq!(summary(&part)["warnings"], warnings);
+}

@@ -64,13 +64,7 @@ pub struct Layout {
 impl Layout {
     /// The layout with all constraint rows active.
     pub fn new(model: &Model) -> Self {
-        let joint_rows: Vec<Vec<Row>> = model.joints.iter().map(joints::rows).collect();
-        let mut joint_row_start = Vec::with_capacity(joint_rows.len());
-        let mut n_rows = 0;
-        for r in &joint_rows {
-            joint_row_start.push(n_rows);
-            n_rows += r.len();
-        }
+        let (joint_rows, joint_row_start, n_rows) = joints::row_table(model);
         let mut layout = Self {
             n_nodes: model.nodes.len(),
             n_dofs: 6 * model.nodes.len(),
@@ -115,6 +109,22 @@ impl Layout {
     /// Index of the stabilization unknown (and velocity-constraint equation) of active row `k`.
     pub fn zeta(&self, k: usize) -> usize {
         self.n_dofs + self.n_active + k
+    }
+
+    /// The layout of the stabilized index-2 formulation or not, with the given rows left out
+    /// as redundant.
+    pub fn with_rows(model: &Model, stabilized: bool, redundant: &[usize]) -> Self {
+        let mut layout = Self::new(model);
+        layout.stabilized = stabilized;
+        layout.deactivate_rows(model, redundant);
+        layout
+    }
+
+    /// The rows left out as redundant, in increasing order.
+    pub fn redundant_rows(&self) -> Vec<usize> {
+        (0..self.n_rows)
+            .filter(|&r| self.row_unknown[r].is_none())
+            .collect()
     }
 
     /// Marks the given rows as redundant.

@@ -212,13 +212,15 @@ impl<'m> Outputs<'m> {
     fn reopen(
         out: &OutputDir,
         model: &'m crate::Model,
-        saved: &RunCheckpoint,
+        files: &[(String, u64)],
+        rows: usize,
+        sensors: SensorEvaluator,
     ) -> Result<Self, OutputError> {
         Ok(Self {
             model,
-            sensors: saved.sensors.clone(),
-            files: ResultFiles::reopen(out, &saved.files)?,
-            rows: saved.outputs,
+            sensors,
+            files: ResultFiles::reopen(out, files)?,
+            rows,
             seconds: 0.0,
         })
     }
@@ -281,27 +283,25 @@ impl Observer for Progress<'_> {
     }
 }
 
-/// Runs an analysis with the result files and the progress as its observers; returns the
-/// analysis' result, the files (if they could be created) and the first write error.
+/// Runs an analysis with the result files and the progress as its observers (`run` gets
+/// both); returns the analysis' result, the files (if they could be created) and the first
+/// write error.
 fn observed<'m, R>(
-    out: &OutputDir,
-    first: &str,
-    model: &'m crate::Model,
-    progress: Progress,
-    run: impl FnOnce(&mut dyn Observer) -> Result<R, SolveError>,
+    outputs: Result<Outputs<'m>, OutputError>,
+    mut progress: Progress,
+    run: impl FnOnce(&mut ResultSink<'m>, &mut Progress) -> Result<R, SolveError>,
 ) -> (
     Result<(), SolveError>,
     Option<Outputs<'m>>,
     Option<OutputError>,
 ) {
-    match Outputs::create(out, first, model) {
+    match outputs {
         Ok(outputs) => {
             let mut sink = ResultSink {
                 outputs,
                 error: None,
             };
-            let mut progress = progress;
-            let result = run(&mut Observers(vec![&mut sink, &mut progress]));
+            let result = run(&mut sink, &mut progress);
             (result.map(|_| ()), Some(sink.outputs), sink.error)
         }
         Err(e) => (Ok(()), None, Some(e)),
@@ -325,8 +325,10 @@ fn run_static(
         report: progress,
         end: settings.load_factor,
     };
-    let (result, outputs, error) =
-        observed(out, "load_factor", model, progress, |o| statics.run(o));
+    let outputs = Outputs::create(out, "load_factor", model);
+    let (result, outputs, error) = observed(outputs, progress, |sink, progress| {
+        statics.run(&mut Observers(vec![sink, progress]))
+    });
     let stats = statics.stats;
     let work = Work {
         steps: stats.steps,
@@ -385,8 +387,14 @@ fn start_dynamic<'m>(
             path.display()
         )));
     }
-    let sim = Simulation::resume(saved.checkpoint.clone(), settings.t_end)?;
-    Ok((sim, Outputs::reopen(out, model, &saved)))
+    let RunCheckpoint {
+        checkpoint,
+        files,
+        outputs,
+        sensors,
+    } = saved;
+    let sim = Simulation::resume(checkpoint, settings.t_end)?;
+    Ok((sim, Outputs::reopen(out, model, &files, outputs, sensors)))
 }
 
 /// Writes the checkpoint of a dynamic run and of its result files.
@@ -421,46 +429,39 @@ fn run_dynamic(
     };
     sim.interrupt = interrupt;
     let t_end = settings.t_end;
-    let mut progress = Progress {
+    let progress = Progress {
         report: progress,
         end: t_end,
     };
-    let (result, outputs, error) = match outputs {
-        Ok(outputs) => {
-            let mut sink = ResultSink {
-                outputs,
-                error: None,
+    let (result, outputs, error) = observed(outputs, progress, |sink, progress| {
+        let result = loop {
+            // The next multiple of the interval after now; an interval too small to advance
+            // the time (or not positive) leaves only the checkpoint at the end.
+            let stop = options.checkpoint_interval.map_or(t_end, |i| {
+                let next = ((sim.state.t / i).floor() + 1.0) * i;
+                [next, next + i]
+                    .into_iter()
+                    .find(|&t| t > sim.state.t && i > 0.0)
+                    .unwrap_or(t_end)
+            });
+            let result = sim.run_until(stop, &mut Observers(vec![&mut *sink, &mut *progress]));
+            let checkpoint = match &result {
+                Ok(_) => options.checkpoint_interval.is_some(),
+                Err(e) => matches!(e, SolveError::Interrupted { .. }),
             };
-            let result = loop {
-                // The next multiple of the interval after now; an interval too small to
-                // advance the time (or not positive) leaves only the checkpoint at the end.
-                let stop = options.checkpoint_interval.map_or(t_end, |i| {
-                    let next = ((sim.state.t / i).floor() + 1.0) * i;
-                    [next, next + i]
-                        .into_iter()
-                        .find(|&t| t > sim.state.t && i > 0.0)
-                        .unwrap_or(t_end)
-                });
-                let result = sim.run_until(stop, &mut Observers(vec![&mut sink, &mut progress]));
-                let checkpoint = match &result {
-                    Ok(_) => options.checkpoint_interval.is_some(),
-                    Err(e) => matches!(e, SolveError::Interrupted { .. }),
-                };
-                if checkpoint && sink.error.is_none() {
-                    if let Err(e) = write_checkpoint(out, &sim, &sink.outputs) {
-                        sink.error = Some(e);
-                    }
+            if checkpoint && sink.error.is_none() {
+                if let Err(e) = write_checkpoint(out, &sim, &sink.outputs) {
+                    sink.error = Some(e);
                 }
-                if result.is_err() || sink.error.is_some() || sim.state.t >= t_end {
-                    break result;
-                }
-            };
-            let notes = sim.notes();
-            sim.warnings.extend(notes);
-            (result.map(|_| ()), Some(sink.outputs), sink.error)
-        }
-        Err(e) => (Ok(()), None, Some(e)),
-    };
+            }
+            if result.is_err() || sink.error.is_some() || sim.state.t >= t_end {
+                break result;
+            }
+        };
+        let notes = sim.notes();
+        sim.warnings.extend(notes);
+        result
+    });
     let work = Work {
         steps: sim.stats.steps,
         newton_iterations: sim.stats.newton_iterations,

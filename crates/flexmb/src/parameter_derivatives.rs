@@ -83,18 +83,6 @@ impl At<'_> {
     }
 }
 
-/// First row of each joint, and the total number of rows.
-fn row_starts(model: &Model) -> (Vec<usize>, Vec<Vec<Row>>, usize) {
-    let rows: Vec<Vec<Row>> = model.joints.iter().map(joints::rows).collect();
-    let mut starts = Vec::with_capacity(rows.len());
-    let mut n = 0;
-    for r in &rows {
-        starts.push(n);
-        n += r.len();
-    }
-    (starts, rows, n)
-}
-
 /// What an element's derivative is taken with respect to.
 enum Wrt<P> {
     /// One of its own parameters.
@@ -126,7 +114,7 @@ fn element_term<E: ElementParameters>(
 }
 
 /// Visits the local terms of the derivative with respect to `id`. `rows` and `starts` as
-/// from [`row_starts`] (may be empty if `id` is not a joint parameter).
+/// from [`joints::row_table`] (may be empty if `id` is not a joint parameter).
 fn visit(
     at: &At,
     params: &Parameters,
@@ -188,8 +176,8 @@ pub fn residual_derivative(
     dpsi: &mut [f64],
 ) -> DerivativeMethod {
     assert_eq!(dr.len(), 6 * model.nodes.len(), "dr: 6 per node");
-    let (starts, rows, n_rows) = match params.kind(id) {
-        ParamKind::Joint(..) => row_starts(model),
+    let (rows, starts, n_rows) = match params.kind(id) {
+        ParamKind::Joint(..) => joints::row_table(model),
         _ => (Vec::new(), Vec::new(), dphi.len()),
     };
     assert_eq!(dphi.len(), n_rows, "dphi: one per constraint row");
@@ -238,7 +226,7 @@ pub fn constraint_force_derivative(
     if !matches!(params.kind(id), ParamKind::Joint(..)) {
         return;
     }
-    let (starts, rows, _) = row_starts(model);
+    let (rows, starts, _) = joints::row_table(model);
     let at = At {
         model,
         nodes,
@@ -270,7 +258,7 @@ pub fn residual_derivative_transpose(
     (w_r, w_phi, w_psi): (&[f64], &[f64], &[f64]),
     grad: &mut [f64],
 ) {
-    let (starts, rows, n_rows) = row_starts(model);
+    let (rows, starts, n_rows) = joints::row_table(model);
     assert_eq!(w_r.len(), 6 * model.nodes.len(), "w_r: 6 per node");
     assert_eq!(w_phi.len(), n_rows, "w_phi: one per constraint row");
     assert!(

@@ -163,9 +163,7 @@ fn check(name: &str, sim: &Simulation) {
 fn check_parameters(name: &str, sim: &Simulation) -> Vec<String> {
     let h = sim.settings.h;
     let layout = sim.data.layout.clone();
-    let redundant: Vec<usize> = (0..layout.n_rows)
-        .filter(|&r| layout.row_unknown[r].is_none())
-        .collect();
+    let redundant = layout.redundant_rows();
     let f = sim.step_function(h);
     let mass = f.step.mass;
     let mut data = Data::new(&sim.model, layout.clone()).expect("data");
@@ -177,9 +175,7 @@ fn check_parameters(name: &str, sim: &Simulation) -> Vec<String> {
         *v += 0.05 * x_scale * rand();
     }
     let residual_of = |model: &flexmb::Model| {
-        let mut l = Layout::new(model);
-        l.stabilized = layout.stabilized;
-        l.deactivate_rows(model, &redundant);
+        let l = Layout::with_rows(model, layout.stabilized, &redundant);
         let mut d = Data::new(model, l.clone()).expect("data");
         StepFunction::new(model, &l, &sim.state, &sim.settings, h)
             .with_mass_scale(mass)

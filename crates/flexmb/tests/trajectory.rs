@@ -57,9 +57,8 @@ fn check_simulation(file: &str, mut sim: flexmb::Simulation) -> usize {
         .collect();
     let changes = rows_changed.len();
     for s in a.iter().step_by(5).chain(rows_changed) {
-        let mut layout = Layout::new(&sim.model);
-        layout.stabilized = sim.settings.stabilized();
-        layout.deactivate_rows(&sim.model, &s.redundant_rows);
+        let stabilized = sim.settings.stabilized();
+        let layout = Layout::with_rows(&sim.model, stabilized, &s.redundant_rows);
         let mut data = Data::new(&sim.model, layout.clone()).expect("data");
         let f = StepFunction::new(&sim.model, &layout, &s.start, &sim.settings, s.h);
         let end = f.end_state(&s.unknowns);

@@ -24,7 +24,7 @@ pub mod parameters;
 pub mod primitives;
 
 use crate::elements::{Mat12, NodeState, Vec12};
-use crate::model::{Joint, JointKind, NodeId};
+use crate::model::{Joint, JointKind, Model, NodeId};
 use flexmb_lie::{so3::hat, Frame, Group, Vec3};
 use primitives::{dot1, dot1_into, dot2, dot2_into, Primitive};
 
@@ -55,6 +55,19 @@ impl Row {
             Row::DriveSlide => "the driven translation".into(),
         }
     }
+}
+
+/// The rows of every joint of a model, the index of each joint's first row among all rows,
+/// and the number of rows: the numbering of `State::lambda`.
+pub fn row_table(model: &Model) -> (Vec<Vec<Row>>, Vec<usize>, usize) {
+    let rows: Vec<Vec<Row>> = model.joints.iter().map(self::rows).collect();
+    let mut starts = Vec::with_capacity(rows.len());
+    let mut n = 0;
+    for r in &rows {
+        starts.push(n);
+        n += r.len();
+    }
+    (rows, starts, n)
 }
 
 /// The constraint rows of a joint.

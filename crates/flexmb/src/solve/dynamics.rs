@@ -374,11 +374,6 @@ pub struct Memory {
     matrix: Option<Vec<f64>>,
 }
 
-/// Whether a Newton memory names a factorized matrix whose values are not given.
-fn newton_holds_matrix_without_values(memory: &NewtonMemory, values: bool) -> bool {
-    memory.holds_matrix() && !values
-}
-
 /// A self-contained checkpoint of a dynamic run: model, settings and [`Memory`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Checkpoint {
@@ -412,6 +407,8 @@ struct Integrator {
     nodes: Vec<NodeState>,
     /// Round-off floor of the scaled multipliers' tolerance (`n_active`).
     mu_floor: Vec<f64>,
+    /// Row scale `s` of the current step ([`step::Start::scale`]).
+    scale: f64,
     /// The converged unknowns of the last accepted step, in its layout.
     unknowns: Vec<f64>,
     /// The rows left out as redundant in the last accepted step (the rows may be chosen
@@ -547,9 +544,7 @@ impl Simulation {
             state: self.state.clone(),
             stats: self.stats,
             verification: self.verification.clone(),
-            redundant_rows: (0..layout.n_rows)
-                .filter(|&r| layout.row_unknown[r].is_none())
-                .collect(),
+            redundant_rows: layout.redundant_rows(),
             previous: self.integrator.previous.clone(),
             mu_floor: self.integrator.mu_floor.clone(),
             control: self.control,
@@ -590,7 +585,13 @@ impl Simulation {
             t_end,
             ..c.settings
         };
-        Self::restore(Arc::new(c.model), settings, c.memory)
+        let model = Arc::new(c.model);
+        // The notes on the rows left out at the start, which the run that wrote the
+        // checkpoint gave too (`restore` alone does not repeat this QR).
+        let (_, warnings) = prepare_layout(&model);
+        let mut sim = Self::restore(model, settings, c.memory)?;
+        sim.warnings = warnings;
+        Ok(sim)
     }
 
     /// A simulation of `model` with `settings` restored to a memory taken from one of the
@@ -603,14 +604,13 @@ impl Simulation {
         let c = memory;
         model.validate()?;
         settings.check()?;
-        let mut layout = Layout::new(&model);
-        layout.stabilized = settings.stabilized();
-        if c.redundant_rows.iter().any(|&r| r >= layout.n_rows) {
+        let (_, _, n_rows) = crate::joints::row_table(&model);
+        if c.redundant_rows.iter().any(|&r| r >= n_rows) {
             return Err(SolveError::Checkpoint(
                 "its redundant rows are not rows of the model".into(),
             ));
         }
-        layout.deactivate_rows(&model, &c.redundant_rows);
+        let layout = Layout::with_rows(&model, settings.stabilized(), &c.redundant_rows);
         let mut data = Data::new(&model, layout)?;
         let mut newton = NewtonSolver::new(Self::policy(&settings), settings.verify);
         let holds_values = c.matrix.is_some();
@@ -623,12 +623,12 @@ impl Simulation {
             data.values = values;
             data.solver.factorize(&data.values)?;
         }
-        if newton_holds_matrix_without_values(&c.newton, holds_values) {
+        if c.newton.holds_matrix() && !holds_values {
             return Err(SolveError::Checkpoint(
                 "it names an iteration matrix it does not hold".into(),
             ));
         }
-        newton.restore(&c.newton);
+        newton.restore(c.newton);
         let n = model.nodes.len();
         let rows = data.layout.n_rows;
         let consistent = c.state.q.len() == n
@@ -790,21 +790,16 @@ impl Simulation {
     }
 
     fn step_unknowns_into(&self, x: &mut Vec<f64>) {
-        let layout = &self.data.layout;
         let it = &self.integrator;
-        let h = self.state.t - it.saved.t;
-        let scale = 1.0 / (self.params.beta_prime(h) * self.mass);
-        x.clear();
-        x.extend_from_slice(&it.increments);
-        x.extend(
-            layout
-                .active_rows
-                .iter()
-                .map(|&r| scale * self.state.lambda[r]),
+        let layout = &self.data.layout;
+        step::pack_unknowns(
+            layout,
+            it.scale,
+            &it.increments,
+            &self.state.lambda,
+            &it.zeta,
+            x,
         );
-        if layout.stabilized {
-            x.extend_from_slice(&it.zeta);
-        }
     }
 
     /// Takes one step toward the next output time (or the end), reducing the step size
@@ -928,11 +923,7 @@ impl Simulation {
             let mut unknowns = std::mem::take(&mut self.integrator.unknowns);
             self.step_unknowns_into(&mut unknowns);
             self.integrator.unknowns = unknowns;
-            let layout = &self.data.layout;
-            self.integrator.redundant_rows.clear();
-            self.integrator
-                .redundant_rows
-                .extend((0..layout.n_rows).filter(|&r| layout.row_unknown[r].is_none()));
+            self.integrator.redundant_rows = self.data.layout.redundant_rows();
         }
         self.watch_redundant_rows();
         if self.stats.steps == 1 || h < self.stats.smallest_step {
@@ -975,9 +966,7 @@ impl Simulation {
         else {
             return false;
         };
-        let mut layout = Layout::new(model);
-        layout.stabilized = self.data.layout.stabilized;
-        layout.deactivate_rows(model, &redundant);
+        let layout = Layout::with_rows(model, self.data.layout.stabilized, &redundant);
         let Ok(data) = Data::new(model, layout) else {
             return false;
         };
@@ -1003,6 +992,7 @@ impl Simulation {
         it.saved.clone_from(&self.state);
         let h = t_new - it.saved.t;
         let start = step::Start::new(self.params, h, self.mass, &self.settings, t_new);
+        it.scale = start.scale;
         let stabilized = self.data.layout.stabilized;
         node_states_into(&it.saved, &mut it.nodes);
         if stabilized {

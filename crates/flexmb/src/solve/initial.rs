@@ -136,10 +136,7 @@ pub fn reselect_redundant_rows(model: &Model, layout: &Layout, q: &[Frame]) -> O
     let (order, _) = row_order(model, layout, q);
     let mut redundant = order[layout.n_rows - count..].to_vec();
     redundant.sort_unstable();
-    let current: Vec<usize> = (0..layout.n_rows)
-        .filter(|&r| layout.row_unknown[r].is_none())
-        .collect();
-    (redundant != current).then_some(redundant)
+    (redundant != layout.redundant_rows()).then_some(redundant)
 }
 
 /// The consistent initial accelerations as a (linear) system for [`NewtonSolver`]:

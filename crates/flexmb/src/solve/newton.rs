@@ -407,9 +407,13 @@ pub enum MultiplierLimit {
 /// What [`NewtonSolver`] remembers between solves (a checkpoint's part).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct NewtonMemory {
+    /// `(key, regularization)` of the factorized matrix, `None` if there is none.
     matrix: Option<(f64, f64)>,
+    /// Solves since the matrix was last factorized.
     age: usize,
+    /// Rebuild the matrix at every iteration of the next attempt.
     fresh_only: bool,
+    /// Solves left with the regularization on.
     regularized_solves: usize,
 }
 
@@ -490,14 +494,8 @@ const STALE_ITERATIONS: usize = 3;
 /// solve after one that needed more than 3 iterations with it.
 pub struct NewtonSolver {
     pub policy: NewtonPolicy,
-    /// `(key, regularization)` of the factorized matrix, `None` if there is none.
-    matrix: Option<(f64, f64)>,
-    /// Solves since the matrix was last factorized.
-    age: usize,
-    /// Rebuild the matrix at every iteration of the next attempt.
-    fresh_only: bool,
-    /// Solves left with the regularization on.
-    regularized_solves: usize,
+    /// What it remembers between solves.
+    memory: NewtonMemory,
     /// Verify mode: every accepted iterate re-checked ([`NewtonInfo::check`]).
     verify: bool,
     /// Values of the verify mode's matrix (kept apart, so that `data.values` always holds
@@ -511,10 +509,12 @@ impl NewtonSolver {
     pub fn new(policy: NewtonPolicy, verify: bool) -> Self {
         Self {
             policy,
-            matrix: None,
-            age: 0,
-            fresh_only: false,
-            regularized_solves: 0,
+            memory: NewtonMemory {
+                matrix: None,
+                age: 0,
+                fresh_only: false,
+                regularized_solves: 0,
+            },
             verify,
             verify_values: Vec::new(),
             verify_solver: None,
@@ -523,37 +523,29 @@ impl NewtonSolver {
 
     /// What the solver remembers between solves, for a checkpoint.
     pub(crate) fn memory(&self) -> NewtonMemory {
-        NewtonMemory {
-            matrix: self.matrix,
-            age: self.age,
-            fresh_only: self.fresh_only,
-            regularized_solves: self.regularized_solves,
-        }
+        self.memory
     }
 
     /// Restores what [`NewtonSolver::memory`] returned; the matrix it names must be
     /// factorized in the data.
-    pub(crate) fn restore(&mut self, memory: &NewtonMemory) {
-        self.matrix = memory.matrix;
-        self.age = memory.age;
-        self.fresh_only = memory.fresh_only;
-        self.regularized_solves = memory.regularized_solves;
+    pub(crate) fn restore(&mut self, memory: NewtonMemory) {
+        self.memory = memory;
     }
 
     /// Whether a factorized matrix is held (its values are `data.values`).
     pub fn holds_matrix(&self) -> bool {
-        self.matrix.is_some()
+        self.memory.holds_matrix()
     }
 
     /// Forgets the factorized matrix (the data was rebuilt).
     pub fn forget_matrix(&mut self) {
-        self.matrix = None;
+        self.memory.matrix = None;
         self.verify_solver = None;
     }
 
     /// Keeps the regularization on for the next solves (after a rejected step).
     pub fn regularize_next(&mut self) {
-        self.regularized_solves = self.policy.regularized_solves;
+        self.memory.regularized_solves = self.policy.regularized_solves;
     }
 
     /// Solves the system from its current iterate. `key` identifies the matrix (a reused
@@ -574,7 +566,7 @@ impl NewtonSolver {
                     // Iterations with a reused matrix may have led Newton astray: once more
                     // from the start, with fresh matrices.
                     info.retries += 1;
-                    self.fresh_only = true;
+                    self.memory.fresh_only = true;
                     sys.restart();
                 }
                 Err(error) => return Err(NewtonFailure { error, info }),
@@ -590,12 +582,12 @@ impl NewtonSolver {
         info: &mut NewtonInfo,
     ) -> Result<(), NewtonError> {
         let newton = self.policy.settings;
-        let mut regularization = if self.regularized_solves > 0 {
+        let mut regularization = if self.memory.regularized_solves > 0 {
             REGULARIZATION
         } else {
             0.0
         };
-        self.regularized_solves = self.regularized_solves.saturating_sub(1);
+        self.memory.regularized_solves = self.memory.regularized_solves.saturating_sub(1);
         let mut convergence = Convergence {
             exact_by_size: self.policy.exact_by_size,
             ..Convergence::default()
@@ -605,13 +597,14 @@ impl NewtonSolver {
         let mut configuration = convergence;
         let mut previous_mu = None;
         let same_matrix = self
+            .memory
             .matrix
             .is_some_and(|(k, reg)| (k - key).abs() <= 1e-6 * key.abs() && reg == regularization);
         let mut refresh = !newton.reuse_jacobian
-            || self.fresh_only
+            || self.memory.fresh_only
             || !same_matrix
-            || self.age >= newton.max_jacobian_age;
-        let fresh_only = std::mem::take(&mut self.fresh_only);
+            || self.memory.age >= newton.max_jacobian_age;
+        let fresh_only = std::mem::take(&mut self.memory.fresh_only);
         info.reused_matrix = false;
         // Iteration at which the matrix was last rebuilt (0: a reused matrix).
         let mut last_factorization = 0;
@@ -633,7 +626,7 @@ impl NewtonSolver {
                         && self.policy.regularized_solves > 0
                     {
                         regularization = REGULARIZATION;
-                        self.regularized_solves = self.policy.regularized_solves;
+                        self.memory.regularized_solves = self.policy.regularized_solves;
                         sys.assemble(data, true, regularization);
                         info.factorizations += 1;
                         factorized = data.solver.factorize(&data.values);
@@ -647,8 +640,8 @@ impl NewtonSolver {
                             source: e,
                         });
                     }
-                    self.matrix = Some((key, regularization));
-                    self.age = 0;
+                    self.memory.matrix = Some((key, regularization));
+                    self.memory.age = 0;
                     last_factorization = iteration;
                     refresh = false;
                 }
@@ -735,7 +728,7 @@ impl NewtonSolver {
         })();
         match result {
             Ok(iterations) => {
-                self.age += 1;
+                self.memory.age += 1;
                 // Iterations done with the matrix the next solve would reuse.
                 if iterations - last_factorization.saturating_sub(1) > STALE_ITERATIONS
                     && data.solver.backend() == Backend::Dense
@@ -744,12 +737,12 @@ impl NewtonSolver {
                     // matrix is cheaper to rebuild for the next solve than extra iterations
                     // at every one. A large sparse factorization costs several iterations,
                     // so it waits for the contraction test.
-                    self.age = newton.max_jacobian_age;
+                    self.memory.age = newton.max_jacobian_age;
                 }
                 Ok(())
             }
             Err(e) => {
-                self.matrix = None;
+                self.memory.matrix = None;
                 Err(e)
             }
         }
@@ -767,48 +760,41 @@ impl NewtonSolver {
         regularization: f64,
         undetermined: bool,
     ) -> Check {
-        // `data.values` holds the factorized matrix, which the next solve may reuse.
+        // `data.values` holds the factorized matrix, which the next solve may reuse: the
+        // check's matrix goes to a buffer of its own.
         self.verify_values.resize(data.values.len(), 0.0);
         std::mem::swap(&mut data.values, &mut self.verify_values);
-        let check = self.verify_check(sys, data, regularization, undetermined);
-        std::mem::swap(&mut data.values, &mut self.verify_values);
-        check
-    }
-
-    fn verify_check<S: NonlinearSystem>(
-        &mut self,
-        sys: &mut S,
-        data: &mut Data,
-        regularization: f64,
-        undetermined: bool,
-    ) -> Check {
         sys.assemble(data, true, regularization);
         if self.verify_solver.is_none() {
-            let n = data.residual.len();
-            self.verify_solver = LinearSolver::new(n, &data.pattern).ok();
+            self.verify_solver = LinearSolver::new(data.residual.len(), &data.pattern).ok();
         }
-        let Some(solver) = self.verify_solver.as_mut() else {
-            return Check::default();
+        let factorized = self
+            .verify_solver
+            .as_mut()
+            .and_then(|solver| solver.factorize(&data.values).ok().map(|()| solver));
+        let check = match factorized {
+            None => Check::default(),
+            Some(solver) => {
+                let dx = &mut data.correction;
+                for (d, r) in dx.iter_mut().zip(&data.residual) {
+                    *d = -r;
+                }
+                solver.solve_in_place(dx);
+                let norms = sys.norms(data);
+                let error = if undetermined {
+                    let (blocks, n) = norms.configuration();
+                    blocks[..n].iter().fold(0.0f64, |m, &v| m.max(v))
+                } else {
+                    norms.max()
+                };
+                Check {
+                    error,
+                    worst: Some(norms.worst),
+                }
+            }
         };
-        if solver.factorize(&data.values).is_err() {
-            return Check::default();
-        }
-        let dx = &mut data.correction;
-        for (d, r) in dx.iter_mut().zip(&data.residual) {
-            *d = -r;
-        }
-        solver.solve_in_place(dx);
-        let norms = sys.norms(data);
-        let error = if undetermined {
-            let (blocks, n) = norms.configuration();
-            blocks[..n].iter().fold(0.0f64, |m, &v| m.max(v))
-        } else {
-            norms.max()
-        };
-        Check {
-            error,
-            worst: Some(norms.worst),
-        }
+        std::mem::swap(&mut data.values, &mut self.verify_values);
+        check
     }
 }
 

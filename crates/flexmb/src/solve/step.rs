@@ -77,11 +77,21 @@ impl Start {
             bp,
             gp,
             mass,
-            // Equilibrium rows times 1 / (beta' m) with m the largest nodal mass: the mass
-            // block is O(1) whatever h and the units of mass, like the constraint block.
-            scale: 1.0 / (bp * mass),
+            scale: 0.0,
             load_factor: settings.load_factor_at(t_new),
             nodal_damping: settings.nodal_damping,
+        }
+        .with_mass(mass)
+    }
+
+    /// The step with the row scale of largest nodal mass `mass`: the equilibrium rows times
+    /// `1 / (beta' m)`, so that the mass block is O(1) whatever h and the units of mass,
+    /// like the constraint block.
+    pub fn with_mass(self, mass: f64) -> Self {
+        Self {
+            mass,
+            scale: 1.0 / (self.bp * mass),
+            ..self
         }
     }
 
@@ -138,6 +148,26 @@ pub fn predict(
         for (k, l) in state.lambda.iter_mut().enumerate() {
             *l += (*l - lambda_prev[k]) * ratio;
         }
+    }
+}
+
+/// The Newton vector `x = (dq, mu, zeta)` of `layout` from the increments, the multipliers
+/// (`n_rows`, unscaled: `mu = s lambda` of the active rows) and the stabilization unknowns
+/// (`n_active`, or empty for zeros; ignored outside the stabilized formulation).
+pub fn pack_unknowns(
+    layout: &Layout,
+    scale: f64,
+    dq: &[f64],
+    lambda: &[f64],
+    zeta: &[f64],
+    x: &mut Vec<f64>,
+) {
+    x.clear();
+    x.extend_from_slice(dq);
+    x.extend(layout.active_rows.iter().map(|&r| scale * lambda[r]));
+    if layout.stabilized {
+        x.extend_from_slice(zeta);
+        x.resize(layout.n_unknowns(), 0.0);
     }
 }
 
@@ -338,8 +368,7 @@ impl<'a> StepFunction<'a> {
     /// the nominal model's), not a function of the parameters: derivatives with respect to
     /// the parameters are taken at fixed `s`, as the unknowns `mu = s lambda` are.
     pub fn with_mass_scale(mut self, mass: f64) -> Self {
-        self.step.mass = mass;
-        self.step.scale = 1.0 / (self.step.bp * mass);
+        self.step = self.step.with_mass(mass);
         self
     }
 
@@ -356,11 +385,9 @@ impl<'a> StepFunction<'a> {
             &mut state,
             &mut dq,
         );
-        let mut x = vec![0.0; self.layout.n_unknowns()];
-        x[..dq.len()].copy_from_slice(&dq);
-        for (k, &row) in self.layout.active_rows.iter().enumerate() {
-            x[self.layout.n_dofs + k] = self.step.scale * self.start.lambda[row];
-        }
+        let mut x = Vec::new();
+        let lambda = &self.start.lambda;
+        pack_unknowns(self.layout, self.step.scale, &dq, lambda, &[], &mut x);
         x
     }
 
@@ -377,6 +404,11 @@ impl<'a> StepFunction<'a> {
     /// The end of the step `s_{n+1}` for the unknowns `x` (the scheme's relations in the
     /// module documentation; multipliers `lambda = mu / s`, redundant rows 0).
     pub fn end_state(&self, x: &[f64]) -> State {
+        self.end_state_and_total(x).0
+    }
+
+    /// [`StepFunction::end_state`] and the total increments `dq + B(q_n)^T zeta`.
+    fn end_state_and_total(&self, x: &[f64]) -> (State, Vec<f64>) {
         let p = &self.step.params;
         let h = self.step.h;
         let s0 = self.start;
@@ -401,13 +433,12 @@ impl<'a> StepFunction<'a> {
         for (k, &row) in self.layout.active_rows.iter().enumerate() {
             end.lambda[row] = x[self.layout.n_dofs + k] / self.step.scale;
         }
-        end
+        (end, total)
     }
 
     /// Node kinematics at the end of the step, with the tangent operators `T(total)`.
     fn end_nodes(&self, x: &[f64]) -> (State, Vec<NodeState>, Vec<f64>) {
-        let end = self.end_state(x);
-        let total = self.total(x);
+        let (end, total) = self.end_state_and_total(x);
         let mut nodes = self.start_nodes.clone();
         kinematics(self.model.group, self.start, &end, &total, true, &mut nodes);
         (end, nodes, total)
