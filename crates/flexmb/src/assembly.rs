@@ -16,7 +16,9 @@
 //! (`c_m = c_c = 0`).
 
 use crate::data::{active_slots, Data, Layout};
-use crate::elements::{Coefficients, Context, ElementKernel, Mat12, NodeState, Vec12};
+use crate::elements::{
+    Coefficients, Context, ElementKernel, LocalBuffers, Mat12, NodeState, Vec12,
+};
 use crate::joints::{self, ConstraintKernel};
 use crate::model::{Model, NodeId};
 
@@ -137,6 +139,8 @@ impl Scaling {
             m: 0.0,
             c: 0.0,
             k: 0.0,
+            x: 0.0,
+            xdot: 0.0,
         },
         constraint_rhs: ConstraintRhs::Position,
         load_factor: 1.0,
@@ -167,6 +171,7 @@ pub fn assemble(model: &Model, data: &mut Data, it: &Iterate, sc: &Scaling, matr
         phi,
         b_rows,
         nodal_mass,
+        local,
         ..
     } = data;
     let out = Outputs {
@@ -176,14 +181,14 @@ pub fn assemble(model: &Model, data: &mut Data, it: &Iterate, sc: &Scaling, matr
     };
     if matrix {
         let mut sink = Values { values, pos: 0 };
-        traverse(model, layout, nodal_mass, it, sc, out, &mut sink);
+        traverse(model, layout, nodal_mass, it, sc, out, local, &mut sink);
         debug_assert_eq!(
             sink.pos,
             sink.values.len(),
             "assembly order differs from the pattern"
         );
     } else {
-        traverse(model, layout, nodal_mass, it, sc, out, &mut NoMatrix);
+        traverse(model, layout, nodal_mass, it, sc, out, local, &mut NoMatrix);
     }
 }
 
@@ -210,6 +215,7 @@ pub fn pattern(model: &Model, layout: &Layout) -> Vec<(usize, usize)> {
         &it,
         &Scaling::NONE,
         out,
+        &mut LocalBuffers::default(),
         &mut Pattern(&mut p),
     );
     p
@@ -229,6 +235,7 @@ fn traverse<S: Sink>(
     it: &Iterate,
     sc: &Scaling,
     out: Outputs,
+    buffers: &mut LocalBuffers,
     sink: &mut S,
 ) {
     let Outputs {
@@ -245,29 +252,29 @@ fn traverse<S: Sink>(
     };
     let ground = [NodeState::ground(Default::default()); 2];
     residual.iter_mut().for_each(|r| *r = 0.0);
-    let mut r = Vec12::zeros();
     let mut s = Mat12::zeros();
     let n_dofs = layout.n_dofs;
     for e in &layout.elements {
         let kernel = e.kernel(model);
-        let slots = kernel.nodes();
-        let dofs = [layout.dof(slots[0]), layout.dof(slots[1])];
+        let n_slots = kernel.n_slots();
+        let dof = |k: usize| layout.dof(kernel.node(k));
         if S::EVALUATE {
-            let nodes = gather(it.nodes, slots, &ground);
-            kernel.evaluate(
-                &ctx,
-                &nodes,
-                &mut r,
-                S::MATRIX.then_some((&sc.coef, &mut s)),
-            );
-            for (ka, a) in active_slots(dofs) {
-                for i in 0..6 {
-                    residual[a + i] += sc.row_scale * r[6 * ka + i];
+            buffers.gather(&kernel, it.nodes, (&[], &[], 0));
+        }
+        let (local, mut r, mut se) = buffers.split(kernel.n_local());
+        if S::EVALUATE {
+            let matrix = S::MATRIX.then_some((&sc.coef, &mut se));
+            kernel.evaluate(&ctx, &local, &mut r, matrix);
+            for k in 0..n_slots {
+                if let Some(a) = dof(k) {
+                    for i in 0..6 {
+                        residual[a + i] += sc.row_scale * r[6 * k + i];
+                    }
                 }
             }
         }
         if S::MATRIX {
-            scatter_blocks(sink, dofs, &s);
+            scatter_blocks(sink, n_slots, dof, |i, j| se[(i, j)]);
         }
     }
     if S::EVALUATE && sc.nodal_damping > 0.0 {
@@ -320,11 +327,13 @@ fn traverse<S: Sink>(
             if S::MATRIX {
                 // c_k K_c T, column block by column block
                 s = k * sc.coef.k;
-                crate::elements::physical::apply_tangent_full(&nodes, active, &mut s, &sc.coef, &k);
+                crate::elements::physical::apply_tangent_full(
+                    &nodes, &active, &mut s, &sc.coef, &k,
+                );
             }
         }
         if S::MATRIX {
-            scatter_blocks(sink, dofs, &s);
+            scatter_blocks(sink, 2, |k| dofs[k], |i, j| s[(i, j)]);
         }
         let mut vloc = Vec12::zeros();
         if S::EVALUATE {
@@ -419,13 +428,23 @@ fn traverse<S: Sink>(
     }
 }
 
-/// Emits the node-node blocks of a local matrix, column block by column block.
-fn scatter_blocks<S: Sink>(sink: &mut S, dofs: [Option<usize>; 2], s: &Mat12) {
-    for (kb, b) in active_slots(dofs) {
-        for (ka, a) in active_slots(dofs) {
+/// Emits the node-node blocks of a local matrix (`value(i, j)`, local indices) on `n_slots`
+/// slots (`dof`: a slot's first global unknown, `None` for the ground), column block by column
+/// block.
+#[inline]
+fn scatter_blocks<S: Sink>(
+    sink: &mut S,
+    n_slots: usize,
+    dof: impl Fn(usize) -> Option<usize>,
+    value: impl Fn(usize, usize) -> f64,
+) {
+    for kb in 0..n_slots {
+        let Some(b) = dof(kb) else { continue };
+        for ka in 0..n_slots {
+            let Some(a) = dof(ka) else { continue };
             for j in 0..6 {
                 for i in 0..6 {
-                    sink.entry(a + i, b + j, s[(6 * ka + i, 6 * kb + j)]);
+                    sink.entry(a + i, b + j, value(6 * ka + i, 6 * kb + j));
                 }
             }
         }

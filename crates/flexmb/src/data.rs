@@ -271,6 +271,8 @@ pub struct Data {
     pub nodal_mass: Vec<flexmb_lie::Vec6>,
     /// Rows of `B` at the current iterate (`n_rows`, group coordinates).
     pub b_rows: Vec<crate::elements::Vec12>,
+    /// One element's local inputs, vector and matrix during assembly (scratch).
+    pub local: crate::elements::LocalBuffers,
     pub solver: LinearSolver,
 }
 
@@ -295,6 +297,7 @@ impl Data {
             phi: vec![0.0; layout.n_rows],
             nodal_mass: nodal_mass(model),
             b_rows: vec![crate::elements::Vec12::zeros(); layout.n_rows],
+            local: Default::default(),
             pattern,
             solver,
             layout,

@@ -43,15 +43,16 @@
 //! - M. Arnold, O. Brüls, A. Cardona, Error analysis of generalized-alpha Lie group time
 //!   integration methods for constrained mechanical systems, Numer. Math. 129 (2015), Sect. 3.
 
-use crate::elements::{Context, DerivativeMethod, ElementParameters, NodeState, Vec12};
+use crate::elements::{Context, DerivativeMethod, ElementParameters, LocalBuffers, NodeState};
 use crate::joints::parameters::{ConstraintParameters, JointDerivative};
 use crate::joints::{self, Row};
 use crate::model::{Model, NodeId, ParamId, ParamKind, Parameters};
+use nalgebra::DVector;
 
 /// One local term of a derivative.
 enum Piece<'a> {
-    /// `dr_e/dp` of an element on two node slots.
-    Element([Option<NodeId>; 2], &'a Vec12),
+    /// `dr_e/dp` of an element on its node slots (6 entries per slot).
+    Element(&'a [Option<NodeId>], &'a [f64]),
     /// The derivatives of joint `j`'s rows.
     Joint(usize, &'a JointDerivative),
 }
@@ -99,17 +100,20 @@ fn element_term<E: ElementParameters>(
     sink: &mut dyn FnMut(Piece),
 ) -> DerivativeMethod {
     let ctx = at.context();
-    let slots = e.nodes();
-    let nodes = at.pair(slots);
-    let mut d = Vec12::zeros();
+    let slots: Vec<_> = (0..e.n_slots()).map(|k| e.node(k)).collect();
+    let mut buffers = LocalBuffers::default();
+    buffers.gather(e, at.nodes, (&[], &[], 0));
+    let local = buffers.local();
+    let mut d = DVector::zeros(e.n_local());
+    let mut dv = d.as_view_mut();
     let method = match wrt {
-        Wrt::Own(p) => e.parameter_derivative(&ctx, p, &nodes, &mut d),
+        Wrt::Own(p) => e.parameter_derivative(&ctx, p, &local, &mut dv),
         Wrt::Gravity(k) => {
-            e.gravity_derivative(&ctx, k, &nodes, &mut d);
+            e.gravity_derivative(&ctx, k, &local, &mut dv);
             DerivativeMethod::Analytic
         }
     };
-    sink(Piece::Element(slots, &d));
+    sink(Piece::Element(&slots, d.as_slice()));
     method
 }
 
@@ -199,7 +203,7 @@ pub fn residual_derivative(
         Piece::Element(slots, d) => scatter(dr, slots, d),
         Piece::Joint(j, d) => {
             let joint = &model.joints[j];
-            scatter(dr, [joint.node_a, joint.node_b], &d.dforce);
+            scatter(dr, &[joint.node_a, joint.node_b], d.dforce.as_slice());
             let s = starts[j];
             dphi[s..s + d.n_rows].copy_from_slice(&d.dphi[..d.n_rows]);
             if !dpsi.is_empty() {
@@ -237,7 +241,7 @@ pub fn constraint_force_derivative(
     let mut sink = |piece: Piece| {
         if let Piece::Joint(j, d) = piece {
             let joint = &model.joints[j];
-            scatter(dforce, [joint.node_a, joint.node_b], &d.dforce);
+            scatter(dforce, &[joint.node_a, joint.node_b], d.dforce.as_slice());
         }
     };
     visit(&at, params, id, (&rows, &starts), &mut sink);
@@ -279,7 +283,7 @@ pub fn residual_derivative_transpose(
             Piece::Element(slots, d) => sum += gather_dot(w_r, slots, d),
             Piece::Joint(j, d) => {
                 let joint = &model.joints[j];
-                sum += gather_dot(w_r, [joint.node_a, joint.node_b], &d.dforce);
+                sum += gather_dot(w_r, &[joint.node_a, joint.node_b], d.dforce.as_slice());
                 let s = starts[j];
                 for r in 0..d.n_rows {
                     sum += w_phi[s + r] * d.dphi[r];
@@ -294,8 +298,8 @@ pub fn residual_derivative_transpose(
     }
 }
 
-/// Adds a local 12-vector to the rows of its node slots.
-fn scatter(out: &mut [f64], slots: [Option<NodeId>; 2], d: &Vec12) {
+/// Adds a local vector (6 entries per slot) to the rows of its node slots.
+fn scatter(out: &mut [f64], slots: &[Option<NodeId>], d: &[f64]) {
     for (k, slot) in slots.iter().enumerate() {
         if let Some(n) = slot {
             for i in 0..6 {
@@ -305,8 +309,8 @@ fn scatter(out: &mut [f64], slots: [Option<NodeId>; 2], d: &Vec12) {
     }
 }
 
-/// `w . L^T d` for a local 12-vector on two node slots.
-fn gather_dot(w: &[f64], slots: [Option<NodeId>; 2], d: &Vec12) -> f64 {
+/// `w . L^T d` for a local vector on its node slots.
+fn gather_dot(w: &[f64], slots: &[Option<NodeId>], d: &[f64]) -> f64 {
     let mut sum = 0.0;
     for (k, slot) in slots.iter().enumerate() {
         if let Some(n) = slot {

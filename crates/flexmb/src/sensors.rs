@@ -1,7 +1,7 @@
 //! Sensors: the output channels declared by a model, evaluated from the state.
 
 use crate::data::Data;
-use crate::elements::{Context, ElementKernel, ElementRef, NodeState};
+use crate::elements::{Context, ElementKernel, ElementRef, LocalBuffers, NodeState};
 use crate::joints;
 use crate::model::{Model, SensorFrame, SensorKind};
 use crate::state::State;
@@ -46,11 +46,13 @@ pub fn energies(model: &Model, elements: &[ElementRef], state: &State) -> (f64, 
     };
     let mut ke = 0.0;
     let mut pe = 0.0;
+    let mut buffers = LocalBuffers::default();
     for e in elements {
         let k = e.kernel(model);
-        let p = pair(&nodes, k.nodes());
-        ke += k.kinetic_energy(&ctx, &p);
-        pe += k.potential_energy(&ctx, &p);
+        buffers.gather(&k, &nodes, (&[], &[], 0));
+        let local = buffers.local();
+        ke += k.kinetic_energy(&ctx, &local);
+        pe += k.potential_energy(&ctx, &local);
     }
     (ke, pe)
 }

@@ -89,9 +89,8 @@ fn assembled_stiffness_matches_finite_differences_of_the_residual() {
     let sc = Scaling {
         row_scale: 1.0,
         coef: Coefficients {
-            m: 0.0,
-            c: 0.0,
             k: 1.0,
+            ..Coefficients::STIFFNESS
         },
         constraint_rhs: ConstraintRhs::Position,
         load_factor: 1.0,

@@ -4,7 +4,9 @@
 //! (configurations `exp` of random algebra vectors, as in `tangents_match_finite_differences`).
 //! Every parameter kind of the registry is checked, on both groups where it exists.
 
-use flexmb::elements::{Context, DerivativeMethod, ElementKernel, ElementRef, NodeState, Vec12};
+use flexmb::elements::{
+    evaluate_owned, Context, DerivativeMethod, ElementKernel, ElementRef, Local, NodeState, Vec12,
+};
 use flexmb::joints;
 use flexmb::model::parameters::{
     BodyParam, JointParam, LoadParam, NodeParam, SectionParam, SpringParam,
@@ -46,7 +48,7 @@ fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
         slots.map(|s| s.map_or(NodeState::ground(Frame::identity()), |n| at.nodes[n.0]))
     };
     let mut r = vec![0.0; 6 * model.nodes.len()];
-    let mut add = |slots: [Option<NodeId>; 2], local: &Vec12| {
+    let mut add = |slots: &[Option<NodeId>], local: &[f64]| {
         for (k, s) in slots.iter().enumerate() {
             if let Some(n) = s {
                 for i in 0..6 {
@@ -57,9 +59,13 @@ fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     };
     for e in ElementRef::all(model) {
         let kernel = e.kernel(model);
-        let mut local = Vec12::zeros();
-        kernel.evaluate(&ctx, &pair(kernel.nodes()), &mut local, None);
-        add(kernel.nodes(), &local);
+        let slots: Vec<_> = (0..kernel.n_slots()).map(|k| kernel.node(k)).collect();
+        let nodes: Vec<NodeState> = slots
+            .iter()
+            .map(|s| s.map_or(NodeState::ground(Frame::identity()), |n| at.nodes[n.0]))
+            .collect();
+        let (local, _) = evaluate_owned(&kernel, &ctx, &Local::nodes(&nodes), None);
+        add(&slots, local.as_slice());
     }
     let (mut phi, mut psi) = (vec![], vec![]);
     for joint in &model.joints {
@@ -80,7 +86,7 @@ fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
             psi.push(jv.b[i].dot(&v) + jv.phi_t[i]);
             force += jv.b[i] * lambda[i];
         }
-        add(slots, &force);
+        add(&slots, force.as_slice());
     }
     (r, phi, psi)
 }

@@ -3,13 +3,16 @@
 //! gradients B and their derivatives H. One shared checker serves all. Parameter derivatives:
 //! `parameters_match_finite_differences.rs`.
 
-use flexmb::elements::{Coefficients, Context, ElementKernel, Mat12, NodeState, Vec12};
+use flexmb::elements::{
+    evaluate_owned, Coefficients, Context, ElementKernel, Local, Mat12, NodeState, Vec12,
+};
 use flexmb::joints;
 use flexmb::model::{
     Beam, BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, RigidBody,
     SpringDamper, TimeFunction,
 };
 use flexmb_lie::{Frame, Group, Mat3, Mat6, Vec3, Vec6};
+use nalgebra::DMatrix;
 
 mod common;
 
@@ -17,8 +20,8 @@ use common::Lcg;
 
 const EPS: f64 = 1e-6;
 
-fn perturb(group: Group, nodes: &[NodeState; 2], k: usize, e: f64, what: char) -> [NodeState; 2] {
-    let mut out = *nodes;
+fn perturb(group: Group, nodes: &[NodeState], k: usize, e: f64, what: char) -> Vec<NodeState> {
+    let mut out = nodes.to_vec();
     let (a, i) = (k / 6, k % 6);
     let mut d = Vec6::zeros();
     d[i] = e;
@@ -30,11 +33,11 @@ fn perturb(group: Group, nodes: &[NodeState; 2], k: usize, e: f64, what: char) -
     out
 }
 
-fn assert_close(analytic: &Mat12, fd: &Mat12, what: &str, active: [bool; 2]) {
+fn assert_close(analytic: &DMatrix<f64>, fd: &DMatrix<f64>, what: &str, active: &[bool]) {
     let scale = 1.0 + fd.abs().max();
-    for i in 0..12 {
-        for j in 0..12 {
-            if !active[i / 6] || !active[j / 6] {
+    for i in 0..fd.nrows() {
+        for j in 0..fd.ncols() {
+            if !active[i] || !active[j] {
                 continue;
             }
             let (a, f) = (analytic[(i, j)], fd[(i, j)]);
@@ -46,8 +49,39 @@ fn assert_close(analytic: &Mat12, fd: &Mat12, what: &str, active: [bool; 2]) {
     }
 }
 
+/// Two node slots from a perturbed copy.
+fn two(nodes: Vec<NodeState>) -> [NodeState; 2] {
+    nodes.try_into().expect("two slots")
+}
+
+fn dense(m: &Mat12) -> DMatrix<f64> {
+    DMatrix::from_column_slice(12, 12, m.as_slice())
+}
+
+/// Per entry of a two-slot local vector: whether its slot is a node.
+fn entries(active: [bool; 2]) -> Vec<bool> {
+    (0..12).map(|i| active[i / 6]).collect()
+}
+
+fn coefficients(m: f64, c: f64, k: f64, x: f64, xdot: f64) -> Coefficients {
+    Coefficients { m, c, k, x, xdot }
+}
+
 /// The shared checker for force elements: K (with T = I), C and M.
-fn check_element(name: &str, kernel: &dyn ElementKernel, model: &Model, nodes: &[NodeState; 2]) {
+fn check_element(name: &str, kernel: &dyn ElementKernel, model: &Model, nodes: &[NodeState]) {
+    check_element_with_states(name, kernel, model, nodes, &[], &[]);
+}
+
+/// [`check_element`] for an element with states `x` (rates `xdot`): also the columns of
+/// `dr/dx` and `dr/dxdot`, and every row of the state equations.
+fn check_element_with_states(
+    name: &str,
+    kernel: &dyn ElementKernel,
+    model: &Model,
+    nodes: &[NodeState],
+    x: &[f64],
+    xdot: &[f64],
+) {
     let group = model.group;
     let ctx = Context {
         model,
@@ -56,51 +90,65 @@ fn check_element(name: &str, kernel: &dyn ElementKernel, model: &Model, nodes: &
         gravity_scale: 1.0,
         load_scale: 1.0,
     };
-    let active = [kernel.nodes()[0].is_some(), kernel.nodes()[1].is_some()];
+    let nodes = &nodes[..kernel.n_slots()];
+    let n6 = 6 * nodes.len();
+    let n = kernel.n_local();
+    assert_eq!(n, n6 + x.len(), "{name}: local size");
+    let active: Vec<bool> = (0..n)
+        .map(|i| i >= n6 || kernel.node(i / 6).is_some())
+        .collect();
+    let eval = |nodes: &[NodeState], x: &[f64], xdot: &[f64]| {
+        let local = Local { nodes, x, xdot };
+        evaluate_owned(kernel, &ctx, &local, None).0
+    };
     for (what, coef) in [
-        (
-            'q',
-            Coefficients {
-                m: 0.0,
-                c: 0.0,
-                k: 1.0,
-            },
-        ),
-        (
-            'v',
-            Coefficients {
-                m: 0.0,
-                c: 1.0,
-                k: 0.0,
-            },
-        ),
-        (
-            'a',
-            Coefficients {
-                m: 1.0,
-                c: 0.0,
-                k: 0.0,
-            },
-        ),
+        ('q', coefficients(0.0, 0.0, 1.0, 0.0, 0.0)),
+        ('v', coefficients(0.0, 1.0, 0.0, 0.0, 0.0)),
+        ('a', coefficients(1.0, 0.0, 0.0, 0.0, 0.0)),
+        ('x', coefficients(0.0, 0.0, 0.0, 1.0, 0.0)),
+        ('d', coefficients(0.0, 0.0, 0.0, 0.0, 1.0)),
     ] {
-        let mut r = Vec12::zeros();
-        let mut s = Mat12::zeros();
-        kernel.evaluate(&ctx, nodes, &mut r, Some((&coef, &mut s)));
-        let mut fd = Mat12::zeros();
-        for k in 0..12 {
-            if !active[k / 6] {
+        let local = Local { nodes, x, xdot };
+        let (_, s) = evaluate_owned(kernel, &ctx, &local, Some(&coef));
+        let mut fd = DMatrix::zeros(n, n);
+        for k in 0..n {
+            if !active[k] {
                 continue;
             }
-            let (mut rp, mut rm) = (Vec12::zeros(), Vec12::zeros());
-            kernel.evaluate(&ctx, &perturb(group, nodes, k, EPS, what), &mut rp, None);
-            kernel.evaluate(&ctx, &perturb(group, nodes, k, -EPS, what), &mut rm, None);
+            let (rp, rm) = if k < n6 {
+                if matches!(what, 'x' | 'd') {
+                    continue;
+                }
+                (
+                    eval(&perturb(group, nodes, k, EPS, what), x, xdot),
+                    eval(&perturb(group, nodes, k, -EPS, what), x, xdot),
+                )
+            } else {
+                let i = k - n6;
+                let moved = |v: &[f64], e: f64| {
+                    let mut v = v.to_vec();
+                    v[i] += e;
+                    v
+                };
+                match what {
+                    'x' => (
+                        eval(nodes, &moved(x, EPS), xdot),
+                        eval(nodes, &moved(x, -EPS), xdot),
+                    ),
+                    'd' => (
+                        eval(nodes, x, &moved(xdot, EPS)),
+                        eval(nodes, x, &moved(xdot, -EPS)),
+                    ),
+                    _ => continue,
+                }
+            };
             fd.set_column(k, &((rp - rm) / (2.0 * EPS)));
         }
         assert_close(
             &s,
             &fd,
             &format!("{name} on {group:?}, derivative wrt {what}"),
-            active,
+            &active,
         );
     }
 }
@@ -258,14 +306,14 @@ fn joint_gradients_and_their_derivatives_match_finite_differences() {
                             group,
                             joint,
                             row,
-                            &perturb(group, &nodes, k, EPS, 'q'),
+                            &two(perturb(group, &nodes, k, EPS, 'q')),
                             t,
                         );
                         let m = joints::evaluate_row(
                             group,
                             joint,
                             row,
-                            &perturb(group, &nodes, k, -EPS, 'q'),
+                            &two(perturb(group, &nodes, k, -EPS, 'q')),
                             t,
                         );
                         fd_b[k] = (p.phi - m.phi) / (2.0 * EPS);
@@ -280,7 +328,12 @@ fn joint_gradients_and_their_derivatives_match_finite_differences() {
                             fd_b[k]
                         );
                     }
-                    assert_close(&rv.h, &fd_h, &format!("{what}: H"), active);
+                    assert_close(
+                        &dense(&rv.h),
+                        &dense(&fd_h),
+                        &format!("{what}: H"),
+                        &entries(active),
+                    );
                     // time derivatives of driven rows
                     let tp = joints::evaluate_row(group, joint, row, &nodes, t + EPS);
                     let tm = joints::evaluate_row(group, joint, row, &nodes, t - EPS);
@@ -385,15 +438,8 @@ fn beam_tangent_is_invariant_under_rigid_motion() {
     );
     let ctx = context(&model);
     let stiffness = |nodes: &[NodeState; 2]| {
-        let mut r = Vec12::zeros();
-        let mut s = Mat12::zeros();
-        let coef = Coefficients {
-            m: 0.0,
-            c: 0.0,
-            k: 1.0,
-        };
-        beam.evaluate(&ctx, nodes, &mut r, Some((&coef, &mut s)));
-        (r, s)
+        let coef = coefficients(0.0, 0.0, 1.0, 0.0, 0.0);
+        evaluate_owned(&beam, &ctx, &Local::nodes(nodes), Some(&coef))
     };
     let mut nodes = [NodeState::ground(Frame::identity()); 2];
     nodes[1].q = flexmb_lie::se3::exp(&(d0 + rng.v6(0.4)));
@@ -404,8 +450,8 @@ fn beam_tangent_is_invariant_under_rigid_motion() {
         NodeState::ground(rigid.compose(&nodes[1].q)),
     ];
     let (r1, k1) = stiffness(&moved);
-    assert!((r0 - r1).norm() < 1e-9 * r0.norm());
-    assert!((k0 - k1).norm() < 1e-9 * k0.norm());
+    assert!((&r0 - r1).norm() < 1e-9 * r0.norm());
+    assert!((&k0 - k1).norm() < 1e-9 * k0.norm());
 }
 
 /// Context at t = 0, gravity and loads at full scale.
@@ -486,7 +532,7 @@ fn beam_mass_is_exact_for_rigid_motions() {
             let mut nodes = [NodeState::ground(ha), NodeState::ground(hb)];
             nodes[0].v = eta_a;
             nodes[1].v = flexmb_lie::se3::big_ad(&hb.inverse().compose(&ha)) * eta_a;
-            let energy = beam.kinetic_energy(&ctx, &nodes);
+            let energy = beam.kinetic_energy(&ctx, &Local::nodes(&nodes));
 
             let xdot = ha.r * eta_a.fixed_rows::<3>(0);
             let omega = ha.r * eta_a.fixed_rows::<3>(3);
@@ -544,7 +590,7 @@ fn consistent_beam_mass_is_the_kinetic_energy_of_the_interpolation() {
         let mut nodes = [NodeState::ground(ha), NodeState::ground(hb)];
         nodes[0].v = va;
         nodes[1].v = vb;
-        let energy = beam.kinetic_energy(&ctx, &nodes);
+        let energy = beam.kinetic_energy(&ctx, &Local::nodes(&nodes));
 
         let field = |t: f64, xi: f64| {
             let a = ha

@@ -93,8 +93,8 @@
 
 use super::rigid_body::momentum_jacobian;
 use super::{
-    Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Mat12, NodeState,
-    Vec12,
+    Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local, LocalMatrix,
+    LocalVector, Mat12, NodeState, Vec12,
 };
 use crate::model::parameters::SectionParam;
 use crate::model::{Beam, BeamMass, NodeId};
@@ -242,19 +242,31 @@ pub struct BeamElement<'m> {
     pub mass: &'m Mat12,
 }
 
+/// The two slots of a beam's [`Local`].
+fn pair<'a>(local: &Local<'a>) -> &'a [NodeState; 2] {
+    local
+        .nodes
+        .try_into()
+        .expect("a beam element has two node slots")
+}
+
 impl ElementKernel for BeamElement<'_> {
-    fn nodes(&self) -> [Option<NodeId>; 2] {
-        let b = self.beam;
-        [Some(b.nodes[0]), Some(b.nodes[1])]
+    fn n_slots(&self) -> usize {
+        2
+    }
+
+    fn node(&self, slot: usize) -> Option<NodeId> {
+        Some(self.beam.nodes[slot])
     }
 
     fn evaluate(
         &self,
         ctx: &Context,
-        nodes: &[NodeState; 2],
-        r: &mut Vec12,
-        s: Option<(&Coefficients, &mut Mat12)>,
+        local: &Local,
+        r_out: &mut LocalVector,
+        s: Option<(&Coefficients, &mut LocalMatrix)>,
     ) {
+        let nodes = pair(local);
         let b = self.beam;
         let st = b.state(nodes);
         let (aa, ab) = (offset_map(&b.offset_a), offset_map(&b.offset_b));
@@ -268,15 +280,15 @@ impl ElementKernel for BeamElement<'_> {
         } else {
             st.stress
         };
-        *r = p.transpose() * sigma;
+        let mut r = p.transpose() * sigma;
 
         // Inertia and gravity (module documentation).
         let vdot = stack(nodes, 'a');
         let mm = self.mass;
         let momentum = mm * v;
-        *r += mm * vdot;
+        r += mm * vdot;
         if alpha > 0.0 {
-            *r += momentum * alpha;
+            r += momentum * alpha;
         }
         let mut weights = [Vec3::zeros(); 2];
         for end in 0..2 {
@@ -288,6 +300,7 @@ impl ElementKernel for BeamElement<'_> {
             let mut rf = re.fixed_rows_mut::<3>(0);
             rf -= we;
         }
+        r_out.copy_from(&r);
         let Some((coef, s)) = s else {
             return;
         };
@@ -320,51 +333,56 @@ impl ElementKernel for BeamElement<'_> {
             let mut kb = k.fixed_view_mut::<3, 3>(6 * end, 6 * end + 3);
             kb -= hat(&weights[end]);
         }
-        *s = mm * coef.m + c_t * coef.c + k * coef.k;
-        super::physical::apply_tangent_full(nodes, [true, true], s, coef, &k);
+        s.copy_from(&(mm * coef.m + c_t * coef.c + k * coef.k));
+        super::physical::apply_tangent_full(nodes, &[true, true], s, coef, &k);
     }
 
-    fn kinetic_energy(&self, _ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        let v = stack(nodes, 'v');
+    fn kinetic_energy(&self, _ctx: &Context, local: &Local) -> f64 {
+        let v = stack(pair(local), 'v');
         0.5 * v.dot(&(self.mass * v))
     }
 
-    fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        self.beam.potential_energy(ctx, nodes)
+    fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
+        self.beam.potential_energy(ctx, local)
     }
 }
 
 /// A beam alone: the [`BeamElement`] with the mass matrix computed at each call.
 impl ElementKernel for Beam {
-    fn nodes(&self) -> [Option<NodeId>; 2] {
-        [Some(self.nodes[0]), Some(self.nodes[1])]
+    fn n_slots(&self) -> usize {
+        2
+    }
+
+    fn node(&self, slot: usize) -> Option<NodeId> {
+        Some(self.nodes[slot])
     }
 
     fn evaluate(
         &self,
         ctx: &Context,
-        nodes: &[NodeState; 2],
-        r: &mut Vec12,
-        s: Option<(&Coefficients, &mut Mat12)>,
+        local: &Local,
+        r: &mut LocalVector,
+        s: Option<(&Coefficients, &mut LocalMatrix)>,
     ) {
         let mass = mass_matrix(self);
         BeamElement {
             beam: self,
             mass: &mass,
         }
-        .evaluate(ctx, nodes, r, s);
+        .evaluate(ctx, local, r, s);
     }
 
-    fn kinetic_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
+    fn kinetic_energy(&self, ctx: &Context, local: &Local) -> f64 {
         let mass = mass_matrix(self);
         BeamElement {
             beam: self,
             mass: &mass,
         }
-        .kinetic_energy(ctx, nodes)
+        .kinetic_energy(ctx, local)
     }
 
-    fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
+    fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
+        let nodes = pair(local);
         let st = self.state(nodes);
         let half_mass = 0.5 * self.length * self.section.mass_per_length * ctx.gravity_scale;
         let gravity: f64 = nodes
@@ -406,9 +424,10 @@ impl ElementParameters for Beam {
         &self,
         ctx: &Context,
         p: SectionParam,
-        nodes: &[NodeState; 2],
-        dr: &mut Vec12,
+        local: &Local,
+        dr: &mut LocalVector,
     ) -> DerivativeMethod {
+        let nodes = pair(local);
         let sec = &self.section;
         let (alpha, beta) = (sec.damping_mass, sec.damping_stiffness);
         // P v / L and P, when the stiffness terms need them
@@ -419,7 +438,7 @@ impl ElementParameters for Beam {
             let pv = p * stack(nodes, 'v') / self.length;
             (st, p, pv)
         };
-        *dr = match p {
+        let d = match p {
             SectionParam::Stiffness(i, j) => {
                 let (st, p, pv) = rate();
                 let e = unit_symmetric::<6>(i, j);
@@ -452,10 +471,12 @@ impl ElementParameters for Beam {
             }
             SectionParam::DampingMass => mass_matrix(self) * stack(nodes, 'v'),
         };
+        dr.copy_from(&d);
         DerivativeMethod::Analytic
     }
 
-    fn gravity_derivative(&self, ctx: &Context, k: usize, nodes: &[NodeState; 2], dr: &mut Vec12) {
+    fn gravity_derivative(&self, ctx: &Context, k: usize, local: &Local, dr: &mut LocalVector) {
+        let nodes = pair(local);
         let mut e = Vec3::zeros();
         e[k] = -0.5 * self.length * self.section.mass_per_length * ctx.gravity_scale;
         dr.fill(0.0);

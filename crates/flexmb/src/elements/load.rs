@@ -14,23 +14,23 @@
 //! `df/da` ([`crate::model::TimeFunction::amplitude_derivative`]).
 
 use super::{
-    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Mat12,
-    NodeState, Vec12,
+    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
+    LocalMatrix, LocalVector, NodeState,
 };
 use crate::model::parameters::LoadParam;
 use crate::model::{Load, LoadFrame, NodeId};
-use flexmb_lie::{so3::hat, Vec3};
+use flexmb_lie::{so3::hat, Mat6, Vec3, Vec6};
 
 impl Load {
     /// Physical residual of force `force` and torque `torque` scaled by `f` (module
     /// documentation).
-    fn physical_residual(&self, force: &Vec3, torque: &Vec3, f: f64, n: &NodeState) -> Vec12 {
+    fn physical_residual(&self, force: &Vec3, torque: &Vec3, f: f64, n: &NodeState) -> Vec6 {
         let rot = n.q.r;
         let (rf, rm) = match self.frame {
             LoadFrame::Inertial => (-force * f, -(rot.transpose() * torque) * f),
             LoadFrame::Body => (-(rot * force) * f, -torque * f),
         };
-        let mut r_p = Vec12::zeros();
+        let mut r_p = Vec6::zeros();
         r_p.fixed_rows_mut::<3>(0).copy_from(&rf);
         r_p.fixed_rows_mut::<3>(3).copy_from(&rm);
         r_p
@@ -38,21 +38,26 @@ impl Load {
 }
 
 impl ElementKernel for Load {
-    fn nodes(&self) -> [Option<NodeId>; 2] {
-        [Some(self.node), None]
+    fn n_slots(&self) -> usize {
+        1
+    }
+
+    fn node(&self, _slot: usize) -> Option<NodeId> {
+        Some(self.node)
     }
 
     fn evaluate(
         &self,
         ctx: &Context,
-        nodes: &[NodeState; 2],
-        r: &mut Vec12,
-        s: Option<(&Coefficients, &mut Mat12)>,
+        local: &Local,
+        r: &mut LocalVector,
+        s: Option<(&Coefficients, &mut LocalMatrix)>,
     ) {
+        let nodes = local.nodes;
         let f = self.function.value(ctx.t) * ctx.load_scale;
         let rot = nodes[0].q.r;
-        let mut r_p = Vec12::zeros();
-        let mut k_p = Mat12::zeros();
+        let mut r_p = Vec6::zeros();
+        let mut k_p = Mat6::zeros();
         match self.frame {
             LoadFrame::Inertial => {
                 let mb = rot.transpose() * self.torque;
@@ -68,16 +73,8 @@ impl ElementKernel for Load {
                     .copy_from(&(rot * hat(&self.force) * f));
             }
         }
-        physical::to_group(
-            ctx.group,
-            nodes,
-            [true, false],
-            &r_p,
-            Some(&k_p),
-            None,
-            r,
-            s,
-        );
+        let (r_p, k_p) = (r_p.as_slice(), k_p.as_slice());
+        physical::to_group(ctx.group, nodes, &[true], r_p, Some(k_p), None, r, s);
     }
 }
 
@@ -88,9 +85,10 @@ impl ElementParameters for Load {
         &self,
         ctx: &Context,
         p: LoadParam,
-        nodes: &[NodeState; 2],
-        dr: &mut Vec12,
+        local: &Local,
+        dr: &mut LocalVector,
     ) -> DerivativeMethod {
+        let nodes = local.nodes;
         let f = self.function.value(ctx.t) * ctx.load_scale;
         let unit = |k: usize| {
             let mut e = Vec3::zeros();
@@ -106,7 +104,16 @@ impl ElementParameters for Load {
                 self.physical_residual(&self.force, &self.torque, df, &nodes[0])
             }
         };
-        physical::to_group(ctx.group, nodes, [true, false], &r_p, None, None, dr, None);
+        physical::to_group(
+            ctx.group,
+            nodes,
+            &[true],
+            r_p.as_slice(),
+            None,
+            None,
+            dr,
+            None,
+        );
         DerivativeMethod::Analytic
     }
 }

@@ -33,13 +33,20 @@ pub mod spring;
 
 use crate::model::{Model, NodeId};
 use flexmb_lie::{Frame, Group, Mat6, Vec3, Vec6};
-use nalgebra::{SMatrix, SVector};
+use nalgebra::{DMatrix, DMatrixViewMut, DVector, DVectorViewMut, SMatrix, SVector};
 use std::sync::Arc;
 
-/// Local vector of a two-node element: `[node a (6), node b (6)]`.
+/// Local vector of a two-node element: `[node a (6), node b (6)]` (joints, and the
+/// fixed-size arithmetic inside two-node elements).
 pub type Vec12 = SVector<f64, 12>;
 /// Local matrix of a two-node element, rows and columns ordered like [`Vec12`].
 pub type Mat12 = SMatrix<f64, 12, 12>;
+
+/// An element's local vector: 6 entries per node slot (Lie algebra: translation, then
+/// rotation), then one per element state ([`ElementKernel::n_states`]).
+pub type LocalVector<'a> = DVectorViewMut<'a, f64>;
+/// An element's local matrix, rows and columns ordered like [`LocalVector`].
+pub type LocalMatrix<'a> = DMatrixViewMut<'a, f64>;
 
 /// Kinematics of one node as an element sees it.
 #[derive(Clone, Copy, Debug)]
@@ -66,26 +73,36 @@ impl NodeState {
     }
 }
 
-/// Coefficients of the iteration matrix `S = m M + c C_t + k K_t T`.
+/// Coefficients of the iteration matrix: on the node columns `S = m M + c C_t + k K_t T`,
+/// on the columns of the element's states `S_x = x dr/dx + xdot dr/dxdot`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Coefficients {
     pub m: f64,
     pub c: f64,
     pub k: f64,
+    /// Factor on `dr/dx` (element states).
+    pub x: f64,
+    /// Factor on `dr/dxdot` (element state rates).
+    pub xdot: f64,
 }
 
 impl Coefficients {
-    /// Only the mass matrix (consistent initial accelerations).
+    /// Only the mass matrix, and on the states only `dr/dxdot`: the matrix of the
+    /// accelerations and state rates (consistent initial conditions).
     pub const MASS: Coefficients = Coefficients {
         m: 1.0,
         c: 0.0,
         k: 0.0,
+        x: 0.0,
+        xdot: 1.0,
     };
-    /// Only the tangent stiffness (statics).
+    /// Only the tangent stiffness, and on the states only `dr/dx` (statics).
     pub const STIFFNESS: Coefficients = Coefficients {
         m: 0.0,
         c: 0.0,
         k: 1.0,
+        x: 1.0,
+        xdot: 0.0,
     };
 }
 
@@ -115,27 +132,154 @@ pub enum ElementRef {
     Spring(usize),
 }
 
+/// What an element sees besides its own data: the kinematics of its node slots (the
+/// ground's, at rest, for a slot without a node) and its own states and their rates.
+#[derive(Clone, Copy, Debug)]
+pub struct Local<'a> {
+    /// One per slot ([`ElementKernel::n_slots`]).
+    pub nodes: &'a [NodeState],
+    /// The element's states `x` ([`ElementKernel::n_states`]).
+    pub x: &'a [f64],
+    /// Their rates `xdot`.
+    pub xdot: &'a [f64],
+}
+
+impl<'a> Local<'a> {
+    /// Node kinematics only (an element without states).
+    pub fn nodes(nodes: &'a [NodeState]) -> Self {
+        Self {
+            nodes,
+            x: &[],
+            xdot: &[],
+        }
+    }
+}
+
 /// One small capability set shared by every force element.
+///
+/// An element connects `n_slots` node slots (any number; a slot may be the ground) and may
+/// own `n_states` first-order states `x` with as many equations `e(q, v, vdot, x, xdot, t) =
+/// 0` of its own (an internal variable: a damper's elongation, a friction model's bristle
+/// deflection). Its local vector is `[r (6 per slot); e (one per state)]`.
 pub trait ElementKernel {
-    /// The nodes the element connects (`None` = ground), in local order.
-    fn nodes(&self) -> [Option<NodeId>; 2];
-    /// Residual `r` (12 entries, only the first 6 used by one-node elements) and, if asked,
-    /// the iteration matrix `S = m M + c C_t + k K_t T` (group coordinates).
+    /// Number of node slots.
+    fn n_slots(&self) -> usize;
+    /// The node of slot `k` (`None` = the ground).
+    fn node(&self, k: usize) -> Option<NodeId>;
+    /// Number of states the element owns.
+    fn n_states(&self) -> usize {
+        0
+    }
+    /// Size of the local vector: `6 n_slots + n_states`.
+    fn n_local(&self) -> usize {
+        6 * self.n_slots() + self.n_states()
+    }
+    /// Residual `[r; e]` (every entry written) and, if asked, the iteration matrix (every
+    /// entry written): on node columns `m M + c C_t + k K_t T`, on state columns
+    /// `x dr/dx + xdot dr/dxdot`, for the rows of `r` and of `e` alike (group coordinates).
     fn evaluate(
         &self,
         ctx: &Context,
-        nodes: &[NodeState; 2],
-        r: &mut Vec12,
-        s: Option<(&Coefficients, &mut Mat12)>,
+        local: &Local,
+        r: &mut LocalVector,
+        s: Option<(&Coefficients, &mut LocalMatrix)>,
     );
     /// Kinetic energy \[J\].
-    fn kinetic_energy(&self, _ctx: &Context, _nodes: &[NodeState; 2]) -> f64 {
+    fn kinetic_energy(&self, _ctx: &Context, _local: &Local) -> f64 {
         0.0
     }
     /// Potential energy \[J\] (gravity, elastic).
-    fn potential_energy(&self, _ctx: &Context, _nodes: &[NodeState; 2]) -> f64 {
+    fn potential_energy(&self, _ctx: &Context, _local: &Local) -> f64 {
         0.0
     }
+    /// Energy dissipated per unit time \[W\] by the element's internal variables (the
+    /// power its states absorb), for an energy balance.
+    fn internal_dissipation(&self, _ctx: &Context, _local: &Local) -> f64 {
+        0.0
+    }
+}
+
+/// Reused storage for one element's [`Local`] inputs and its local vector and matrix.
+#[derive(Clone, Debug, Default)]
+pub struct LocalBuffers {
+    nodes: Vec<NodeState>,
+    x: Vec<f64>,
+    xdot: Vec<f64>,
+    r: Vec<f64>,
+    s: Vec<f64>,
+}
+
+impl LocalBuffers {
+    /// Gathers the inputs of `kernel` from the kinematics of all nodes and from the states
+    /// and rates of all elements (`x`, `xdot`, the element's own starting at `state_start`).
+    #[inline]
+    pub fn gather<K: ElementKernel + ?Sized>(
+        &mut self,
+        kernel: &K,
+        nodes: &[NodeState],
+        (x, xdot, state_start): (&[f64], &[f64], usize),
+    ) {
+        let ground = NodeState::ground(Default::default());
+        self.nodes.clear();
+        self.nodes
+            .extend((0..kernel.n_slots()).map(|k| kernel.node(k).map_or(ground, |n| nodes[n.0])));
+        let ns = kernel.n_states();
+        self.x.clear();
+        self.xdot.clear();
+        if ns > 0 {
+            self.x.extend_from_slice(&x[state_start..state_start + ns]);
+            self.xdot
+                .extend_from_slice(&xdot[state_start..state_start + ns]);
+        }
+    }
+
+    /// The gathered inputs and the local vector and matrix (`n` = [`ElementKernel::n_local`])
+    /// to write.
+    #[inline]
+    pub fn split(&mut self, n: usize) -> (Local<'_>, LocalVector<'_>, LocalMatrix<'_>) {
+        if self.r.len() < n {
+            self.r.resize(n, 0.0);
+        }
+        if self.s.len() < n * n {
+            self.s.resize(n * n, 0.0);
+        }
+        let local = Local {
+            nodes: &self.nodes,
+            x: &self.x,
+            xdot: &self.xdot,
+        };
+        (
+            local,
+            LocalVector::from_slice(&mut self.r[..n], n),
+            LocalMatrix::from_slice(&mut self.s[..n * n], n, n),
+        )
+    }
+
+    /// The gathered inputs.
+    pub fn local(&self) -> Local<'_> {
+        Local {
+            nodes: &self.nodes,
+            x: &self.x,
+            xdot: &self.xdot,
+        }
+    }
+}
+
+/// The local residual of `kernel` and, with `coef`, its local matrix, as owned values (tests
+/// and derivative code; assembly writes into [`LocalBuffers`] instead).
+pub fn evaluate_owned<K: ElementKernel + ?Sized>(
+    kernel: &K,
+    ctx: &Context,
+    local: &Local,
+    coef: Option<&Coefficients>,
+) -> (DVector<f64>, DMatrix<f64>) {
+    let n = kernel.n_local();
+    let mut r = DVector::zeros(n);
+    let mut s = DMatrix::zeros(n, n);
+    let mut rv = r.as_view_mut();
+    let mut sv = s.as_view_mut();
+    kernel.evaluate(ctx, local, &mut rv, coef.map(|c| (c, &mut sv)));
+    (r, s)
 }
 
 impl ElementRef {
@@ -193,23 +337,36 @@ macro_rules! dispatch {
 }
 
 impl ElementKernel for Kernel<'_> {
-    fn nodes(&self) -> [Option<NodeId>; 2] {
-        dispatch!(self, k => k.nodes())
+    #[inline]
+    fn n_slots(&self) -> usize {
+        dispatch!(self, k => k.n_slots())
     }
+    #[inline]
+    fn node(&self, slot: usize) -> Option<NodeId> {
+        dispatch!(self, k => k.node(slot))
+    }
+    #[inline]
+    fn n_states(&self) -> usize {
+        dispatch!(self, k => k.n_states())
+    }
+    #[inline]
     fn evaluate(
         &self,
         ctx: &Context,
-        nodes: &[NodeState; 2],
-        r: &mut Vec12,
-        s: Option<(&Coefficients, &mut Mat12)>,
+        local: &Local,
+        r: &mut LocalVector,
+        s: Option<(&Coefficients, &mut LocalMatrix)>,
     ) {
-        dispatch!(self, k => k.evaluate(ctx, nodes, r, s))
+        dispatch!(self, k => k.evaluate(ctx, local, r, s))
     }
-    fn kinetic_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        dispatch!(self, k => k.kinetic_energy(ctx, nodes))
+    fn kinetic_energy(&self, ctx: &Context, local: &Local) -> f64 {
+        dispatch!(self, k => k.kinetic_energy(ctx, local))
     }
-    fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        dispatch!(self, k => k.potential_energy(ctx, nodes))
+    fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
+        dispatch!(self, k => k.potential_energy(ctx, local))
+    }
+    fn internal_dissipation(&self, ctx: &Context, local: &Local) -> f64 {
+        dispatch!(self, k => k.internal_dissipation(ctx, local))
     }
 }
 
@@ -239,22 +396,17 @@ pub enum DerivativeMethod {
 pub trait ElementParameters: ElementKernel {
     /// The element's parameters.
     type Param: Copy;
-    /// `dr/dp` (12 entries like the residual, group coordinates, overwritten).
+    /// `d[r; e]/dp` (like the residual, group coordinates, every entry written).
     fn parameter_derivative(
         &self,
         ctx: &Context,
         p: Self::Param,
-        nodes: &[NodeState; 2],
-        dr: &mut Vec12,
+        local: &Local,
+        dr: &mut LocalVector,
     ) -> DerivativeMethod;
-    /// `dr/dg_k`, component `k` of gravity (overwritten; zero for massless elements).
-    fn gravity_derivative(
-        &self,
-        _ctx: &Context,
-        _k: usize,
-        _nodes: &[NodeState; 2],
-        dr: &mut Vec12,
-    ) {
+    /// `d[r; e]/dg_k`, component `k` of gravity (every entry written; zero for massless
+    /// elements).
+    fn gravity_derivative(&self, _ctx: &Context, _k: usize, _local: &Local, dr: &mut LocalVector) {
         dr.fill(0.0);
     }
 }
@@ -270,19 +422,17 @@ pub const FD_STEP: f64 = 6e-6;
 pub fn central_difference<E: ElementKernel + Clone>(
     element: &E,
     ctx: &Context,
-    nodes: &[NodeState; 2],
+    local: &Local,
     (value, scale): (f64, f64),
     set: impl Fn(&mut E, f64),
-    dr: &mut Vec12,
+    dr: &mut LocalVector,
 ) -> DerivativeMethod {
     let h = FD_STEP * value.abs().max(scale);
     let r = |v: f64| {
         let mut copy = element.clone();
         set(&mut copy, v);
-        let mut out = Vec12::zeros();
-        copy.evaluate(ctx, nodes, &mut out, None);
-        out
+        evaluate_owned(&copy, ctx, local, None).0
     };
-    *dr = (r(value + h) - r(value - h)) / (2.0 * h);
+    dr.copy_from(&((r(value + h) - r(value - h)) / (2.0 * h)));
     DerivativeMethod::FiniteDifference
 }

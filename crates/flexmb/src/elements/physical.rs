@@ -15,8 +15,12 @@
 //! the derivative of `R^T` at fixed `f_p`) and `v_p = (R U, Omega)` is the physical velocity
 //! (its derivative `dv_p/dtheta = -R tilde(U)` gives the last term).
 
-use super::{Coefficients, Mat12, NodeState, Vec12};
-use flexmb_lie::{so3::hat, Group, Mat3, Vec3};
+use super::{Coefficients, LocalMatrix, LocalVector, NodeState};
+use flexmb_lie::{so3::hat, Group, Mat3, Mat6, Vec3};
+use nalgebra::allocator::Allocator;
+use nalgebra::{
+    DMatrix, DMatrixView, DVectorView, DefaultAllocator, Dim, Matrix, Storage, StorageMut, U6,
+};
 
 /// Physical velocity `(xdot, Omega)` of a node.
 pub fn velocity(group: Group, n: &NodeState) -> (Vec3, Vec3) {
@@ -28,51 +32,59 @@ pub fn velocity(group: Group, n: &NodeState) -> (Vec3, Vec3) {
     }
 }
 
-/// Converts a physical residual and, optionally, physical `K_p` and `C_p` into the group's
-/// residual and iteration matrix `S = c.c C + c.k K T` (no mass term: these elements have
-/// none). `active` tells which of the two node slots exist (ground slots are skipped).
+/// Converts a physical residual and, optionally, physical `K_p` and `C_p` (column-major,
+/// `6 n` square for the `n` slots of `nodes`) into the group's residual and iteration matrix
+/// `S = c.c C + c.k K T` (no mass term: these elements have none), written to the first
+/// `6 n` rows (and columns) of `r` and `s`. `active` tells which slots are nodes (ground
+/// slots are skipped).
 pub fn to_group(
     group: Group,
-    nodes: &[NodeState; 2],
-    active: [bool; 2],
-    r_p: &Vec12,
-    k_p: Option<&Mat12>,
-    c_p: Option<&Mat12>,
-    r: &mut Vec12,
-    s: Option<(&Coefficients, &mut Mat12)>,
+    nodes: &[NodeState],
+    active: &[bool],
+    r_p: &[f64],
+    k_p: Option<&[f64]>,
+    c_p: Option<&[f64]>,
+    r: &mut LocalVector,
+    s: Option<(&Coefficients, &mut LocalMatrix)>,
 ) {
+    let n = 6 * nodes.len();
+    let r_p = DVectorView::from_slice(r_p, n);
+    let k_p = k_p.map(|k| DMatrixView::from_slice(k, n, n));
+    let c_p = c_p.map(|c| DMatrixView::from_slice(c, n, n));
+    let mut r = r.rows_mut(0, n);
     match group {
         Group::R3xSO3 => {
-            *r = *r_p;
+            r.copy_from(&r_p);
             if let Some((coef, s)) = s {
+                let mut s = s.view_mut((0, 0), (n, n));
                 s.fill(0.0);
-                if let Some(k) = k_p {
-                    *s += k * coef.k;
+                if let Some(k) = &k_p {
+                    s += k * coef.k;
                 }
-                if let Some(c) = c_p {
-                    *s += c * coef.c;
+                if let Some(c) = &c_p {
+                    s += c * coef.c;
                 }
-                if let Some(k) = k_p {
-                    apply_tangent_full(nodes, active, s, coef, k);
+                if let Some(k) = &k_p {
+                    apply_tangent_full(nodes, active, &mut s, coef, k);
                 }
             }
         }
         Group::SE3 => {
-            // P = blockdiag(R_a, I, R_b, I)
-            let mut p = Mat12::identity();
-            for a in 0..2 {
+            // P = blockdiag(R_a, I, R_b, I, ...)
+            let mut p = DMatrix::<f64>::identity(n, n);
+            for a in 0..nodes.len() {
                 if active[a] {
                     p.fixed_view_mut::<3, 3>(6 * a, 6 * a)
                         .copy_from(&nodes[a].q.r);
                 }
             }
-            *r = p.transpose() * r_p;
+            r.copy_from(&(p.transpose() * r_p));
             if let Some((coef, s)) = s {
-                let mut k = match k_p {
-                    Some(k) => p.transpose() * k * p,
-                    None => Mat12::zeros(),
+                let mut k = match &k_p {
+                    Some(k) => p.transpose() * k * &p,
+                    None => DMatrix::zeros(n, n),
                 };
-                for a in 0..2 {
+                for a in 0..nodes.len() {
                     if !active[a] {
                         continue;
                     }
@@ -80,13 +92,14 @@ pub fn to_group(
                     let mut blk = k.fixed_view_mut::<3, 3>(6 * a, 6 * a + 3);
                     blk += hat(&f);
                 }
+                let mut s = s.view_mut((0, 0), (n, n));
                 s.fill(0.0);
-                if let Some(c) = c_p {
-                    let cg = p.transpose() * c * p;
-                    *s += cg * coef.c;
+                if let Some(c) = &c_p {
+                    let cg = p.transpose() * c * &p;
+                    s += cg * coef.c;
                     // dv_p/dw: translation velocity R U depends on the rotation.
-                    let mut dv = Mat12::zeros();
-                    for a in 0..2 {
+                    let mut dv = DMatrix::zeros(n, n);
+                    for a in 0..nodes.len() {
                         if active[a] {
                             let u = nodes[a].v.fixed_rows::<3>(0).into_owned();
                             let blk: Mat3 = -nodes[a].q.r * hat(&u);
@@ -95,33 +108,43 @@ pub fn to_group(
                     }
                     k += p.transpose() * c * dv;
                 }
-                *s += k * coef.k;
-                apply_tangent_full(nodes, active, s, coef, &k);
+                s += &k * coef.k;
+                apply_tangent_full(nodes, active, &mut s, coef, &k);
             }
         }
     }
 }
 
-/// `s += c.k K (T - I)` column block by column block, which turns `c.k K` into `c.k K T`.
-pub fn apply_tangent_full(
-    nodes: &[NodeState; 2],
-    active: [bool; 2],
-    s: &mut Mat12,
+/// `s += c.k K (T - I)` column block by column block, which turns `c.k K` into `c.k K T`
+/// (`nodes` and `active` one per slot; the first `6 n` columns of `s` and `k`).
+pub fn apply_tangent_full<R1, C1, S1, R2, C2, S2>(
+    nodes: &[NodeState],
+    active: &[bool],
+    s: &mut Matrix<f64, R1, C1, S1>,
     coef: &Coefficients,
-    k: &Mat12,
-) {
+    k: &Matrix<f64, R2, C2, S2>,
+) where
+    R1: Dim,
+    C1: Dim,
+    S1: StorageMut<f64, R1, C1>,
+    R2: Dim,
+    C2: Dim,
+    S2: Storage<f64, R2, C2>,
+    DefaultAllocator: Allocator<R2, U6> + Allocator<U6, U6>,
+    nalgebra::constraint::ShapeConstraint: nalgebra::constraint::SameNumberOfRows<R1, R2>,
+{
     if coef.k == 0.0 {
         return;
     }
-    for b in 0..2 {
+    for b in 0..nodes.len() {
         if !active[b] {
             continue;
         }
         let t = &nodes[b].t;
-        if *t == flexmb_lie::Mat6::identity() {
+        if *t == Mat6::identity() {
             continue;
         }
-        let tm = t - flexmb_lie::Mat6::identity();
+        let tm = t - Mat6::identity();
         let cols = k.fixed_columns::<6>(6 * b) * tm * coef.k;
         let mut target = s.fixed_columns_mut::<6>(6 * b);
         target += cols;

@@ -42,8 +42,8 @@
 //! `-[ e_k m ; tilde(X) R^T e_k m ]` (R3xSO(3)), times the load factor.
 
 use super::{
-    Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Mat12, NodeState,
-    Vec12,
+    Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local, LocalMatrix,
+    LocalVector, NodeState,
 };
 use crate::model::parameters::{BodyParam, VOIGT};
 use crate::model::{NodeId, RigidBody};
@@ -211,41 +211,42 @@ impl RigidBody {
 }
 
 impl ElementKernel for RigidBody {
-    fn nodes(&self) -> [Option<NodeId>; 2] {
-        [Some(self.node), None]
+    fn n_slots(&self) -> usize {
+        1
     }
 
+    fn node(&self, _slot: usize) -> Option<NodeId> {
+        Some(self.node)
+    }
+
+    #[inline]
     fn evaluate(
         &self,
         ctx: &Context,
-        nodes: &[NodeState; 2],
-        r: &mut Vec12,
-        s: Option<(&Coefficients, &mut Mat12)>,
+        local: &Local,
+        r: &mut LocalVector,
+        s: Option<(&Coefficients, &mut LocalMatrix)>,
     ) {
-        let n = &nodes[0];
-        r.fill(0.0);
-        if s.is_none() {
+        let n = &local.nodes[0];
+        let Some((coef, s)) = s else {
             r.fixed_rows_mut::<6>(0).copy_from(&self.residual(ctx, n));
             return;
-        }
+        };
         let (res, mm, c, k) = self.local(ctx, n);
         r.fixed_rows_mut::<6>(0).copy_from(&res);
-        if let Some((coef, s)) = s {
-            s.fill(0.0);
-            let blk = mm * coef.m + c * coef.c + k * n.t * coef.k;
-            s.fixed_view_mut::<6, 6>(0, 0).copy_from(&blk);
-        }
+        let blk = mm * coef.m + c * coef.c + k * n.t * coef.k;
+        s.fixed_view_mut::<6, 6>(0, 0).copy_from(&blk);
     }
 
-    fn kinetic_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        let n = &nodes[0];
+    fn kinetic_energy(&self, ctx: &Context, local: &Local) -> f64 {
+        let n = &local.nodes[0];
         let om = n.v.fixed_rows::<3>(3).into_owned();
         let vg = self.com_velocity(ctx.group, n);
         0.5 * self.mass * vg.norm_squared() + 0.5 * om.dot(&(self.inertia * om))
     }
 
-    fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        -self.mass * ctx.gravity_scale * ctx.model.gravity.dot(&self.com_position(&nodes[0]))
+    fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
+        -self.mass * ctx.gravity_scale * ctx.model.gravity.dot(&self.com_position(&local.nodes[0]))
     }
 }
 
@@ -256,10 +257,10 @@ impl ElementParameters for RigidBody {
         &self,
         ctx: &Context,
         p: BodyParam,
-        nodes: &[NodeState; 2],
-        dr: &mut Vec12,
+        local: &Local,
+        dr: &mut LocalVector,
     ) -> DerivativeMethod {
-        let n = &nodes[0];
+        let n = &local.nodes[0];
         let d = match p {
             BodyParam::Mass => residual_of(ctx, n, 1.0, &self.com, &Mat3::zeros()),
             BodyParam::Inertia(k) => {
@@ -271,13 +272,12 @@ impl ElementParameters for RigidBody {
             }
             BodyParam::Com(k) => self.com_derivative(ctx, n, k),
         };
-        dr.fill(0.0);
         dr.fixed_rows_mut::<6>(0).copy_from(&d);
         DerivativeMethod::Analytic
     }
 
-    fn gravity_derivative(&self, ctx: &Context, k: usize, nodes: &[NodeState; 2], dr: &mut Vec12) {
-        let n = &nodes[0];
+    fn gravity_derivative(&self, ctx: &Context, k: usize, local: &Local, dr: &mut LocalVector) {
+        let n = &local.nodes[0];
         let mut w = Vec3::zeros();
         w[k] = -self.mass * ctx.gravity_scale;
         let wb = n.q.r.transpose() * w;
@@ -286,7 +286,6 @@ impl ElementParameters for RigidBody {
             Group::SE3 => wb,
             Group::R3xSO3 => w,
         };
-        dr.fill(0.0);
         dr.fixed_rows_mut::<3>(0).copy_from(&force);
         dr.fixed_rows_mut::<3>(3).copy_from(&(xt * wb));
     }

@@ -15,7 +15,7 @@
 
 use super::{
     central_difference, physical, Coefficients, Context, DerivativeMethod, ElementKernel,
-    ElementParameters, Mat12, NodeState, Vec12,
+    ElementParameters, Local, LocalMatrix, LocalVector, Mat12, NodeState, Vec12,
 };
 use crate::model::parameters::SpringParam;
 use crate::model::{NodeId, SpringDamper};
@@ -31,7 +31,7 @@ struct Geometry {
 }
 
 impl SpringDamper {
-    fn geometry(&self, ctx: &Context, nodes: &[NodeState; 2]) -> Geometry {
+    fn geometry(&self, ctx: &Context, nodes: &[NodeState]) -> Geometry {
         let (na, nb) = (&nodes[0], &nodes[1]);
         let pa = na.q.point(&self.point_a);
         let pb = nb.q.point(&self.point_b);
@@ -71,37 +71,43 @@ impl SpringDamper {
 }
 
 impl ElementKernel for SpringDamper {
-    fn nodes(&self) -> [Option<NodeId>; 2] {
-        [self.node_a, self.node_b]
+    fn n_slots(&self) -> usize {
+        2
+    }
+
+    fn node(&self, slot: usize) -> Option<NodeId> {
+        [self.node_a, self.node_b][slot]
     }
 
     fn evaluate(
         &self,
         ctx: &Context,
-        nodes: &[NodeState; 2],
-        r: &mut Vec12,
-        s: Option<(&Coefficients, &mut Mat12)>,
+        local: &Local,
+        r: &mut LocalVector,
+        s: Option<(&Coefficients, &mut LocalMatrix)>,
     ) {
+        let nodes = local.nodes;
         let geo = self.geometry(ctx, nodes);
         let tension = self.stiffness * (geo.l - self.rest_length) + self.damping * geo.ldot;
         let r_p = geo.g * tension;
         let dt = geo.g * self.stiffness + geo.h.transpose() * geo.v_p * self.damping;
         let k_p = geo.g * dt.transpose() + geo.h * tension;
         let c_p = geo.g * geo.g.transpose() * self.damping;
+        let (r_p, k_p, c_p) = (r_p.as_slice(), k_p.as_slice(), c_p.as_slice());
         physical::to_group(
             ctx.group,
             nodes,
-            self.active(),
-            &r_p,
-            Some(&k_p),
-            Some(&c_p),
+            &self.active(),
+            r_p,
+            Some(k_p),
+            Some(c_p),
             r,
             s,
         );
     }
 
-    fn potential_energy(&self, ctx: &Context, nodes: &[NodeState; 2]) -> f64 {
-        let e = self.geometry(ctx, nodes).l - self.rest_length;
+    fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
+        let e = self.geometry(ctx, local.nodes).l - self.rest_length;
         0.5 * self.stiffness * e * e
     }
 }
@@ -113,9 +119,10 @@ impl ElementParameters for SpringDamper {
         &self,
         ctx: &Context,
         p: SpringParam,
-        nodes: &[NodeState; 2],
-        dr: &mut Vec12,
+        local: &Local,
+        dr: &mut LocalVector,
     ) -> DerivativeMethod {
+        let nodes = local.nodes;
         let geo = self.geometry(ctx, nodes);
         let dt = match p {
             SpringParam::Stiffness => geo.l - self.rest_length,
@@ -128,14 +135,15 @@ impl ElementParameters for SpringDamper {
                 let scale = self.rest_length.max(geo.l).max(at.abs());
                 let scale = if scale > 1e-300 { scale } else { 1.0 };
                 let set = |s: &mut SpringDamper, v: f64| p.set(s, model_nodes, v);
-                return central_difference(self, ctx, nodes, (at, scale), set, dr);
+                return central_difference(self, ctx, local, (at, scale), set, dr);
             }
         };
+        let r_p = geo.g * dt;
         physical::to_group(
             ctx.group,
             nodes,
-            self.active(),
-            &(geo.g * dt),
+            &self.active(),
+            r_p.as_slice(),
             None,
             None,
             dr,

@@ -197,6 +197,8 @@ pub fn initial_accelerations(
             m: s,
             c: 0.0,
             k: 0.0,
+            x: 0.0,
+            xdot: s,
         },
         constraint_rhs: ConstraintRhs::Position,
         load_factor,

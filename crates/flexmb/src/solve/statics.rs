@@ -281,6 +281,8 @@ fn scaling(row_scale: f64, load_factor: f64) -> Scaling {
             m: 0.0,
             c: 0.0,
             k: row_scale,
+            x: row_scale,
+            xdot: 0.0,
         },
         constraint_rhs: ConstraintRhs::Position,
         load_factor,

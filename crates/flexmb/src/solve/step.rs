@@ -104,6 +104,8 @@ impl Start {
                 m: 1.0 / self.mass,
                 c: self.gp * self.scale,
                 k: self.scale,
+                x: self.scale,
+                xdot: 0.0,
             },
             constraint_rhs: ConstraintRhs::Position,
             load_factor: self.load_factor,
@@ -499,7 +501,13 @@ impl<'a> StepFunction<'a> {
                     .map(|(&(i, j), &v)| (i, j, v))
                     .collect::<Triplets>()
             };
-        let coef = |m, c, k| Coefficients { m, c, k };
+        let coef = |m, c, k| Coefficients {
+            m,
+            c,
+            k,
+            x: 0.0,
+            xdot: 0.0,
+        };
         // Position-level rows against the configuration: s (K_t + K_c) and B.
         let mut f_q = take(data, coef(0.0, 0.0, s), &|i, j| j < nd && i < nd + na);
         let f_mu = take(data, coef(0.0, 0.0, 0.0), &|i, j| {
