@@ -49,11 +49,10 @@ fn main() {
     let (layout, _) = prepare_layout(&file.model);
     let layout_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let n_rows = layout.n_rows;
+    let mut state = State::initial(&file.model, &layout);
     let mut data = Data::new(&file.model, layout).unwrap_or_else(|e| panic!("{e}"));
     let data_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let mut state = State::initial(&file.model, n_rows);
     initial_accelerations(
         &file.model,
         &mut data,

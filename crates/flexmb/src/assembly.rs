@@ -53,6 +53,10 @@ pub struct Scaling {
     /// Nodal viscous damping `alpha D v` with `D` the nodal masses and inertias
     /// ([`crate::Data::nodal_mass`]) [1/s]: used by pseudo-dynamic static analysis.
     pub nodal_damping: f64,
+    /// Factor on the elements' state equations (`h` in dynamics: a state equation written
+    /// as a rate then weighs like an increment; `row_scale` elsewhere). The element matrices
+    /// come with `row_scale` in their coefficients; their state rows are rescaled.
+    pub state_scale: f64,
 }
 
 /// The point at which the equations are assembled: every input is explicit, nothing is read
@@ -69,6 +73,9 @@ pub struct Iterate<'a> {
     /// Rows of `B(q_n)` at the start of the step (`n_rows`): the stabilized formulation's
     /// block of the position rows against the stabilization unknowns. Unused otherwise.
     pub b_start: &'a [Vec12],
+    /// The elements' states `x` and rates `xdot` (`n_states` each).
+    pub x: &'a [f64],
+    pub xdot: &'a [f64],
 }
 
 /// Where the entries of the iteration matrix go. The same traversal of elements and joints
@@ -147,6 +154,7 @@ impl Scaling {
         regularization: 0.0,
         velocity_scale: 1.0,
         nodal_damping: 0.0,
+        state_scale: 1.0,
     };
 }
 
@@ -202,6 +210,8 @@ pub fn pattern(model: &Model, layout: &Layout) -> Vec<(usize, usize)> {
         t: 0.0,
         lambda: &[],
         b_start: &[],
+        x: &[],
+        xdot: &[],
     };
     let out = Outputs {
         residual: &mut [],
@@ -254,14 +264,16 @@ fn traverse<S: Sink>(
     residual.iter_mut().for_each(|r| *r = 0.0);
     let mut s = Mat12::zeros();
     let n_dofs = layout.n_dofs;
-    for e in &layout.elements {
+    let state_offset = layout.state_offset();
+    for (e, &x_start) in layout.elements.iter().zip(&layout.state_start) {
         let kernel = e.kernel(model);
         let n_slots = kernel.n_slots();
         let dof = |k: usize| layout.dof(kernel.node(k));
         if S::EVALUATE {
-            buffers.gather(&kernel, it.nodes, (&[], &[], 0));
+            buffers.gather(&kernel, it.nodes, (it.x, it.xdot, x_start));
         }
         let (local, mut r, mut se) = buffers.split(kernel.n_local());
+        let n_states = local.x.len();
         if S::EVALUATE {
             let matrix = S::MATRIX.then_some((&sc.coef, &mut se));
             kernel.evaluate(&ctx, &local, &mut r, matrix);
@@ -272,9 +284,18 @@ fn traverse<S: Sink>(
                     }
                 }
             }
+            for i in 0..n_states {
+                residual[state_offset + x_start + i] = sc.state_scale * r[6 * n_slots + i];
+            }
         }
         if S::MATRIX {
             scatter_blocks(sink, n_slots, dof, |i, j| se[(i, j)]);
+            let n_states = kernel.n_states();
+            if n_states > 0 {
+                let ratio = sc.state_scale / sc.row_scale;
+                let xs = state_offset + x_start;
+                scatter_states(sink, (n_slots, n_states), dof, xs, ratio, &se);
+            }
         }
     }
     if S::EVALUATE && sc.nodal_damping > 0.0 {
@@ -422,8 +443,11 @@ fn traverse<S: Sink>(
             };
             sink.entry(k, k, v);
         }
-        for k in n_dofs..layout.n_unknowns() {
+        for k in n_dofs..state_offset {
             sink.entry(k, k, -sc.regularization);
+        }
+        for k in state_offset..layout.n_unknowns() {
+            sink.entry(k, k, 0.0);
         }
     }
 }
@@ -447,6 +471,41 @@ fn scatter_blocks<S: Sink>(
                     sink.entry(a + i, b + j, value(6 * ka + i, 6 * kb + j));
                 }
             }
+        }
+    }
+}
+
+/// Emits the blocks of an element's local matrix that involve its states (`n_slots` node
+/// slots, then `n_states` states, the first of which is unknown `xs`): the node rows against
+/// the state columns, then the state rows (times `ratio`) against the node columns and the
+/// state columns.
+#[inline]
+fn scatter_states<S: Sink>(
+    sink: &mut S,
+    (n_slots, n_states): (usize, usize),
+    dof: impl Fn(usize) -> Option<usize>,
+    xs: usize,
+    ratio: f64,
+    se: &crate::elements::LocalMatrix,
+) {
+    let n6 = 6 * n_slots;
+    for j in 0..n_states {
+        for ka in 0..n_slots {
+            let Some(a) = dof(ka) else { continue };
+            for i in 0..6 {
+                sink.entry(a + i, xs + j, se[(6 * ka + i, n6 + j)] * 1.0);
+            }
+        }
+    }
+    for i in 0..n_states {
+        for kb in 0..n_slots {
+            let Some(b) = dof(kb) else { continue };
+            for j in 0..6 {
+                sink.entry(xs + i, b + j, se[(n6 + i, 6 * kb + j)] * ratio);
+            }
+        }
+        for j in 0..n_states {
+            sink.entry(xs + i, xs + j, se[(n6 + i, n6 + j)] * ratio);
         }
     }
 }

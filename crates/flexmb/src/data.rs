@@ -4,12 +4,14 @@
 //! [`Layout`] numbers the unknowns of the Newton iteration in three blocks ([`Block`]):
 //!
 //! ```text
-//! [ node 0 (6) | ... | node n-1 (6) | multipliers (n_active) | stabilization (n_active) ]
+//! [ node 0 (6) | ... | node n-1 (6) | multipliers (n_active) | stabilization (n_active) | states (n_states) ]
 //! ```
 //!
-//! The last block exists only in the stabilized index-2 formulation (see
+//! The stabilization block exists only in the stabilized index-2 formulation (see
 //! [`crate::solve::dynamics`]): one unknown `zeta` per active row, with the velocity-level
-//! constraint as its equation. [`Layout::unknown`] names an index as an [`UnknownId`] (a
+//! constraint as its equation. The states block holds the first-order states that elements
+//! own ([`crate::elements::ElementKernel::n_states`]), element after element
+//! ([`Layout::state_start`]), each with its element's equation for it. [`Layout::unknown`] names an index as an [`UnknownId`] (a
 //! node component, a joint row's multiplier or stabilization unknown), which failures carry
 //! and [`Layout::describe`] puts in words.
 //!
@@ -59,12 +61,23 @@ pub struct Layout {
     pub node_rows: Vec<Vec<(usize, usize)>>,
     /// Force elements.
     pub elements: Vec<ElementRef>,
+    /// Index of each element's first state in `State::x` (one per element).
+    pub state_start: Vec<usize>,
+    /// Total first-order states.
+    pub n_states: usize,
 }
 
 impl Layout {
     /// The layout with all constraint rows active.
     pub fn new(model: &Model) -> Self {
         let (joint_rows, joint_row_start, n_rows) = joints::row_table(model);
+        let elements = ElementRef::all(model);
+        let mut state_start = Vec::with_capacity(elements.len());
+        let mut n_states = 0;
+        for e in &elements {
+            state_start.push(n_states);
+            n_states += crate::elements::ElementKernel::n_states(&e.kernel(model));
+        }
         let mut layout = Self {
             n_nodes: model.nodes.len(),
             n_dofs: 6 * model.nodes.len(),
@@ -76,7 +89,9 @@ impl Layout {
             n_active: n_rows,
             stabilized: false,
             node_rows: Vec::new(),
-            elements: ElementRef::all(model),
+            elements,
+            state_start,
+            n_states,
         };
         layout.rebuild_node_rows(model);
         layout
@@ -103,6 +118,11 @@ impl Layout {
 
     /// Total Newton unknowns.
     pub fn n_unknowns(&self) -> usize {
+        self.n_dofs + self.n_active * (1 + self.stabilized as usize) + self.n_states
+    }
+
+    /// Index of the first state unknown (and equation) in the Newton vector.
+    pub fn state_offset(&self) -> usize {
         self.n_dofs + self.n_active * (1 + self.stabilized as usize)
     }
 
@@ -175,6 +195,7 @@ impl Layout {
             Block::Multipliers => nd..nd + na,
             Block::Stabilization if self.stabilized => nd + na..nd + 2 * na,
             Block::Stabilization => nd + na..nd + na,
+            Block::States => self.state_offset()..self.n_unknowns(),
         }
     }
 
@@ -193,9 +214,18 @@ impl Layout {
         } else if i < nd + na {
             let (joint, row) = row(i - nd);
             UnknownId::Multiplier { joint, row }
-        } else {
+        } else if i < self.state_offset() {
             let (joint, row) = row(i - nd - na);
             UnknownId::Stabilization { joint, row }
+        } else {
+            let k = i - self.state_offset();
+            // the last element whose states start at or before k: it owns state k (an
+            // element without states shares its start with the next element)
+            let element = self.state_start.partition_point(|&s| s <= k) - 1;
+            UnknownId::State {
+                element,
+                index: (k - self.state_start[element]) as u16,
+            }
         }
     }
 
@@ -215,6 +245,11 @@ impl Layout {
                 "velocity-level constraint of {}",
                 self.describe_row(model, self.joint_row_start[joint.0] + row as usize)
             ),
+            UnknownId::State { element, index } => format!(
+                "state equation {} of {}",
+                index + 1,
+                self.elements[element].describe(model)
+            ),
         }
     }
 
@@ -233,6 +268,8 @@ pub enum Block {
     Multipliers,
     /// One stabilization unknown `zeta` per active row (stabilized index-2 form only).
     Stabilization,
+    /// The first-order states of the elements.
+    States,
 }
 
 /// One unknown of the Newton vector, by what it belongs to: the typed form of an index that
@@ -246,6 +283,9 @@ pub enum UnknownId {
     Multiplier { joint: JointId, row: u8 },
     /// Stabilization unknown of a joint's row; its equation is the row at velocity level.
     Stabilization { joint: JointId, row: u8 },
+    /// State `index` (0-based) of element `element` (index in [`Layout::elements`]); its
+    /// equation is the element's equation for it.
+    State { element: usize, index: u16 },
 }
 
 /// Everything derived from a model plus the solver workspaces.

@@ -47,9 +47,11 @@ pub fn energies(model: &Model, elements: &[ElementRef], state: &State) -> (f64, 
     let mut ke = 0.0;
     let mut pe = 0.0;
     let mut buffers = LocalBuffers::default();
+    let mut start = 0;
     for e in elements {
         let k = e.kernel(model);
-        buffers.gather(&k, &nodes, (&[], &[], 0));
+        buffers.gather(&k, &nodes, (&state.x, &state.xdot, start));
+        start += k.n_states();
         let local = buffers.local();
         ke += k.kinetic_energy(&ctx, &local);
         pe += k.potential_energy(&ctx, &local);

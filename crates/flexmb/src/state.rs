@@ -1,5 +1,7 @@
 //! The state: everything that changes during a run.
 
+use crate::data::Layout;
+use crate::elements::{Context, ElementKernel, LocalBuffers};
 use crate::model::Model;
 use flexmb_lie::{Frame, Group, Vec6};
 
@@ -20,12 +22,24 @@ pub struct State {
     pub a: Vec<Vec6>,
     /// Lagrange multipliers (unscaled, physical units of the rows' generalized forces).
     pub lambda: Vec<f64>,
+    /// First-order states of the elements (`n_states`, [`crate::data::Layout::state_start`]).
+    #[serde(default)]
+    pub x: Vec<f64>,
+    /// Their rates `xdot`.
+    #[serde(default)]
+    pub xdot: Vec<f64>,
+    /// Their algorithmic rates `w` of the first-order generalized-alpha scheme.
+    #[serde(default)]
+    pub w: Vec<f64>,
 }
 
 impl State {
-    /// The model's initial configuration and velocities; accelerations and multipliers zero
-    /// (see [`crate::solve::initial_accelerations`] for consistent ones).
-    pub fn initial(model: &Model, n_rows: usize) -> Self {
+    /// The model's initial configuration and velocities, and the elements' initial states
+    /// ([`crate::elements::ElementKernel::initial_states`]) of `layout`; accelerations,
+    /// rates and multipliers zero (see [`crate::solve::initial_accelerations`] for
+    /// consistent ones).
+    pub fn initial(model: &Model, layout: &Layout) -> Self {
+        let n_rows = layout.n_rows;
         let v = model
             .nodes
             .iter()
@@ -38,13 +52,31 @@ impl State {
             })
             .collect();
         let n = model.nodes.len();
-        Self {
+        let mut state = Self {
             t: 0.0,
             q: model.nodes.iter().map(|n| n.frame).collect(),
             v,
             vdot: vec![Vec6::zeros(); n],
             a: vec![Vec6::zeros(); n],
             lambda: vec![0.0; n_rows],
+            x: vec![0.0; layout.n_states],
+            xdot: vec![0.0; layout.n_states],
+            w: vec![0.0; layout.n_states],
+        };
+        if layout.n_states > 0 {
+            let nodes = crate::sensors::node_states(&state);
+            let ctx = Context::at(model, 0.0, 1.0);
+            let mut buffers = LocalBuffers::default();
+            for (e, &start) in layout.elements.iter().zip(&layout.state_start) {
+                let kernel = e.kernel(model);
+                let ns = kernel.n_states();
+                if ns > 0 {
+                    buffers.gather(&kernel, &nodes, (&[], &[], 0));
+                    let x = &mut state.x[start..start + ns];
+                    kernel.initial_states(&ctx, &buffers.local(), x);
+                }
+            }
         }
+        state
     }
 }

@@ -194,6 +194,7 @@ fn arc_length_follows_the_von_mises_truss_through_its_limit_points() {
             stiffness: k,
             damping: 0.0,
             rest_length: l0,
+            relaxation: None,
         });
     }
     m.loads.push(Load {

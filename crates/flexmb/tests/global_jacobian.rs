@@ -31,6 +31,8 @@ fn residual(
         t: 0.3,
         lambda,
         b_start: &[],
+        x: &[],
+        xdot: &[],
     };
     assemble(model, data, &it, sc, matrix);
     data.residual.clone()
@@ -97,6 +99,7 @@ fn assembled_stiffness_matches_finite_differences_of_the_residual() {
         regularization: 0.0,
         velocity_scale: 1.0,
         nodal_damping: 0.0,
+        state_scale: 1.0,
     };
     residual(&m, &mut data, &q0, &dq, &lambda, &sc, true);
     let mut dense = vec![vec![0.0; nu]; nu];

@@ -497,6 +497,7 @@ fn api_model() -> Model {
         stiffness: 1.0,
         damping: 0.0,
         rest_length: 1.0,
+        relaxation: None,
     });
     m.sensors.push(Sensor {
         name: "y".into(),

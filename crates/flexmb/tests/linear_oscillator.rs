@@ -27,6 +27,7 @@ fn oscillate(scheme: Scheme, rho_inf: f64) -> Vec<(f64, f64, f64)> {
         stiffness: 1.0,
         damping: 0.0,
         rest_length: 1.0,
+        relaxation: None,
     });
     let mut s = DynamicSettings::new(120.0 * PI, 0.1);
     s.rho_inf = rho_inf;

@@ -132,6 +132,7 @@ fn expected_model() -> Model {
         stiffness: 100.0,
         damping: 0.0,
         rest_length: 2f64.sqrt(),
+        relaxation: None,
     });
     let tip = to_top(Vec3::new(1.0, 1.0, 0.0));
     m.sensors.push(Sensor {

@@ -153,6 +153,8 @@ fn pattern(params: &Parameters, id: ParamId) -> String {
             SpringParam::RestLength => "spring.<s>.rest_length",
             SpringParam::PointA(_) => "spring.<s>.point_a.<k>",
             SpringParam::PointB(_) => "spring.<s>.point_b.<k>",
+            SpringParam::RelaxationStiffness => "spring.<s>.relaxation.stiffness",
+            SpringParam::RelaxationDamping => "spring.<s>.relaxation.damping",
         },
     };
     item.into()
@@ -296,6 +298,7 @@ fn mechanism(group: Group) -> Model {
         stiffness: 120.0,
         damping: 3.5,
         rest_length: 0.4,
+        relaxation: None,
     });
     m.springs.push(SpringDamper {
         name: "tether".into(),
@@ -306,6 +309,7 @@ fn mechanism(group: Group) -> Model {
         stiffness: 50.0,
         damping: 0.5,
         rest_length: 1.0,
+        relaxation: None,
     });
     m.loads.push(Load {
         name: "push".into(),

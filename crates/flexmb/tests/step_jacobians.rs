@@ -28,9 +28,11 @@ fn simulation(file: &str, overrides: &[&str], steps: usize) -> Simulation {
 }
 
 /// [`relative_difference`] row block by row block (equilibrium, constraints, velocity-level
-/// rows), so that rows of a small scale are not judged against the largest ones.
-fn blockwise(a: &[f64], b: &[f64], nd: usize, na: usize, floor: f64) -> f64 {
-    [0..nd, nd..nd + na, nd + na..a.len()]
+/// rows, element states), so that rows of a small scale are not judged against the largest
+/// ones.
+fn blockwise(a: &[f64], b: &[f64], layout: &Layout, floor: f64) -> f64 {
+    let (nd, na, so) = (layout.n_dofs, layout.n_active, layout.state_offset());
+    [0..nd, nd..nd + na, nd + na..so, so..a.len()]
         .into_iter()
         .filter(|r| !r.is_empty())
         .map(|r| relative_difference(&a[r.clone()], &b[r], floor))
@@ -66,13 +68,17 @@ fn check(name: &str, sim: &Simulation) {
     // difference of the residual, relative to its size, so that round-off in rows that sum
     // large forces does not pass for an error and a small block is not hidden by a large one.
     let jacobian = f.jacobian(&x, &mut data);
-    let (nd, na) = (layout.n_dofs, layout.n_active);
+    let (nd, na, so) = (layout.n_dofs, layout.n_active, layout.state_offset());
     type Selection<'a> = Box<dyn Fn(usize) -> bool + 'a>;
-    let kinds: [(&str, Selection); 5] = [
+    let kinds: [(&str, Selection); 6] = [
         ("translations", Box::new(move |i| i < nd && i % 6 < 3)),
         ("rotations", Box::new(move |i| i < nd && i % 6 >= 3)),
         ("multipliers", Box::new(move |i| (nd..nd + na).contains(&i))),
-        ("stabilization", Box::new(move |i| i >= nd + na)),
+        (
+            "stabilization",
+            Box::new(move |i| (nd + na..so).contains(&i)),
+        ),
+        ("element states", Box::new(move |i| i >= so)),
         ("all unknowns", Box::new(|_| true)),
     ];
     for (kind, selected) in kinds {
@@ -101,7 +107,7 @@ fn check(name: &str, sim: &Simulation) {
                 .zip(&rm)
                 .map(|(a, b)| (a - b) / (2.0 * eps))
                 .collect();
-            let d = blockwise(&ju, &fd, nd, na, 1e-12);
+            let d = blockwise(&ju, &fd, &layout, 1e-12);
             assert!(
                 d < 1e-6,
                 "{name}: dR/dx along the {kind} (trial {trial}) differs from finite differences by {d:e}"
@@ -110,11 +116,15 @@ fn check(name: &str, sim: &Simulation) {
     }
     // dR/ds_n along random tangents.
     let n = sim.state.q.len();
+    let ns = sim.state.x.len();
     let tangent = |rand: &mut dyn FnMut() -> f64| StartTangent {
         q: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
         v: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
         vdot: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
         a: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
+        x: (0..ns).map(|_| rand()).collect(),
+        xdot: (0..ns).map(|_| rand()).collect(),
+        w: (0..ns).map(|_| rand()).collect(),
     };
     for trial in 0..3 {
         let ds = tangent(&mut rand);
@@ -131,6 +141,11 @@ fn check(name: &str, sim: &Simulation) {
                 s.vdot[i] += ds.vdot[i] * (sign * eps);
                 s.a[i] += ds.a[i] * (sign * eps);
             }
+            for i in 0..ns {
+                s.x[i] += ds.x[i] * (sign * eps);
+                s.xdot[i] += ds.xdot[i] * (sign * eps);
+                s.w[i] += ds.w[i] * (sign * eps);
+            }
             s
         };
         let (sp, sm) = (moved(1.0), moved(-1.0));
@@ -143,7 +158,7 @@ fn check(name: &str, sim: &Simulation) {
             .zip(&rm)
             .map(|(a, b)| (a - b) / (2.0 * eps))
             .collect();
-        let d = blockwise(&jv, &fd, layout.n_dofs, layout.n_active, 1e-6);
+        let d = blockwise(&jv, &fd, &layout, 1e-6);
         assert!(d < 1e-5, "{name}: dR/ds_n (trial {trial}) differs by {d:e}");
         // <w, J ds> = <J^T w, ds>
         let w: Vec<f64> = (0..nu).map(|_| rand()).collect();
@@ -335,4 +350,63 @@ fn stabilized_step_jacobians_match_finite_differences() {
     // A driven revolute joint turning (the spin-up's hub): Phi_t depends on q.
     let sim = simulation("spin_up.toml", &["solver.formulation=index2"], 1000);
     check("spin-up, stabilized index 2", &sim);
+}
+
+/// Two bodies on SE(3) or R3xSO(3), the first on a spherical joint to the ground, joined by a
+/// spring-damper with a Maxwell branch between offset points (one element state), under
+/// gravity: the element-state block of the step.
+fn viscoelastic_pair(group: flexmb_lie::Group, stabilized: bool) -> Simulation {
+    use flexmb::model::{JointKind, Model, Relaxation, SpringDamper};
+    use flexmb_lie::{Frame, Mat3, Vec3};
+    let mut m = Model::new(group);
+    m.gravity = Vec3::new(0.0, 0.0, -9.81);
+    let a = m.add_node("a", Frame::new(Vec3::new(0.5, 0.0, 0.0), Mat3::identity()));
+    let b = m.add_node("b", Frame::new(Vec3::new(1.2, 0.3, -0.2), Mat3::identity()));
+    let inertia = Mat3::new(0.3, 0.01, 0.0, 0.01, 0.2, 0.02, 0.0, 0.02, 0.25);
+    m.add_body("a", a, 2.0, Vec3::new(0.05, 0.0, 0.0), inertia);
+    m.add_body("b", b, 1.0, Vec3::zeros(), inertia * 0.5);
+    m.add_joint(
+        "pivot",
+        JointKind::Spherical,
+        None,
+        Some(a),
+        Vec3::zeros(),
+        Mat3::identity(),
+        None,
+    );
+    m.springs.push(SpringDamper {
+        name: "mount".into(),
+        node_a: Some(a),
+        node_b: Some(b),
+        point_a: Vec3::new(0.1, 0.05, 0.0),
+        point_b: Vec3::new(-0.05, 0.0, 0.1),
+        stiffness: 300.0,
+        damping: 2.0,
+        rest_length: 0.6,
+        relaxation: Some(Relaxation {
+            stiffness: 500.0,
+            damping: 20.0,
+        }),
+    });
+    let mut s = flexmb::DynamicSettings::new(1.0, 1e-3);
+    if stabilized {
+        s.formulation = flexmb::solve::Formulation::StabilizedIndex2;
+    }
+    let mut sim = Simulation::new(&m, s).expect("starts");
+    for _ in 0..20 {
+        sim.step().expect("step");
+    }
+    sim
+}
+
+#[test]
+fn element_state_step_jacobians_match_finite_differences() {
+    for group in [flexmb_lie::Group::SE3, flexmb_lie::Group::R3xSO3] {
+        for stabilized in [false, true] {
+            let sim = viscoelastic_pair(group, stabilized);
+            assert_eq!(sim.data.layout.n_states, 1);
+            let name = format!("viscoelastic pair on {group:?}, stabilized {stabilized}");
+            check(&name, &sim);
+        }
+    }
 }

@@ -118,6 +118,19 @@ pub struct Context<'a> {
     pub load_scale: f64,
 }
 
+impl<'a> Context<'a> {
+    /// The context of `model` at time `t` with gravity and loads times `load_factor`.
+    pub fn at(model: &'a Model, t: f64, load_factor: f64) -> Self {
+        Self {
+            model,
+            group: model.group,
+            t,
+            gravity_scale: load_factor,
+            load_scale: load_factor,
+        }
+    }
+}
+
 /// The built-in force elements (enum dispatch), each with what it derives from the model
 /// once: a beam element carries its mass matrix (computed from its section by
 /// [`beam::mass_matrix`]), so that a [`Model`] holds no derived data. Built by
@@ -184,17 +197,15 @@ pub trait ElementKernel {
         r: &mut LocalVector,
         s: Option<(&Coefficients, &mut LocalMatrix)>,
     );
+    /// The element's states at the start of a run, from the initial kinematics in `local`
+    /// (its `x` and `xdot` empty); `x` is zero on entry.
+    fn initial_states(&self, _ctx: &Context, _local: &Local, _x: &mut [f64]) {}
     /// Kinetic energy \[J\].
     fn kinetic_energy(&self, _ctx: &Context, _local: &Local) -> f64 {
         0.0
     }
     /// Potential energy \[J\] (gravity, elastic).
     fn potential_energy(&self, _ctx: &Context, _local: &Local) -> f64 {
-        0.0
-    }
-    /// Energy dissipated per unit time \[W\] by the element's internal variables (the
-    /// power its states absorb), for an energy balance.
-    fn internal_dissipation(&self, _ctx: &Context, _local: &Local) -> f64 {
         0.0
     }
 }
@@ -211,7 +222,8 @@ pub struct LocalBuffers {
 
 impl LocalBuffers {
     /// Gathers the inputs of `kernel` from the kinematics of all nodes and from the states
-    /// and rates of all elements (`x`, `xdot`, the element's own starting at `state_start`).
+    /// and rates of all elements (`x`, `xdot`, the element's own starting at `state_start`;
+    /// both empty: zeros, where no states exist yet).
     #[inline]
     pub fn gather<K: ElementKernel + ?Sized>(
         &mut self,
@@ -226,7 +238,10 @@ impl LocalBuffers {
         let ns = kernel.n_states();
         self.x.clear();
         self.xdot.clear();
-        if ns > 0 {
+        if ns > 0 && x.is_empty() {
+            self.x.resize(ns, 0.0);
+            self.xdot.resize(ns, 0.0);
+        } else if ns > 0 {
             self.x.extend_from_slice(&x[state_start..state_start + ns]);
             self.xdot
                 .extend_from_slice(&xdot[state_start..state_start + ns]);
@@ -359,14 +374,14 @@ impl ElementKernel for Kernel<'_> {
     ) {
         dispatch!(self, k => k.evaluate(ctx, local, r, s))
     }
+    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+        dispatch!(self, k => k.initial_states(ctx, local, x))
+    }
     fn kinetic_energy(&self, ctx: &Context, local: &Local) -> f64 {
         dispatch!(self, k => k.kinetic_energy(ctx, local))
     }
     fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
         dispatch!(self, k => k.potential_energy(ctx, local))
-    }
-    fn internal_dissipation(&self, ctx: &Context, local: &Local) -> f64 {
-        dispatch!(self, k => k.internal_dissipation(ctx, local))
     }
 }
 

@@ -9,9 +9,22 @@
 //! ```
 //! (physical coordinates, see [`super::physical`]). Géradin & Cardona 2001, Sect. 6.3.
 //!
+//! **Maxwell branch** ([`crate::model::Relaxation`], viscoelastic relaxation; the standard
+//! linear solid when the spring is there too): a spring `k_m` in series with a damper
+//! `c_m`. The damper's elongation `z` is the element's one state, with its own equation
+//!
+//! ```text
+//! T = k (l - l0) + c ldot + k_m (l - l0 - z),     e = zdot - (k_m / c_m) (l - l0 - z) = 0,
+//! dr_p/dz = -k_m g,   de/dw_p = -(k_m / c_m) g^T,   de/dz = k_m / c_m,   de/dzdot = 1,
+//! ```
+//!
+//! and `k + k_m` in place of `k` in `K_p`. At the start the branch is unstressed
+//! (`z_0 = l(q_0) - l0`).
+//!
 //! **Parameter derivatives** ([`SpringParam`]): `dr_p/dk = (l - l0) g`, `dr_p/dc = ldot g`,
-//! `dr_p/dl0 = -k g`; the attachment points by the finite-difference default
-//! ([`super::central_difference`]).
+//! `dr_p/dl0 = -(k + k_m) g` (`de/dl0 = k_m / c_m`), `dr_p/dk_m = (l - l0 - z) g`
+//! (`de/dk_m = -(l - l0 - z) / c_m`), `de/dc_m = k_m (l - l0 - z) / c_m^2`; the attachment
+//! points by the finite-difference default ([`super::central_difference`]).
 
 use super::{
     central_difference, physical, Coefficients, Context, DerivativeMethod, ElementKernel,
@@ -19,7 +32,7 @@ use super::{
 };
 use crate::model::parameters::SpringParam;
 use crate::model::{NodeId, SpringDamper};
-use flexmb_lie::{so3::hat, Mat3, Vec3};
+use flexmb_lie::{so3::hat, Group, Mat3, Vec3};
 use nalgebra::SMatrix;
 
 struct Geometry {
@@ -68,6 +81,29 @@ impl SpringDamper {
     fn active(&self) -> [bool; 2] {
         [self.node_a.is_some(), self.node_b.is_some()]
     }
+
+    /// `(k_m, c_m, l - l0 - z)` of the Maxwell branch, if any.
+    fn branch(&self, geo: &Geometry, local: &Local) -> Option<(f64, f64, f64)> {
+        self.relaxation.map(|m| {
+            (
+                m.stiffness,
+                m.damping,
+                geo.l - self.rest_length - local.x[0],
+            )
+        })
+    }
+
+    /// `g` in group coordinates (`P^T g`), like a residual.
+    fn group_gradient(group: Group, nodes: &[NodeState], g: &Vec12) -> Vec12 {
+        let mut out = *g;
+        if group == Group::SE3 {
+            for a in 0..2 {
+                let t = nodes[a].q.r.transpose() * g.fixed_rows::<3>(6 * a);
+                out.fixed_rows_mut::<3>(6 * a).copy_from(&t);
+            }
+        }
+        out
+    }
 }
 
 impl ElementKernel for SpringDamper {
@@ -79,6 +115,16 @@ impl ElementKernel for SpringDamper {
         [self.node_a, self.node_b][slot]
     }
 
+    fn n_states(&self) -> usize {
+        self.relaxation.is_some() as usize
+    }
+
+    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+        if self.relaxation.is_some() {
+            x[0] = self.geometry(ctx, local.nodes).l - self.rest_length;
+        }
+    }
+
     fn evaluate(
         &self,
         ctx: &Context,
@@ -88,27 +134,69 @@ impl ElementKernel for SpringDamper {
     ) {
         let nodes = local.nodes;
         let geo = self.geometry(ctx, nodes);
-        let tension = self.stiffness * (geo.l - self.rest_length) + self.damping * geo.ldot;
+        let branch = self.branch(&geo, local);
+        let mut tension = self.stiffness * (geo.l - self.rest_length) + self.damping * geo.ldot;
+        let mut stiffness = self.stiffness;
+        if let Some((km, _, stretch)) = branch {
+            tension += km * stretch;
+            stiffness += km;
+        }
         let r_p = geo.g * tension;
-        let dt = geo.g * self.stiffness + geo.h.transpose() * geo.v_p * self.damping;
+        let dt = geo.g * stiffness + geo.h.transpose() * geo.v_p * self.damping;
         let k_p = geo.g * dt.transpose() + geo.h * tension;
         let c_p = geo.g * geo.g.transpose() * self.damping;
         let (r_p, k_p, c_p) = (r_p.as_slice(), k_p.as_slice(), c_p.as_slice());
+        let active = self.active();
+        let Some((km, cm, stretch)) = branch else {
+            physical::to_group(ctx.group, nodes, &active, r_p, Some(k_p), Some(c_p), r, s);
+            return;
+        };
+        r[12] = local.xdot[0] - km / cm * stretch;
+        let Some((coef, s)) = s else {
+            physical::to_group(
+                ctx.group,
+                nodes,
+                &active,
+                r_p,
+                Some(k_p),
+                Some(c_p),
+                r,
+                None,
+            );
+            return;
+        };
         physical::to_group(
             ctx.group,
             nodes,
-            &self.active(),
+            &active,
             r_p,
             Some(k_p),
             Some(c_p),
             r,
-            s,
+            Some((coef, &mut *s)),
         );
+        let g = Self::group_gradient(ctx.group, nodes, &geo.g);
+        for a in 0..2 {
+            let row = if active[a] {
+                nodes[a].t.transpose() * g.fixed_rows::<6>(6 * a) * (-km / cm * coef.k)
+            } else {
+                flexmb_lie::Vec6::zeros()
+            };
+            for i in 0..6 {
+                s[(6 * a + i, 12)] = -km * g[6 * a + i] * coef.x;
+                s[(12, 6 * a + i)] = row[i];
+            }
+        }
+        s[(12, 12)] = km / cm * coef.x + coef.xdot;
     }
 
     fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
-        let e = self.geometry(ctx, local.nodes).l - self.rest_length;
-        0.5 * self.stiffness * e * e
+        let geo = self.geometry(ctx, local.nodes);
+        let e = geo.l - self.rest_length;
+        let branch = self
+            .branch(&geo, local)
+            .map_or(0.0, |(km, _, s)| 0.5 * km * s * s);
+        0.5 * self.stiffness * e * e + branch
     }
 }
 
@@ -124,10 +212,15 @@ impl ElementParameters for SpringDamper {
     ) -> DerivativeMethod {
         let nodes = local.nodes;
         let geo = self.geometry(ctx, nodes);
-        let dt = match p {
-            SpringParam::Stiffness => geo.l - self.rest_length,
-            SpringParam::Damping => geo.ldot,
-            SpringParam::RestLength => -self.stiffness,
+        let branch = self.branch(&geo, local);
+        let (km, cm, stretch) = branch.unwrap_or((0.0, 1.0, 0.0));
+        // (dT/dp, de/dp)
+        let (dt, de) = match p {
+            SpringParam::Stiffness => (geo.l - self.rest_length, 0.0),
+            SpringParam::Damping => (geo.ldot, 0.0),
+            SpringParam::RestLength => (-self.stiffness - km, km / cm),
+            SpringParam::RelaxationStiffness => (stretch, -stretch / cm),
+            SpringParam::RelaxationDamping => (0.0, km * stretch / (cm * cm)),
             SpringParam::PointA(_) | SpringParam::PointB(_) => {
                 let model_nodes = &ctx.model.nodes;
                 let at = p.get(self, model_nodes);
@@ -149,6 +242,9 @@ impl ElementParameters for SpringDamper {
             dr,
             None,
         );
+        if branch.is_some() {
+            dr[12] = de;
+        }
         DerivativeMethod::Analytic
     }
 }

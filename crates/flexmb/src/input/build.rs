@@ -1101,6 +1101,7 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             stiffness,
             damping,
             rest_length,
+            relaxation: None,
         });
         origins.springs.push(Origin::of(&t));
     }

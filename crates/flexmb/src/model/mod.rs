@@ -148,6 +148,20 @@ pub struct SpringDamper {
     pub damping: f64,
     /// Rest length l0 \[m\], >= 0.
     pub rest_length: f64,
+    /// A Maxwell branch in parallel (viscoelastic relaxation), or none.
+    #[serde(default)]
+    pub relaxation: Option<Relaxation>,
+}
+
+/// A Maxwell branch: a spring `k_m` in series with a damper `c_m`, between the same points
+/// as the spring-damper it belongs to. Its internal variable is the damper's elongation `z`
+/// (one element state): branch force `k_m (l - l0 - z)`, `c_m zdot = k_m (l - l0 - z)`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Relaxation {
+    /// Branch stiffness k_m [N/m], > 0.
+    pub stiffness: f64,
+    /// Branch damping c_m [N s/m], > 0 (relaxation time `c_m / k_m`).
+    pub damping: f64,
 }
 
 /// Cross-section properties of a beam, in the section frame (x along the beam axis, y and z

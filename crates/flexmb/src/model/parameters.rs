@@ -139,6 +139,10 @@ pub enum SpringParam {
     PointA(usize),
     /// Component of attachment point B at t = 0, inertial \[m\].
     PointB(usize),
+    /// Stiffness of the Maxwell branch [N/m].
+    RelaxationStiffness,
+    /// Damping of the Maxwell branch [N s/m].
+    RelaxationDamping,
 }
 
 /// What a parameter is: its item and which of the item's quantities.
@@ -279,6 +283,13 @@ impl Parameters {
             }
             for k in 0..3 {
                 add(format!("point_b.{k}"), SpringParam::PointB(k));
+            }
+            if model.springs[i].relaxation.is_some() {
+                add(
+                    "relaxation.stiffness".into(),
+                    SpringParam::RelaxationStiffness,
+                );
+                add("relaxation.damping".into(), SpringParam::RelaxationDamping);
             }
         }
         reg
@@ -685,6 +696,8 @@ impl SpringParam {
             SpringParam::RestLength => spring.rest_length,
             SpringParam::PointA(k) => to_inertial(nodes, spring.node_a, &spring.point_a)[k],
             SpringParam::PointB(k) => to_inertial(nodes, spring.node_b, &spring.point_b)[k],
+            SpringParam::RelaxationStiffness => spring.relaxation.map_or(0.0, |m| m.stiffness),
+            SpringParam::RelaxationDamping => spring.relaxation.map_or(0.0, |m| m.damping),
         }
     }
 
@@ -701,6 +714,16 @@ impl SpringParam {
             SpringParam::RestLength => spring.rest_length = value,
             SpringParam::PointA(k) => point(spring.node_a, &mut spring.point_a, k),
             SpringParam::PointB(k) => point(spring.node_b, &mut spring.point_b, k),
+            SpringParam::RelaxationStiffness => {
+                if let Some(m) = &mut spring.relaxation {
+                    m.stiffness = value;
+                }
+            }
+            SpringParam::RelaxationDamping => {
+                if let Some(m) = &mut spring.relaxation {
+                    m.damping = value;
+                }
+            }
         }
     }
 }

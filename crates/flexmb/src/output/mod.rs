@@ -584,7 +584,7 @@ mod tests {
         let values = hard_values();
         let names: Vec<String> = (0..values.len()).map(|i| format!("s{i}")).collect();
         let model = crate::Model::new(flexmb_lie::Group::SE3);
-        let state = crate::State::initial(&model, 0);
+        let state = crate::State::initial(&model, &crate::data::Layout::new(&model));
         let mut files = ResultFiles::create(&out, "time", &model, &names).unwrap();
         // Each row: a time taken from the list and every value, rotated by the row number.
         for row in 0..5 {

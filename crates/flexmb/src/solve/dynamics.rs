@@ -46,7 +46,7 @@ use super::newton::{
 };
 use super::step;
 use crate::assembly::{assemble, Iterate};
-use crate::data::{Data, Layout};
+use crate::data::{Block, Data, Layout};
 use crate::elements::{NodeState, Vec12};
 use crate::error::{SettingsError, SolveError};
 use crate::model::Model;
@@ -493,9 +493,8 @@ impl Simulation {
         model.validate()?;
         settings.check()?;
         let (layout, warnings) = prepare_layout(&model);
-        let n_rows = layout.n_rows;
         let mut data = Data::new(&model, layout.clone())?;
-        let mut state = State::initial(&model, n_rows);
+        let mut state = State::initial(&model, &layout);
         initial_accelerations(&model, &mut data, &mut state, settings.load_factor_at(0.0))?;
         if settings.stabilized() {
             let mut stabilized = layout;
@@ -792,14 +791,9 @@ impl Simulation {
     fn step_unknowns_into(&self, x: &mut Vec<f64>) {
         let it = &self.integrator;
         let layout = &self.data.layout;
-        step::pack_unknowns(
-            layout,
-            it.scale,
-            &it.increments,
-            &self.state.lambda,
-            &it.zeta,
-            x,
-        );
+        let step = (&it.increments[..], &self.state.lambda[..], &it.zeta[..]);
+        let states = (&it.saved.x[..], &self.state.x[..]);
+        step::pack_unknowns(layout, it.scale, step, states, x);
     }
 
     /// Takes one step toward the next output time (or the end), reducing the step size
@@ -1012,6 +1006,7 @@ impl Simulation {
         ));
         step::predict(
             &self.params,
+            &start.first,
             h,
             &it.saved,
             extrapolate,
@@ -1089,8 +1084,8 @@ impl StepSystem<'_> {
     fn finish(&mut self, layout: &Layout) {
         self.update_total(layout);
         step::finish(
+            &self.start,
             self.model.group,
-            &self.start.params,
             self.saved,
             self.total,
             self.state,
@@ -1115,6 +1110,8 @@ impl NonlinearSystem for StepSystem<'_> {
             t: self.state.t,
             lambda: &self.state.lambda,
             b_start: self.b_start,
+            x: &self.state.x,
+            xdot: &self.state.xdot,
         };
         assemble(self.model, data, &it, &sc, matrix);
     }
@@ -1148,15 +1145,25 @@ impl NonlinearSystem for StepSystem<'_> {
             (mu, worst_mu) = (e, nd + w);
         }
         let zeta = if layout.stabilized {
-            weighted_norm(&dx[nd + na..], self.zeta, &|_| newton.atol, newton.rtol).0
+            let range = layout.block(Block::Stabilization);
+            weighted_norm(&dx[range], self.zeta, &|_| newton.atol, newton.rtol).0
         } else {
             0.0
         };
+        let states = &dx[layout.block(Block::States)];
+        let (x, worst_x) = weighted_norm(states, &self.state.x, &|_| newton.atol, newton.rtol);
+        let worst = if x > q.max(mu) {
+            layout.state_offset() + worst_x
+        } else if q >= mu {
+            worst_q
+        } else {
+            worst_mu
+        };
         Norms {
-            blocks: [q, mu, zeta, 0.0],
-            n: 3,
+            blocks: [q, mu, zeta, x],
+            n: 4,
             multipliers: Some(1),
-            worst: if q >= mu { worst_q } else { worst_mu },
+            worst,
         }
     }
 
@@ -1176,6 +1183,7 @@ impl NonlinearSystem for StepSystem<'_> {
         self.previous.h = 0.0;
         step::predict(
             &self.start.params,
+            &self.start.first,
             self.start.h,
             self.saved,
             None,

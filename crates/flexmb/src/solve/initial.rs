@@ -14,7 +14,7 @@ use super::newton::{
     NewtonError, NewtonPolicy, NewtonSettings, NewtonSolver, NonlinearSystem, Norms,
 };
 use crate::assembly::{assemble, ConstraintRhs, Iterate, Scaling};
-use crate::data::{Data, Layout};
+use crate::data::{Block, Data, Layout};
 use crate::elements::{Coefficients, NodeState};
 use crate::error::SolveError;
 use crate::joints;
@@ -147,6 +147,8 @@ pub fn reselect_redundant_rows(model: &Model, layout: &Layout, q: &[Frame]) -> O
 struct Accelerations<'a> {
     model: &'a Model,
     nodes: &'a [NodeState],
+    /// The elements' initial states, and zero rates.
+    states: (&'a [f64], &'a [f64]),
     t: f64,
     sc: Scaling,
     zeros: &'a [f64],
@@ -161,6 +163,8 @@ impl NonlinearSystem for Accelerations<'_> {
             t: self.t,
             lambda: self.zeros,
             b_start: &[],
+            x: self.states.0,
+            xdot: self.states.1,
         };
         assemble(self.model, data, &it, &self.sc, matrix);
     }
@@ -178,7 +182,9 @@ impl NonlinearSystem for Accelerations<'_> {
     }
 }
 
-/// Checks the initial conditions and computes consistent `vdot0`, `a0 = vdot0` and `lambda0`.
+/// Checks the initial conditions and computes consistent `vdot0`, `a0 = vdot0` and `lambda0`,
+/// and the rates of the element states `xdot0`, `w0 = xdot0` (their equations solved with
+/// the accelerations: `[M B^T 0; B 0 0; E_vd 0 E_xd] [vdot0; mu0; xdot0] = -[...]`).
 pub fn initial_accelerations(
     model: &Model,
     data: &mut Data,
@@ -190,6 +196,7 @@ pub fn initial_accelerations(
         n.vdot.fill(0.0);
     }
     let zeros = vec![0.0; data.layout.n_rows];
+    let no_rates = vec![0.0; data.layout.n_states];
     let s = 1.0 / mass_scale(model);
     let mut sc = Scaling {
         row_scale: s,
@@ -205,12 +212,15 @@ pub fn initial_accelerations(
         regularization: 0.0,
         velocity_scale: 1.0,
         nodal_damping: 0.0,
+        state_scale: s,
     };
     let mut it = Iterate {
         nodes: &nodes,
         t: state.t,
         lambda: &zeros,
         b_start: &[],
+        x: &state.x,
+        xdot: &no_rates,
     };
     assemble(model, data, &it, &sc, false);
     if let Some((row, v)) = worst(&data.phi) {
@@ -226,7 +236,7 @@ pub fn initial_accelerations(
     it.nodes = &nodes;
     assemble(model, data, &it, &sc, false);
     let nd = data.layout.n_dofs;
-    if let Some((k, v)) = worst(&data.residual[nd..]) {
+    if let Some((k, v)) = worst(&data.residual[data.layout.block(Block::Multipliers)]) {
         if v > VELOCITY_TOLERANCE {
             let desc = data.layout.describe_unknown(model, nd + k);
             return Err(SolveError::InconsistentInitialConditions(format!(
@@ -238,6 +248,7 @@ pub fn initial_accelerations(
     let mut system = Accelerations {
         model,
         nodes: &nodes,
+        states: (&state.x, &no_rates),
         t: state.t,
         sc,
         zeros: &zeros,
@@ -269,6 +280,9 @@ pub fn initial_accelerations(
     for (row, slot) in data.layout.row_unknown.iter().enumerate() {
         state.lambda[row] = slot.map_or(0.0, |k| x[nd + k] / s);
     }
+    let rates = &x[data.layout.block(Block::States)];
+    state.xdot.copy_from_slice(rates);
+    state.w.copy_from_slice(rates);
     Ok(())
 }
 

@@ -16,7 +16,7 @@ pub mod step;
 pub mod trajectory;
 
 pub use dynamics::{DynamicSettings, Formulation, IntoShared, Scheme, Simulation, Stats, StepInfo};
-pub use generalized_alpha::GaParameters;
+pub use generalized_alpha::{FirstOrderParameters, GaParameters};
 pub use initial::{initial_accelerations, prepare_layout};
 pub use newton::{NewtonError, NewtonSettings, Verification};
 pub use statics::{StaticMethod, StaticSettings, StaticStats, Statics};

@@ -289,6 +289,7 @@ fn scaling(row_scale: f64, load_factor: f64) -> Scaling {
         regularization: 0.0,
         velocity_scale: 1.0,
         nodal_damping: 0.0,
+        state_scale: row_scale,
     }
 }
 
@@ -311,6 +312,8 @@ impl LoadStep<'_> {
             t: load_factor,
             lambda: self.lambda,
             b_start: &[],
+            x: &[],
+            xdot: &[],
         };
         assemble(
             self.model,
@@ -352,6 +355,8 @@ impl NonlinearSystem for LoadStep<'_> {
                 t: lambda + delta,
                 lambda: self.lambda,
                 b_start: &[],
+                x: &[],
+                xdot: &[],
             };
             assemble(self.model, data, &it, &ahead, false);
             arc.load_derivative.clone_from(&data.residual);
@@ -465,9 +470,14 @@ impl Statics {
         model.validate()?;
         settings.check()?;
         let (layout, warnings) = prepare_layout(&model);
-        let n_rows = layout.n_rows;
+        if layout.n_states > 0 {
+            let element = layout.describe(&model, layout.unknown(layout.state_offset()));
+            return Err(SolveError::Unsupported(format!(
+                "static analysis does not solve for element states yet ({element}): use method = \"pseudo_dynamic\", which integrates them"
+            )));
+        }
+        let mut state = State::initial(&model, &layout);
         let mut data = Data::new(&model, layout)?;
-        let mut state = State::initial(&model, n_rows);
         for v in state.v.iter_mut() {
             *v = Vec6::zeros();
         }

@@ -31,7 +31,7 @@
 //! vectors and transposed vectors: what a forward sensitivity, a discrete adjoint and a
 //! transcription NLP call.
 
-use super::generalized_alpha::GaParameters;
+use super::generalized_alpha::{FirstOrderParameters, GaParameters};
 use super::DynamicSettings;
 use crate::assembly::{ConstraintRhs, Scaling};
 use crate::data::{Block, Layout};
@@ -45,6 +45,10 @@ use flexmb_lie::{Group, Mat6, Vec6};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Start {
     pub params: GaParameters,
+    /// The first-order scheme of the element states.
+    pub first: FirstOrderParameters,
+    /// `d xdot / d x` of the states: [`FirstOrderParameters::rate_coefficient`].
+    pub cx: f64,
     /// Step size \[s\].
     pub h: f64,
     /// `beta'`, `gamma'` of `h`.
@@ -71,8 +75,15 @@ impl Start {
     ) -> Self {
         let bp = params.beta_prime(h);
         let gp = params.gamma_prime(h);
+        let first = FirstOrderParameters::from_rho_inf(
+            settings
+                .scheme
+                .spectral_radius_at_infinity(settings.rho_inf),
+        );
         Self {
             params,
+            first,
+            cx: first.rate_coefficient(h),
             h,
             bp,
             gp,
@@ -105,13 +116,14 @@ impl Start {
                 c: self.gp * self.scale,
                 k: self.scale,
                 x: self.scale,
-                xdot: 0.0,
+                xdot: self.scale * self.cx,
             },
             constraint_rhs: ConstraintRhs::Position,
             load_factor: self.load_factor,
             regularization,
             velocity_scale: 1.0 / self.gp,
             nodal_damping: self.nodal_damping,
+            state_scale: self.h,
         }
     }
 }
@@ -120,10 +132,12 @@ impl Start {
 /// `(h_prev, vdot_{n-1}, lambda_{n-1})` when given: a closer start saves Newton iterations;
 /// the solution does not depend on it), `lambda_{n+1}` likewise, and the `v` and increment
 /// that the scheme gives for them. Writes `state.v`, `state.vdot`, `state.lambda` (`state`
-/// holds `s_n` on entry) and `dq`.
+/// holds `s_n` on entry) and `dq`; the element states: `xdot_{n+1} = xdot_n` and the `x`
+/// the first-order scheme gives for it (`state.x`, `state.xdot`).
 #[inline]
 pub fn predict(
     p: &GaParameters,
+    first: &FirstOrderParameters,
     h: f64,
     start: &State,
     extrapolate: Option<(f64, &[Vec6], &[f64])>,
@@ -151,17 +165,22 @@ pub fn predict(
             *l += (*l - lambda_prev[k]) * ratio;
         }
     }
+    for i in 0..start.x.len() {
+        let w1 = first.rate(start.xdot[i], start.xdot[i], start.w[i]);
+        state.xdot[i] = start.xdot[i];
+        state.x[i] = start.x[i] + first.increment(h, start.w[i], w1);
+    }
 }
 
-/// The Newton vector `x = (dq, mu, zeta)` of `layout` from the increments, the multipliers
-/// (`n_rows`, unscaled: `mu = s lambda` of the active rows) and the stabilization unknowns
-/// (`n_active`, or empty for zeros; ignored outside the stabilized formulation).
+/// The Newton vector `x = (dq, mu, zeta, dx)` of `layout` from the increments, the
+/// multipliers (`n_rows`, unscaled: `mu = s lambda` of the active rows), the stabilization
+/// unknowns (`n_active`, or empty for zeros; ignored outside the stabilized formulation) and
+/// the element states at both ends of the step (`dx = x_{n+1} - x_n`).
 pub fn pack_unknowns(
     layout: &Layout,
     scale: f64,
-    dq: &[f64],
-    lambda: &[f64],
-    zeta: &[f64],
+    (dq, lambda, zeta): (&[f64], &[f64], &[f64]),
+    (x_n, x_1): (&[f64], &[f64]),
     x: &mut Vec<f64>,
 ) {
     x.clear();
@@ -169,8 +188,9 @@ pub fn pack_unknowns(
     x.extend(layout.active_rows.iter().map(|&r| scale * lambda[r]));
     if layout.stabilized {
         x.extend_from_slice(zeta);
-        x.resize(layout.n_unknowns(), 0.0);
+        x.resize(layout.state_offset(), 0.0);
     }
+    x.extend(x_1.iter().zip(x_n).map(|(b, a)| b - a));
 }
 
 /// `dq + B(q_n)^T zeta` into `total` in the stabilized formulation, `dq` otherwise.
@@ -219,7 +239,8 @@ pub fn kinematics(
 }
 
 /// Applies a Newton correction `dx`: `dq += dx`, `v += gamma' dx`, `vdot += beta' dx`,
-/// `lambda += dmu / s`, and `zeta += dzeta` in the stabilized formulation.
+/// `lambda += dmu / s`, `zeta += dzeta` in the stabilized formulation, and on the element
+/// states `x += dx`, `xdot += c_x dx`.
 #[inline]
 pub fn correct(
     layout: &Layout,
@@ -249,13 +270,22 @@ pub fn correct(
             state.lambda[row] += dx[nd + k] / start.scale;
         }
     }
+    let dx_states = &dx[layout.block(Block::States)];
+    for (i, d) in dx_states.iter().enumerate() {
+        state.x[i] += d;
+        state.xdot[i] += start.cx * d;
+    }
 }
 
-/// End of the step: `q_{n+1} = q_n exp(total)` (re-orthonormalized) and the algorithmic
+/// End of the step: `q_{n+1} = q_n exp(total)` (re-orthonormalized), the algorithmic
 /// acceleration `a_{n+1} = (alpha_f vdot_n + (1 - alpha_f) vdot_{n+1} - alpha_m a_n) /
-/// (1 - alpha_m)`.
+/// (1 - alpha_m)` and the states' algorithmic rates `w_{n+1}` likewise.
 #[inline]
-pub fn finish(group: Group, p: &GaParameters, start: &State, total: &[f64], state: &mut State) {
+pub fn finish(step: &Start, group: Group, start: &State, total: &[f64], state: &mut State) {
+    let p = &step.params;
+    for i in 0..start.x.len() {
+        state.w[i] = step.first.rate(start.xdot[i], state.xdot[i], start.w[i]);
+    }
     for i in 0..start.q.len() {
         let inc = Vec6::from_column_slice(&total[6 * i..6 * i + 6]);
         let mut q = group.integrate(&start.q[i], &inc);
@@ -269,33 +299,45 @@ pub fn finish(group: Group, p: &GaParameters, start: &State, total: &[f64], stat
 
 /// A tangent (or, for the transposed products, a cotangent) of the start of a step `s_n`:
 /// right-trivialized perturbations of `q_n` (`q_n exp(q)`) and changes of `v_n`, `vdot_n`,
-/// `a_n`, one vector of 6 per node each.
+/// `a_n`, one vector of 6 per node each, and of the element states `x_n`, their rates
+/// `xdot_n` and algorithmic rates `w_n`, one per state each.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StartTangent {
     pub q: Vec<Vec6>,
     pub v: Vec<Vec6>,
     pub vdot: Vec<Vec6>,
     pub a: Vec<Vec6>,
+    pub x: Vec<f64>,
+    pub xdot: Vec<f64>,
+    pub w: Vec<f64>,
 }
 
 impl StartTangent {
-    pub fn zeros(n_nodes: usize) -> Self {
+    pub fn zeros(n_nodes: usize, n_states: usize) -> Self {
         let z = vec![Vec6::zeros(); n_nodes];
+        let zs = vec![0.0; n_states];
         Self {
             q: z.clone(),
             v: z.clone(),
             vdot: z.clone(),
             a: z,
+            x: zs.clone(),
+            xdot: zs.clone(),
+            w: zs,
         }
     }
 
     /// Euclidean inner product of the components.
     pub fn dot(&self, other: &Self) -> f64 {
         let d = |a: &[Vec6], b: &[Vec6]| a.iter().zip(b).map(|(x, y)| x.dot(y)).sum::<f64>();
+        let s = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
         d(&self.q, &other.q)
             + d(&self.v, &other.v)
             + d(&self.vdot, &other.vdot)
             + d(&self.a, &other.a)
+            + s(&self.x, &other.x)
+            + s(&self.xdot, &other.xdot)
+            + s(&self.w, &other.w)
     }
 }
 
@@ -326,6 +368,9 @@ struct Partials {
     f_v: Triplets,
     f_vd: Triplets,
     f_mu: Triplets,
+    /// The element states `x_{n+1}` and their rates `xdot_{n+1}` (all rows, state columns).
+    f_x: Triplets,
+    f_xd: Triplets,
     /// Tangent operators `T(total)` of the nodes' increments.
     t: Vec<Mat6>,
     /// Transports `G = Ad(exp(-total))`: `q_n exp(d) exp(total) = q_{n+1} exp(G d)`.
@@ -381,6 +426,7 @@ impl<'a> StepFunction<'a> {
         let mut dq = Vec::new();
         predict(
             &self.step.params,
+            &self.step.first,
             self.step.h,
             self.start,
             None,
@@ -388,8 +434,9 @@ impl<'a> StepFunction<'a> {
             &mut dq,
         );
         let mut x = Vec::new();
-        let lambda = &self.start.lambda;
-        pack_unknowns(self.layout, self.step.scale, &dq, lambda, &[], &mut x);
+        let step = (&dq[..], &self.start.lambda[..], &[][..]);
+        let states = (&self.start.x[..], &state.x[..]);
+        pack_unknowns(self.layout, self.step.scale, step, states, &mut x);
         x
     }
 
@@ -435,6 +482,14 @@ impl<'a> StepFunction<'a> {
         for (k, &row) in self.layout.active_rows.iter().enumerate() {
             end.lambda[row] = x[self.layout.n_dofs + k] / self.step.scale;
         }
+        let first = &self.step.first;
+        let dx = &x[self.layout.block(Block::States)];
+        for (i, d) in dx.iter().enumerate() {
+            let w1 = (d - h * (1.0 - first.gamma) * s0.w[i]) / (h * first.gamma);
+            end.x[i] = s0.x[i] + d;
+            end.xdot[i] = first.rate_from(s0.xdot[i], s0.w[i], w1);
+            end.w[i] = w1;
+        }
         (end, total)
     }
 
@@ -464,6 +519,8 @@ impl<'a> StepFunction<'a> {
             t: end.t,
             lambda: &end.lambda,
             b_start: &self.b_start,
+            x: &end.x,
+            xdot: &end.xdot,
         };
         crate::assembly::assemble(self.model, data, &it, sc, matrix);
     }
@@ -508,8 +565,12 @@ impl<'a> StepFunction<'a> {
             x: 0.0,
             xdot: 0.0,
         };
+        // The rows of the element states come after the velocity-level rows.
+        let so = layout.state_offset();
         // Position-level rows against the configuration: s (K_t + K_c) and B.
-        let mut f_q = take(data, coef(0.0, 0.0, s), &|i, j| j < nd && i < nd + na);
+        let mut f_q = take(data, coef(0.0, 0.0, s), &|i, j| {
+            j < nd && (i < nd + na || i >= so)
+        });
         let f_mu = take(data, coef(0.0, 0.0, 0.0), &|i, j| {
             i < nd && (nd..nd + na).contains(&j)
         });
@@ -518,10 +579,28 @@ impl<'a> StepFunction<'a> {
         let mut f_v = take(data, coef(0.0, s, 0.0), &|i, j| {
             j < nd && (i < nd || i >= nd + na)
         });
-        for e in f_v.iter_mut().filter(|e| e.0 >= nd + na) {
+        for e in f_v.iter_mut().filter(|e| e.0 >= nd + na && e.0 < so) {
             e.2 /= self.step.gp;
         }
-        let f_vd = take(data, coef(s, 0.0, 0.0), &|i, j| i < nd && j < nd);
+        let f_vd = take(data, coef(s, 0.0, 0.0), &|i, j| {
+            (i < nd || i >= so) && j < nd
+        });
+        let (f_x, f_xd) = if layout.n_states > 0 {
+            let x = Coefficients {
+                x: s,
+                ..coef(0.0, 0.0, 0.0)
+            };
+            let xd = Coefficients {
+                xdot: s,
+                ..coef(0.0, 0.0, 0.0)
+            };
+            (
+                take(data, x, &|_, j| j >= so),
+                take(data, xd, &|_, j| j >= so),
+            )
+        } else {
+            (Triplets::new(), Triplets::new())
+        };
         if layout.stabilized {
             self.velocity_rows_configuration(&nodes, &end, &mut f_q);
         }
@@ -530,6 +609,8 @@ impl<'a> StepFunction<'a> {
             f_v,
             f_vd,
             f_mu,
+            f_x,
+            f_xd,
             t,
             g,
         }
@@ -646,6 +727,8 @@ impl<'a> StepFunction<'a> {
         out.extend(p.f_v.iter().map(|&(i, j, v)| (i, j, v * self.step.gp)));
         out.extend(p.f_vd.iter().map(|&(i, j, v)| (i, j, v * self.step.bp)));
         out.extend(p.f_mu.iter().copied());
+        out.extend(p.f_x.iter().copied());
+        out.extend(p.f_xd.iter().map(|&(i, j, v)| (i, j, v * self.step.cx)));
         out
     }
 
@@ -684,6 +767,10 @@ impl<'a> StepFunction<'a> {
         dp: &[f64],
         data: &mut crate::Data,
     ) -> Vec<f64> {
+        assert_eq!(
+            self.layout.n_states, 0,
+            "parameter derivatives of models with element states are not implemented yet"
+        );
         use crate::parameter_derivatives::{constraint_force_derivative, residual_derivative};
         let layout = self.layout;
         let (nd, na) = (layout.n_dofs, layout.n_active);
@@ -752,6 +839,10 @@ impl<'a> StepFunction<'a> {
         w: &[f64],
         data: &mut crate::Data,
     ) -> Vec<f64> {
+        assert_eq!(
+            self.layout.n_states, 0,
+            "parameter derivatives of models with element states are not implemented yet"
+        );
         use crate::parameter_derivatives::{
             constraint_force_derivative, residual_derivative_transpose,
         };
@@ -836,7 +927,26 @@ impl<'a> StepFunction<'a> {
                 out[i] += v * d[j / 6][j % 6];
             }
         }
+        // States: x_{n+1} = x_n + dx; xdot_{n+1} = d_w w_n + d_xd xdot_n at fixed dx.
+        let (d_w, d_xd) = self.state_start_coefficients();
+        let so = self.layout.state_offset();
+        for &(i, j, v) in &p.f_x {
+            out[i] += v * ds.x[j - so];
+        }
+        for &(i, j, v) in &p.f_xd {
+            out[i] += v * (d_w * ds.w[j - so] + d_xd * ds.xdot[j - so]);
+        }
         out
+    }
+
+    /// Coefficients of `xdot_{n+1}` in `w_n` and `xdot_n` at fixed `dx = x_{n+1} - x_n`:
+    /// `w_{n+1} = (dx - h (1 - gamma) w_n) / (h gamma)` into
+    /// [`FirstOrderParameters::rate_from`].
+    fn state_start_coefficients(&self) -> (f64, f64) {
+        let f = &self.step.first;
+        let dw1 = -(1.0 - f.gamma) / f.gamma;
+        let d_w = ((1.0 - f.alpha_m) * dw1 + f.alpha_m) / (1.0 - f.alpha_f);
+        (d_w, -f.alpha_f / (1.0 - f.alpha_f))
     }
 
     /// `(dR/ds_n)^T w` at `x`.
@@ -857,11 +967,24 @@ impl<'a> StepFunction<'a> {
         for (i, j, v) in self.start_constraint_stiffness(x) {
             q[j / 6][j % 6] += v * tg[i / 6][i % 6];
         }
+        let ns = self.layout.n_states;
+        let so = self.layout.state_offset();
+        let (d_w, d_xd) = self.state_start_coefficients();
+        let (mut gx, mut gxd) = (vec![0.0; ns], vec![0.0; ns]);
+        for &(i, j, v) in &p.f_x {
+            gx[j - so] += v * w[i];
+        }
+        for &(i, j, v) in &p.f_xd {
+            gxd[j - so] += v * w[i];
+        }
         StartTangent {
             q,
             v: (0..n).map(|i| gv[i] * c1 + gvd[i] * c3).collect(),
             vdot: (0..n).map(|i| gvd[i] * c5).collect(),
             a: (0..n).map(|i| gv[i] * c2 + gvd[i] * c4).collect(),
+            x: gx,
+            xdot: gxd.iter().map(|g| g * d_xd).collect(),
+            w: gxd.iter().map(|g| g * d_w).collect(),
         }
     }
 }
