@@ -1,14 +1,16 @@
 //! Derivatives of the equations with respect to model parameters ([`Parameters`]).
 //!
-//! At given node kinematics `(q, v, vdot)` (one [`NodeState`] per model node, tangent
-//! operators identity), time `t`, multipliers `lambda` (one per constraint row, unscaled) and
-//! load factor, the unscaled equations of the time step and of statics are (Brüls & Cardona
-//! 2010, Eq. (37); velocity level: Arnold, Brüls & Cardona 2015, Sect. 3)
+//! At a [`Point`]: node kinematics `(q, v, vdot)` (one [`NodeState`] per model node, tangent
+//! operators identity), the element states `x` and rates `xdot`, time `t`, multipliers
+//! `lambda` (one per constraint row, unscaled) and load factor, the unscaled equations of the
+//! time step and of statics are (Brüls & Cardona 2010, Eq. (37); velocity level: Arnold,
+//! Brüls & Cardona 2015, Sect. 3)
 //!
 //! ```text
-//! R(p)   = r(q, v, vdot, t; p) + B(q; p)^T lambda      6 per node: equilibrium
+//! R(p)   = r(q, v, vdot, x, xdot, t; p) + B(q; p)^T lambda   6 per node: equilibrium
 //! Phi(p) = Phi(q, t; p)                                n_rows: position level
 //! psi(p) = B(q; p) v + Phi_t(q, t; p)                  n_rows: velocity level (stabilized index 2)
+//! E(p)   = e(q, v, vdot, x, xdot, t; p)                n_states: the elements' state equations
 //! ```
 //!
 //! with `r = M vdot - hat(v)^T M v + g_int(q, v) - g_ext(q, t)` the sum of the force elements'
@@ -43,7 +45,9 @@
 //! - M. Arnold, O. Brüls, A. Cardona, Error analysis of generalized-alpha Lie group time
 //!   integration methods for constrained mechanical systems, Numer. Math. 129 (2015), Sect. 3.
 
-use crate::elements::{Context, DerivativeMethod, ElementParameters, LocalBuffers, NodeState};
+use crate::elements::{
+    Context, DerivativeMethod, ElementParameters, ElementRef, LocalBuffers, NodeState,
+};
 use crate::joints::parameters::{ConstraintParameters, JointDerivative};
 use crate::joints::{self, Row};
 use crate::model::{Model, NodeId, ParamId, ParamKind, Parameters};
@@ -51,36 +55,44 @@ use nalgebra::DVector;
 
 /// One local term of a derivative.
 enum Piece<'a> {
-    /// `dr_e/dp` of an element on its node slots (6 entries per slot).
-    Element(&'a [Option<NodeId>], &'a [f64]),
+    /// `d[r_e; e_e]/dp` of an element on its node slots (6 entries per slot), then its states
+    /// (the first of which is state `.1` of the model).
+    Element(&'a [Option<NodeId>], usize, &'a [f64]),
     /// The derivatives of joint `j`'s rows.
     Joint(usize, &'a JointDerivative),
 }
 
-/// Where the derivatives are taken.
+/// Where the derivatives are taken (module documentation).
+#[derive(Clone, Copy, Debug)]
+pub struct Point<'a> {
+    /// Node kinematics (one per model node, tangent operators identity).
+    pub nodes: &'a [NodeState],
+    /// The element states and their rates (`n_states` each; both empty: zeros).
+    pub x: &'a [f64],
+    pub xdot: &'a [f64],
+    /// Time (the load factor in statics).
+    pub t: f64,
+    /// Multipliers, unscaled (`n_rows`; rows left out as redundant carry 0).
+    pub lambda: &'a [f64],
+    /// Factor on gravity and loads (1 in dynamics).
+    pub load_factor: f64,
+}
+
+/// A model and a point.
 struct At<'a> {
     model: &'a Model,
-    nodes: &'a [NodeState],
-    t: f64,
-    lambda: &'a [f64],
-    load_factor: f64,
+    point: &'a Point<'a>,
 }
 
 impl At<'_> {
     fn context(&self) -> Context<'_> {
-        Context {
-            model: self.model,
-            group: self.model.group,
-            t: self.t,
-            gravity_scale: self.load_factor,
-            load_scale: self.load_factor,
-        }
+        Context::at(self.model, self.point.t, self.point.load_factor)
     }
 
     /// The kinematics of two node slots (identity frame at rest for the ground).
     fn pair(&self, slots: [Option<NodeId>; 2]) -> [NodeState; 2] {
         let ground = NodeState::ground(Default::default());
-        slots.map(|s| s.map_or(ground, |n| self.nodes[n.0]))
+        slots.map(|s| s.map_or(ground, |n| self.point.nodes[n.0]))
     }
 }
 
@@ -92,17 +104,19 @@ enum Wrt<P> {
     Gravity(usize),
 }
 
-/// One element's term: its derivative at the kinematics of its nodes, to `sink`.
+/// One element's term (the element and the index of its first state): its derivative at the
+/// kinematics of its nodes and its states, to `sink`.
 fn element_term<E: ElementParameters>(
     at: &At,
-    e: &E,
+    (e, state_start): (&E, usize),
     wrt: Wrt<E::Param>,
     sink: &mut dyn FnMut(Piece),
 ) -> DerivativeMethod {
     let ctx = at.context();
     let slots: Vec<_> = (0..e.n_slots()).map(|k| e.node(k)).collect();
     let mut buffers = LocalBuffers::default();
-    buffers.gather(e, at.nodes, (&[], &[], 0));
+    let p = at.point;
+    buffers.gather(e, p.nodes, (p.x, p.xdot, state_start));
     let local = buffers.local();
     let mut d = DVector::zeros(e.n_local());
     let mut dv = d.as_view_mut();
@@ -113,7 +127,7 @@ fn element_term<E: ElementParameters>(
             DerivativeMethod::Analytic
         }
     };
-    sink(Piece::Element(&slots, d.as_slice()));
+    sink(Piece::Element(&slots, state_start, d.as_slice()));
     method
 }
 
@@ -130,55 +144,60 @@ fn visit(
     match params.kind(id) {
         ParamKind::Gravity(k) => {
             for b in &model.bodies {
-                element_term(at, b, Wrt::Gravity(k), sink);
+                element_term(at, (b, 0), Wrt::Gravity(k), sink);
             }
             for b in &model.beams {
-                element_term(at, b, Wrt::Gravity(k), sink);
+                element_term(at, (b, 0), Wrt::Gravity(k), sink);
             }
             DerivativeMethod::Analytic
         }
         ParamKind::Node(..) => DerivativeMethod::Analytic,
-        ParamKind::Body(i, p) => element_term(at, &model.bodies[i], Wrt::Own(p), sink),
+        ParamKind::Body(i, p) => element_term(at, (&model.bodies[i], 0), Wrt::Own(p), sink),
         ParamKind::Beam(item, p) => {
             let mut method = DerivativeMethod::Analytic;
             for &e in params.beam_elements(item) {
-                method = element_term(at, &model.beams[e], Wrt::Own(p), sink);
+                method = element_term(at, (&model.beams[e], 0), Wrt::Own(p), sink);
             }
             method
         }
-        ParamKind::Load(i, p) => element_term(at, &model.loads[i], Wrt::Own(p), sink),
-        ParamKind::Spring(i, p) => element_term(at, &model.springs[i], Wrt::Own(p), sink),
+        ParamKind::Load(i, p) => element_term(at, (&model.loads[i], 0), Wrt::Own(p), sink),
+        ParamKind::Spring(i, p) => {
+            let spring = (&model.springs[i], ElementRef::spring_state_start(model, i));
+            element_term(at, spring, Wrt::Own(p), sink)
+        }
         ParamKind::Joint(j, p) => {
             let joint = &model.joints[j.0];
             let (rows, start) = (&rows[j.0], starts[j.0]);
             let nodes = at.pair([joint.node_a, joint.node_b]);
-            let lambda = &at.lambda[start..start + rows.len()];
-            let (d, method) = joint.parameter_derivative(model, rows, p, &nodes, at.t, lambda);
+            let (t, lambda) = (at.point.t, &at.point.lambda[start..start + rows.len()]);
+            let (d, method) = joint.parameter_derivative(model, rows, p, &nodes, t, lambda);
             sink(Piece::Joint(j.0, &d));
             method
         }
     }
 }
 
-/// `dR/dp` of the unscaled equations (module documentation) for one parameter, at the node
-/// kinematics `nodes` (one per model node, tangent operators identity), time `t` (the load
-/// factor in statics), multipliers `lambda` (`n_rows`, unscaled; rows left out as redundant
-/// carry 0) and `load_factor` (1 in dynamics). Overwrites `dr` (6 per node: equilibrium rows
-/// `r + B^T lambda`), `dphi` (`n_rows`: position-level `Phi`) and `dpsi` (`n_rows`:
-/// velocity-level `B v + Phi_t`; may be empty, then not computed). Returns how the local
-/// derivatives were obtained.
+/// The columns of [`residual_derivative`], overwritten: `dr` (6 per node: equilibrium rows
+/// `r + B^T lambda`), `dphi` (`n_rows`: position-level `Phi`), `dpsi` (`n_rows`:
+/// velocity-level `B v + Phi_t`; may be empty, then not computed) and `de` (`n_states`: the
+/// elements' state equations; may be empty, then not computed).
+pub struct Columns<'a> {
+    pub dr: &'a mut [f64],
+    pub dphi: &'a mut [f64],
+    pub dpsi: &'a mut [f64],
+    pub de: &'a mut [f64],
+}
+
+/// `dR/dp` of the unscaled equations (module documentation) for one parameter at `point`,
+/// into `out`. Returns how the local derivatives were obtained.
 pub fn residual_derivative(
     model: &Model,
     params: &Parameters,
     id: ParamId,
-    nodes: &[NodeState],
-    t: f64,
-    lambda: &[f64],
-    load_factor: f64,
-    dr: &mut [f64],
-    dphi: &mut [f64],
-    dpsi: &mut [f64],
+    point: &Point,
+    out: Columns,
 ) -> DerivativeMethod {
+    let Columns { dr, dphi, dpsi, de } = out;
     assert_eq!(dr.len(), 6 * model.nodes.len(), "dr: 6 per node");
     let (rows, starts, n_rows) = match params.kind(id) {
         ParamKind::Joint(..) => joints::row_table(model),
@@ -192,15 +211,16 @@ pub fn residual_derivative(
     dr.fill(0.0);
     dphi.fill(0.0);
     dpsi.fill(0.0);
-    let at = At {
-        model,
-        nodes,
-        t,
-        lambda,
-        load_factor,
-    };
+    de.fill(0.0);
+    let at = At { model, point };
     let mut sink = |piece: Piece| match piece {
-        Piece::Element(slots, d) => scatter(dr, slots, d),
+        Piece::Element(slots, x_start, d) => {
+            scatter(dr, slots, d);
+            let states = &d[6 * slots.len()..];
+            if !de.is_empty() {
+                de[x_start..x_start + states.len()].copy_from_slice(states);
+            }
+        }
         Piece::Joint(j, d) => {
             let joint = &model.joints[j];
             scatter(dr, &[joint.node_a, joint.node_b], d.dforce.as_slice());
@@ -231,12 +251,17 @@ pub fn constraint_force_derivative(
         return;
     }
     let (rows, starts, _) = joints::row_table(model);
-    let at = At {
-        model,
+    let point = Point {
         nodes,
+        x: &[],
+        xdot: &[],
         t,
         lambda: w,
         load_factor: 1.0,
+    };
+    let at = At {
+        model,
+        point: &point,
     };
     let mut sink = |piece: Piece| {
         if let Piece::Joint(j, d) = piece {
@@ -247,48 +272,55 @@ pub fn constraint_force_derivative(
     visit(&at, params, id, (&rows, &starts), &mut sink);
 }
 
-/// `J_p^T w` for every parameter: `grad[k] = w_r . dR/dp_k + w_phi . dPhi/dp_k + w_psi .
-/// dpsi/dp_k` (`grad`: one per parameter, overwritten), with the arguments of
-/// [`residual_derivative`]; `w_r` 6 per node, `w_phi` and `w_psi` one per constraint row
-/// (`w_psi` may be empty: no velocity-level rows). Costs one local derivative per parameter
-/// and item, never a dense column.
+/// The weights of [`residual_derivative_transpose`]: `r` 6 per node, `phi` and `psi` one per
+/// constraint row (`psi` may be empty: no velocity-level rows), `e` one per element state
+/// (may be empty: no state rows).
+#[derive(Clone, Copy, Debug)]
+pub struct Weights<'a> {
+    pub r: &'a [f64],
+    pub phi: &'a [f64],
+    pub psi: &'a [f64],
+    pub e: &'a [f64],
+}
+
+/// `J_p^T w` for every parameter: `grad[k] = w.r . dR/dp_k + w.phi . dPhi/dp_k + w.psi .
+/// dpsi/dp_k + w.e . dE/dp_k` (`grad`: one per parameter, overwritten) at `point`. Costs one
+/// local derivative per parameter and item, never a dense column.
 pub fn residual_derivative_transpose(
     model: &Model,
     params: &Parameters,
-    nodes: &[NodeState],
-    t: f64,
-    lambda: &[f64],
-    load_factor: f64,
-    (w_r, w_phi, w_psi): (&[f64], &[f64], &[f64]),
+    point: &Point,
+    w: Weights,
     grad: &mut [f64],
 ) {
     let (rows, starts, n_rows) = joints::row_table(model);
-    assert_eq!(w_r.len(), 6 * model.nodes.len(), "w_r: 6 per node");
-    assert_eq!(w_phi.len(), n_rows, "w_phi: one per constraint row");
+    assert_eq!(w.r.len(), 6 * model.nodes.len(), "w.r: 6 per node");
+    assert_eq!(w.phi.len(), n_rows, "w.phi: one per constraint row");
     assert!(
-        w_psi.is_empty() || w_psi.len() == n_rows,
-        "w_psi: one per row, or none"
+        w.psi.is_empty() || w.psi.len() == n_rows,
+        "w.psi: one per row, or none"
     );
     assert_eq!(grad.len(), params.len(), "grad: one per parameter");
-    let at = At {
-        model,
-        nodes,
-        t,
-        lambda,
-        load_factor,
-    };
+    let at = At { model, point };
     for id in params.ids() {
         let mut sum = 0.0;
         let mut sink = |piece: Piece| match piece {
-            Piece::Element(slots, d) => sum += gather_dot(w_r, slots, d),
+            Piece::Element(slots, x_start, d) => {
+                sum += gather_dot(w.r, slots, d);
+                if !w.e.is_empty() {
+                    let states = &d[6 * slots.len()..];
+                    let we = &w.e[x_start..x_start + states.len()];
+                    sum += we.iter().zip(states).map(|(a, b)| a * b).sum::<f64>();
+                }
+            }
             Piece::Joint(j, d) => {
                 let joint = &model.joints[j];
-                sum += gather_dot(w_r, &[joint.node_a, joint.node_b], d.dforce.as_slice());
+                sum += gather_dot(w.r, &[joint.node_a, joint.node_b], d.dforce.as_slice());
                 let s = starts[j];
                 for r in 0..d.n_rows {
-                    sum += w_phi[s + r] * d.dphi[r];
-                    if !w_psi.is_empty() {
-                        sum += w_psi[s + r] * d.dpsi[r];
+                    sum += w.phi[s + r] * d.dphi[r];
+                    if !w.psi.is_empty() {
+                        sum += w.psi[s + r] * d.dpsi[r];
                     }
                 }
             }

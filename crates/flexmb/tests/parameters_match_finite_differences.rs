@@ -16,7 +16,8 @@ use flexmb::model::{
     Parameters, SpringDamper, TimeFunction,
 };
 use flexmb::parameter_derivatives::{
-    constraint_force_derivative, residual_derivative, residual_derivative_transpose,
+    constraint_force_derivative, residual_derivative, residual_derivative_transpose, Columns,
+    Weights,
 };
 use flexmb_lie::{Frame, Group, Mat3, Mat6, Vec3, Vec6};
 use std::collections::BTreeSet;
@@ -28,15 +29,31 @@ use common::Lcg;
 /// Where the equations are evaluated.
 struct Point {
     nodes: Vec<NodeState>,
+    /// Element states and rates.
+    x: Vec<f64>,
+    xdot: Vec<f64>,
     t: f64,
     lambda: Vec<f64>,
     load_factor: f64,
 }
 
-/// The unscaled equations `(r + B^T lambda, Phi, B v + Phi_t)` of `model` at `at`: the sum of
-/// the element kernels (with their mass matrices as the assembly builds them) and the joint
-/// rows, in joint order.
-fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+impl Point {
+    fn view(&self) -> flexmb::parameter_derivatives::Point<'_> {
+        flexmb::parameter_derivatives::Point {
+            nodes: &self.nodes,
+            x: &self.x,
+            xdot: &self.xdot,
+            t: self.t,
+            lambda: &self.lambda,
+            load_factor: self.load_factor,
+        }
+    }
+}
+
+/// The unscaled equations `(r + B^T lambda, Phi, B v + Phi_t, e)` of `model` at `at`: the sum
+/// of the element kernels (with their mass matrices as the assembly builds them) and the
+/// joint rows, in joint order, and the elements' state equations in element order.
+fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
     let ctx = Context {
         model,
         group: model.group,
@@ -57,6 +74,7 @@ fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
             }
         }
     };
+    let mut e_rows = vec![];
     for e in ElementRef::all(model) {
         let kernel = e.kernel(model);
         let slots: Vec<_> = (0..kernel.n_slots()).map(|k| kernel.node(k)).collect();
@@ -64,8 +82,15 @@ fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
             .iter()
             .map(|s| s.map_or(NodeState::ground(Frame::identity()), |n| at.nodes[n.0]))
             .collect();
-        let (local, _) = evaluate_owned(&kernel, &ctx, &Local::nodes(&nodes), None);
+        let states = e_rows.len()..e_rows.len() + kernel.n_states();
+        let local = Local {
+            nodes: &nodes,
+            x: &at.x[states.clone()],
+            xdot: &at.xdot[states],
+        };
+        let (local, _) = evaluate_owned(&kernel, &ctx, &local, None);
         add(&slots, local.as_slice());
+        e_rows.extend_from_slice(&local.as_slice()[6 * slots.len()..]);
     }
     let (mut phi, mut psi) = (vec![], vec![]);
     for joint in &model.joints {
@@ -88,7 +113,7 @@ fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
         }
         add(&slots, force.as_slice());
     }
-    (r, phi, psi)
+    (r, phi, psi, e_rows)
 }
 
 fn n_rows(model: &Model) -> usize {
@@ -108,8 +133,11 @@ fn point(model: &Model, rng: &mut Lcg, spread: f64) -> Point {
             t: Mat6::identity(),
         })
         .collect();
+    let n_states = flexmb::data::Layout::new(model).n_states;
     Point {
         nodes,
+        x: (0..n_states).map(|_| 0.2 * rng.next()).collect(),
+        xdot: (0..n_states).map(|_| rng.next()).collect(),
         t: 0.37,
         lambda: (0..n_rows(model)).map(|_| rng.next() * 10.0).collect(),
         load_factor: 0.8,
@@ -183,37 +211,31 @@ fn relative_error(a: &[f64], b: &[f64]) -> (f64, f64) {
 /// constraint-force term against the columns of joint parameters.
 fn check_model(name: &str, model: &Model, at: &Point, seen: &mut Seen) {
     let params = Parameters::new(model);
-    let (nd, nr) = (6 * model.nodes.len(), n_rows(model));
+    let (nd, nr, ns) = (6 * model.nodes.len(), n_rows(model), at.x.len());
     let mut rng = Lcg(99);
     let w_r: Vec<f64> = (0..nd).map(|_| rng.next()).collect();
     let w_phi: Vec<f64> = (0..nr).map(|_| rng.next()).collect();
     let w_psi: Vec<f64> = (0..nr).map(|_| rng.next()).collect();
+    let w_e: Vec<f64> = (0..ns).map(|_| rng.next()).collect();
     let mut grad = vec![0.0; params.len()];
-    residual_derivative_transpose(
-        model,
-        &params,
-        &at.nodes,
-        at.t,
-        &at.lambda,
-        at.load_factor,
-        (&w_r, &w_phi, &w_psi),
-        &mut grad,
-    );
+    let weights = Weights {
+        r: &w_r,
+        phi: &w_phi,
+        psi: &w_psi,
+        e: &w_e,
+    };
+    residual_derivative_transpose(model, &params, &at.view(), weights, &mut grad);
     for id in params.ids() {
         let path = params.path(id);
         let (mut dr, mut dphi, mut dpsi) = (vec![0.0; nd], vec![0.0; nr], vec![0.0; nr]);
-        let method = residual_derivative(
-            model,
-            &params,
-            id,
-            &at.nodes,
-            at.t,
-            &at.lambda,
-            at.load_factor,
-            &mut dr,
-            &mut dphi,
-            &mut dpsi,
-        );
+        let mut de = vec![0.0; ns];
+        let columns = Columns {
+            dr: &mut dr,
+            dphi: &mut dphi,
+            dpsi: &mut dpsi,
+            de: &mut de,
+        };
+        let method = residual_derivative(model, &params, id, &at.view(), columns);
         let kind = pattern(&params, id);
         if method == DerivativeMethod::FiniteDifference {
             seen.by_differences.insert(kind.clone());
@@ -231,11 +253,12 @@ fn check_model(name: &str, model: &Model, at: &Point, seen: &mut Seen) {
         let fd = |a: &[f64], b: &[f64]| -> Vec<f64> {
             a.iter().zip(b).map(|(x, y)| (x - y) / (2.0 * h)).collect()
         };
-        let analytic: Vec<f64> = [&dr[..], &dphi, &dpsi].concat();
+        let analytic: Vec<f64> = [&dr[..], &dphi, &dpsi, &de].concat();
         let differences = [
             fd(&plus.0, &minus.0),
             fd(&plus.1, &minus.1),
             fd(&plus.2, &minus.2),
+            fd(&plus.3, &minus.3),
         ];
         let differences = differences.concat();
         let (diff, scale) = relative_error(&analytic, &differences);
@@ -255,7 +278,7 @@ fn check_model(name: &str, model: &Model, at: &Point, seen: &mut Seen) {
         }
 
         let dot = |w: &[f64], d: &[f64]| w.iter().zip(d).map(|(a, b)| a * b).sum::<f64>();
-        let column = dot(&w_r, &dr) + dot(&w_phi, &dphi) + dot(&w_psi, &dpsi);
+        let column = dot(&w_r, &dr) + dot(&w_phi, &dphi) + dot(&w_psi, &dpsi) + dot(&w_e, &de);
         let g = grad[id.0 as usize];
         assert!(
             (g - column).abs() <= 1e-12 * (1.0 + column.abs()),
@@ -273,7 +296,7 @@ fn check_model(name: &str, model: &Model, at: &Point, seen: &mut Seen) {
 }
 
 /// Two bodies (offset centres of mass, full inertias), springs between them and to the
-/// ground, a dead load with a sine and a follower load with a table, gravity, a revolute
+/// ground (the latter with a Maxwell branch: one element state), a dead load with a sine and a follower load with a table, gravity, a revolute
 /// joint between the bodies, a driven revolute and a driven prismatic joint to the ground.
 fn mechanism(group: Group) -> Model {
     let mut m = Model::new(group);
@@ -309,7 +332,10 @@ fn mechanism(group: Group) -> Model {
         stiffness: 50.0,
         damping: 0.5,
         rest_length: 1.0,
-        relaxation: None,
+        relaxation: Some(flexmb::model::Relaxation {
+            stiffness: 30.0,
+            damping: 4.0,
+        }),
     });
     m.loads.push(Load {
         name: "push".into(),
@@ -469,5 +495,5 @@ fn parameter_kinds_by_finite_differences_are_the_listed_ones() {
             "spring.<s>.point_b.<k>"
         ]
     );
-    assert_eq!(seen.kinds.len(), 23, "kinds checked: {:#?}", seen.kinds);
+    assert_eq!(seen.kinds.len(), 25, "kinds checked: {:#?}", seen.kinds);
 }

@@ -302,6 +302,10 @@ fn step_parameter_derivatives_match_finite_differences() {
         let sim = simulation(file, overrides, 3);
         paths.extend(check_parameters(file, &sim));
     }
+    for stabilized in [false, true] {
+        let sim = viscoelastic_pair(flexmb_lie::Group::SE3, stabilized);
+        paths.extend(check_parameters("viscoelastic pair", &sim));
+    }
     let covered = kinds(&paths);
     for kind in [
         "body.mass",
@@ -313,6 +317,10 @@ fn step_parameter_derivatives_match_finite_differences() {
         "beam.section.EA",
         "beam.section.rhoA",
         "beam.damping.stiffness",
+        "spring.stiffness",
+        "spring.rest_length",
+        "spring.relaxation.stiffness",
+        "spring.relaxation.damping",
     ] {
         assert!(covered.contains(kind), "{kind} not covered: {covered:?}");
     }

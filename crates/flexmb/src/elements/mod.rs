@@ -211,13 +211,28 @@ pub trait ElementKernel {
 }
 
 /// Reused storage for one element's [`Local`] inputs and its local vector and matrix.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct LocalBuffers {
+    /// The kinematics of a ground slot (built once).
+    ground: NodeState,
     nodes: Vec<NodeState>,
     x: Vec<f64>,
     xdot: Vec<f64>,
     r: Vec<f64>,
     s: Vec<f64>,
+}
+
+impl Default for LocalBuffers {
+    fn default() -> Self {
+        Self {
+            ground: NodeState::ground(Frame::identity()),
+            nodes: Vec::new(),
+            x: Vec::new(),
+            xdot: Vec::new(),
+            r: Vec::new(),
+            s: Vec::new(),
+        }
+    }
 }
 
 impl LocalBuffers {
@@ -231,17 +246,21 @@ impl LocalBuffers {
         nodes: &[NodeState],
         (x, xdot, state_start): (&[f64], &[f64], usize),
     ) {
-        let ground = NodeState::ground(Default::default());
         self.nodes.clear();
-        self.nodes
-            .extend((0..kernel.n_slots()).map(|k| kernel.node(k).map_or(ground, |n| nodes[n.0])));
+        for k in 0..kernel.n_slots() {
+            let node = kernel.node(k).map_or(&self.ground, |n| &nodes[n.0]);
+            self.nodes.push(*node);
+        }
         let ns = kernel.n_states();
         self.x.clear();
         self.xdot.clear();
-        if ns > 0 && x.is_empty() {
+        if ns == 0 {
+            return;
+        }
+        if x.is_empty() {
             self.x.resize(ns, 0.0);
             self.xdot.resize(ns, 0.0);
-        } else if ns > 0 {
+        } else {
             self.x.extend_from_slice(&x[state_start..state_start + ns]);
             self.xdot
                 .extend_from_slice(&xdot[state_start..state_start + ns]);
@@ -298,6 +317,16 @@ pub fn evaluate_owned<K: ElementKernel + ?Sized>(
 }
 
 impl ElementRef {
+    /// The index of spring `i`'s first state in `State::x`: the states of the springs before
+    /// it (in the order of [`ElementRef::all`], bodies, beams and loads come first and own
+    /// none). The same as [`crate::data::Layout::state_start`] of the spring.
+    pub fn spring_state_start(model: &Model, i: usize) -> usize {
+        model.springs[..i]
+            .iter()
+            .map(|s| s.relaxation.is_some() as usize)
+            .sum()
+    }
+
     /// All force elements of a model (beam mass matrices computed here).
     pub fn all(model: &Model) -> Vec<ElementRef> {
         let mut out: Vec<ElementRef> = (0..model.bodies.len()).map(ElementRef::Body).collect();

@@ -742,6 +742,22 @@ impl<'a> StepFunction<'a> {
         (end, nodes)
     }
 
+    /// The [`crate::parameter_derivatives::Point`] of the end of the step.
+    fn derivative_point<'p>(
+        &self,
+        end: &'p State,
+        nodes: &'p [NodeState],
+    ) -> crate::parameter_derivatives::Point<'p> {
+        crate::parameter_derivatives::Point {
+            nodes,
+            x: &end.x,
+            xdot: &end.xdot,
+            t: end.t,
+            lambda: &end.lambda,
+            load_factor: self.step.load_factor,
+        }
+    }
+
     /// The stabilization unknowns of `x` as one weight per constraint row (0 for the rows
     /// left out).
     fn zeta_rows(&self, x: &[f64]) -> Vec<f64> {
@@ -757,9 +773,10 @@ impl<'a> StepFunction<'a> {
     /// `(dR/dp) dp` at `x`, `dp` one entry per parameter of `params` (a
     /// [`crate::model::parameters::Parameters`] of this model): `s dr/dp` on the
     /// equilibrium rows, `dPhi/dp` on the constraint rows and `dpsi/dp / gamma'` on the
-    /// velocity-level rows (with `r + B^T lambda`, `Phi` and `psi = B v + Phi_t` at the end
-    /// of the step, [`crate::parameter_derivatives`]), and in the stabilized form the move
-    /// of `q_{n+1} = q_n exp(dq + B(q_n; p)^T zeta)`: `F_q T d(B(q_n)^T zeta)/dp`.
+    /// velocity-level rows, `h de/dp` on the element states' rows (with `r + B^T lambda`,
+    /// `Phi`, `psi = B v + Phi_t` and `e` at the end of the step,
+    /// [`crate::parameter_derivatives`]), and in the stabilized form the move of
+    /// `q_{n+1} = q_n exp(dq + B(q_n; p)^T zeta)`: `F_q T d(B(q_n)^T zeta)/dp`.
     pub fn parameter_jvp(
         &self,
         x: &[f64],
@@ -767,18 +784,18 @@ impl<'a> StepFunction<'a> {
         dp: &[f64],
         data: &mut crate::Data,
     ) -> Vec<f64> {
-        assert_eq!(
-            self.layout.n_states, 0,
-            "parameter derivatives of models with element states are not implemented yet"
-        );
-        use crate::parameter_derivatives::{constraint_force_derivative, residual_derivative};
+        use crate::parameter_derivatives::{
+            constraint_force_derivative, residual_derivative, Columns,
+        };
         let layout = self.layout;
-        let (nd, na) = (layout.n_dofs, layout.n_active);
+        let (nd, na, so) = (layout.n_dofs, layout.n_active, layout.state_offset());
         let (end, nodes) = self.parameter_point(x);
+        let point = self.derivative_point(&end, &nodes);
         let zeta = self.zeta_rows(x);
         let mut dr = vec![0.0; nd];
         let mut dphi = vec![0.0; layout.n_rows];
         let mut dpsi = vec![0.0; if layout.stabilized { layout.n_rows } else { 0 }];
+        let mut de = vec![0.0; layout.n_states];
         let mut dforce = vec![0.0; nd];
         let mut out = vec![0.0; layout.n_unknowns()];
         let mut dtotal = vec![0.0; nd];
@@ -786,20 +803,18 @@ impl<'a> StepFunction<'a> {
             if d == 0.0 {
                 continue;
             }
-            residual_derivative(
-                self.model,
-                params,
-                id,
-                &nodes,
-                end.t,
-                &end.lambda,
-                self.step.load_factor,
-                &mut dr,
-                &mut dphi,
-                &mut dpsi,
-            );
+            let columns = Columns {
+                dr: &mut dr,
+                dphi: &mut dphi,
+                dpsi: &mut dpsi,
+                de: &mut de,
+            };
+            residual_derivative(self.model, params, id, &point, columns);
             for i in 0..nd {
                 out[i] += d * self.step.scale * dr[i];
+            }
+            for (k, e) in de.iter().enumerate() {
+                out[so + k] += d * self.step.h * e;
             }
             for (k, &row) in layout.active_rows.iter().enumerate() {
                 out[nd + k] += d * dphi[row];
@@ -839,17 +854,18 @@ impl<'a> StepFunction<'a> {
         w: &[f64],
         data: &mut crate::Data,
     ) -> Vec<f64> {
-        assert_eq!(
-            self.layout.n_states, 0,
-            "parameter derivatives of models with element states are not implemented yet"
-        );
         use crate::parameter_derivatives::{
-            constraint_force_derivative, residual_derivative_transpose,
+            constraint_force_derivative, residual_derivative_transpose, Weights,
         };
         let layout = self.layout;
         let (nd, na) = (layout.n_dofs, layout.n_active);
         let (end, nodes) = self.parameter_point(x);
+        let point = self.derivative_point(&end, &nodes);
         let w_r: Vec<f64> = w[..nd].iter().map(|v| v * self.step.scale).collect();
+        let w_e: Vec<f64> = w[layout.block(Block::States)]
+            .iter()
+            .map(|v| v * self.step.h)
+            .collect();
         let mut w_phi = vec![0.0; layout.n_rows];
         let mut w_psi = vec![0.0; if layout.stabilized { layout.n_rows } else { 0 }];
         for (k, &row) in layout.active_rows.iter().enumerate() {
@@ -859,16 +875,13 @@ impl<'a> StepFunction<'a> {
             }
         }
         let mut grad = vec![0.0; params.len()];
-        residual_derivative_transpose(
-            self.model,
-            params,
-            &nodes,
-            end.t,
-            &end.lambda,
-            self.step.load_factor,
-            (&w_r, &w_phi, &w_psi),
-            &mut grad,
-        );
+        let weights = Weights {
+            r: &w_r,
+            phi: &w_phi,
+            psi: &w_psi,
+            e: &w_e,
+        };
+        residual_derivative_transpose(self.model, params, &point, weights, &mut grad);
         if layout.stabilized {
             // u = (F_q T)^T w, then u . d(B(q_n)^T zeta)/dp for the joint parameters.
             let p = self.partials(x, data);
