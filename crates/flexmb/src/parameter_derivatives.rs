@@ -67,7 +67,7 @@ enum Piece<'a> {
 pub struct Point<'a> {
     /// Node kinematics (one per model node, tangent operators identity).
     pub nodes: &'a [NodeState],
-    /// The element states and their rates (`n_states` each; both empty: zeros).
+    /// The element states and their rates (`n_states` each).
     pub x: &'a [f64],
     pub xdot: &'a [f64],
     /// Time (the load factor in statics).

@@ -8,8 +8,8 @@
 //! ```
 //!
 //! with second-order convergence in `h` of the coupled scheme (mechanical generalized-alpha,
-//! first-order generalized-alpha for `z`; Brüls & Golinval 2008); static analysis refuses
-//! element states with a clear message.
+//! first-order generalized-alpha for `z`; Brüls & Golinval 2008); and the static equilibrium,
+//! where the branch has relaxed.
 
 use flexmb::model::{Model, Relaxation, SpringDamper};
 use flexmb::solve::Statics;
@@ -98,14 +98,51 @@ fn standard_linear_solid_matches_the_exact_solution_to_second_order() {
 }
 
 #[test]
-fn static_analysis_refuses_element_states() {
-    let settings = flexmb::solve::StaticSettings::default();
-    let error = Statics::new(model(Group::SE3), settings)
-        .err()
-        .expect("refused")
-        .to_string();
-    assert!(
-        error.contains("element states") && error.contains("spring 'solid'"),
-        "{error}"
-    );
+fn static_equilibrium_relaxes_the_maxwell_branch() {
+    // At rest the branch carries no force (c_m zdot = k_m (u - z) = 0): the spring alone
+    // balances the load, u = F / k, and z = u. The mass slides on a prismatic joint along
+    // the spring's axis; load control and arc length, on both groups.
+    use flexmb::model::{JointKind, Load, LoadFrame, TimeFunction};
+    use flexmb::solve::StaticMethod;
+    let force = 0.3;
+    for group in [Group::SE3, Group::R3xSO3] {
+        for method in [StaticMethod::LoadControl, StaticMethod::ArcLength] {
+            let mut m = model(group);
+            let z_to_x = Mat3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0);
+            let node = flexmb::model::NodeId(0);
+            let at = Vec3::new(U0, 0.0, 0.0);
+            m.add_joint(
+                "slide",
+                JointKind::Prismatic,
+                None,
+                Some(node),
+                at,
+                z_to_x,
+                None,
+            );
+            m.loads.push(Load {
+                name: "pull".into(),
+                node,
+                force: Vec3::new(force, 0.0, 0.0),
+                torque: Vec3::zeros(),
+                frame: LoadFrame::Inertial,
+                function: TimeFunction::Constant { value: 1.0 },
+            });
+            let mut settings = flexmb::solve::StaticSettings {
+                method,
+                ..Default::default()
+            };
+            settings.arc_length = 0.05;
+            let mut statics = Statics::new(m, settings).expect("starts");
+            statics
+                .run(&mut |_: &flexmb::observe::Sample| Ok(()))
+                .expect("converges");
+            let (u, z) = (statics.state.q[0].x.x, statics.state.x[0]);
+            assert!(
+                (u - force / K).abs() < 1e-9 && (z - u).abs() < 1e-9,
+                "{group:?}, {method:?}: u = {u}, z = {z}, expected {}",
+                force / K
+            );
+        }
+    }
 }

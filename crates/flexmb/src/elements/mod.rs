@@ -237,8 +237,7 @@ impl Default for LocalBuffers {
 
 impl LocalBuffers {
     /// Gathers the inputs of `kernel` from the kinematics of all nodes and from the states
-    /// and rates of all elements (`x`, `xdot`, the element's own starting at `state_start`;
-    /// both empty: zeros, where no states exist yet).
+    /// and rates of all elements (`x`, `xdot`, the element's own starting at `state_start`).
     #[inline]
     pub fn gather<K: ElementKernel + ?Sized>(
         &mut self,
@@ -254,13 +253,7 @@ impl LocalBuffers {
         let ns = kernel.n_states();
         self.x.clear();
         self.xdot.clear();
-        if ns == 0 {
-            return;
-        }
-        if x.is_empty() {
-            self.x.resize(ns, 0.0);
-            self.xdot.resize(ns, 0.0);
-        } else {
+        if ns > 0 {
             self.x.extend_from_slice(&x[state_start..state_start + ns]);
             self.xdot
                 .extend_from_slice(&xdot[state_start..state_start + ns]);

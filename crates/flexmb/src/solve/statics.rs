@@ -23,7 +23,7 @@ use super::newton::{
     NewtonSolver, NonlinearSystem, Norms, Verification,
 };
 use crate::assembly::{assemble, ConstraintRhs, Iterate, Scaling};
-use crate::data::Data;
+use crate::data::{Block, Data};
 use crate::elements::{Coefficients, NodeState};
 use crate::error::{SettingsError, SolveError};
 use crate::model::limits::within;
@@ -246,15 +246,19 @@ struct LoadStep<'a> {
     nodes: &'a mut [NodeState],
     lambda: &'a mut Vec<f64>,
     dq: Vec<f64>,
+    /// The element states of the iterate (their equations at rest, `xdot = 0`).
+    x: Vec<f64>,
+    /// Zero rates (`n_states`).
+    rates: &'a [f64],
     row_scale: f64,
     newton: NewtonSettings,
     /// Load factor of the iterate.
     load_factor: f64,
     /// Arc-length continuation: the constraint `|dq| = dl` and its state.
     arc: Option<ArcLength>,
-    /// The iterate's start `(dq, lambda, load factor, load increment)`, for a second
-    /// attempt with fresh matrices.
-    first: (Vec<f64>, Vec<f64>, f64, f64),
+    /// The iterate's start `(dq, lambda, load factor, load increment, states)`, for a
+    /// second attempt with fresh matrices.
+    first: (Vec<f64>, Vec<f64>, f64, f64, Vec<f64>),
 }
 
 /// The arc-length part of a load step (Crisfield's cylindrical constraint).
@@ -312,8 +316,8 @@ impl LoadStep<'_> {
             t: load_factor,
             lambda: self.lambda,
             b_start: &[],
-            x: &[],
-            xdot: &[],
+            x: &self.x,
+            xdot: self.rates,
         };
         assemble(
             self.model,
@@ -355,8 +359,8 @@ impl NonlinearSystem for LoadStep<'_> {
                 t: lambda + delta,
                 lambda: self.lambda,
                 b_start: &[],
-                x: &[],
-                xdot: &[],
+                x: &self.x,
+                xdot: self.rates,
             };
             assemble(self.model, data, &it, &ahead, false);
             arc.load_derivative.clone_from(&data.residual);
@@ -425,14 +429,19 @@ impl NonlinearSystem for LoadStep<'_> {
             self.load_factor = arc.lambda0 + arc.dlambda;
         }
         self.add_multipliers(&data.layout, &data.correction, 1.0);
+        let states = &data.correction[data.layout.block(Block::States)];
+        for (x, d) in self.x.iter_mut().zip(states) {
+            *x += d;
+        }
     }
 
     /// The increments' weighted correction; with arc length also the load factor's,
     /// `|dmu| / (rtol |dlambda| + atol)`.
     fn restart(&mut self) {
-        let (dq, lambda, load_factor, dlambda) = &self.first;
+        let (dq, lambda, load_factor, dlambda, x) = &self.first;
         self.dq.clone_from(dq);
         self.lambda.clone_from(lambda);
+        self.x.clone_from(x);
         self.load_factor = *load_factor;
         if let Some(arc) = &mut self.arc {
             arc.dlambda = *dlambda;
@@ -459,6 +468,17 @@ impl NonlinearSystem for LoadStep<'_> {
             norms.blocks[1] =
                 arc.dmu.abs() / (newton.rtol * arc.dlambda.abs().max(1e-12) + newton.atol);
         }
+        if !self.x.is_empty() {
+            let states = data.layout.block(Block::States);
+            let dx = &data.correction[states.clone()];
+            let (x, worst) = weighted_norm(dx, &self.x, &|_| newton.atol, newton.rtol);
+            let k = norms.n;
+            norms.blocks[k] = x;
+            norms.n += 1;
+            if x > norms.blocks[..k].iter().fold(0.0f64, |m, &v| m.max(v)) {
+                norms.worst = states.start + worst;
+            }
+        }
         norms
     }
 }
@@ -470,12 +490,6 @@ impl Statics {
         model.validate()?;
         settings.check()?;
         let (layout, warnings) = prepare_layout(&model);
-        if layout.n_states > 0 {
-            let element = layout.describe(&model, layout.unknown(layout.state_offset()));
-            return Err(SolveError::Unsupported(format!(
-                "static analysis does not solve for element states yet ({element}): use method = \"pseudo_dynamic\", which integrates them"
-            )));
-        }
         let mut state = State::initial(&model, &layout);
         let mut data = Data::new(&model, layout)?;
         for v in state.v.iter_mut() {
@@ -484,12 +498,15 @@ impl Statics {
         let nodes = node_states(&state);
         // Row scale from the stiffness at the start.
         let mut row_scale = 1.0;
+        let rates = vec![0.0; state.x.len()];
         let mut start = LoadStep {
             model: &model,
             q0: &state.q,
             nodes: &mut nodes.clone(),
             lambda: &mut state.lambda.clone(),
             dq: vec![0.0; data.layout.n_dofs],
+            x: state.x.clone(),
+            rates: &rates,
             row_scale,
             newton: settings.newton,
             load_factor: 0.0,
@@ -641,7 +658,7 @@ impl Statics {
     fn solve_step(
         &mut self,
         load_factor: f64,
-        dq: Vec<f64>,
+        (dq, x): (Vec<f64>, Vec<f64>),
         arc: Option<ArcLength>,
     ) -> Result<(usize, Option<ArcLength>, Vec<f64>), NewtonError> {
         let mut lambda = self.state.lambda.clone();
@@ -650,13 +667,17 @@ impl Statics {
             lambda.clone(),
             load_factor,
             arc.as_ref().map_or(0.0, |a| a.dlambda),
+            x.clone(),
         );
+        let rates = vec![0.0; x.len()];
         let mut sys = LoadStep {
             model: &self.model,
             q0: &self.state.q,
             nodes: &mut self.nodes,
             lambda: &mut lambda,
             dq,
+            x,
+            rates: &rates,
             row_scale: self.row_scale,
             newton: self.settings.newton,
             load_factor,
@@ -671,6 +692,7 @@ impl Statics {
         self.stats.factorizations += work.factorizations;
         let info = result.map_err(|f| f.error)?;
         let (dq, reached, arc) = (std::mem::take(&mut sys.dq), sys.load_factor, sys.arc.take());
+        self.state.x = std::mem::take(&mut sys.x);
         let group = self.model.group;
         for (i, q) in self.state.q.iter_mut().enumerate() {
             *q = group.integrate(q, &Vec6::from_column_slice(&dq[6 * i..6 * i + 6]));
@@ -689,7 +711,7 @@ impl Statics {
     /// converged configuration; returns the iterations.
     fn solve_at(&mut self, lambda: f64) -> Result<usize, NewtonError> {
         let nd = self.data.layout.n_dofs;
-        self.solve_step(lambda, vec![0.0; nd], None)
+        self.solve_step(lambda, (vec![0.0; nd], self.state.x.clone()), None)
             .map(|(iterations, _, _)| iterations)
     }
 
@@ -762,12 +784,15 @@ impl Statics {
         let nd = self.data.layout.n_dofs;
         let lambda0 = self.load_factor;
         let mut lambda = self.state.lambda.clone();
+        let rates = vec![0.0; self.state.x.len()];
         let mut predictor = LoadStep {
             model: &self.model,
             q0: &self.state.q,
             nodes: &mut self.nodes,
             lambda: &mut lambda,
             dq: vec![0.0; nd],
+            x: self.state.x.clone(),
+            rates: &rates,
             row_scale: self.row_scale,
             newton: self.settings.newton,
             load_factor: lambda0,
@@ -811,13 +836,20 @@ impl Statics {
         let dlam = sign * dl / norm_b.sqrt().max(1e-300);
         predictor.add_multipliers(&self.data.layout, &xb, dlam);
         arc.dlambda = dlam;
-        // The predictor moves the configuration along the tangent.
+        // The predictor moves the configuration (and the element states) along the tangent.
         let dq = xb[..nd].iter().map(|b| dlam * b).collect();
+        let states = &xb[self.data.layout.block(Block::States)];
+        let x = predictor
+            .x
+            .iter()
+            .zip(states)
+            .map(|(x, b)| x + dlam * b)
+            .collect();
         let saved_lambda = std::mem::replace(&mut self.state.lambda, lambda);
         // Arc length has no divergence test: the constraint keeps the iterates bounded.
         let policy = self.newton.policy;
         self.newton.policy.diverge_after = usize::MAX;
-        let result = self.solve_step(lambda0 + dlam, dq, Some(arc));
+        let result = self.solve_step(lambda0 + dlam, (dq, x), Some(arc));
         self.newton.policy = policy;
         match result {
             Ok((iterations, Some(arc), dq)) => Ok((dq, arc.dlambda, iterations)),
