@@ -109,8 +109,6 @@ pub enum SolveError {
     #[error("the step size {h:.3e} s is below the resolution of the time t = {t:.6e} s (t + h == t): the run cannot advance")]
     StepUnderflow { t: f64, h: f64 },
     /// A checkpoint that cannot be resumed.
-    #[error("{0}")]
-    Unsupported(String),
     #[error("checkpoint: {0}")]
     Checkpoint(String),
     #[error("output error: {0}")]

@@ -1,7 +1,7 @@
 //! Sensors: the output channels declared by a model, evaluated from the state.
 
 use crate::data::Data;
-use crate::elements::{Context, ElementKernel, ElementRef, LocalBuffers, NodeState};
+use crate::elements::{Context, ElementKernel, ElementRef, Local, LocalBuffers, NodeState};
 use crate::joints;
 use crate::model::{Model, SensorFrame, SensorKind};
 use crate::state::State;
@@ -155,6 +155,17 @@ impl SensorEvaluator {
                     } else {
                         m[*component]
                     }
+                }
+                SensorKind::SpringForce { spring } => {
+                    let sp = &model.springs[*spring];
+                    let start = ElementRef::spring_state_start(model, *spring);
+                    let ns = sp.n_states();
+                    let local = Local {
+                        nodes: &pair(&nodes, [sp.node_a, sp.node_b]),
+                        x: &state.x[start..start + ns],
+                        xdot: &state.xdot[start..start + ns],
+                    };
+                    sp.tension(&Context::at(model, state.t, 1.0), &local)
                 }
                 SensorKind::KineticEnergy
                 | SensorKind::PotentialEnergy

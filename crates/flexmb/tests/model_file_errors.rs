@@ -1362,3 +1362,62 @@ fn a_changed_beam_section_needs_no_refresh() {
     let translation = |m: &flexmb::elements::Mat12| m[(0, 0)];
     assert!((translation(&after) - 2.0 * translation(&before)).abs() < 1e-12 * translation(&after));
 }
+
+#[test]
+fn spring_maxwell_branch_and_spring_force_sensor() {
+    let text = GOOD.replace(
+        "stiffness = 100\n",
+        "stiffness = 100\nrelaxation_stiffness = 500\nrelaxation_damping = 20\n",
+    ) + "\n[[sensor]]\nname = \"F\"\ntype = \"spring_force\"\nspring = \"s\"\n";
+    let file = parse_model_str(&text, "maxwell.toml", &[]).expect("reads");
+    assert_eq!(
+        file.model.springs[0].relaxation,
+        Some(flexmb::model::Relaxation {
+            stiffness: 500.0,
+            damping: 20.0
+        })
+    );
+    assert_eq!(
+        file.model.sensors[3].kind,
+        SensorKind::SpringForce { spring: 0 }
+    );
+    // The parameters of the branch have paths.
+    let params = flexmb::model::Parameters::new(&file.model);
+    assert!(params.id("spring.s.relaxation.damping").is_ok());
+    // One key without the other is an error at that key.
+    let half = GOOD.replace(
+        "stiffness = 100\n",
+        "stiffness = 100\nrelaxation_damping = 20\n",
+    );
+    let e = parse_model_str(&half, "half.toml", &[])
+        .map(|_| ())
+        .expect_err("refused")
+        .to_string();
+    assert_contains(
+        &e,
+        &[
+            "half.toml:53:",
+            "relaxation_damping",
+            "needs both relaxation_stiffness and relaxation_damping",
+        ],
+    );
+    let negative = GOOD.replace(
+        "stiffness = 100\n",
+        "stiffness = 100\nrelaxation_stiffness = -5\nrelaxation_damping = 20\n",
+    );
+    let e = parse_model_str(&negative, "negative.toml", &[])
+        .map(|_| ())
+        .expect_err("refused")
+        .to_string();
+    assert_contains(
+        &e,
+        &["negative.toml:53:", "relaxation_stiffness", "positive"],
+    );
+    let unknown =
+        GOOD.to_string() + "\n[[sensor]]\nname = \"F\"\ntype = \"spring_force\"\nspring = \"t\"\n";
+    let e = parse_model_str(&unknown, "unknown.toml", &[])
+        .map(|_| ())
+        .expect_err("refused")
+        .to_string();
+    assert_contains(&e, &["unknown spring 't'"]);
+}

@@ -82,6 +82,23 @@ impl SpringDamper {
         [self.node_a.is_some(), self.node_b.is_some()]
     }
 
+    /// The tension `T` (module documentation), the branch included \[N\].
+    pub fn tension(&self, ctx: &Context, local: &Local) -> f64 {
+        let geo = self.geometry(ctx, local.nodes);
+        self.tension_and_stiffness(&geo, self.branch(&geo, local)).0
+    }
+
+    /// `T` and the stiffness `k + k_m` along the line.
+    fn tension_and_stiffness(&self, geo: &Geometry, branch: Option<(f64, f64, f64)>) -> (f64, f64) {
+        let mut tension = self.stiffness * (geo.l - self.rest_length) + self.damping * geo.ldot;
+        let mut stiffness = self.stiffness;
+        if let Some((km, _, stretch)) = branch {
+            tension += km * stretch;
+            stiffness += km;
+        }
+        (tension, stiffness)
+    }
+
     /// `(k_m, c_m, l - l0 - z)` of the Maxwell branch, if any.
     fn branch(&self, geo: &Geometry, local: &Local) -> Option<(f64, f64, f64)> {
         self.relaxation.map(|m| {
@@ -135,12 +152,7 @@ impl ElementKernel for SpringDamper {
         let nodes = local.nodes;
         let geo = self.geometry(ctx, nodes);
         let branch = self.branch(&geo, local);
-        let mut tension = self.stiffness * (geo.l - self.rest_length) + self.damping * geo.ldot;
-        let mut stiffness = self.stiffness;
-        if let Some((km, _, stretch)) = branch {
-            tension += km * stretch;
-            stiffness += km;
-        }
+        let (tension, stiffness) = self.tension_and_stiffness(&geo, branch);
         let r_p = geo.g * tension;
         let dt = geo.g * stiffness + geo.h.transpose() * geo.v_p * self.damping;
         let k_p = geo.g * dt.transpose() + geo.h * tension;

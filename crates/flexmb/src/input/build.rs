@@ -10,7 +10,7 @@ use crate::model::limits::{
 };
 use crate::model::{
     box_inertia, clip, frame_from_axis, rotation_from_vector, JointKind, Load, LoadFrame, Model,
-    NodeId, Sensor, SensorFrame, SensorKind, SpringDamper, TimeFunction,
+    NodeId, Relaxation, Sensor, SensorFrame, SensorKind, SpringDamper, TimeFunction,
 };
 use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
 use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
@@ -1068,6 +1068,8 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "stiffness",
             "damping",
             "rest_length",
+            "relaxation_stiffness",
+            "relaxation_damping",
         ])?;
         let name = read_name(&t, &mut names, "spring")?;
         let node_a = match t.field("node_a") {
@@ -1092,6 +1094,21 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             }
             None => (pa - pb).norm(),
         };
+        let relaxation = match (
+            t.field("relaxation_stiffness"),
+            t.field("relaxation_damping"),
+        ) {
+            (None, None) => None,
+            (Some(k), Some(c)) => Some(Relaxation {
+                stiffness: physical(&k)?,
+                damping: physical(&c)?,
+            }),
+            (Some(f), None) | (None, Some(f)) => {
+                let message =
+                    "a Maxwell branch needs both relaxation_stiffness and relaxation_damping";
+                return Err(f.err(message.to_string()));
+            }
+        };
         model.springs.push(SpringDamper {
             name,
             node_a,
@@ -1101,7 +1118,7 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             stiffness,
             damping,
             rest_length,
-            relaxation: None,
+            relaxation,
         });
         origins.springs.push(Origin::of(&t));
     }
@@ -1130,6 +1147,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "frame",
             "joint",
             "beam",
+            "spring",
         ])?;
         let name = read_name(&t, &mut names, "sensor")?;
         let ty = t.req("type")?.choice(&[
@@ -1146,6 +1164,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "constraint_violation",
             "beam_strain",
             "beam_stress",
+            "spring_force",
         ])?;
         let why = format!("for a {ty} sensor");
         let uses: &[&str] = match ty {
@@ -1155,9 +1174,18 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "joint_coordinate" => &["joint"],
             "joint_force" | "joint_torque" => &["joint", "component"],
             "beam_strain" | "beam_stress" => &["beam", "component"],
+            "spring_force" => &["spring"],
             _ => &[],
         };
-        for k in ["node", "point", "component", "frame", "joint", "beam"] {
+        for k in [
+            "node",
+            "point",
+            "component",
+            "frame",
+            "joint",
+            "beam",
+            "spring",
+        ] {
             if !uses.contains(&k) {
                 t.forbid(k, &why)?;
             }
@@ -1246,6 +1274,20 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                 beam: super::beam::require_element(model, origins, &t.req("beam")?)?,
                 component: component(BEAM)?,
             },
+            "spring_force" => {
+                let f = t.req("spring")?;
+                let sname = f.str()?;
+                let names = || model.springs.iter().map(|s| s.name.as_str());
+                let spring = names().position(|n| n == sname).ok_or_else(|| {
+                    f.err(format!(
+                        "unknown spring '{}'{} (springs: {})",
+                        clip(sname, QUOTED),
+                        suggestion(sname, names()),
+                        name_list(names(), 12)
+                    ))
+                })?;
+                SensorKind::SpringForce { spring }
+            }
             "kinetic_energy" => SensorKind::KineticEnergy,
             "potential_energy" => SensorKind::PotentialEnergy,
             "total_energy" => SensorKind::TotalEnergy,

@@ -317,6 +317,11 @@ pub enum SensorKind {
         joint: JointId,
         component: usize,
     },
+    /// Tension of a spring-damper, its Maxwell branch included \[N\] (index in
+    /// [`Model::springs`]).
+    SpringForce {
+        spring: usize,
+    },
     KineticEnergy,
     PotentialEnergy,
     TotalEnergy,

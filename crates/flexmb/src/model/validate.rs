@@ -334,6 +334,12 @@ impl Model {
             finite3(&s.point_b, 2.0 * MAX_KINEMATIC).map_err(|m| fail("point_b", m))?;
             in_range(s.stiffness, 0.0, MAX_PHYSICAL).map_err(|m| fail("stiffness", m))?;
             in_range(s.damping, 0.0, MAX_PHYSICAL).map_err(|m| fail("damping", m))?;
+            if let Some(branch) = &s.relaxation {
+                in_range(branch.stiffness, MIN_PHYSICAL, MAX_PHYSICAL)
+                    .map_err(|m| fail("relaxation_stiffness", m))?;
+                in_range(branch.damping, MIN_PHYSICAL, MAX_PHYSICAL)
+                    .map_err(|m| fail("relaxation_damping", m))?;
+            }
             // The default rest length is the distance of two points in range: up to 2e9.
             in_range(s.rest_length, 0.0, 2.0 * MAX_KINEMATIC)
                 .map_err(|m| fail("rest_length", m))?;
@@ -492,6 +498,15 @@ impl Model {
                         ));
                     }
                     (None, Some((*component, 6)))
+                }
+                SensorKind::SpringForce { spring } => {
+                    if *spring >= self.springs.len() {
+                        return Err(fail(
+                            "spring",
+                            format!("spring index {spring} does not exist"),
+                        ));
+                    }
+                    (None, None)
                 }
                 SensorKind::KineticEnergy
                 | SensorKind::PotentialEnergy
