@@ -1383,7 +1383,7 @@ fn spring_maxwell_branch_and_spring_force_sensor() {
     );
     // The parameters of the branch have paths.
     let params = flexmb::model::Parameters::new(&file.model);
-    assert!(params.id("spring.s.relaxation.damping").is_ok());
+    assert!(params.id("spring.s.relaxation_damping").is_ok());
     // One key without the other is an error at that key.
     let half = GOOD.replace(
         "stiffness = 100\n",

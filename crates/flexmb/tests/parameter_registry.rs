@@ -26,6 +26,7 @@ const EXAMPLES: &[&str] = &[
     "roll_up.toml",
     "slider_crank.toml",
     "spin_up.toml",
+    "viscoelastic_mount.toml",
 ];
 
 fn read(name: &str, overrides: &[&str]) -> Model {
@@ -302,6 +303,18 @@ fn parameter_set_matches_set_override_on_example_files() {
             "joint.motor.drive.slope=140",
             "joint.motor.drive.slope",
             140.0,
+        ),
+        (
+            "viscoelastic_mount.toml",
+            "spring.mount.relaxation_stiffness=3",
+            "spring.mount.relaxation_stiffness",
+            3.0,
+        ),
+        (
+            "viscoelastic_mount.toml",
+            "spring.mount.relaxation_damping=0.7",
+            "spring.mount.relaxation_damping",
+            0.7,
         ),
     ];
     for &(file, set, path, value) in cases {

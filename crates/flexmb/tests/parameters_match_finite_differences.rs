@@ -181,8 +181,8 @@ fn pattern(params: &Parameters, id: ParamId) -> String {
             SpringParam::RestLength => "spring.<s>.rest_length",
             SpringParam::PointA(_) => "spring.<s>.point_a.<k>",
             SpringParam::PointB(_) => "spring.<s>.point_b.<k>",
-            SpringParam::RelaxationStiffness => "spring.<s>.relaxation.stiffness",
-            SpringParam::RelaxationDamping => "spring.<s>.relaxation.damping",
+            SpringParam::RelaxationStiffness => "spring.<s>.relaxation_stiffness",
+            SpringParam::RelaxationDamping => "spring.<s>.relaxation_damping",
         },
     };
     item.into()

@@ -319,8 +319,8 @@ fn step_parameter_derivatives_match_finite_differences() {
         "beam.damping.stiffness",
         "spring.stiffness",
         "spring.rest_length",
-        "spring.relaxation.stiffness",
-        "spring.relaxation.damping",
+        "spring.relaxation_stiffness",
+        "spring.relaxation_damping",
     ] {
         assert!(covered.contains(kind), "{kind} not covered: {covered:?}");
     }

@@ -43,31 +43,36 @@ struct Geometry {
     v_p: Vec12,
 }
 
+/// The length `l = |P_b - P_a|` of the segment between the points `p_a` of node `na` and
+/// `p_b` of node `nb` (node frames), its gradient `g = dl/dw_p` and the derivative `H` of
+/// the gradient (module documentation), in the physical coordinates of the two nodes.
+pub(super) fn segment(na: &NodeState, pa: &Vec3, nb: &NodeState, pb: &Vec3) -> (f64, Vec12, Mat12) {
+    let d = nb.q.point(pb) - na.q.point(pa);
+    let l = d.norm().max(1e-300);
+    let n = d / l;
+    let mut dm = SMatrix::<f64, 3, 12>::zeros();
+    dm.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(-Mat3::identity()));
+    dm.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&(na.q.r * hat(pa)));
+    dm.fixed_view_mut::<3, 3>(0, 6).copy_from(&Mat3::identity());
+    dm.fixed_view_mut::<3, 3>(0, 9)
+        .copy_from(&(-nb.q.r * hat(pb)));
+    let g = dm.transpose() * n;
+    let proj = (Mat3::identity() - n * n.transpose()) / l;
+    let mut h = dm.transpose() * proj * dm;
+    let na_b: Vec3 = na.q.r.transpose() * n;
+    let nb_b: Vec3 = nb.q.r.transpose() * n;
+    let mut blk = h.fixed_view_mut::<3, 3>(3, 3);
+    blk -= hat(pa) * hat(&na_b);
+    let mut blk = h.fixed_view_mut::<3, 3>(9, 9);
+    blk += hat(pb) * hat(&nb_b);
+    (l, g, h)
+}
+
 impl SpringDamper {
     fn geometry(&self, ctx: &Context, nodes: &[NodeState]) -> Geometry {
-        let (na, nb) = (&nodes[0], &nodes[1]);
-        let pa = na.q.point(&self.point_a);
-        let pb = nb.q.point(&self.point_b);
-        let d = pb - pa;
-        let l = d.norm().max(1e-300);
-        let n = d / l;
-        let mut dm = SMatrix::<f64, 3, 12>::zeros();
-        dm.fixed_view_mut::<3, 3>(0, 0)
-            .copy_from(&(-Mat3::identity()));
-        dm.fixed_view_mut::<3, 3>(0, 3)
-            .copy_from(&(na.q.r * hat(&self.point_a)));
-        dm.fixed_view_mut::<3, 3>(0, 6).copy_from(&Mat3::identity());
-        dm.fixed_view_mut::<3, 3>(0, 9)
-            .copy_from(&(-nb.q.r * hat(&self.point_b)));
-        let g = dm.transpose() * n;
-        let proj = (Mat3::identity() - n * n.transpose()) / l;
-        let mut h = dm.transpose() * proj * dm;
-        let na_b: Vec3 = na.q.r.transpose() * n;
-        let nb_b: Vec3 = nb.q.r.transpose() * n;
-        let mut blk = h.fixed_view_mut::<3, 3>(3, 3);
-        blk -= hat(&self.point_a) * hat(&na_b);
-        let mut blk = h.fixed_view_mut::<3, 3>(9, 9);
-        blk += hat(&self.point_b) * hat(&nb_b);
+        let (l, g, h) = segment(&nodes[0], &self.point_a, &nodes[1], &self.point_b);
         let mut v_p = Vec12::zeros();
         for (a, node) in nodes.iter().enumerate() {
             let (xd, om) = physical::velocity(ctx.group, node);

@@ -26,6 +26,7 @@
 //! | load | `load.<l>.function.<a>` | amplitude `a` of the load's time function | same |
 //! | spring | `spring.<s>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `l0` \[m\] | same |
 //! | spring | `spring.<s>.point_a.<k>`, `spring.<s>.point_b.<k>` | attachment point at t = 0, inertial \[m\] | same |
+//! | spring | `spring.<s>.relaxation_stiffness`, `.relaxation_damping` | Maxwell branch `k_m` [N/m], `c_m` [N s/m] (springs that have one) | same |
 //!
 //! Components `<k>` are 0, 1, 2 (x, y, z); matrix indices follow the strain order
 //! `(axial, shear 2, shear 3, torsion, bending 2, bending 3)` for `C` and `(x, y, z)` for `J`.
@@ -286,10 +287,10 @@ impl Parameters {
             }
             if model.springs[i].relaxation.is_some() {
                 add(
-                    "relaxation.stiffness".into(),
+                    "relaxation_stiffness".into(),
                     SpringParam::RelaxationStiffness,
                 );
-                add("relaxation.damping".into(), SpringParam::RelaxationDamping);
+                add("relaxation_damping".into(), SpringParam::RelaxationDamping);
             }
         }
         reg
