@@ -165,6 +165,7 @@ fn visit(
             let spring = (&model.springs[i], ElementRef::spring_state_start(model, i));
             element_term(at, spring, Wrt::Own(p), sink)
         }
+        ParamKind::Rope(i, p) => element_term(at, (&model.ropes[i], 0), Wrt::Own(p), sink),
         ParamKind::Joint(j, p) => {
             let joint = &model.joints[j.0];
             let (rows, start) = (&rows[j.0], starts[j.0]);

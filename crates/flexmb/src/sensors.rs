@@ -167,6 +167,16 @@ impl SensorEvaluator {
                     };
                     sp.tension(&Context::at(model, state.t, 1.0), &local)
                 }
+                SensorKind::RopeForce { rope } => {
+                    let rope = &model.ropes[*rope];
+                    let ground = NodeState::ground(Default::default());
+                    let slots: Vec<NodeState> = rope
+                        .points
+                        .iter()
+                        .map(|p| p.node.map_or(ground, |n| nodes[n.0]))
+                        .collect();
+                    rope.force(&Context::at(model, state.t, 1.0), &Local::nodes(&slots))
+                }
                 SensorKind::KineticEnergy
                 | SensorKind::PotentialEnergy
                 | SensorKind::TotalEnergy => {

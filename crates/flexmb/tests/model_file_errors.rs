@@ -1421,3 +1421,43 @@ fn spring_maxwell_branch_and_spring_force_sensor() {
         .to_string();
     assert_contains(&e, &["unknown spring 't'"]);
 }
+
+#[test]
+fn rope_errors_name_the_key() {
+    let rope = |points: &str| {
+        GOOD.to_string()
+            + &format!("\n[[rope]]\nname = \"r\"\npoints = {points}\nstiffness = 10\n")
+    };
+    let read = |text: String| {
+        parse_model_str(&text, "rope.toml", &[])
+            .map(|_| ())
+            .expect_err("refused")
+            .to_string()
+    };
+    let ok = rope("[{ point = [0, 0, 3] }, { node = \"top\", point = [1, 0, 0] }]");
+    let file = parse_model_str(&ok, "rope.toml", &[]).expect("reads");
+    assert_eq!(file.model.ropes[0].points.len(), 2);
+    assert!((file.model.ropes[0].rest_length - 10f64.sqrt()).abs() < 1e-12);
+    assert_contains(
+        &read(rope("[{ node = \"tpo\", point = [1, 0, 0] }, { point = [0, 0, 3] }]")),
+        &["rope.toml:", "rope[0].points[0].node", "unknown node 'tpo'"],
+    );
+    assert_contains(
+        &read(rope("[{ node = \"top\", point = [1, 0, 0] }]")),
+        &["field 'rope[0].points'", "2 to 64 points"],
+    );
+    assert_contains(
+        &read(rope("[{ point = [0, 0, 3] }, { point = [1, 0, 0] }]")),
+        &["field 'rope[0].points'", "every point is on the ground"],
+    );
+    assert_contains(
+        &read(rope(
+            "[{ point = [1, 0, 0] }, { node = \"top\", point = [1, 0, 0] }]",
+        )),
+        &["field 'rope[0].points'", "points 1 and 2 coincide"],
+    );
+    assert_contains(
+        &read(rope("[{ point = [0, 0, 3], nod = \"top\" }, { point = [1, 0, 0] }]")),
+        &["unknown key 'nod'"],
+    );
+}

@@ -9,7 +9,7 @@ use flexmb::elements::{
 };
 use flexmb::joints;
 use flexmb::model::parameters::{
-    BodyParam, JointParam, LoadParam, NodeParam, SectionParam, SpringParam,
+    BodyParam, JointParam, LoadParam, NodeParam, RopeParam, SectionParam, SpringParam,
 };
 use flexmb::model::{
     BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, ParamId, ParamKind,
@@ -184,6 +184,12 @@ fn pattern(params: &Parameters, id: ParamId) -> String {
             SpringParam::RelaxationStiffness => "spring.<s>.relaxation_stiffness",
             SpringParam::RelaxationDamping => "spring.<s>.relaxation_damping",
         },
+        ParamKind::Rope(_, p) => match p {
+            RopeParam::Stiffness => "rope.<r>.stiffness",
+            RopeParam::Damping => "rope.<r>.damping",
+            RopeParam::RestLength => "rope.<r>.rest_length",
+            RopeParam::Point(..) => "rope.<r>.points.<i>.point.<k>",
+        },
     };
     item.into()
 }
@@ -336,6 +342,20 @@ fn mechanism(group: Group) -> Model {
             stiffness: 30.0,
             damping: 4.0,
         }),
+    });
+    // A rope from the ground over a and b to c (four slots), taut.
+    let at = |node: Option<NodeId>, point: Vec3| flexmb::model::RopePoint { node, point };
+    m.ropes.push(flexmb::model::Rope {
+        name: "hoist".into(),
+        points: vec![
+            at(None, Vec3::new(2.0, 1.5, 0.0)),
+            at(Some(a), Vec3::new(0.1, 0.0, 0.2)),
+            at(Some(b), Vec3::new(0.0, -0.2, 0.1)),
+            at(Some(c), Vec3::zeros()),
+        ],
+        stiffness: 80.0,
+        damping: 1.5,
+        rest_length: 0.1,
     });
     m.loads.push(Load {
         name: "push".into(),
@@ -491,9 +511,10 @@ fn parameter_kinds_by_finite_differences_are_the_listed_ones() {
         by_differences,
         [
             "joint.<j>.position.<k>",
+            "rope.<r>.points.<i>.point.<k>",
             "spring.<s>.point_a.<k>",
             "spring.<s>.point_b.<k>"
         ]
     );
-    assert_eq!(seen.kinds.len(), 25, "kinds checked: {:#?}", seen.kinds);
+    assert_eq!(seen.kinds.len(), 29, "kinds checked: {:#?}", seen.kinds);
 }

@@ -174,8 +174,8 @@ fn check(name: &str, sim: &Simulation) {
 /// `dR/dp` (products with a vector and a transposed vector) against central differences of
 /// the step residual of the model with one parameter moved (through `Parameters::set`, at
 /// the same row scale), for every parameter that enters the residual, or every k-th of them
-/// to keep it to about 40; returns the paths checked.
-fn check_parameters(name: &str, sim: &Simulation) -> Vec<String> {
+/// to keep it to about `most` of them; returns the paths checked.
+fn check_parameters(name: &str, sim: &Simulation, most: usize) -> Vec<String> {
     let h = sim.settings.h;
     let layout = sim.data.layout.clone();
     let redundant = layout.redundant_rows();
@@ -200,7 +200,7 @@ fn check_parameters(name: &str, sim: &Simulation) -> Vec<String> {
         .ids()
         .filter(|&id| params.role(id) == ParamRole::Residual)
         .collect();
-    let stride = ids.len().div_ceil(40).max(1);
+    let stride = ids.len().div_ceil(most).max(1);
     let mut checked = Vec::new();
     for &id in ids.iter().step_by(stride) {
         let mut dp = vec![0.0; params.len()];
@@ -300,11 +300,11 @@ fn step_parameter_derivatives_match_finite_differences() {
         ("slider_crank.toml", &[][..]),
     ] {
         let sim = simulation(file, overrides, 3);
-        paths.extend(check_parameters(file, &sim));
+        paths.extend(check_parameters(file, &sim, 40));
     }
     for stabilized in [false, true] {
         let sim = viscoelastic_pair(flexmb_lie::Group::SE3, stabilized);
-        paths.extend(check_parameters("viscoelastic pair", &sim));
+        paths.extend(check_parameters("viscoelastic pair", &sim, usize::MAX));
     }
     let covered = kinds(&paths);
     for kind in [
@@ -321,6 +321,10 @@ fn step_parameter_derivatives_match_finite_differences() {
         "spring.rest_length",
         "spring.relaxation_stiffness",
         "spring.relaxation_damping",
+        "rope.stiffness",
+        "rope.damping",
+        "rope.rest_length",
+        "rope.points.point",
     ] {
         assert!(covered.contains(kind), "{kind} not covered: {covered:?}");
     }
@@ -361,8 +365,10 @@ fn stabilized_step_jacobians_match_finite_differences() {
 }
 
 /// Two bodies on SE(3) or R3xSO(3), the first on a spherical joint to the ground, joined by a
-/// spring-damper with a Maxwell branch between offset points (one element state), under
-/// gravity: the element-state block of the step.
+/// spring-damper with a Maxwell branch between offset points (one element state), and held
+/// by a rope from the ground over both bodies and back to the ground (an element on four
+/// slots), under gravity: the element-state block of the step and an element on more than
+/// two slots.
 fn viscoelastic_pair(group: flexmb_lie::Group, stabilized: bool) -> Simulation {
     use flexmb::model::{JointKind, Model, Relaxation, SpringDamper};
     use flexmb_lie::{Frame, Mat3, Vec3};
@@ -395,6 +401,19 @@ fn viscoelastic_pair(group: flexmb_lie::Group, stabilized: bool) -> Simulation {
             stiffness: 500.0,
             damping: 20.0,
         }),
+    });
+    let at = |node, point| flexmb::model::RopePoint { node, point };
+    m.ropes.push(flexmb::model::Rope {
+        name: "sling".into(),
+        points: vec![
+            at(None, Vec3::new(0.3, 0.5, 1.0)),
+            at(Some(a), Vec3::new(0.1, 0.1, 0.0)),
+            at(Some(b), Vec3::new(0.0, 0.1, 0.05)),
+            at(None, Vec3::new(1.5, 0.2, 1.0)),
+        ],
+        stiffness: 400.0,
+        damping: 3.0,
+        rest_length: 2.5,
     });
     let mut s = flexmb::DynamicSettings::new(1.0, 1e-3);
     if stabilized {

@@ -208,6 +208,37 @@ fn load_tangents_match_finite_differences() {
 }
 
 #[test]
+fn rope_tangents_match_finite_differences() {
+    // A rope on four slots: from the ground over a point of node a, a point of node b and a
+    // second point of node a (one node on two slots), taut.
+    use flexmb::model::{Rope, RopePoint};
+    let mut rng = Lcg(5);
+    for model in models() {
+        for _ in 0..3 {
+            let at = |node: Option<usize>, p: Vec3| RopePoint {
+                node: node.map(NodeId),
+                point: p,
+            };
+            let rope = Rope {
+                name: "r".into(),
+                points: vec![
+                    at(None, Vec3::new(2.0, 1.0, -0.5)),
+                    at(Some(0), Vec3::new(0.2, 0.1, -0.3)),
+                    at(Some(1), Vec3::new(-0.1, 0.4, 0.2)),
+                    at(Some(0), Vec3::new(-0.3, 0.0, 0.25)),
+                ],
+                stiffness: 150.0,
+                damping: 2.5,
+                rest_length: 0.05,
+            };
+            let (a, b) = (rng.node(model.group), rng.node(model.group));
+            let nodes = [NodeState::ground(Frame::identity()), a, b, a];
+            check_element("rope", &rope, &model, &nodes);
+        }
+    }
+}
+
+#[test]
 fn spring_with_maxwell_branch_tangents_match_finite_differences() {
     // The element state z (the branch damper's elongation) and its rate: columns dr/dz,
     // dr/dzdot and the row of the state equation, against central differences.

@@ -29,6 +29,7 @@ pub mod beam;
 pub mod load;
 pub mod physical;
 pub mod rigid_body;
+pub mod rope;
 pub mod spring;
 
 use crate::model::{Model, NodeId};
@@ -143,6 +144,7 @@ pub enum ElementRef {
     Beam(usize, Arc<Mat12>),
     Load(usize),
     Spring(usize),
+    Rope(usize),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -327,6 +329,7 @@ impl ElementRef {
         out.extend(beams.map(|(i, b)| ElementRef::Beam(i, Arc::new(beam::mass_matrix(b)))));
         out.extend((0..model.loads.len()).map(ElementRef::Load));
         out.extend((0..model.springs.len()).map(ElementRef::Spring));
+        out.extend((0..model.ropes.len()).map(ElementRef::Rope));
         out
     }
 
@@ -340,6 +343,7 @@ impl ElementRef {
             }),
             ElementRef::Load(i) => Kernel::Load(&model.loads[*i]),
             ElementRef::Spring(i) => Kernel::Spring(&model.springs[*i]),
+            ElementRef::Rope(i) => Kernel::Rope(&model.ropes[*i]),
         }
     }
 
@@ -350,6 +354,7 @@ impl ElementRef {
             ElementRef::Beam(i, _) => format!("beam element '{}'", model.beams[*i].name),
             ElementRef::Load(i) => format!("load '{}'", model.loads[*i].name),
             ElementRef::Spring(i) => format!("spring '{}'", model.springs[*i].name),
+            ElementRef::Rope(i) => format!("rope '{}'", model.ropes[*i].name),
         }
     }
 }
@@ -360,6 +365,7 @@ pub enum Kernel<'m> {
     Beam(beam::BeamElement<'m>),
     Load(&'m crate::model::Load),
     Spring(&'m crate::model::SpringDamper),
+    Rope(&'m crate::model::Rope),
 }
 
 macro_rules! dispatch {
@@ -369,6 +375,7 @@ macro_rules! dispatch {
             Kernel::Beam($k) => $e,
             Kernel::Load($k) => $e,
             Kernel::Spring($k) => $e,
+            Kernel::Rope($k) => $e,
         }
     };
 }

@@ -10,7 +10,8 @@ use crate::model::limits::{
 };
 use crate::model::{
     box_inertia, clip, frame_from_axis, rotation_from_vector, JointKind, Load, LoadFrame, Model,
-    NodeId, Relaxation, Sensor, SensorFrame, SensorKind, SpringDamper, TimeFunction,
+    NodeId, Relaxation, Rope, RopePoint, Sensor, SensorFrame, SensorKind, SpringDamper,
+    TimeFunction,
 };
 use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
 use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
@@ -27,6 +28,7 @@ const TOP_KEYS: &[&str] = &[
     "joint",
     "load",
     "spring",
+    "rope",
     "beam",
     "sensor",
 ];
@@ -95,6 +97,7 @@ pub(super) struct Origins {
     joints: Vec<Origin>,
     loads: Vec<Origin>,
     springs: Vec<Origin>,
+    ropes: Vec<Origin>,
     /// One per element of `Model::beams`.
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
@@ -158,6 +161,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     read_joints(&top, &mut model, &mut origins)?;
     read_loads(&top, &mut model, &mut origins)?;
     read_springs(&top, &mut model, &mut origins)?;
+    read_ropes(&top, &mut model, &mut origins)?;
     read_sensors(&top, &mut model, &mut origins)?;
 
     model
@@ -183,6 +187,7 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
         "joint" => &origins.joints,
         "load" => &origins.loads,
         "spring" => &origins.springs,
+        "rope" => &origins.ropes,
         "beam" => &origins.beams,
         "sensor" => &origins.sensors,
         _ => &[],
@@ -1125,6 +1130,51 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
     Ok(())
 }
 
+fn read_ropes(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+    let mut names = HashMap::new();
+    for t in top.items("rope")? {
+        t.check_keys(&["name", "points", "stiffness", "damping", "rest_length"])?;
+        let name = read_name(&t, &mut names, "rope")?;
+        let list = t.req("points")?;
+        let mut points = Vec::new();
+        let mut length = 0.0;
+        let mut previous: Option<Vec3> = None;
+        for (i, v) in list.array()?.iter().enumerate() {
+            let pt = list.elem(i, v).table()?;
+            pt.check_keys(&["node", "point"])?;
+            let node = match pt.field("node") {
+                Some(f) => resolve_node(model, origins, &f, true)?,
+                None => None,
+            };
+            let p = point(&pt.req("point")?)?;
+            length += previous.map_or(0.0, |q: Vec3| (p - q).norm());
+            previous = Some(p);
+            points.push(RopePoint {
+                node,
+                point: to_node_frame(model, node, &p),
+            });
+        }
+        let stiffness = physical_or_zero(&t.req("stiffness")?)?;
+        let damping = match t.field("damping") {
+            Some(f) => physical_or_zero(&f)?,
+            None => 0.0,
+        };
+        let rest_length = match t.field("rest_length") {
+            Some(f) => physical_or_zero(&f)?,
+            None => length,
+        };
+        model.ropes.push(Rope {
+            name,
+            points,
+            stiffness,
+            damping,
+            rest_length,
+        });
+        origins.ropes.push(Origin::of(&t));
+    }
+    Ok(())
+}
+
 fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
     const XYZ: &[&str] = &["x", "y", "z"];
     const WXYZ: &[&str] = &["w", "x", "y", "z"];
@@ -1148,6 +1198,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "joint",
             "beam",
             "spring",
+            "rope",
         ])?;
         let name = read_name(&t, &mut names, "sensor")?;
         let ty = t.req("type")?.choice(&[
@@ -1165,6 +1216,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "beam_strain",
             "beam_stress",
             "spring_force",
+            "rope_force",
         ])?;
         let why = format!("for a {ty} sensor");
         let uses: &[&str] = match ty {
@@ -1175,6 +1227,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "joint_force" | "joint_torque" => &["joint", "component"],
             "beam_strain" | "beam_stress" => &["beam", "component"],
             "spring_force" => &["spring"],
+            "rope_force" => &["rope"],
             _ => &[],
         };
         for k in [
@@ -1185,6 +1238,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "joint",
             "beam",
             "spring",
+            "rope",
         ] {
             if !uses.contains(&k) {
                 t.forbid(k, &why)?;
@@ -1287,6 +1341,20 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                     ))
                 })?;
                 SensorKind::SpringForce { spring }
+            }
+            "rope_force" => {
+                let f = t.req("rope")?;
+                let rname = f.str()?;
+                let names = || model.ropes.iter().map(|r| r.name.as_str());
+                let rope = names().position(|n| n == rname).ok_or_else(|| {
+                    f.err(format!(
+                        "unknown rope '{}'{} (ropes: {})",
+                        clip(rname, QUOTED),
+                        suggestion(rname, names()),
+                        name_list(names(), 12)
+                    ))
+                })?;
+                SensorKind::RopeForce { rope }
             }
             "kinetic_energy" => SensorKind::KineticEnergy,
             "potential_energy" => SensorKind::PotentialEnergy,

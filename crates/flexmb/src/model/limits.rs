@@ -44,6 +44,9 @@ pub const MIN_RELATIVE_LENGTH: f64 = 1e-6;
 /// 1.5 kB, its share of the solver's matrices more).
 pub const MAX_ITEMS: usize = 2_000_000;
 
+/// Most points of one rope: its local matrix is dense, `(6 n)^2` entries.
+pub const MAX_ROPE_POINTS: usize = 64;
+
 /// Whether `v` is in `[lo, hi]` (false for NaN).
 pub fn within(v: f64, lo: f64, hi: f64) -> bool {
     lo <= v && v <= hi

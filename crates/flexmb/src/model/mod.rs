@@ -164,6 +164,30 @@ pub struct Relaxation {
     pub damping: f64,
 }
 
+/// A point a rope passes through: fixed on a node (node frame) or on the ground (inertial).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RopePoint {
+    pub node: Option<NodeId>,
+    /// The point, in the frame of `node` (inertial for the ground) \[m\].
+    pub point: Vec3,
+}
+
+/// A rope (cable, belt) through `n >= 2` points, the intermediate ones frictionless eyelets
+/// or pulleys: one tension along its whole length `L` (the sum of the straight segments),
+/// `T = k (L - L0) + c dL/dt` while taut, and no force when slack (`L <= L0`, or a
+/// damping force that would push). An element on `n` node slots ([`crate::elements::rope`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Rope {
+    pub name: String,
+    pub points: Vec<RopePoint>,
+    /// Axial stiffness of the whole rope k [N/m], >= 0.
+    pub stiffness: f64,
+    /// Damping c [N s/m], >= 0.
+    pub damping: f64,
+    /// Unstretched length L0 \[m\], >= 0.
+    pub rest_length: f64,
+}
+
 /// Cross-section properties of a beam, in the section frame (x along the beam axis, y and z
 /// the section's principal axes). Strain components are ordered
 /// `(epsilon_1, gamma_2, gamma_3, kappa_1, kappa_2, kappa_3)`: axial strain, two shear
@@ -322,6 +346,10 @@ pub enum SensorKind {
     SpringForce {
         spring: usize,
     },
+    /// Tension of a rope \[N\] (index in [`Model::ropes`]).
+    RopeForce {
+        rope: usize,
+    },
     KineticEnergy,
     PotentialEnergy,
     TotalEnergy,
@@ -361,6 +389,8 @@ pub struct Model {
     pub joints: Vec<Joint>,
     pub loads: Vec<Load>,
     pub springs: Vec<SpringDamper>,
+    #[serde(default)]
+    pub ropes: Vec<Rope>,
     pub beams: Vec<Beam>,
     pub sensors: Vec<Sensor>,
 }
@@ -387,6 +417,7 @@ impl Model {
             joints: Vec::new(),
             loads: Vec::new(),
             springs: Vec::new(),
+            ropes: Vec::new(),
             beams: Vec::new(),
             sensors: Vec::new(),
         }

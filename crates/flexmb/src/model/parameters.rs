@@ -27,6 +27,8 @@
 //! | spring | `spring.<s>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `l0` \[m\] | same |
 //! | spring | `spring.<s>.point_a.<k>`, `spring.<s>.point_b.<k>` | attachment point at t = 0, inertial \[m\] | same |
 //! | spring | `spring.<s>.relaxation_stiffness`, `.relaxation_damping` | Maxwell branch `k_m` [N/m], `c_m` [N s/m] (springs that have one) | same |
+//! | rope | `rope.<r>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `L0` \[m\] | same |
+//! | rope | `rope.<r>.points.<i>.point.<k>` | point `i` at t = 0, inertial \[m\] | same |
 //!
 //! Components `<k>` are 0, 1, 2 (x, y, z); matrix indices follow the strain order
 //! `(axial, shear 2, shear 3, torsion, bending 2, bending 3)` for `C` and `(x, y, z)` for `J`.
@@ -48,7 +50,7 @@
 //! ([`ParamRole::Residual`]).
 
 use super::{BeamSection, JointId};
-use super::{Joint, Load, Model, Node, NodeId, RigidBody, SpringDamper};
+use super::{Joint, Load, Model, Node, NodeId, RigidBody, Rope, SpringDamper};
 use flexmb_lie::Vec3;
 use std::collections::HashMap;
 
@@ -146,6 +148,19 @@ pub enum SpringParam {
     RelaxationDamping,
 }
 
+/// Parameters of a rope.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RopeParam {
+    /// Stiffness [N/m].
+    Stiffness,
+    /// Damping [N s/m].
+    Damping,
+    /// Unstretched length \[m\].
+    RestLength,
+    /// Component `k` of point `i` at t = 0, inertial \[m\].
+    Point(usize, usize),
+}
+
 /// What a parameter is: its item and which of the item's quantities.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ParamKind {
@@ -161,6 +176,8 @@ pub enum ParamKind {
     Load(usize, LoadParam),
     /// Index in [`Model::springs`].
     Spring(usize, SpringParam),
+    /// Index in [`Model::ropes`].
+    Rope(usize, RopeParam),
 }
 
 /// A path that names no parameter.
@@ -293,6 +310,20 @@ impl Parameters {
                 add("relaxation_damping".into(), SpringParam::RelaxationDamping);
             }
         }
+        let names = segments(model.ropes.iter().map(|r| r.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            let mut add = |key: String, p| {
+                reg.push(format!("rope.{name}.{key}"), ParamKind::Rope(i, p));
+            };
+            add("stiffness".into(), RopeParam::Stiffness);
+            add("damping".into(), RopeParam::Damping);
+            add("rest_length".into(), RopeParam::RestLength);
+            for j in 0..model.ropes[i].points.len() {
+                for k in 0..3 {
+                    add(format!("points.{j}.point.{k}"), RopeParam::Point(j, k));
+                }
+            }
+        }
         reg
     }
 
@@ -363,6 +394,7 @@ impl Parameters {
             ParamKind::Joint(j, p) => p.get(&model.joints[j.0], &model.nodes),
             ParamKind::Load(i, p) => p.get(&model.loads[i]),
             ParamKind::Spring(i, p) => p.get(&model.springs[i], &model.nodes),
+            ParamKind::Rope(i, p) => p.get(&model.ropes[i], &model.nodes),
         }
     }
 
@@ -383,6 +415,7 @@ impl Parameters {
             ParamKind::Joint(j, p) => p.set(&mut model.joints[j.0], &model.nodes, value),
             ParamKind::Load(i, p) => p.set(&mut model.loads[i], value),
             ParamKind::Spring(i, p) => p.set(&mut model.springs[i], &model.nodes, value),
+            ParamKind::Rope(i, p) => p.set(&mut model.ropes[i], &model.nodes, value),
         }
     }
 
@@ -639,6 +672,36 @@ fn to_node_frame(nodes: &[Node], node: Option<NodeId>, p: &Vec3) -> Vec3 {
     match node {
         Some(n) => nodes[n.0].frame.inverse().point(p),
         None => *p,
+    }
+}
+
+impl RopeParam {
+    /// The value; `nodes` are the model's nodes (their initial frames).
+    pub fn get(self, rope: &Rope, nodes: &[Node]) -> f64 {
+        match self {
+            RopeParam::Stiffness => rope.stiffness,
+            RopeParam::Damping => rope.damping,
+            RopeParam::RestLength => rope.rest_length,
+            RopeParam::Point(i, k) => {
+                let p = &rope.points[i];
+                to_inertial(nodes, p.node, &p.point)[k]
+            }
+        }
+    }
+
+    /// Sets the value (points converted to their node's frame).
+    pub fn set(self, rope: &mut Rope, nodes: &[Node], value: f64) {
+        match self {
+            RopeParam::Stiffness => rope.stiffness = value,
+            RopeParam::Damping => rope.damping = value,
+            RopeParam::RestLength => rope.rest_length = value,
+            RopeParam::Point(i, k) => {
+                let p = &mut rope.points[i];
+                let mut x = to_inertial(nodes, p.node, &p.point);
+                x[k] = value;
+                p.point = to_node_frame(nodes, p.node, &x);
+            }
+        }
     }
 }
 

@@ -5,10 +5,10 @@
 //! (table, index, name) and the field, which the model-file front end maps back to a line.
 
 use super::limits::{
-    within, MAX_ANGLE, MAX_ITEMS, MAX_KINEMATIC, MAX_PHYSICAL, MAX_TIME, MIN_PHYSICAL,
-    MIN_RELATIVE_LENGTH, MIN_STEP,
+    within, MAX_ANGLE, MAX_ITEMS, MAX_KINEMATIC, MAX_PHYSICAL, MAX_ROPE_POINTS, MAX_TIME,
+    MIN_PHYSICAL, MIN_RELATIVE_LENGTH, MIN_STEP,
 };
-use super::{ItemRef, JointKind, Model, NodeId, SensorKind, TimeFunction};
+use super::{ItemRef, JointKind, Model, NodeId, RopePoint, SensorKind, TimeFunction};
 use crate::error::ModelError;
 use flexmb_lie::{Frame, Group, Mat3, Vec3};
 use std::collections::HashMap;
@@ -361,6 +361,53 @@ impl Model {
             }
         }
 
+        for (i, r) in self.ropes.iter().enumerate() {
+            let fail = |field, m| bad("rope", i, &r.name, field, m);
+            let n_points = r.points.len();
+            if !(2..=MAX_ROPE_POINTS).contains(&n_points) {
+                return Err(fail(
+                    "points",
+                    format!("has {n_points} points: a rope runs through 2 to {MAX_ROPE_POINTS} points (its local matrix is dense)"),
+                ));
+            }
+            for p in &r.points {
+                check_node("rope", i, &r.name, "points", p.node)?;
+                finite3(&p.point, 2.0 * MAX_KINEMATIC).map_err(|m| fail("points", m))?;
+            }
+            if r.points.iter().all(|p| p.node.is_none()) {
+                return Err(fail(
+                    "points",
+                    "every point is on the ground: give at least one node".into(),
+                ));
+            }
+            in_range(r.stiffness, 0.0, MAX_PHYSICAL).map_err(|m| fail("stiffness", m))?;
+            in_range(r.damping, 0.0, MAX_PHYSICAL).map_err(|m| fail("damping", m))?;
+            let world = |p: &RopePoint| match p.node {
+                Some(id) => self.nodes[id.0].frame.point(&p.point),
+                None => p.point,
+            };
+            let length: f64 = r
+                .points
+                .windows(2)
+                .map(|w| (world(&w[1]) - world(&w[0])).norm())
+                .sum();
+            in_range(r.rest_length, 0.0, 2.0 * MAX_KINEMATIC * n_points as f64)
+                .map_err(|m| fail("rest_length", m))?;
+            for (s, w) in r.points.windows(2).enumerate() {
+                let (a, b) = (world(&w[0]), world(&w[1]));
+                if (b - a).norm() <= 1e-9 * length.max(a.norm()).max(b.norm()) {
+                    return Err(fail(
+                        "points",
+                        format!(
+                            "points {} and {} coincide at t = 0: the direction of the rope between them is undefined",
+                            s + 1,
+                            s + 2
+                        ),
+                    ));
+                }
+            }
+        }
+
         let model_extent = extent(self);
         for (i, b) in self.beams.iter().enumerate() {
             let fail = |field, m| bad("beam", i, &b.name, field, m);
@@ -505,6 +552,12 @@ impl Model {
                             "spring",
                             format!("spring index {spring} does not exist"),
                         ));
+                    }
+                    (None, None)
+                }
+                SensorKind::RopeForce { rope } => {
+                    if *rope >= self.ropes.len() {
+                        return Err(fail("rope", format!("rope index {rope} does not exist")));
                     }
                     (None, None)
                 }
