@@ -331,6 +331,52 @@ pub fn residual_derivative_transpose(
     }
 }
 
+/// `dD/dp`: the derivative of the diagonal nodal masses and inertias `D`
+/// ([`crate::Data::nodal_mass`]: bodies' masses and mean inertias about their nodes, the
+/// lumped halves of beam elements) with respect to one parameter, as `(node, dD_node)`
+/// pairs (none for a parameter that does not change `D`). The nodal damping `alpha D v` of
+/// pseudo-dynamic statics depends on the parameters through it.
+pub fn nodal_mass_derivative(
+    model: &Model,
+    params: &Parameters,
+    id: ParamId,
+) -> Vec<(NodeId, flexmb_lie::Vec6)> {
+    use crate::model::parameters::{BodyParam, SectionParam};
+    use flexmb_lie::Vec6;
+    let split = |m: f64, j: f64| Vec6::new(m, m, m, j, j, j);
+    match params.kind(id) {
+        ParamKind::Body(i, p) => {
+            let b = &model.bodies[i];
+            let d = match p {
+                // j_o = tr(J) / 3 + m |c|^2 2 / 3
+                BodyParam::Mass => split(1.0, b.com.norm_squared() * 2.0 / 3.0),
+                BodyParam::Inertia(k) if k < 3 => split(0.0, 1.0 / 3.0),
+                BodyParam::Inertia(_) => return Vec::new(),
+                BodyParam::Com(k) => split(0.0, b.mass * 4.0 / 3.0 * b.com[k]),
+            };
+            vec![(b.node, d)]
+        }
+        ParamKind::Beam(item, p) => {
+            let per_length = |b: &crate::model::Beam| match p {
+                SectionParam::MassPerLength => Some(split(0.5 * b.length, 0.0)),
+                SectionParam::RotaryInertia(i, j) if i == j => {
+                    Some(split(0.0, 0.5 * b.length / 3.0))
+                }
+                _ => None,
+            };
+            let mut out = Vec::new();
+            for &e in params.beam_elements(item) {
+                let b = &model.beams[e];
+                if let Some(d) = per_length(b) {
+                    out.extend(b.nodes.iter().map(|&n| (n, d)));
+                }
+            }
+            out
+        }
+        _ => Vec::new(),
+    }
+}
+
 /// Adds a local vector (6 entries per slot) to the rows of its node slots.
 fn scatter(out: &mut [f64], slots: &[Option<NodeId>], d: &[f64]) {
     for (k, slot) in slots.iter().enumerate() {

@@ -1425,8 +1425,7 @@ fn spring_maxwell_branch_and_spring_force_sensor() {
 #[test]
 fn rope_errors_name_the_key() {
     let rope = |points: &str| {
-        GOOD.to_string()
-            + &format!("\n[[rope]]\nname = \"r\"\npoints = {points}\nstiffness = 10\n")
+        GOOD.to_string() + &format!("\n[[rope]]\nname = \"r\"\npoints = {points}\nstiffness = 10\n")
     };
     let read = |text: String| {
         parse_model_str(&text, "rope.toml", &[])
@@ -1439,7 +1438,9 @@ fn rope_errors_name_the_key() {
     assert_eq!(file.model.ropes[0].points.len(), 2);
     assert!((file.model.ropes[0].rest_length - 10f64.sqrt()).abs() < 1e-12);
     assert_contains(
-        &read(rope("[{ node = \"tpo\", point = [1, 0, 0] }, { point = [0, 0, 3] }]")),
+        &read(rope(
+            "[{ node = \"tpo\", point = [1, 0, 0] }, { point = [0, 0, 3] }]",
+        )),
         &["rope.toml:", "rope[0].points[0].node", "unknown node 'tpo'"],
     );
     assert_contains(
@@ -1457,7 +1458,9 @@ fn rope_errors_name_the_key() {
         &["field 'rope[0].points'", "points 1 and 2 coincide"],
     );
     assert_contains(
-        &read(rope("[{ point = [0, 0, 3], nod = \"top\" }, { point = [1, 0, 0] }]")),
+        &read(rope(
+            "[{ point = [0, 0, 3], nod = \"top\" }, { point = [1, 0, 0] }]",
+        )),
         &["unknown key 'nod'"],
     );
 }

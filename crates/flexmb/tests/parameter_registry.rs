@@ -27,6 +27,7 @@ const EXAMPLES: &[&str] = &[
     "slider_crank.toml",
     "spin_up.toml",
     "viscoelastic_mount.toml",
+    "block_and_tackle.toml",
 ];
 
 fn read(name: &str, overrides: &[&str]) -> Model {
@@ -309,6 +310,18 @@ fn parameter_set_matches_set_override_on_example_files() {
             "spring.mount.relaxation_stiffness=3",
             "spring.mount.relaxation_stiffness",
             3.0,
+        ),
+        (
+            "block_and_tackle.toml",
+            "rope.rope.points.2.point.0=0.6",
+            "rope.rope.points.2.point.0",
+            0.6,
+        ),
+        (
+            "block_and_tackle.toml",
+            "rope.rope.stiffness=1200",
+            "rope.rope.stiffness",
+            1200.0,
         ),
         (
             "viscoelastic_mount.toml",

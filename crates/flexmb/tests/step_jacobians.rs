@@ -68,6 +68,19 @@ fn check(name: &str, sim: &Simulation) {
     // difference of the residual, relative to its size, so that round-off in rows that sum
     // large forces does not pass for an error and a small block is not hidden by a large one.
     let jacobian = f.jacobian(&x, &mut data);
+    // The partial derivatives are kept for the last x only: another point recomputes them,
+    // and coming back gives the same matrix.
+    let other: Vec<f64> = x.iter().map(|v| v * 1.01 + 1e-4).collect();
+    assert_ne!(
+        f.jacobian(&other, &mut data),
+        jacobian,
+        "{name}: another point"
+    );
+    assert_eq!(
+        f.jacobian(&x, &mut data),
+        jacobian,
+        "{name}: the same point again"
+    );
     let (nd, na, so) = (layout.n_dofs, layout.n_active, layout.state_offset());
     type Selection<'a> = Box<dyn Fn(usize) -> bool + 'a>;
     let kinds: [(&str, Selection); 6] = [
@@ -305,6 +318,14 @@ fn step_parameter_derivatives_match_finite_differences() {
     for stabilized in [false, true] {
         let sim = viscoelastic_pair(flexmb_lie::Group::SE3, stabilized);
         paths.extend(check_parameters("viscoelastic pair", &sim, usize::MAX));
+    }
+    // The nodal damping alpha D v of pseudo-dynamic statics: D depends on the masses and
+    // inertias of bodies and beams.
+    for file in ["heavy_top.toml", "flexible_four_bar.toml"] {
+        let mut sim = simulation(file, &[], 3);
+        sim.settings.nodal_damping = 7.0;
+        let name = format!("{file} with nodal damping");
+        paths.extend(check_parameters(&name, &sim, usize::MAX));
     }
     let covered = kinds(&paths);
     for kind in [

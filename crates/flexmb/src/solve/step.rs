@@ -40,6 +40,8 @@ use crate::joints::ConstraintKernel;
 use crate::model::Model;
 use crate::state::State;
 use flexmb_lie::{Group, Mat6, Vec6};
+use std::cell::RefCell;
+use std::rc::Rc;
 
 /// The fixed numbers of one step: scheme, size, scaling and loading.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -347,7 +349,9 @@ pub type Triplets = Vec<(usize, usize, f64)>;
 /// The step residual `R(x; s_n, p, h)` as a function (see the module documentation), with
 /// its exact Jacobian `dR/dx` and the products of `dR/ds_n` with a tangent and with a
 /// transposed vector. Every evaluation takes its inputs explicitly; `data` is scratch (a
-/// [`crate::Data`] of the same layout).
+/// [`crate::Data`] of the same layout). The partial derivatives at the last `x` asked for
+/// are kept: `jacobian`, `start_jvp`, `start_vjp` and the parameter products at the same
+/// `x` (what an adjoint step calls) assemble them once.
 pub struct StepFunction<'a> {
     model: &'a Model,
     layout: &'a Layout,
@@ -358,6 +362,8 @@ pub struct StepFunction<'a> {
     b_start: Vec<Vec12>,
     /// Node kinematics of `s_n` (`T = I`).
     start_nodes: Vec<NodeState>,
+    /// The partial derivatives at the last `x` (see [`StepFunction::partials`]).
+    cache: RefCell<Option<(Vec<f64>, Rc<Partials>)>>,
 }
 
 /// Partial derivatives of the residual at the end of the step with respect to its
@@ -407,6 +413,7 @@ impl<'a> StepFunction<'a> {
             step,
             b_start,
             start_nodes,
+            cache: RefCell::new(None),
         }
     }
 
@@ -416,6 +423,7 @@ impl<'a> StepFunction<'a> {
     /// the parameters are taken at fixed `s`, as the unknowns `mu = s lambda` are.
     pub fn with_mass_scale(mut self, mass: f64) -> Self {
         self.step = self.step.with_mass(mass);
+        self.cache = RefCell::new(None);
         self
     }
 
@@ -532,8 +540,22 @@ impl<'a> StepFunction<'a> {
         data.residual.clone()
     }
 
-    /// The partial derivatives at the end of the step (see [`Partials`]).
-    fn partials(&self, x: &[f64], data: &mut crate::Data) -> Partials {
+    /// The partial derivatives at the end of the step (see [`Partials`]), kept for the next
+    /// call at the same `x`.
+    fn partials(&self, x: &[f64], data: &mut crate::Data) -> Rc<Partials> {
+        if let Some((at, p)) = &*self.cache.borrow() {
+            if at.as_slice() == x {
+                return Rc::clone(p);
+            }
+        }
+        let p = Rc::new(self.compute_partials(x, data));
+        *self.cache.borrow_mut() = Some((x.to_vec(), Rc::clone(&p)));
+        p
+    }
+
+    /// [`StepFunction::partials`], assembled: four assemblies of the iteration matrix with
+    /// one coefficient at a time (six with element states).
+    fn compute_partials(&self, x: &[f64], data: &mut crate::Data) -> Partials {
         let (end, mut nodes, total) = self.end_nodes(x);
         let group = self.model.group;
         let t: Vec<Mat6> = nodes.iter().map(|n| n.t).collect();
@@ -742,6 +764,23 @@ impl<'a> StepFunction<'a> {
         (end, nodes)
     }
 
+    /// `alpha dD/dp` of the nodal damping `alpha D v` (pseudo-dynamic statics; none without
+    /// it), per node.
+    fn nodal_damping_derivative(
+        &self,
+        params: &crate::model::parameters::Parameters,
+        id: crate::model::ParamId,
+    ) -> Vec<(crate::model::NodeId, Vec6)> {
+        if self.step.nodal_damping == 0.0 {
+            return Vec::new();
+        }
+        let alpha = self.step.nodal_damping;
+        crate::parameter_derivatives::nodal_mass_derivative(self.model, params, id)
+            .into_iter()
+            .map(|(n, d)| (n, d * alpha))
+            .collect()
+    }
+
     /// The [`crate::parameter_derivatives::Point`] of the end of the step.
     fn derivative_point<'p>(
         &self,
@@ -773,7 +812,8 @@ impl<'a> StepFunction<'a> {
     /// `(dR/dp) dp` at `x`, `dp` one entry per parameter of `params` (a
     /// [`crate::model::parameters::Parameters`] of this model): `s dr/dp` on the
     /// equilibrium rows, `dPhi/dp` on the constraint rows and `dpsi/dp / gamma'` on the
-    /// velocity-level rows, `h de/dp` on the element states' rows (with `r + B^T lambda`,
+    /// velocity-level rows, `h de/dp` on the element states' rows, `s alpha dD/dp v` of the
+    /// nodal damping of pseudo-dynamic statics (with `r + B^T lambda`,
     /// `Phi`, `psi = B v + Phi_t` and `e` at the end of the step,
     /// [`crate::parameter_derivatives`]), and in the stabilized form the move of
     /// `q_{n+1} = q_n exp(dq + B(q_n; p)^T zeta)`: `F_q T d(B(q_n)^T zeta)/dp`.
@@ -812,6 +852,12 @@ impl<'a> StepFunction<'a> {
             residual_derivative(self.model, params, id, &point, columns);
             for i in 0..nd {
                 out[i] += d * self.step.scale * dr[i];
+            }
+            for (node, dd) in self.nodal_damping_derivative(params, id) {
+                let damping = dd.component_mul(&end.v[node.0]) * (self.step.scale * d);
+                for k in 0..6 {
+                    out[6 * node.0 + k] += damping[k];
+                }
             }
             for (k, e) in de.iter().enumerate() {
                 out[so + k] += d * self.step.h * e;
@@ -882,6 +928,15 @@ impl<'a> StepFunction<'a> {
             e: &w_e,
         };
         residual_derivative_transpose(self.model, params, &point, weights, &mut grad);
+        if self.step.nodal_damping > 0.0 {
+            for (k, id) in params.ids().enumerate() {
+                for (node, dd) in self.nodal_damping_derivative(params, id) {
+                    let damping = dd.component_mul(&end.v[node.0]);
+                    let w_node = &w_r[6 * node.0..6 * node.0 + 6];
+                    grad[k] += damping.iter().zip(w_node).map(|(a, b)| a * b).sum::<f64>();
+                }
+            }
+        }
         if layout.stabilized {
             // u = (F_q T)^T w, then u . d(B(q_n)^T zeta)/dp for the joint parameters.
             let p = self.partials(x, data);
