@@ -272,7 +272,7 @@ fn traverse<S: Sink>(
         if S::EVALUATE {
             buffers.gather(&kernel, it.nodes, (it.x, it.xdot, x_start));
         }
-        let (local, mut r, mut se) = buffers.split(kernel.n_local());
+        let (local, mut r, mut se) = buffers.split(kernel.n_local(), it.nodes);
         let n_states = local.x.len();
         if S::EVALUATE {
             let matrix = S::MATRIX.then_some((&sc.coef, &mut se));
@@ -289,7 +289,7 @@ fn traverse<S: Sink>(
             }
         }
         if S::MATRIX {
-            scatter_blocks(sink, n_slots, dof, |i, j| se[(i, j)]);
+            scatter_blocks(sink, n_slots, dof, |i, j| se.get(i, j));
             let n_states = kernel.n_states();
             if n_states > 0 {
                 let ratio = sc.state_scale / sc.row_scale;
@@ -493,7 +493,7 @@ fn scatter_states<S: Sink>(
         for ka in 0..n_slots {
             let Some(a) = dof(ka) else { continue };
             for i in 0..6 {
-                sink.entry(a + i, xs + j, se[(6 * ka + i, n6 + j)] * 1.0);
+                sink.entry(a + i, xs + j, se.get(6 * ka + i, n6 + j));
             }
         }
     }
@@ -501,11 +501,11 @@ fn scatter_states<S: Sink>(
         for kb in 0..n_slots {
             let Some(b) = dof(kb) else { continue };
             for j in 0..6 {
-                sink.entry(xs + i, b + j, se[(n6 + i, 6 * kb + j)] * ratio);
+                sink.entry(xs + i, b + j, se.get(n6 + i, 6 * kb + j) * ratio);
             }
         }
         for j in 0..n_states {
-            sink.entry(xs + i, xs + j, se[(n6 + i, n6 + j)] * ratio);
+            sink.entry(xs + i, xs + j, se.get(n6 + i, n6 + j) * ratio);
         }
     }
 }

@@ -117,7 +117,7 @@ fn element_term<E: ElementParameters>(
     let mut buffers = LocalBuffers::default();
     let p = at.point;
     buffers.gather(e, p.nodes, (p.x, p.xdot, state_start));
-    let local = buffers.local();
+    let local = buffers.local(p.nodes);
     let mut d = DVector::zeros(e.n_local());
     let mut dv = d.as_view_mut();
     let method = match wrt {

@@ -52,7 +52,7 @@ pub fn energies(model: &Model, elements: &[ElementRef], state: &State) -> (f64, 
         let k = e.kernel(model);
         buffers.gather(&k, &nodes, (&state.x, &state.xdot, start));
         start += k.n_states();
-        let local = buffers.local();
+        let local = buffers.local(&nodes);
         ke += k.kinetic_energy(&ctx, &local);
         pe += k.potential_energy(&ctx, &local);
     }

@@ -74,7 +74,7 @@ impl State {
                     let zeros = vec![0.0; ns];
                     buffers.gather(&kernel, &nodes, (&zeros, &zeros, 0));
                     let x = &mut state.x[start..start + ns];
-                    kernel.initial_states(&ctx, &buffers.local(), x);
+                    kernel.initial_states(&ctx, &buffers.local(&nodes), x);
                 }
             }
         }

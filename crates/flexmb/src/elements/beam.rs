@@ -300,7 +300,7 @@ impl ElementKernel for BeamElement<'_> {
             let mut rf = re.fixed_rows_mut::<3>(0);
             rf -= we;
         }
-        r_out.copy_from(&r);
+        r_out.fixed_rows_mut::<12>(0).copy_from(&r);
         let Some((coef, s)) = s else {
             return;
         };
@@ -333,8 +333,9 @@ impl ElementKernel for BeamElement<'_> {
             let mut kb = k.fixed_view_mut::<3, 3>(6 * end, 6 * end + 3);
             kb -= hat(&weights[end]);
         }
+        let mut s = s.fixed::<12>();
         s.copy_from(&(mm * coef.m + c_t * coef.c + k * coef.k));
-        super::physical::apply_tangent_full(nodes, &[true, true], s, coef, &k);
+        super::physical::apply_tangent_full(nodes, &[true, true], &mut s, coef, &k);
     }
 
     fn kinetic_energy(&self, _ctx: &Context, local: &Local) -> f64 {

@@ -46,8 +46,47 @@ pub type Mat12 = SMatrix<f64, 12, 12>;
 /// An element's local vector: 6 entries per node slot (Lie algebra: translation, then
 /// rotation), then one per element state ([`ElementKernel::n_states`]).
 pub type LocalVector<'a> = DVectorViewMut<'a, f64>;
-/// An element's local matrix, rows and columns ordered like [`LocalVector`].
-pub type LocalMatrix<'a> = DMatrixViewMut<'a, f64>;
+/// An element's local matrix, rows and columns ordered like [`LocalVector`]: `n x n`,
+/// column-major in contiguous storage, seen as a fixed-size matrix by an element whose
+/// size is static ([`LocalMatrix::fixed`]: the arithmetic of fixed-size matrices) and as a
+/// dynamic one otherwise ([`LocalMatrix::view`]).
+pub struct LocalMatrix<'a> {
+    data: &'a mut [f64],
+    n: usize,
+}
+
+impl<'a> LocalMatrix<'a> {
+    /// The `n x n` matrix stored column-major in `data` (at least `n^2` entries).
+    pub fn new(data: &'a mut [f64], n: usize) -> Self {
+        Self {
+            data: &mut data[..n * n],
+            n,
+        }
+    }
+
+    /// The number of rows (and columns).
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+
+    /// Entry `(i, j)`.
+    #[inline]
+    pub fn get(&self, i: usize, j: usize) -> f64 {
+        self.data[i + j * self.n]
+    }
+
+    /// The whole matrix as a dynamic view.
+    pub fn view(&mut self) -> DMatrixViewMut<'_, f64> {
+        DMatrixViewMut::from_slice(self.data, self.n, self.n)
+    }
+
+    /// The whole matrix as an `N x N` view (`N` must be its size).
+    #[inline]
+    pub fn fixed<const N: usize>(&mut self) -> nalgebra::SMatrixViewMut<'_, f64, N, N> {
+        assert_eq!(self.n, N, "local matrix of size {} seen as {N}", self.n);
+        nalgebra::SMatrixViewMut::<f64, N, N>::from_slice(self.data)
+    }
+}
 
 /// Kinematics of one node as an element sees it.
 #[derive(Clone, Copy, Debug)]
@@ -217,6 +256,9 @@ pub trait ElementKernel {
 pub struct LocalBuffers {
     /// The kinematics of a ground slot (built once).
     ground: NodeState,
+    /// The slots' kinematics are those of consecutive nodes: read them in place.
+    in_place: Option<std::ops::Range<usize>>,
+    /// Otherwise, their copy.
     nodes: Vec<NodeState>,
     x: Vec<f64>,
     xdot: Vec<f64>,
@@ -228,6 +270,7 @@ impl Default for LocalBuffers {
     fn default() -> Self {
         Self {
             ground: NodeState::ground(Frame::identity()),
+            in_place: None,
             nodes: Vec::new(),
             x: Vec::new(),
             xdot: Vec::new(),
@@ -240,6 +283,9 @@ impl Default for LocalBuffers {
 impl LocalBuffers {
     /// Gathers the inputs of `kernel` from the kinematics of all nodes and from the states
     /// and rates of all elements (`x`, `xdot`, the element's own starting at `state_start`).
+    /// Slots that are consecutive nodes (a body, most beam elements) are not copied: the
+    /// element reads them in `nodes`, which [`LocalBuffers::split`] and
+    /// [`LocalBuffers::local`] take again.
     #[inline]
     pub fn gather<K: ElementKernel + ?Sized>(
         &mut self,
@@ -247,10 +293,19 @@ impl LocalBuffers {
         nodes: &[NodeState],
         (x, xdot, state_start): (&[f64], &[f64], usize),
     ) {
+        let n = kernel.n_slots();
+        self.in_place = match kernel.node(0) {
+            Some(first) if (1..n).all(|k| kernel.node(k) == Some(NodeId(first.0 + k))) => {
+                Some(first.0..first.0 + n)
+            }
+            _ => None,
+        };
         self.nodes.clear();
-        for k in 0..kernel.n_slots() {
-            let node = kernel.node(k).map_or(&self.ground, |n| &nodes[n.0]);
-            self.nodes.push(*node);
+        if self.in_place.is_none() {
+            for k in 0..n {
+                let node = kernel.node(k).map_or(&self.ground, |n| &nodes[n.0]);
+                self.nodes.push(*node);
+            }
         }
         let ns = kernel.n_states();
         self.x.clear();
@@ -262,10 +317,14 @@ impl LocalBuffers {
         }
     }
 
-    /// The gathered inputs and the local vector and matrix (`n` = [`ElementKernel::n_local`])
-    /// to write.
+    /// The gathered inputs (`nodes`: those given to [`LocalBuffers::gather`]) and the local
+    /// vector and matrix (`n` = [`ElementKernel::n_local`]) to write.
     #[inline]
-    pub fn split(&mut self, n: usize) -> (Local<'_>, LocalVector<'_>, LocalMatrix<'_>) {
+    pub fn split<'s>(
+        &'s mut self,
+        n: usize,
+        nodes: &'s [NodeState],
+    ) -> (Local<'s>, LocalVector<'s>, LocalMatrix<'s>) {
         if self.r.len() < n {
             self.r.resize(n, 0.0);
         }
@@ -273,21 +332,27 @@ impl LocalBuffers {
             self.s.resize(n * n, 0.0);
         }
         let local = Local {
-            nodes: &self.nodes,
+            nodes: match &self.in_place {
+                Some(range) => &nodes[range.clone()],
+                None => &self.nodes,
+            },
             x: &self.x,
             xdot: &self.xdot,
         };
         (
             local,
             LocalVector::from_slice(&mut self.r[..n], n),
-            LocalMatrix::from_slice(&mut self.s[..n * n], n, n),
+            LocalMatrix::new(&mut self.s, n),
         )
     }
 
-    /// The gathered inputs.
-    pub fn local(&self) -> Local<'_> {
+    /// The gathered inputs (`nodes`: those given to [`LocalBuffers::gather`]).
+    pub fn local<'s>(&'s self, nodes: &'s [NodeState]) -> Local<'s> {
         Local {
-            nodes: &self.nodes,
+            nodes: match &self.in_place {
+                Some(range) => &nodes[range.clone()],
+                None => &self.nodes,
+            },
             x: &self.x,
             xdot: &self.xdot,
         }
@@ -306,7 +371,7 @@ pub fn evaluate_owned<K: ElementKernel + ?Sized>(
     let mut r = DVector::zeros(n);
     let mut s = DMatrix::zeros(n, n);
     let mut rv = r.as_view_mut();
-    let mut sv = s.as_view_mut();
+    let mut sv = LocalMatrix::new(s.as_mut_slice(), n);
     kernel.evaluate(ctx, local, &mut rv, coef.map(|c| (c, &mut sv)));
     (r, s)
 }

@@ -56,7 +56,8 @@ pub fn to_group(
         Group::R3xSO3 => {
             r.copy_from(&r_p);
             if let Some((coef, s)) = s {
-                let mut s = s.view_mut((0, 0), (n, n));
+                let mut whole = s.view();
+                let mut s = whole.view_mut((0, 0), (n, n));
                 s.fill(0.0);
                 if let Some(k) = &k_p {
                     s += k * coef.k;
@@ -92,7 +93,8 @@ pub fn to_group(
                     let mut blk = k.fixed_view_mut::<3, 3>(6 * a, 6 * a + 3);
                     blk += hat(&f);
                 }
-                let mut s = s.view_mut((0, 0), (n, n));
+                let mut whole = s.view();
+                let mut s = whole.view_mut((0, 0), (n, n));
                 s.fill(0.0);
                 if let Some(c) = &c_p {
                     let cg = p.transpose() * c * &p;

@@ -235,7 +235,7 @@ impl ElementKernel for RigidBody {
         let (res, mm, c, k) = self.local(ctx, n);
         r.fixed_rows_mut::<6>(0).copy_from(&res);
         let blk = mm * coef.m + c * coef.c + k * n.t * coef.k;
-        s.fixed_view_mut::<6, 6>(0, 0).copy_from(&blk);
+        s.fixed::<6>().copy_from(&blk);
     }
 
     fn kinetic_energy(&self, ctx: &Context, local: &Local) -> f64 {

@@ -193,6 +193,7 @@ impl ElementKernel for SpringDamper {
             Some((coef, &mut *s)),
         );
         let g = Self::group_gradient(ctx.group, nodes, &geo.g);
+        let mut s = s.view();
         for a in 0..2 {
             let row = if active[a] {
                 nodes[a].t.transpose() * g.fixed_rows::<6>(6 * a) * (-km / cm * coef.k)
