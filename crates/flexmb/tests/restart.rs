@@ -78,6 +78,13 @@ fn resumed_beam_run_matches_the_uninterrupted_run() {
     check("spin_up.toml", &["solver.t_end=2"]);
 }
 
+#[test]
+fn resumed_run_with_element_states_and_a_rope_matches_the_uninterrupted_run() {
+    // The Maxwell branch's state, its rate and algorithmic rate go through the checkpoint.
+    check("viscoelastic_mount.toml", &["solver.t_end=2"]);
+    check("block_and_tackle.toml", &["solver.t_end=0.3"]);
+}
+
 /// A run extended past an end that is not an output time goes on to the next output time
 /// (none is skipped).
 #[test]
