@@ -239,41 +239,21 @@ fn rope_tangents_match_finite_differences() {
 }
 
 #[test]
-fn spring_with_maxwell_branch_tangents_match_finite_differences() {
-    // The element state z (the branch damper's elongation) and its rate: columns dr/dz,
-    // dr/dzdot and the row of the state equation, against central differences.
-    let mut rng = Lcg(4);
-    for model in models() {
-        for ground_a in [false, true] {
-            let spring = SpringDamper {
-                name: "s".into(),
-                node_a: (!ground_a).then_some(NodeId(0)),
-                node_b: Some(NodeId(1)),
-                point_a: Vec3::new(0.2, 0.1, -0.3),
-                point_b: Vec3::new(-0.1, 0.4, 0.2),
-                stiffness: 120.0,
-                damping: 3.5,
-                rest_length: 0.4,
-                relaxation: Some(flexmb::model::Relaxation {
-                    stiffness: 80.0,
-                    damping: 7.0,
-                }),
-            };
-            let mut nodes = [rng.node(model.group), rng.node(model.group)];
-            if ground_a {
-                nodes[0] = NodeState::ground(Frame::identity());
-            }
-            let (x, xdot) = ([0.3 * rng.next()], [2.0 * rng.next()]);
-            check_element_with_states("Maxwell spring", &spring, &model, &nodes, &x, &xdot);
-        }
-    }
-}
-
-#[test]
 fn spring_damper_tangents_match_finite_differences() {
+    // With a Maxwell branch, also the element state z (the branch damper's elongation) and
+    // its rate: columns dr/dz, dr/dzdot and the row of the state equation.
     let mut rng = Lcg(3);
+    let branch = flexmb::model::Relaxation {
+        stiffness: 80.0,
+        damping: 7.0,
+    };
     for model in models() {
-        for ground_a in [false, true] {
+        for (ground_a, relaxation) in [
+            (false, None),
+            (true, None),
+            (false, Some(branch)),
+            (true, Some(branch)),
+        ] {
             let spring = SpringDamper {
                 name: "s".into(),
                 node_a: (!ground_a).then_some(NodeId(0)),
@@ -283,13 +263,17 @@ fn spring_damper_tangents_match_finite_differences() {
                 stiffness: 120.0,
                 damping: 3.5,
                 rest_length: 0.4,
-                relaxation: None,
+                relaxation,
             };
             let mut nodes = [rng.node(model.group), rng.node(model.group)];
             if ground_a {
                 nodes[0] = NodeState::ground(Frame::identity());
             }
-            check_element("spring-damper", &spring, &model, &nodes);
+            let n = spring.n_states();
+            let x: Vec<f64> = (0..n).map(|_| 0.3 * rng.next()).collect();
+            let xdot: Vec<f64> = (0..n).map(|_| 2.0 * rng.next()).collect();
+            let name = format!("spring-damper (Maxwell branch: {})", relaxation.is_some());
+            check_element_with_states(&name, &spring, &model, &nodes, &x, &xdot);
         }
     }
 }

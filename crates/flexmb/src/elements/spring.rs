@@ -164,24 +164,8 @@ impl ElementKernel for SpringDamper {
         let c_p = geo.g * geo.g.transpose() * self.damping;
         let (r_p, k_p, c_p) = (r_p.as_slice(), k_p.as_slice(), c_p.as_slice());
         let active = self.active();
-        let Some((km, cm, stretch)) = branch else {
-            physical::to_group(ctx.group, nodes, &active, r_p, Some(k_p), Some(c_p), r, s);
-            return;
-        };
-        r[12] = local.xdot[0] - km / cm * stretch;
-        let Some((coef, s)) = s else {
-            physical::to_group(
-                ctx.group,
-                nodes,
-                &active,
-                r_p,
-                Some(k_p),
-                Some(c_p),
-                r,
-                None,
-            );
-            return;
-        };
+        let mut s = s;
+        let matrix = s.as_mut().map(|(coef, m)| (*coef, &mut **m));
         physical::to_group(
             ctx.group,
             nodes,
@@ -190,8 +174,15 @@ impl ElementKernel for SpringDamper {
             Some(k_p),
             Some(c_p),
             r,
-            Some((coef, &mut *s)),
+            matrix,
         );
+        let Some((km, cm, stretch)) = branch else {
+            return;
+        };
+        r[12] = local.xdot[0] - km / cm * stretch;
+        let Some((coef, s)) = s else {
+            return;
+        };
         let g = Self::group_gradient(ctx.group, nodes, &geo.g);
         let mut s = s.view();
         for a in 0..2 {

@@ -1175,6 +1175,25 @@ fn read_ropes(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
     Ok(())
 }
 
+/// The index of the item that `f` names among `names` (e.g. the springs), or an error with
+/// the closest name and the list.
+fn item_named<'n, I: Iterator<Item = &'n str>>(
+    f: &Field<'_>,
+    names: impl Fn() -> I,
+    what: &str,
+    plural: &str,
+) -> Result<usize> {
+    let name = f.str()?;
+    names().position(|n| n == name).ok_or_else(|| {
+        f.err(format!(
+            "unknown {what} '{}'{} ({plural}: {})",
+            clip(name, QUOTED),
+            suggestion(name, names()),
+            name_list(names(), 12)
+        ))
+    })
+}
+
 fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
     const XYZ: &[&str] = &["x", "y", "z"];
     const WXYZ: &[&str] = &["w", "x", "y", "z"];
@@ -1329,31 +1348,13 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                 component: component(BEAM)?,
             },
             "spring_force" => {
-                let f = t.req("spring")?;
-                let sname = f.str()?;
                 let names = || model.springs.iter().map(|s| s.name.as_str());
-                let spring = names().position(|n| n == sname).ok_or_else(|| {
-                    f.err(format!(
-                        "unknown spring '{}'{} (springs: {})",
-                        clip(sname, QUOTED),
-                        suggestion(sname, names()),
-                        name_list(names(), 12)
-                    ))
-                })?;
+                let spring = item_named(&t.req("spring")?, names, "spring", "springs")?;
                 SensorKind::SpringForce { spring }
             }
             "rope_force" => {
-                let f = t.req("rope")?;
-                let rname = f.str()?;
                 let names = || model.ropes.iter().map(|r| r.name.as_str());
-                let rope = names().position(|n| n == rname).ok_or_else(|| {
-                    f.err(format!(
-                        "unknown rope '{}'{} (ropes: {})",
-                        clip(rname, QUOTED),
-                        suggestion(rname, names()),
-                        name_list(names(), 12)
-                    ))
-                })?;
+                let rope = item_named(&t.req("rope")?, names, "rope", "ropes")?;
                 SensorKind::RopeForce { rope }
             }
             "kinetic_energy" => SensorKind::KineticEnergy,
