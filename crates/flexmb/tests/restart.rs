@@ -100,3 +100,25 @@ fn extended_run_keeps_every_output_time() {
         "{times:?}"
     );
 }
+
+/// A checkpoint whose element states do not fit the model (a damaged or edited file; serde
+/// reads missing vectors as empty) is refused, not taken for a run that would panic later.
+#[test]
+fn restore_refuses_element_states_that_do_not_fit() {
+    let mut sim = common::example_simulation("viscoelastic_mount.toml", &["solver.t_end=0.1"]);
+    sim.step().expect("step");
+    for damage in 0..3 {
+        let mut memory = sim.memory();
+        match damage {
+            0 => memory.state.x.clear(),
+            1 => memory.state.xdot.push(0.0),
+            _ => memory.state.w.clear(),
+        }
+        let result = Simulation::restore(sim.model.clone(), sim.settings, memory);
+        assert!(
+            matches!(&result, Err(SolveError::Checkpoint(m)) if m.contains("does not fit")),
+            "damage {damage}: {:?}",
+            result.err()
+        );
+    }
+}

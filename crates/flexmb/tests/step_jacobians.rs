@@ -81,6 +81,11 @@ fn check(name: &str, sim: &Simulation) {
         jacobian,
         "{name}: the same point again"
     );
+    // ... and a changed step (here its row scale) recomputes them too.
+    let mut g = sim.step_function(h);
+    assert_eq!(g.jacobian(&x, &mut data), jacobian);
+    g.step = g.step.with_mass(2.0 * g.step.mass);
+    assert_ne!(g.jacobian(&x, &mut data), jacobian, "{name}: the step changed");
     let (nd, na, so) = (layout.n_dofs, layout.n_active, layout.state_offset());
     type Selection<'a> = Box<dyn Fn(usize) -> bool + 'a>;
     let kinds: [(&str, Selection); 6] = [
@@ -386,10 +391,11 @@ fn stabilized_step_jacobians_match_finite_differences() {
 }
 
 /// Two bodies on SE(3) or R3xSO(3), the first on a spherical joint to the ground, joined by a
-/// spring-damper with a Maxwell branch between offset points (one element state), and held
-/// by a rope from the ground over both bodies and back to the ground (an element on four
-/// slots), under gravity: the element-state block of the step and an element on more than
-/// two slots.
+/// spring-damper with a Maxwell branch between offset points and tied to the ground by a
+/// second one (two element states, of two elements), and held by a rope from the ground over
+/// a, b and a again back to the ground (an element on five slots, one node on two of them),
+/// under gravity: the element-state block of the step and an element on more than two
+/// slots.
 fn viscoelastic_pair(group: flexmb_lie::Group, stabilized: bool) -> Simulation {
     use flexmb::model::{JointKind, Model, Relaxation, SpringDamper};
     use flexmb_lie::{Frame, Mat3, Vec3};
@@ -430,11 +436,26 @@ fn viscoelastic_pair(group: flexmb_lie::Group, stabilized: bool) -> Simulation {
             at(None, Vec3::new(0.3, 0.5, 1.0)),
             at(Some(a), Vec3::new(0.1, 0.1, 0.0)),
             at(Some(b), Vec3::new(0.0, 0.1, 0.05)),
+            at(Some(a), Vec3::new(-0.1, 0.0, 0.1)),
             at(None, Vec3::new(1.5, 0.2, 1.0)),
         ],
         stiffness: 400.0,
         damping: 3.0,
-        rest_length: 2.5,
+        rest_length: 3.0,
+    });
+    m.springs.push(SpringDamper {
+        name: "tie".into(),
+        node_a: None,
+        node_b: Some(a),
+        point_a: Vec3::new(0.4, -0.6, 0.2),
+        point_b: Vec3::new(0.0, -0.1, 0.0),
+        stiffness: 50.0,
+        damping: 0.0,
+        rest_length: 0.5,
+        relaxation: Some(Relaxation {
+            stiffness: 120.0,
+            damping: 6.0,
+        }),
     });
     let mut s = flexmb::DynamicSettings::new(1.0, 1e-3);
     if stabilized {
@@ -452,7 +473,7 @@ fn element_state_step_jacobians_match_finite_differences() {
     for group in [flexmb_lie::Group::SE3, flexmb_lie::Group::R3xSO3] {
         for stabilized in [false, true] {
             let sim = viscoelastic_pair(group, stabilized);
-            assert_eq!(sim.data.layout.n_states, 1);
+            assert_eq!(sim.data.layout.n_states, 2);
             let name = format!("viscoelastic pair on {group:?}, stabilized {stabilized}");
             check(&name, &sim);
         }

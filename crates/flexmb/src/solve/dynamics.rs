@@ -635,6 +635,9 @@ impl Simulation {
             && c.state.vdot.len() == n
             && c.state.a.len() == n
             && c.state.lambda.len() == rows
+            && [&c.state.x, &c.state.xdot, &c.state.w]
+                .iter()
+                .all(|v| v.len() == data.layout.n_states)
             && (c.previous.h == 0.0
                 || (c.previous.vdot.len() == n && c.previous.lambda.len() == rows))
             && (!holds_values || c.mu_floor.len() == data.layout.n_active);

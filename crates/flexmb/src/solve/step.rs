@@ -362,8 +362,9 @@ pub struct StepFunction<'a> {
     b_start: Vec<Vec12>,
     /// Node kinematics of `s_n` (`T = I`).
     start_nodes: Vec<NodeState>,
-    /// The partial derivatives at the last `x` (see [`StepFunction::partials`]).
-    cache: RefCell<Option<(Vec<f64>, Rc<Partials>)>>,
+    /// The partial derivatives at the last `x` and the step's numbers then (see
+    /// [`StepFunction::partials`]).
+    cache: RefCell<Option<(Vec<f64>, Start, Rc<Partials>)>>,
 }
 
 /// Partial derivatives of the residual at the end of the step with respect to its
@@ -423,7 +424,6 @@ impl<'a> StepFunction<'a> {
     /// the parameters are taken at fixed `s`, as the unknowns `mu = s lambda` are.
     pub fn with_mass_scale(mut self, mass: f64) -> Self {
         self.step = self.step.with_mass(mass);
-        self.cache = RefCell::new(None);
         self
     }
 
@@ -541,15 +541,15 @@ impl<'a> StepFunction<'a> {
     }
 
     /// The partial derivatives at the end of the step (see [`Partials`]), kept for the next
-    /// call at the same `x`.
+    /// call at the same `x` with the same [`StepFunction::step`].
     fn partials(&self, x: &[f64], data: &mut crate::Data) -> Rc<Partials> {
-        if let Some((at, p)) = &*self.cache.borrow() {
-            if at.as_slice() == x {
+        if let Some((at, step, p)) = &*self.cache.borrow() {
+            if at.as_slice() == x && *step == self.step {
                 return Rc::clone(p);
             }
         }
         let p = Rc::new(self.compute_partials(x, data));
-        *self.cache.borrow_mut() = Some((x.to_vec(), Rc::clone(&p)));
+        *self.cache.borrow_mut() = Some((x.to_vec(), self.step, Rc::clone(&p)));
         p
     }
 
