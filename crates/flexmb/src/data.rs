@@ -74,9 +74,9 @@ impl Layout {
         let elements = ElementRef::all(model);
         let mut state_start = Vec::with_capacity(elements.len());
         let mut n_states = 0;
-        for e in &elements {
+        for item in crate::elements::ElementItem::all(model) {
             state_start.push(n_states);
-            n_states += crate::elements::ElementKernel::n_states(&e.kernel(model));
+            n_states += item.n_states(model);
         }
         let mut layout = Self {
             n_nodes: model.nodes.len(),

@@ -46,7 +46,8 @@
 //!   integration methods for constrained mechanical systems, Numer. Math. 129 (2015), Sect. 3.
 
 use crate::elements::{
-    Context, DerivativeMethod, ElementParameters, ElementRef, LocalBuffers, NodeState,
+    Context, DerivativeMethod, ElementItem, ElementKernel, ElementParameters, LocalBuffers,
+    NodeState,
 };
 use crate::joints::parameters::{ConstraintParameters, JointDerivative};
 use crate::joints::{self, Row};
@@ -162,8 +163,12 @@ fn visit(
         }
         ParamKind::Load(i, p) => element_term(at, (&model.loads[i], 0), Wrt::Own(p), sink),
         ParamKind::Spring(i, p) => {
-            let spring = (&model.springs[i], ElementRef::spring_state_start(model, i));
-            element_term(at, spring, Wrt::Own(p), sink)
+            let spring = &model.springs[i];
+            let start = match spring.n_states() {
+                0 => 0,
+                _ => ElementItem::Spring(i).state_start(model),
+            };
+            element_term(at, (spring, start), Wrt::Own(p), sink)
         }
         ParamKind::Rope(i, p) => element_term(at, (&model.ropes[i], 0), Wrt::Own(p), sink),
         ParamKind::Joint(j, p) => {

@@ -1,7 +1,9 @@
 //! Sensors: the output channels declared by a model, evaluated from the state.
 
 use crate::data::Data;
-use crate::elements::{Context, ElementKernel, ElementRef, Local, LocalBuffers, NodeState};
+use crate::elements::{
+    Context, ElementItem, ElementKernel, ElementRef, Local, LocalBuffers, NodeState,
+};
 use crate::joints;
 use crate::model::{Model, SensorFrame, SensorKind};
 use crate::state::State;
@@ -158,7 +160,7 @@ impl SensorEvaluator {
                 }
                 SensorKind::SpringForce { spring } => {
                     let sp = &model.springs[*spring];
-                    let start = ElementRef::spring_state_start(model, *spring);
+                    let start = ElementItem::Spring(*spring).state_start(model);
                     let ns = sp.n_states();
                     let local = Local {
                         nodes: &pair(&nodes, [sp.node_a, sp.node_b]),

@@ -85,7 +85,11 @@ fn check(name: &str, sim: &Simulation) {
     let mut g = sim.step_function(h);
     assert_eq!(g.jacobian(&x, &mut data), jacobian);
     g.step = g.step.with_mass(2.0 * g.step.mass);
-    assert_ne!(g.jacobian(&x, &mut data), jacobian, "{name}: the step changed");
+    assert_ne!(
+        g.jacobian(&x, &mut data),
+        jacobian,
+        "{name}: the step changed"
+    );
     let (nd, na, so) = (layout.n_dofs, layout.n_active, layout.state_offset());
     type Selection<'a> = Box<dyn Fn(usize) -> bool + 'a>;
     let kinds: [(&str, Selection); 6] = [

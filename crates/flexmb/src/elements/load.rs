@@ -73,8 +73,7 @@ impl ElementKernel for Load {
                     .copy_from(&(rot * hat(&self.force) * f));
             }
         }
-        let (r_p, k_p) = (r_p.as_slice(), k_p.as_slice());
-        physical::to_group(ctx.group, nodes, &[true], r_p, Some(k_p), None, r, s);
+        physical::to_group(ctx.group, nodes, &[true], &r_p, Some(&k_p), None, r, s);
     }
 }
 
@@ -104,16 +103,7 @@ impl ElementParameters for Load {
                 self.physical_residual(&self.force, &self.torque, df, &nodes[0])
             }
         };
-        physical::to_group(
-            ctx.group,
-            nodes,
-            &[true],
-            r_p.as_slice(),
-            None,
-            None,
-            dr,
-            None,
-        );
+        physical::to_group(ctx.group, nodes, &[true], &r_p, None, None, dr, None);
         DerivativeMethod::Analytic
     }
 }

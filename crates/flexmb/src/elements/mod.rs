@@ -377,25 +377,20 @@ pub fn evaluate_owned<K: ElementKernel + ?Sized>(
 }
 
 impl ElementRef {
-    /// The index of spring `i`'s first state in `State::x`: the states of the springs before
-    /// it (in the order of [`ElementRef::all`], bodies, beams and loads come first and own
-    /// none). The same as [`crate::data::Layout::state_start`] of the spring.
-    pub fn spring_state_start(model: &Model, i: usize) -> usize {
-        model.springs[..i]
-            .iter()
-            .map(|s| s.relaxation.is_some() as usize)
-            .sum()
-    }
-
-    /// All force elements of a model (beam mass matrices computed here).
+    /// All force elements of a model (beam mass matrices computed here), in the order of
+    /// [`ElementItem::all`].
     pub fn all(model: &Model) -> Vec<ElementRef> {
-        let mut out: Vec<ElementRef> = (0..model.bodies.len()).map(ElementRef::Body).collect();
-        let beams = model.beams.iter().enumerate();
-        out.extend(beams.map(|(i, b)| ElementRef::Beam(i, Arc::new(beam::mass_matrix(b)))));
-        out.extend((0..model.loads.len()).map(ElementRef::Load));
-        out.extend((0..model.springs.len()).map(ElementRef::Spring));
-        out.extend((0..model.ropes.len()).map(ElementRef::Rope));
-        out
+        ElementItem::all(model)
+            .map(|item| match item {
+                ElementItem::Body(i) => ElementRef::Body(i),
+                ElementItem::Beam(i) => {
+                    ElementRef::Beam(i, Arc::new(beam::mass_matrix(&model.beams[i])))
+                }
+                ElementItem::Load(i) => ElementRef::Load(i),
+                ElementItem::Spring(i) => ElementRef::Spring(i),
+                ElementItem::Rope(i) => ElementRef::Rope(i),
+            })
+            .collect()
     }
 
     /// The kernel of this element.
@@ -421,6 +416,50 @@ impl ElementRef {
             ElementRef::Spring(i) => format!("spring '{}'", model.springs[*i].name),
             ElementRef::Rope(i) => format!("rope '{}'", model.ropes[*i].name),
         }
+    }
+}
+
+/// A force element by its kind and index in the model's list: the order of the elements
+/// ([`ElementItem::all`]), hence of their states in `State::x`, in one place.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ElementItem {
+    Body(usize),
+    Beam(usize),
+    Load(usize),
+    Spring(usize),
+    Rope(usize),
+}
+
+impl ElementItem {
+    /// Every force element of `model`: bodies, beam elements, loads, springs, ropes.
+    pub fn all(model: &Model) -> impl Iterator<Item = ElementItem> {
+        (0..model.bodies.len())
+            .map(ElementItem::Body)
+            .chain((0..model.beams.len()).map(ElementItem::Beam))
+            .chain((0..model.loads.len()).map(ElementItem::Load))
+            .chain((0..model.springs.len()).map(ElementItem::Spring))
+            .chain((0..model.ropes.len()).map(ElementItem::Rope))
+    }
+
+    /// The number of states the element owns.
+    pub fn n_states(self, model: &Model) -> usize {
+        match self {
+            ElementItem::Body(i) => model.bodies[i].n_states(),
+            ElementItem::Beam(i) => model.beams[i].n_states(),
+            ElementItem::Load(i) => model.loads[i].n_states(),
+            ElementItem::Spring(i) => model.springs[i].n_states(),
+            ElementItem::Rope(i) => model.ropes[i].n_states(),
+        }
+    }
+
+    /// The index of the element's first state in `State::x` (the states of the elements
+    /// before it; [`crate::data::Layout::state_start`] of the element). Walks the elements
+    /// before it: for an element that owns states.
+    pub fn state_start(self, model: &Model) -> usize {
+        ElementItem::all(model)
+            .take_while(|&item| item != self)
+            .map(|item| item.n_states(model))
+            .sum()
     }
 }
 

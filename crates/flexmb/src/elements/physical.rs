@@ -18,9 +18,7 @@
 use super::{Coefficients, LocalMatrix, LocalVector, NodeState};
 use flexmb_lie::{so3::hat, Group, Mat3, Mat6, Vec3};
 use nalgebra::allocator::Allocator;
-use nalgebra::{
-    DMatrix, DMatrixView, DVectorView, DefaultAllocator, Dim, Matrix, Storage, StorageMut, U6,
-};
+use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, OVector, Storage, StorageMut, U3, U6};
 
 /// Physical velocity `(xdot, Omega)` of a node.
 pub fn velocity(group: Group, n: &NodeState) -> (Vec3, Vec3) {
@@ -32,87 +30,113 @@ pub fn velocity(group: Group, n: &NodeState) -> (Vec3, Vec3) {
     }
 }
 
-/// Converts a physical residual and, optionally, physical `K_p` and `C_p` (column-major,
-/// `6 n` square for the `n` slots of `nodes`) into the group's residual and iteration matrix
-/// `S = c.c C + c.k K T` (no mass term: these elements have none), written to the first
-/// `6 n` rows (and columns) of `r` and `s`. `active` tells which slots are nodes (ground
-/// slots are skipped).
-pub fn to_group(
+/// Converts a physical residual and, optionally, physical `K_p` and `C_p` (`6 n` for the `n`
+/// slots of `nodes`; a fixed size for an element of static size, no allocation) into the
+/// group's residual and iteration matrix `S = c.c C + c.k K T` (no mass term: these elements
+/// have none), written to the first `6 n` rows (and columns) of `r` and `s`. `active` tells
+/// which slots are nodes (ground slots are skipped). `P` is block-diagonal: it is applied by
+/// rotating the translation rows and columns of each slot in place.
+pub fn to_group<D: Dim>(
     group: Group,
     nodes: &[NodeState],
     active: &[bool],
-    r_p: &[f64],
-    k_p: Option<&[f64]>,
-    c_p: Option<&[f64]>,
+    r_p: &OVector<f64, D>,
+    k_p: Option<&OMatrix<f64, D, D>>,
+    c_p: Option<&OMatrix<f64, D, D>>,
     r: &mut LocalVector,
     s: Option<(&Coefficients, &mut LocalMatrix)>,
-) {
-    let n = 6 * nodes.len();
-    let r_p = DVectorView::from_slice(r_p, n);
-    let k_p = k_p.map(|k| DMatrixView::from_slice(k, n, n));
-    let c_p = c_p.map(|c| DMatrixView::from_slice(c, n, n));
-    let mut r = r.rows_mut(0, n);
+) where
+    DefaultAllocator:
+        Allocator<D> + Allocator<D, D> + Allocator<D, U3> + Allocator<D, U6> + Allocator<U6, U6>,
+{
+    let (d, n) = (r_p.shape_generic().0, r_p.nrows());
+    let zeros = || OMatrix::<f64, D, D>::zeros_generic(d, d);
     match group {
         Group::R3xSO3 => {
-            r.copy_from(&r_p);
+            r.rows_mut(0, n).copy_from_slice(r_p.as_slice());
             if let Some((coef, s)) = s {
-                let mut whole = s.view();
-                let mut s = whole.view_mut((0, 0), (n, n));
-                s.fill(0.0);
-                if let Some(k) = &k_p {
-                    s += k * coef.k;
+                let mut sg = zeros();
+                if let Some(k) = k_p {
+                    sg += k * coef.k;
                 }
-                if let Some(c) = &c_p {
-                    s += c * coef.c;
+                if let Some(c) = c_p {
+                    sg += c * coef.c;
                 }
-                if let Some(k) = &k_p {
-                    apply_tangent_full(nodes, active, &mut s, coef, k);
+                if let Some(k) = k_p {
+                    apply_tangent_full(nodes, active, &mut sg, coef, k);
                 }
+                s.view()
+                    .view_mut((0, 0), (n, n))
+                    .copy_from_slice(sg.as_slice());
             }
         }
         Group::SE3 => {
-            // P = blockdiag(R_a, I, R_b, I, ...)
-            let mut p = DMatrix::<f64>::identity(n, n);
-            for a in 0..nodes.len() {
-                if active[a] {
-                    p.fixed_view_mut::<3, 3>(6 * a, 6 * a)
-                        .copy_from(&nodes[a].q.r);
+            let mut rg = r_p.clone();
+            rotate_rows(&mut rg, nodes, active);
+            r.rows_mut(0, n).copy_from_slice(rg.as_slice());
+            let Some((coef, s)) = s else {
+                return;
+            };
+            // P^T K P, and the derivative of R^T at fixed f_p
+            let mut k = k_p.cloned().unwrap_or_else(zeros);
+            rotate_rows(&mut k, nodes, active);
+            rotate_columns(&mut k, nodes, active);
+            for a in (0..nodes.len()).filter(|&a| active[a]) {
+                let f = rg.fixed_rows::<3>(6 * a).into_owned();
+                let mut blk = k.fixed_view_mut::<3, 3>(6 * a, 6 * a + 3);
+                blk += hat(&f);
+            }
+            let mut sg = zeros();
+            if let Some(c) = c_p {
+                let mut ptc = c.clone();
+                rotate_rows(&mut ptc, nodes, active);
+                let mut cg = ptc.clone();
+                rotate_columns(&mut cg, nodes, active);
+                sg += cg * coef.c;
+                // P^T C dv_p/dw: the translation velocity R U depends on the rotation.
+                for a in (0..nodes.len()).filter(|&a| active[a]) {
+                    let u = nodes[a].v.fixed_rows::<3>(0).into_owned();
+                    let dv: Mat3 = -nodes[a].q.r * hat(&u);
+                    let cols = ptc.fixed_columns::<3>(6 * a) * dv;
+                    let mut target = k.fixed_columns_mut::<3>(6 * a + 3);
+                    target += cols;
                 }
             }
-            r.copy_from(&(p.transpose() * r_p));
-            if let Some((coef, s)) = s {
-                let mut k = match &k_p {
-                    Some(k) => p.transpose() * k * &p,
-                    None => DMatrix::zeros(n, n),
-                };
-                for a in 0..nodes.len() {
-                    if !active[a] {
-                        continue;
-                    }
-                    let f = r.fixed_rows::<3>(6 * a).into_owned();
-                    let mut blk = k.fixed_view_mut::<3, 3>(6 * a, 6 * a + 3);
-                    blk += hat(&f);
-                }
-                let mut whole = s.view();
-                let mut s = whole.view_mut((0, 0), (n, n));
-                s.fill(0.0);
-                if let Some(c) = &c_p {
-                    let cg = p.transpose() * c * &p;
-                    s += cg * coef.c;
-                    // dv_p/dw: translation velocity R U depends on the rotation.
-                    let mut dv = DMatrix::zeros(n, n);
-                    for a in 0..nodes.len() {
-                        if active[a] {
-                            let u = nodes[a].v.fixed_rows::<3>(0).into_owned();
-                            let blk: Mat3 = -nodes[a].q.r * hat(&u);
-                            dv.fixed_view_mut::<3, 3>(6 * a, 6 * a + 3).copy_from(&blk);
-                        }
-                    }
-                    k += p.transpose() * c * dv;
-                }
-                s += &k * coef.k;
-                apply_tangent_full(nodes, active, &mut s, coef, &k);
-            }
+            sg += &k * coef.k;
+            apply_tangent_full(nodes, active, &mut sg, coef, &k);
+            s.view()
+                .view_mut((0, 0), (n, n))
+                .copy_from_slice(sg.as_slice());
+        }
+    }
+}
+
+/// `m <- P^T m` on SE(3): the translation rows of each active slot turned by `R^T`.
+fn rotate_rows<C: Dim, S: StorageMut<f64, D, C>, D: Dim>(
+    m: &mut Matrix<f64, D, C, S>,
+    nodes: &[NodeState],
+    active: &[bool],
+) {
+    for a in (0..nodes.len()).filter(|&a| active[a]) {
+        let rt = nodes[a].q.r.transpose();
+        for j in 0..m.ncols() {
+            let col = rt * m.fixed_view::<3, 1>(6 * a, j);
+            m.fixed_view_mut::<3, 1>(6 * a, j).copy_from(&col);
+        }
+    }
+}
+
+/// `m <- m P` on SE(3): the translation columns of each active slot turned by `R`.
+fn rotate_columns<R: Dim, S: StorageMut<f64, R, D>, D: Dim>(
+    m: &mut Matrix<f64, R, D, S>,
+    nodes: &[NodeState],
+    active: &[bool],
+) {
+    for b in (0..nodes.len()).filter(|&b| active[b]) {
+        let rot = nodes[b].q.r;
+        for i in 0..m.nrows() {
+            let row = m.fixed_view::<1, 3>(i, 6 * b) * rot;
+            m.fixed_view_mut::<1, 3>(i, 6 * b).copy_from(&row);
         }
     }
 }

@@ -97,26 +97,20 @@ impl ElementKernel for Rope {
         let nodes = local.nodes;
         let geo = self.geometry(ctx, nodes);
         let tension = self.tension(&geo);
-        let n = geo.g.len();
         let r_p = &geo.g * tension;
-        let (mut k_p, mut c_p) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
-        if tension > 0.0 {
-            let dt = &geo.g * self.stiffness + geo.h.transpose() * &geo.v_p * self.damping;
-            k_p = &geo.g * dt.transpose() + &geo.h * tension;
-            c_p = &geo.g * geo.g.transpose() * self.damping;
-        }
         let active = self.active();
-        let (k, c) = (k_p.as_slice(), c_p.as_slice());
-        physical::to_group(
-            ctx.group,
-            nodes,
-            &active,
-            r_p.as_slice(),
-            Some(k),
-            Some(c),
-            r,
-            s,
-        );
+        // The tangents only when asked for and taut (a slack rope has none).
+        let (k_p, c_p) = match &s {
+            Some(_) if tension > 0.0 => {
+                let dt = &geo.g * self.stiffness + geo.h.transpose() * &geo.v_p * self.damping;
+                let k_p = &geo.g * dt.transpose() + &geo.h * tension;
+                let c_p = &geo.g * geo.g.transpose() * self.damping;
+                (Some(k_p), Some(c_p))
+            }
+            _ => (None, None),
+        };
+        let (k, c) = (k_p.as_ref(), c_p.as_ref());
+        physical::to_group(ctx.group, nodes, &active, &r_p, k, c, r, s);
     }
 
     fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
@@ -155,16 +149,7 @@ impl ElementParameters for Rope {
         };
         let r_p = &geo.g * dt;
         let active = self.active();
-        physical::to_group(
-            ctx.group,
-            nodes,
-            &active,
-            r_p.as_slice(),
-            None,
-            None,
-            dr,
-            None,
-        );
+        physical::to_group(ctx.group, nodes, &active, &r_p, None, None, dr, None);
         DerivativeMethod::Analytic
     }
 }

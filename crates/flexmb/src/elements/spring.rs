@@ -162,7 +162,6 @@ impl ElementKernel for SpringDamper {
         let dt = geo.g * stiffness + geo.h.transpose() * geo.v_p * self.damping;
         let k_p = geo.g * dt.transpose() + geo.h * tension;
         let c_p = geo.g * geo.g.transpose() * self.damping;
-        let (r_p, k_p, c_p) = (r_p.as_slice(), k_p.as_slice(), c_p.as_slice());
         let active = self.active();
         let mut s = s;
         let matrix = s.as_mut().map(|(coef, m)| (*coef, &mut **m));
@@ -170,9 +169,9 @@ impl ElementKernel for SpringDamper {
             ctx.group,
             nodes,
             &active,
-            r_p,
-            Some(k_p),
-            Some(c_p),
+            &r_p,
+            Some(&k_p),
+            Some(&c_p),
             r,
             matrix,
         );
@@ -241,16 +240,7 @@ impl ElementParameters for SpringDamper {
             }
         };
         let r_p = geo.g * dt;
-        physical::to_group(
-            ctx.group,
-            nodes,
-            &self.active(),
-            r_p.as_slice(),
-            None,
-            None,
-            dr,
-            None,
-        );
+        physical::to_group(ctx.group, nodes, &self.active(), &r_p, None, None, dr, None);
         if branch.is_some() {
             dr[12] = de;
         }

@@ -362,9 +362,15 @@ pub struct StepFunction<'a> {
     b_start: Vec<Vec12>,
     /// Node kinematics of `s_n` (`T = I`).
     start_nodes: Vec<NodeState>,
-    /// The partial derivatives at the last `x` and the step's numbers then (see
-    /// [`StepFunction::partials`]).
-    cache: RefCell<Option<(Vec<f64>, Start, Rc<Partials>)>>,
+    /// The partial derivatives at the last `x` (see [`StepFunction::partials`]).
+    cache: RefCell<Option<Cached>>,
+}
+
+/// Partial derivatives and where they were taken: the unknowns and the step's numbers.
+struct Cached {
+    x: Vec<f64>,
+    step: Start,
+    partials: Rc<Partials>,
 }
 
 /// Partial derivatives of the residual at the end of the step with respect to its
@@ -543,14 +549,18 @@ impl<'a> StepFunction<'a> {
     /// The partial derivatives at the end of the step (see [`Partials`]), kept for the next
     /// call at the same `x` with the same [`StepFunction::step`].
     fn partials(&self, x: &[f64], data: &mut crate::Data) -> Rc<Partials> {
-        if let Some((at, step, p)) = &*self.cache.borrow() {
-            if at.as_slice() == x && *step == self.step {
-                return Rc::clone(p);
+        if let Some(c) = &*self.cache.borrow() {
+            if c.x.as_slice() == x && c.step == self.step {
+                return Rc::clone(&c.partials);
             }
         }
-        let p = Rc::new(self.compute_partials(x, data));
-        *self.cache.borrow_mut() = Some((x.to_vec(), self.step, Rc::clone(&p)));
-        p
+        let partials = Rc::new(self.compute_partials(x, data));
+        *self.cache.borrow_mut() = Some(Cached {
+            x: x.to_vec(),
+            step: self.step,
+            partials: Rc::clone(&partials),
+        });
+        partials
     }
 
     /// [`StepFunction::partials`], assembled: four assemblies of the iteration matrix with
