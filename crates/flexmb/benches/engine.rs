@@ -1,5 +1,6 @@
 //! Engine benchmarks behind BENCHMARKS.md: wall time per step and Newton iterations per step
-//! for the heavy top and the N-link pendulum chains, release build, one thread.
+//! for the heavy top, the N-link pendulum chains, beams and a chain of spring-dampers,
+//! release build, one thread.
 //!
 //! ```text
 //! cargo bench -p flexmb --bench engine              # all cases, each in its own process
@@ -23,6 +24,7 @@ const CASES: &[&str] = &[
     "beam_100",
     "beam_1000",
     "beam_10000",
+    "springs_500",
 ];
 
 fn example(name: &str) -> PathBuf {
@@ -196,6 +198,57 @@ fn long_beam(n: usize) {
     );
 }
 
+/// A chain of 500 bodies on SE(3) hung by spring-dampers with offset attachment points
+/// (every other one with a Maxwell branch: an element state), under gravity: 200 steps of
+/// h = 1e-3 s. The force elements' share of a step.
+fn springs(n: usize) {
+    use flexmb::model::{Model, NodeId, Relaxation, SpringDamper};
+    use flexmb_lie::{Frame, Group, Mat3, Vec3};
+    let mut m = Model::new(Group::SE3);
+    m.gravity = Vec3::new(0.0, 0.0, -9.81);
+    for i in 0..n {
+        let at = Frame::new(Vec3::new(i as f64 * 0.1, 0.0, 0.0), Mat3::identity());
+        let id = m.add_node(&format!("n{i}"), at);
+        m.add_body(
+            &format!("b{i}"),
+            id,
+            1.0,
+            Vec3::zeros(),
+            Mat3::identity() * 1e-2,
+        );
+    }
+    for i in 0..n {
+        m.springs.push(SpringDamper {
+            name: format!("s{i}"),
+            node_a: i.checked_sub(1).map(NodeId),
+            node_b: Some(NodeId(i)),
+            point_a: Vec3::new(if i == 0 { -0.07 } else { 0.03 }, 0.01, 0.0),
+            point_b: Vec3::new(-0.05, 0.01, 0.0),
+            stiffness: 1e4,
+            damping: 1.0,
+            rest_length: 0.02,
+            relaxation: (i % 2 == 1).then_some(Relaxation {
+                stiffness: 5e3,
+                damping: 50.0,
+            }),
+        });
+    }
+    let mut sim = Simulation::new(&m, flexmb::DynamicSettings::new(0.2, 1e-3)).expect("starts");
+    let t0 = Instant::now();
+    let stats = sim
+        .run(&mut |_: &flexmb::observe::Sample| Ok(()))
+        .expect("runs");
+    let dt = t0.elapsed().as_secs_f64();
+    println!(
+        "| springs_{n} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
+        stats.steps,
+        dt * 1e3,
+        dt * 1e6 / stats.steps as f64,
+        dt * 1e6 / (stats.steps * n) as f64,
+        stats.newton_iterations as f64 / stats.steps as f64
+    );
+}
+
 fn run_case(case: &str) {
     match case {
         "right_angle_cantilever" => right_angle_cantilever(),
@@ -204,6 +257,7 @@ fn run_case(case: &str) {
         "heavy_top_se3" => heavy_top("heavy_top.toml"),
         "heavy_top_r3so3" => heavy_top("heavy_top_r3so3.toml"),
         c if c.starts_with("chain_") => chain(c[6..].parse().expect("chain size")),
+        c if c.starts_with("springs_") => springs(c[8..].parse().expect("chain size")),
         other => panic!("unknown case {other}; cases: {CASES:?}"),
     }
 }
@@ -222,6 +276,10 @@ fn main() {
     for case in CASES {
         if *case == "right_angle_cantilever" {
             println!("\n| case | steps | solve time [ms] | time/step [us] | time/step/element [us] | Newton it./step |");
+            println!("|---|---|---|---|---|---|");
+        }
+        if *case == "springs_500" {
+            println!("\n| case | steps | solve time [ms] | time/step [us] | time/step/spring [us] | Newton it./step |");
             println!("|---|---|---|---|---|---|");
         }
         if *case == "chain_10" {
