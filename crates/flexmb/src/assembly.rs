@@ -204,9 +204,8 @@ pub fn assemble(model: &Model, data: &mut Data, it: &Iterate, sc: &Scaling, matr
 /// with no kernel evaluated.
 pub fn pattern(model: &Model, layout: &Layout) -> Vec<(usize, usize)> {
     let mut p = Vec::new();
-    let ground = [NodeState::ground(Default::default())];
     let it = Iterate {
-        nodes: &ground[..0],
+        nodes: &[],
         t: 0.0,
         lambda: &[],
         b_start: &[],

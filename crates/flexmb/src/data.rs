@@ -1,7 +1,7 @@
 //! The numbering of the Newton unknowns ([`Layout`]) and, for one layout, the derived
 //! quantities and workspaces of the solvers ([`Data`]).
 //!
-//! [`Layout`] numbers the unknowns of the Newton iteration in three blocks ([`Block`]):
+//! [`Layout`] numbers the unknowns of the Newton iteration in four blocks ([`Block`]):
 //!
 //! ```text
 //! [ node 0 (6) | ... | node n-1 (6) | multipliers (n_active) | stabilization (n_active) | states (n_states) ]
@@ -11,9 +11,10 @@
 //! [`crate::solve::dynamics`]): one unknown `zeta` per active row, with the velocity-level
 //! constraint as its equation. The states block holds the first-order states that elements
 //! own ([`crate::elements::ElementKernel::n_states`]), element after element
-//! ([`Layout::state_start`]), each with its element's equation for it. [`Layout::unknown`] names an index as an [`UnknownId`] (a
-//! node component, a joint row's multiplier or stabilization unknown), which failures carry
-//! and [`Layout::describe`] puts in words.
+//! ([`Layout::state_start`]), each with its element's equation for it. [`Layout::unknown`]
+//! names an index as an [`UnknownId`] (a node component, a joint row's multiplier or
+//! stabilization unknown, an element's state), which failures carry and [`Layout::describe`]
+//! puts in words.
 //!
 //! [`Data::new`] builds, for a model and a layout, the sparsity pattern of the iteration
 //! matrix, the linear solver (with the symbolic analysis of the sparse backend) and the

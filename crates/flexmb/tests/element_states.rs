@@ -141,32 +141,11 @@ fn static_equilibrium_relaxes_the_maxwell_branch() {
     // At rest the branch carries no force (c_m zdot = k_m (u - z) = 0): the spring alone
     // balances the load, u = F / k, and z = u. The mass slides on a prismatic joint along
     // the spring's axis; load control and arc length, on both groups.
-    use flexmb::model::{JointKind, Load, LoadFrame, TimeFunction};
     use flexmb::solve::StaticMethod;
     let force = 0.3;
     for group in [Group::SE3, Group::R3xSO3] {
         for method in [StaticMethod::LoadControl, StaticMethod::ArcLength] {
-            let mut m = model(group);
-            let z_to_x = Mat3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0);
-            let node = flexmb::model::NodeId(0);
-            let at = Vec3::new(U0, 0.0, 0.0);
-            m.add_joint(
-                "slide",
-                JointKind::Prismatic,
-                None,
-                Some(node),
-                at,
-                z_to_x,
-                None,
-            );
-            m.loads.push(Load {
-                name: "pull".into(),
-                node,
-                force: Vec3::new(force, 0.0, 0.0),
-                torque: Vec3::zeros(),
-                frame: LoadFrame::Inertial,
-                function: TimeFunction::Constant { value: 1.0 },
-            });
+            let m = pulled(group, force);
             let mut settings = flexmb::solve::StaticSettings {
                 method,
                 ..Default::default()
@@ -182,6 +161,75 @@ fn static_equilibrium_relaxes_the_maxwell_branch() {
                 "{group:?}, {method:?}: u = {u}, z = {z}, expected {}",
                 force / K
             );
+        }
+    }
+}
+
+/// The model above on a prismatic joint along the spring, pulled by `force` along it.
+fn pulled(group: Group, force: f64) -> Model {
+    use flexmb::model::{JointKind, Load, LoadFrame, TimeFunction};
+    let mut m = model(group);
+    let z_to_x = Mat3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0);
+    let node = flexmb::model::NodeId(0);
+    let at = Vec3::new(U0, 0.0, 0.0);
+    m.add_joint(
+        "slide",
+        JointKind::Prismatic,
+        None,
+        Some(node),
+        at,
+        z_to_x,
+        None,
+    );
+    m.loads.push(Load {
+        name: "pull".into(),
+        node,
+        force: Vec3::new(force, 0.0, 0.0),
+        torque: Vec3::zeros(),
+        frame: LoadFrame::Inertial,
+        function: TimeFunction::Constant { value: 1.0 },
+    });
+    m
+}
+
+#[test]
+fn pseudo_dynamic_statics_warns_when_the_branch_has_not_relaxed() {
+    // The pseudo-dynamic method settles the nodes within pseudo_time; a branch that relaxes
+    // in c_m / k_m = 2e6 s has not: the run says so instead of returning a state away from
+    // the equilibrium silently. With a branch of 0.25 s it settles on u = F / k.
+    use flexmb::solve::StaticMethod;
+    let force = 0.3;
+    for (branch_damping, settled) in [(2e8, false), (0.5 * 100.0 / 2.0, true)] {
+        let mut m = pulled(Group::SE3, force);
+        m.springs[0].relaxation = Some(Relaxation {
+            stiffness: 100.0,
+            damping: branch_damping,
+        });
+        let settings = flexmb::solve::StaticSettings {
+            method: StaticMethod::PseudoDynamic,
+            pseudo_time: 200.0,
+            pseudo_damping: 2.0,
+            initial_increment: 0.002,
+            ..Default::default()
+        };
+        let mut statics = Statics::new(m, settings).expect("starts");
+        statics
+            .run(&mut |_: &flexmb::observe::Sample| Ok(()))
+            .expect("runs");
+        let u = statics.state.q[0].x.x;
+        let warned = statics
+            .warnings
+            .iter()
+            .any(|w| w.contains("from the static equilibrium"));
+        assert_eq!(
+            warned, !settled,
+            "c_m = {branch_damping}: {:?}",
+            statics.warnings
+        );
+        if settled {
+            assert!((u - force / K).abs() < 1e-4, "u = {u}");
+        } else {
+            assert!((u - force / K).abs() > 1e-2, "u = {u}");
         }
     }
 }

@@ -1,25 +1,31 @@
 //! Force elements: rigid bodies (inertia and gravity), geometrically exact beams on SE(3)
-//! (two nodes, [`beam`]), applied loads, spring-dampers.
+//! (two nodes, [`beam`]), applied loads, spring-dampers (with an optional Maxwell branch,
+//! [`spring`]) and ropes through any number of points ([`rope`]).
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
 //! ```text
-//! r(q, v, vdot, t) = M vdot - hat(v)^T M v + g_int(q, v) - g_ext(q, t),
+//! r(q, v, vdot, x, xdot, t) = M vdot - hat(v)^T M v + g_int(q, v, x) - g_ext(q, t),
 //! ```
 //!
-//! written in the Lie algebra of the model's group (6 components per node: translation, then
-//! rotation; see [`flexmb_lie::Group`]). For the Newton iteration of the generalized-alpha
-//! scheme an element also returns its block of the iteration matrix
+//! written in the Lie algebra of the model's group (6 components per node slot: translation,
+//! then rotation; see [`flexmb_lie::Group`]), and, if it owns first-order states `x`, to their
+//! equations `e(q, v, vdot, x, xdot, t) = 0` (one per state, after the slots' rows). For the
+//! Newton iteration of the generalized-alpha scheme an element also returns its block of the
+//! iteration matrix
 //!
 //! ```text
-//! S = c_m M + c_c C_t + c_k K_t T,     M = dr/dvdot, C_t = dr/dv, K_t = dr/dw (q -> q exp(w)),
+//! S = c_m M + c_c C_t + c_k K_t T     (node columns; M = dr/dvdot, C_t = dr/dv,
+//!                                      K_t = dr/dw for q -> q exp(w))
+//! S_x = c_x d/dx + c_xdot d/dxdot     (state columns)
 //! ```
 //!
-//! where `T` is the tangent operator of each node's increment. One trait, [`ElementKernel`],
-//! serves the dynamic step, statics, the initial accelerations and the step function of
-//! [`crate::solve::step`]; a second, [`ElementParameters`], gives the derivatives `dr/dp` with
-//! respect to the element's own parameters ([`crate::model::parameters`]) that sensitivity
-//! analysis needs ([`crate::parameter_derivatives`]).
+//! for its rows of `r` and of `e` alike, where `T` is the tangent operator of each node's
+//! increment. One trait, [`ElementKernel`], serves the dynamic step, statics, the initial
+//! accelerations and the step function of [`crate::solve::step`]; a second,
+//! [`ElementParameters`], gives the derivatives `d[r; e]/dp` with respect to the element's own
+//! parameters ([`crate::model::parameters`]) that sensitivity analysis needs
+//! ([`crate::parameter_derivatives`]).
 //!
 //! Elements written most naturally in "physical" coordinates (inertial translation
 //! variation, body rotation variation) are converted to the group's coordinates by
@@ -239,7 +245,7 @@ pub trait ElementKernel {
         s: Option<(&Coefficients, &mut LocalMatrix)>,
     );
     /// The element's states at the start of a run, from the initial kinematics in `local`
-    /// (its `x` and `xdot` empty); `x` is zero on entry.
+    /// (its `x` and `xdot` zero); `x` is zero on entry.
     fn initial_states(&self, _ctx: &Context, _local: &Local, _x: &mut [f64]) {}
     /// Kinetic energy \[J\].
     fn kinetic_energy(&self, _ctx: &Context, _local: &Local) -> f64 {

@@ -911,6 +911,58 @@ impl Statics {
                 "pseudo-dynamic analysis: largest nodal velocity {last_speed:.3e} at the end; increase pseudo_time or pseudo_damping for a settled static state"
             ));
         }
+        if self.data.layout.n_states > 0 {
+            self.check_states_settled()?;
+        }
+        Ok(())
+    }
+
+    /// After a pseudo-dynamic run of a model with element states: the states relax on
+    /// their own time (a Maxwell branch: `c_m / k_m`), which the nodal speeds do not show.
+    /// One Newton correction of the static equations from the final state estimates how far
+    /// the states are from the equilibrium; more than `1e-3` of their size (the
+    /// approximation dynamic relaxation makes otherwise), a warning.
+    fn check_states_settled(&mut self) -> Result<(), SolveError> {
+        let nodes = node_states(&self.state);
+        let rates = vec![0.0; self.state.x.len()];
+        let mut lambda = self.state.lambda.clone();
+        let mut sys = LoadStep {
+            model: &self.model,
+            q0: &self.state.q,
+            nodes: &mut nodes.clone(),
+            lambda: &mut lambda,
+            dq: vec![0.0; self.data.layout.n_dofs],
+            x: self.state.x.clone(),
+            rates: &rates,
+            row_scale: self.row_scale,
+            newton: self.settings.newton,
+            load_factor: self.load_factor,
+            arc: None,
+            first: Default::default(),
+        };
+        sys.assemble(&mut self.data, true, 0.0);
+        self.data.solver.factorize(&self.data.values)?;
+        newton_correction(&mut self.data);
+        let states = self.data.layout.block(Block::States);
+        let dx = &self.data.correction[states.clone()];
+        let size = sys
+            .x
+            .iter()
+            .fold(self.settings.newton.atol, |m, v| m.max(v.abs()));
+        let (k, distance) =
+            dx.iter().enumerate().fold(
+                (0, 0.0f64),
+                |w, (k, d)| if d.abs() > w.1 { (k, d.abs()) } else { w },
+            );
+        if distance > 1e-3 * size {
+            let worst = self
+                .data
+                .layout
+                .describe_unknown(&self.model, states.start + k);
+            self.warnings.push(format!(
+                "pseudo-dynamic analysis: the element states are {distance:.3e} from the static equilibrium (largest state {size:.3e}; worst: {worst}); they relax on their own time (a Maxwell branch: relaxation_damping / relaxation_stiffness): increase pseudo_time, or use load_control"
+            ));
+        }
         Ok(())
     }
 }

@@ -2,25 +2,32 @@
 //!
 //! One step `n -> n+1` of size `h` (Brüls & Cardona 2010, Eqs. (40)-(44); Arnold & Brüls
 //! 2007, Eq. (5); stabilized index 2: Arnold, Brüls & Cardona 2015, Sect. 3). Its unknowns
-//! are the Newton vector `x = (dq, mu, zeta)` of [`crate::data::Layout`]: the configuration
-//! increments, the scaled multipliers `mu = s lambda_{n+1}` of the active rows and, in the
-//! stabilized form, one `zeta` per active row. Given the start `s_n = (q_n, v_n, vdot_n, a_n)`
-//! the end of the step is
+//! are the Newton vector `x = (dq, mu, zeta, dx)` of [`crate::data::Layout`]: the
+//! configuration increments, the scaled multipliers `mu = s lambda_{n+1}` of the active rows,
+//! in the stabilized form one `zeta` per active row, and the increments `dx` of the
+//! elements' first-order states. Given the start
+//! `s_n = (q_n, v_n, vdot_n, a_n, x_n, xdot_n, w_n)` the end of the step is
 //!
 //! ```text
 //! q_{n+1}    = q_n exp(dq + B(q_n)^T zeta)                      (B^T zeta: stabilized only)
 //! a_{n+1}    = (dq - h v_n - (1/2 - beta) h^2 a_n) / (beta h^2)
 //! v_{n+1}    = v_n + (1 - gamma) h a_n + gamma h a_{n+1}
 //! vdot_{n+1} = ((1 - alpha_m) a_{n+1} + alpha_m a_n - alpha_f vdot_n) / (1 - alpha_f)
+//! x_{n+1}    = x_n + dx
+//! w_{n+1}    = (dx - h (1 - gamma_1) w_n) / (h gamma_1)
+//! xdot_{n+1} = ((1 - alpha_m1) w_{n+1} + alpha_m1 w_n - alpha_f1 xdot_n) / (1 - alpha_f1)
 //! ```
 //!
-//! (the last two affine in `dq`, with `dv/ddq = gamma' = gamma/(beta h)` and
-//! `dvdot/ddq = beta' = (1 - alpha_m)/((1 - alpha_f) beta h^2)`), and the step residual is
+//! (affine in `dq` and `dx`, with `dv/ddq = gamma' = gamma/(beta h)`,
+//! `dvdot/ddq = beta' = (1 - alpha_m)/((1 - alpha_f) beta h^2)` and
+//! `dxdot/ddx = c_x = (1 - alpha_m1)/((1 - alpha_f1) gamma_1 h)`; the first-order parameters
+//! of [`FirstOrderParameters`]), and the step residual is
 //!
 //! ```text
-//! R(x; s_n, p, h) = [ s (r(q, v, vdot, t) + B(q)^T lambda) ]    s = 1/(beta' m)
+//! R(x; s_n, p, h) = [ s (r(q, v, vdot, x, xdot, t) + B(q)^T lambda) ]    s = 1/(beta' m)
 //!                   [ Phi(q, t)                            ]
 //!                   [ (B(q) v + Phi_t) / gamma'            ]    (stabilized only)
+//!                   [ h e(q, v, vdot, x, xdot, t)          ]    (element states)
 //! ```
 //!
 //! at `t_{n+1}` and the end values above, `m` the largest nodal mass.
