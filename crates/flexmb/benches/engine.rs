@@ -182,14 +182,23 @@ fn long_beam(n: usize) {
     );
     let mut s = flexmb::DynamicSettings::new(0.02, 1e-3);
     s.rho_inf = 0.5;
-    let mut sim = Simulation::new(&m, s).expect("starts");
+    timed_row(
+        &format!("beam_{n}"),
+        n,
+        Simulation::new(&m, s).expect("starts"),
+    );
+}
+
+/// Runs `sim` and prints its row: steps, solve time, time per step and per item (`n` of
+/// them: elements, springs), Newton iterations per step.
+fn timed_row(case: &str, n: usize, mut sim: Simulation) {
     let t0 = Instant::now();
     let stats = sim
         .run(&mut |_: &flexmb::observe::Sample| Ok(()))
         .expect("runs");
     let dt = t0.elapsed().as_secs_f64();
     println!(
-        "| beam_{n} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
+        "| {case} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
         stats.steps,
         dt * 1e3,
         dt * 1e6 / stats.steps as f64,
@@ -233,20 +242,8 @@ fn springs(n: usize) {
             }),
         });
     }
-    let mut sim = Simulation::new(&m, flexmb::DynamicSettings::new(0.2, 1e-3)).expect("starts");
-    let t0 = Instant::now();
-    let stats = sim
-        .run(&mut |_: &flexmb::observe::Sample| Ok(()))
-        .expect("runs");
-    let dt = t0.elapsed().as_secs_f64();
-    println!(
-        "| springs_{n} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
-        stats.steps,
-        dt * 1e3,
-        dt * 1e6 / stats.steps as f64,
-        dt * 1e6 / (stats.steps * n) as f64,
-        stats.newton_iterations as f64 / stats.steps as f64
-    );
+    let sim = Simulation::new(&m, flexmb::DynamicSettings::new(0.2, 1e-3)).expect("starts");
+    timed_row(&format!("springs_{n}"), n, sim);
 }
 
 fn run_case(case: &str) {

@@ -32,6 +32,19 @@ const TOP_KEYS: &[&str] = &[
     "beam",
     "sensor",
 ];
+/// The keys of a `[[sensor]]`: `name`, `type`, then those a type may use.
+const SENSOR_KEYS: &[&str] = &[
+    "name",
+    "type",
+    "node",
+    "point",
+    "component",
+    "frame",
+    "joint",
+    "beam",
+    "spring",
+    "rope",
+];
 const NODE_STATE_KEYS: &[&str] = &[
     "position",
     "orientation",
@@ -1207,18 +1220,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
     ];
     let mut names = HashMap::new();
     for t in top.items("sensor")? {
-        t.check_keys(&[
-            "name",
-            "type",
-            "node",
-            "point",
-            "component",
-            "frame",
-            "joint",
-            "beam",
-            "spring",
-            "rope",
-        ])?;
+        t.check_keys(SENSOR_KEYS)?;
         let name = read_name(&t, &mut names, "sensor")?;
         let ty = t.req("type")?.choice(&[
             "position",
@@ -1249,16 +1251,8 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "rope_force" => &["rope"],
             _ => &[],
         };
-        for k in [
-            "node",
-            "point",
-            "component",
-            "frame",
-            "joint",
-            "beam",
-            "spring",
-            "rope",
-        ] {
+        // The keys after `name` and `type`: each sensor type uses some of them.
+        for &k in &SENSOR_KEYS[2..] {
             if !uses.contains(&k) {
                 t.forbid(k, &why)?;
             }
