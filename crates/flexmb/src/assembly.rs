@@ -252,13 +252,7 @@ fn traverse<S: Sink>(
         phi,
         b_rows,
     } = out;
-    let ctx = Context {
-        model,
-        group: model.group,
-        t: it.t,
-        gravity_scale: sc.load_factor,
-        load_scale: sc.load_factor,
-    };
+    let ctx = Context::at(model, it.t, sc.load_factor);
     let ground = [NodeState::ground(Default::default()); 2];
     residual.iter_mut().for_each(|r| *r = 0.0);
     let mut s = Mat12::zeros();
@@ -266,13 +260,12 @@ fn traverse<S: Sink>(
     let state_offset = layout.state_offset();
     for (e, &x_start) in layout.elements.iter().zip(&layout.state_start) {
         let kernel = e.kernel(model);
-        let n_slots = kernel.n_slots();
+        let (n_slots, n_states) = (kernel.n_slots(), kernel.n_states());
         let dof = |k: usize| layout.dof(kernel.node(k));
         if S::EVALUATE {
             buffers.gather(&kernel, it.nodes, (it.x, it.xdot, x_start));
         }
         let (local, mut r, mut se) = buffers.split(kernel.n_local(), it.nodes);
-        let n_states = local.x.len();
         if S::EVALUATE {
             let matrix = S::MATRIX.then_some((&sc.coef, &mut se));
             kernel.evaluate(&ctx, &local, &mut r, matrix);
@@ -289,7 +282,6 @@ fn traverse<S: Sink>(
         }
         if S::MATRIX {
             scatter_blocks(sink, n_slots, dof, |i, j| se.get(i, j));
-            let n_states = kernel.n_states();
             if n_states > 0 {
                 let ratio = sc.state_scale / sc.row_scale;
                 let xs = state_offset + x_start;

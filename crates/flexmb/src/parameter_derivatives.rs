@@ -46,8 +46,7 @@
 //!   integration methods for constrained mechanical systems, Numer. Math. 129 (2015), Sect. 3.
 
 use crate::elements::{
-    Context, DerivativeMethod, ElementItem, ElementKernel, ElementParameters, LocalBuffers,
-    NodeState,
+    Context, DerivativeMethod, ElementItem, ElementParameters, LocalBuffers, NodeState,
 };
 use crate::joints::parameters::{ConstraintParameters, JointDerivative};
 use crate::joints::{self, Row};
@@ -105,11 +104,11 @@ enum Wrt<P> {
     Gravity(usize),
 }
 
-/// One element's term (the element and the index of its first state): its derivative at the
-/// kinematics of its nodes and its states, to `sink`.
+/// One element's term (the element and which it is): its derivative at the kinematics of its
+/// nodes and its states, to `sink`.
 fn element_term<E: ElementParameters>(
     at: &At,
-    (e, state_start): (&E, usize),
+    (e, item): (&E, ElementItem),
     wrt: Wrt<E::Param>,
     sink: &mut dyn FnMut(Piece),
 ) -> DerivativeMethod {
@@ -117,6 +116,7 @@ fn element_term<E: ElementParameters>(
     let slots: Vec<_> = (0..e.n_slots()).map(|k| e.node(k)).collect();
     let mut buffers = LocalBuffers::default();
     let p = at.point;
+    let state_start = item.state_start(at.model);
     buffers.gather(e, p.nodes, (p.x, p.xdot, state_start));
     let local = buffers.local(p.nodes);
     let mut d = DVector::zeros(e.n_local());
@@ -144,33 +144,47 @@ fn visit(
     let model = at.model;
     match params.kind(id) {
         ParamKind::Gravity(k) => {
-            for b in &model.bodies {
-                element_term(at, (b, 0), Wrt::Gravity(k), sink);
+            for (i, b) in model.bodies.iter().enumerate() {
+                element_term(at, (b, ElementItem::Body(i)), Wrt::Gravity(k), sink);
             }
-            for b in &model.beams {
-                element_term(at, (b, 0), Wrt::Gravity(k), sink);
+            for (i, b) in model.beams.iter().enumerate() {
+                element_term(at, (b, ElementItem::Beam(i)), Wrt::Gravity(k), sink);
             }
             DerivativeMethod::Analytic
         }
         ParamKind::Node(..) => DerivativeMethod::Analytic,
-        ParamKind::Body(i, p) => element_term(at, (&model.bodies[i], 0), Wrt::Own(p), sink),
+        ParamKind::Body(i, p) => element_term(
+            at,
+            (&model.bodies[i], ElementItem::Body(i)),
+            Wrt::Own(p),
+            sink,
+        ),
         ParamKind::Beam(item, p) => {
             let mut method = DerivativeMethod::Analytic;
             for &e in params.beam_elements(item) {
-                method = element_term(at, (&model.beams[e], 0), Wrt::Own(p), sink);
+                let beam = (&model.beams[e], ElementItem::Beam(e));
+                method = element_term(at, beam, Wrt::Own(p), sink);
             }
             method
         }
-        ParamKind::Load(i, p) => element_term(at, (&model.loads[i], 0), Wrt::Own(p), sink),
-        ParamKind::Spring(i, p) => {
-            let spring = &model.springs[i];
-            let start = match spring.n_states() {
-                0 => 0,
-                _ => ElementItem::Spring(i).state_start(model),
-            };
-            element_term(at, (spring, start), Wrt::Own(p), sink)
-        }
-        ParamKind::Rope(i, p) => element_term(at, (&model.ropes[i], 0), Wrt::Own(p), sink),
+        ParamKind::Load(i, p) => element_term(
+            at,
+            (&model.loads[i], ElementItem::Load(i)),
+            Wrt::Own(p),
+            sink,
+        ),
+        ParamKind::Spring(i, p) => element_term(
+            at,
+            (&model.springs[i], ElementItem::Spring(i)),
+            Wrt::Own(p),
+            sink,
+        ),
+        ParamKind::Rope(i, p) => element_term(
+            at,
+            (&model.ropes[i], ElementItem::Rope(i)),
+            Wrt::Own(p),
+            sink,
+        ),
         ParamKind::Joint(j, p) => {
             let joint = &model.joints[j.0];
             let (rows, start) = (&rows[j.0], starts[j.0]);

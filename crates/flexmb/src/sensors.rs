@@ -1,9 +1,7 @@
 //! Sensors: the output channels declared by a model, evaluated from the state.
 
 use crate::data::Data;
-use crate::elements::{
-    Context, ElementItem, ElementKernel, ElementRef, Local, LocalBuffers, NodeState,
-};
+use crate::elements::{Context, ElementItem, ElementKernel, ElementRef, LocalBuffers, NodeState};
 use crate::joints;
 use crate::model::{Model, SensorFrame, SensorKind};
 use crate::state::State;
@@ -39,13 +37,7 @@ fn pair(nodes: &[NodeState], slots: [Option<crate::model::NodeId>; 2]) -> [NodeS
 /// elements ([`ElementRef::all`], e.g. those of [`crate::data::Layout`]).
 pub fn energies(model: &Model, elements: &[ElementRef], state: &State) -> (f64, f64) {
     let nodes = node_states(state);
-    let ctx = Context {
-        model,
-        group: model.group,
-        t: state.t,
-        gravity_scale: 1.0,
-        load_scale: 1.0,
-    };
+    let ctx = Context::at(model, state.t, 1.0);
     let mut ke = 0.0;
     let mut pe = 0.0;
     let mut buffers = LocalBuffers::default();
@@ -92,6 +84,8 @@ impl SensorEvaluator {
     /// Values of all sensors at `state`, multipliers and constraint values from `data`.
     pub fn evaluate(&mut self, model: &Model, data: &Data, state: &State) -> Vec<f64> {
         let nodes = node_states(state);
+        let ctx = Context::at(model, state.t, 1.0);
+        let mut buffers = LocalBuffers::default();
         let mut energy = None;
         let mut out = Vec::with_capacity(model.sensors.len());
         for (k, s) in model.sensors.iter().enumerate() {
@@ -161,23 +155,14 @@ impl SensorEvaluator {
                 SensorKind::SpringForce { spring } => {
                     let sp = &model.springs[*spring];
                     let start = ElementItem::Spring(*spring).state_start(model);
-                    let ns = sp.n_states();
-                    let local = Local {
-                        nodes: &pair(&nodes, [sp.node_a, sp.node_b]),
-                        x: &state.x[start..start + ns],
-                        xdot: &state.xdot[start..start + ns],
-                    };
-                    sp.tension(&Context::at(model, state.t, 1.0), &local)
+                    buffers.gather(sp, &nodes, (&state.x, &state.xdot, start));
+                    sp.tension(&ctx, &buffers.local(&nodes))
                 }
-                SensorKind::RopeForce { rope } => {
-                    let rope = &model.ropes[*rope];
-                    let ground = NodeState::ground(Default::default());
-                    let slots: Vec<NodeState> = rope
-                        .points
-                        .iter()
-                        .map(|p| p.node.map_or(ground, |n| nodes[n.0]))
-                        .collect();
-                    rope.force(&Context::at(model, state.t, 1.0), &Local::nodes(&slots))
+                SensorKind::RopeForce { rope: i } => {
+                    let rope = &model.ropes[*i];
+                    let start = ElementItem::Rope(*i).state_start(model);
+                    buffers.gather(rope, &nodes, (&state.x, &state.xdot, start));
+                    rope.force(&ctx, &buffers.local(&nodes))
                 }
                 SensorKind::KineticEnergy
                 | SensorKind::PotentialEnergy

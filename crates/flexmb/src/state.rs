@@ -71,8 +71,8 @@ impl State {
                 let kernel = e.kernel(model);
                 let ns = kernel.n_states();
                 if ns > 0 {
-                    let zeros = vec![0.0; ns];
-                    buffers.gather(&kernel, &nodes, (&zeros, &zeros, 0));
+                    // the states and rates are still zero here
+                    buffers.gather(&kernel, &nodes, (&state.x, &state.xdot, start));
                     let x = &mut state.x[start..start + ns];
                     kernel.initial_states(&ctx, &buffers.local(&nodes), x);
                 }

@@ -54,13 +54,7 @@ impl Point {
 /// of the element kernels (with their mass matrices as the assembly builds them) and the
 /// joint rows, in joint order, and the elements' state equations in element order.
 fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
-    let ctx = Context {
-        model,
-        group: model.group,
-        t: at.t,
-        gravity_scale: at.load_factor,
-        load_scale: at.load_factor,
-    };
+    let ctx = Context::at(model, at.t, at.load_factor);
     let pair = |slots: [Option<NodeId>; 2]| {
         slots.map(|s| s.map_or(NodeState::ground(Frame::identity()), |n| at.nodes[n.0]))
     };

@@ -83,13 +83,7 @@ fn check_element_with_states(
     xdot: &[f64],
 ) {
     let group = model.group;
-    let ctx = Context {
-        model,
-        group,
-        t: 0.37,
-        gravity_scale: 1.0,
-        load_scale: 1.0,
-    };
+    let ctx = Context::at(model, 0.37, 1.0);
     let nodes = &nodes[..kernel.n_slots()];
     let n6 = 6 * nodes.len();
     let n = kernel.n_local();
@@ -503,13 +497,7 @@ fn beam_tangent_is_invariant_under_rigid_motion() {
 
 /// Context at t = 0, gravity and loads at full scale.
 fn context(model: &Model) -> Context<'_> {
-    Context {
-        model,
-        group: model.group,
-        t: 0.0,
-        gravity_scale: 1.0,
-        load_scale: 1.0,
-    }
+    Context::at(model, 0.0, 1.0)
 }
 
 /// Simpson's rule for `f` on [0, 1] with `n` (even) intervals.

@@ -70,11 +70,6 @@ impl<'a> LocalMatrix<'a> {
         }
     }
 
-    /// The number of rows (and columns).
-    pub fn dim(&self) -> usize {
-        self.n
-    }
-
     /// Entry `(i, j)`.
     #[inline]
     pub fn get(&self, i: usize, j: usize) -> f64 {
@@ -338,10 +333,7 @@ impl LocalBuffers {
             self.s.resize(n * n, 0.0);
         }
         let local = Local {
-            nodes: match &self.in_place {
-                Some(range) => &nodes[range.clone()],
-                None => &self.nodes,
-            },
+            nodes: slot_kinematics(&self.in_place, &self.nodes, nodes),
             x: &self.x,
             xdot: &self.xdot,
         };
@@ -355,13 +347,23 @@ impl LocalBuffers {
     /// The gathered inputs (`nodes`: those given to [`LocalBuffers::gather`]).
     pub fn local<'s>(&'s self, nodes: &'s [NodeState]) -> Local<'s> {
         Local {
-            nodes: match &self.in_place {
-                Some(range) => &nodes[range.clone()],
-                None => &self.nodes,
-            },
+            nodes: slot_kinematics(&self.in_place, &self.nodes, nodes),
             x: &self.x,
             xdot: &self.xdot,
         }
+    }
+}
+
+/// The slots' kinematics: a range of all the nodes' (`in_place`), or their copy.
+#[inline]
+fn slot_kinematics<'s>(
+    in_place: &Option<std::ops::Range<usize>>,
+    copy: &'s [NodeState],
+    nodes: &'s [NodeState],
+) -> &'s [NodeState] {
+    match in_place {
+        Some(range) => &nodes[range.clone()],
+        None => copy,
     }
 }
 
@@ -459,9 +461,12 @@ impl ElementItem {
     }
 
     /// The index of the element's first state in `State::x` (the states of the elements
-    /// before it; [`crate::data::Layout::state_start`] of the element). Walks the elements
-    /// before it: for an element that owns states.
+    /// before it; [`crate::data::Layout::state_start`] of the element), 0 for an element
+    /// without states (it reads none). Walks the elements before it, only when it has states.
     pub fn state_start(self, model: &Model) -> usize {
+        if self.n_states(model) == 0 {
+            return 0;
+        }
         ElementItem::all(model)
             .take_while(|&item| item != self)
             .map(|item| item.n_states(model))

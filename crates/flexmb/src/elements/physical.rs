@@ -72,7 +72,7 @@ pub fn to_group<D: Dim>(
         }
         Group::SE3 => {
             let mut rg = r_p.clone();
-            rotate_rows(&mut rg, nodes, active);
+            translations_to_group(group, nodes, active, &mut rg);
             r.rows_mut(0, n).copy_from_slice(rg.as_slice());
             let Some((coef, s)) = s else {
                 return;
@@ -108,6 +108,19 @@ pub fn to_group<D: Dim>(
                 .view_mut((0, 0), (n, n))
                 .copy_from_slice(sg.as_slice());
         }
+    }
+}
+
+/// `v <- P^T v`: a residual-like vector (or the rows of a matrix) in group coordinates. On
+/// SE(3) the translation rows of each active slot are turned by `R^T`; on R3xSO(3) `P = I`.
+pub fn translations_to_group<C: Dim, S: StorageMut<f64, D, C>, D: Dim>(
+    group: Group,
+    nodes: &[NodeState],
+    active: &[bool],
+    v: &mut Matrix<f64, D, C, S>,
+) {
+    if group == Group::SE3 {
+        rotate_rows(v, nodes, active);
     }
 }
 

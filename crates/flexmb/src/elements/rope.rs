@@ -131,9 +131,7 @@ impl ElementParameters for Rope {
     ) -> DerivativeMethod {
         let nodes = local.nodes;
         let geo = self.geometry(ctx, nodes);
-        let taut = self.tension(&geo) > 0.0;
         let dt = match p {
-            _ if !taut && !matches!(p, RopeParam::Point(..)) => 0.0,
             RopeParam::Stiffness => geo.l - self.rest_length,
             RopeParam::Damping => geo.ldot,
             RopeParam::RestLength => -self.stiffness,
@@ -147,6 +145,8 @@ impl ElementParameters for Rope {
                 return central_difference(self, ctx, local, (at, scale), set, dr);
             }
         };
+        // a slack rope pulls nothing, whatever its parameters
+        let dt = if self.tension(&geo) > 0.0 { dt } else { 0.0 };
         let r_p = &geo.g * dt;
         let active = self.active();
         physical::to_group(ctx.group, nodes, &active, &r_p, None, None, dr, None);

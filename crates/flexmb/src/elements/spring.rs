@@ -32,7 +32,7 @@ use super::{
 };
 use crate::model::parameters::SpringParam;
 use crate::model::{NodeId, SpringDamper};
-use flexmb_lie::{so3::hat, Group, Mat3, Vec3};
+use flexmb_lie::{so3::hat, Mat3, Vec3};
 use nalgebra::SMatrix;
 
 struct Geometry {
@@ -114,18 +114,6 @@ impl SpringDamper {
             )
         })
     }
-
-    /// `g` in group coordinates (`P^T g`), like a residual.
-    fn group_gradient(group: Group, nodes: &[NodeState], g: &Vec12) -> Vec12 {
-        let mut out = *g;
-        if group == Group::SE3 {
-            for a in 0..2 {
-                let t = nodes[a].q.r.transpose() * g.fixed_rows::<3>(6 * a);
-                out.fixed_rows_mut::<3>(6 * a).copy_from(&t);
-            }
-        }
-        out
-    }
 }
 
 impl ElementKernel for SpringDamper {
@@ -182,7 +170,9 @@ impl ElementKernel for SpringDamper {
         let Some((coef, s)) = s else {
             return;
         };
-        let g = Self::group_gradient(ctx.group, nodes, &geo.g);
+        // dl/dw in group coordinates, like a residual
+        let mut g = geo.g;
+        physical::translations_to_group(ctx.group, nodes, &active, &mut g);
         let mut s = s.view();
         for a in 0..2 {
             let row = if active[a] {

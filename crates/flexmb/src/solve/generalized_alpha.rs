@@ -111,6 +111,12 @@ impl FirstOrderParameters {
             / (1.0 - self.alpha_f)
     }
 
+    /// The algorithmic rate `w_{n+1}` of the increment `dx = x_{n+1} - x_n` (the inverse of
+    /// [`FirstOrderParameters::increment`]).
+    pub fn rate_of_increment(&self, h: f64, dx: f64, w_n: f64) -> f64 {
+        (dx - h * (1.0 - self.gamma) * w_n) / (h * self.gamma)
+    }
+
     /// The increment `x_{n+1} - x_n` from `w_n` and `w_{n+1}`.
     pub fn increment(&self, h: f64, w_n: f64, w_1: f64) -> f64 {
         h * (1.0 - self.gamma) * w_n + h * self.gamma * w_1

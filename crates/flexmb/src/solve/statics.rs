@@ -249,7 +249,7 @@ struct LoadStep<'a> {
     /// The element states of the iterate (their equations at rest, `xdot = 0`).
     x: Vec<f64>,
     /// Zero rates (`n_states`).
-    rates: &'a [f64],
+    rates: Vec<f64>,
     row_scale: f64,
     newton: NewtonSettings,
     /// Load factor of the iterate.
@@ -297,7 +297,36 @@ fn scaling(row_scale: f64, load_factor: f64) -> Scaling {
     }
 }
 
-impl LoadStep<'_> {
+impl<'a> LoadStep<'a> {
+    /// The load step from `q0` moved by `dq`, with the element states `x`, at
+    /// `load_factor` (no arc length, no start kept for a second attempt).
+    fn new(
+        model: &'a Model,
+        (q0, nodes, lambda): (
+            &'a [flexmb_lie::Frame],
+            &'a mut [NodeState],
+            &'a mut Vec<f64>,
+        ),
+        (dq, x): (Vec<f64>, Vec<f64>),
+        (row_scale, newton): (f64, NewtonSettings),
+        load_factor: f64,
+    ) -> Self {
+        Self {
+            model,
+            q0,
+            nodes,
+            lambda,
+            dq,
+            rates: vec![0.0; x.len()],
+            x,
+            row_scale,
+            newton,
+            load_factor,
+            arc: None,
+            first: Default::default(),
+        }
+    }
+
     /// `q = q_0 exp(dq)` and the tangent operators into the node kinematics.
     fn set_configuration(&mut self) {
         let group = self.model.group;
@@ -317,7 +346,7 @@ impl LoadStep<'_> {
             lambda: self.lambda,
             b_start: &[],
             x: &self.x,
-            xdot: self.rates,
+            xdot: &self.rates,
         };
         assemble(
             self.model,
@@ -360,7 +389,7 @@ impl NonlinearSystem for LoadStep<'_> {
                 lambda: self.lambda,
                 b_start: &[],
                 x: &self.x,
-                xdot: self.rates,
+                xdot: &self.rates,
             };
             assemble(self.model, data, &it, &ahead, false);
             arc.load_derivative.clone_from(&data.residual);
@@ -498,21 +527,14 @@ impl Statics {
         let nodes = node_states(&state);
         // Row scale from the stiffness at the start.
         let mut row_scale = 1.0;
-        let rates = vec![0.0; state.x.len()];
-        let mut start = LoadStep {
-            model: &model,
-            q0: &state.q,
-            nodes: &mut nodes.clone(),
-            lambda: &mut state.lambda.clone(),
-            dq: vec![0.0; data.layout.n_dofs],
-            x: state.x.clone(),
-            rates: &rates,
-            row_scale,
-            newton: settings.newton,
-            load_factor: 0.0,
-            arc: None,
-            first: Default::default(),
-        };
+        let (mut scratch_nodes, mut scratch_lambda) = (nodes.clone(), state.lambda.clone());
+        let mut start = LoadStep::new(
+            &model,
+            (&state.q, &mut scratch_nodes, &mut scratch_lambda),
+            (vec![0.0; data.layout.n_dofs], state.x.clone()),
+            (row_scale, settings.newton),
+            0.0,
+        );
         start.assemble(&mut data, true, 0.0);
         let nd = data.layout.n_dofs;
         let kmax = data
@@ -669,20 +691,16 @@ impl Statics {
             arc.as_ref().map_or(0.0, |a| a.dlambda),
             x.clone(),
         );
-        let rates = vec![0.0; x.len()];
         let mut sys = LoadStep {
-            model: &self.model,
-            q0: &self.state.q,
-            nodes: &mut self.nodes,
-            lambda: &mut lambda,
-            dq,
-            x,
-            rates: &rates,
-            row_scale: self.row_scale,
-            newton: self.settings.newton,
-            load_factor,
             first,
             arc,
+            ..LoadStep::new(
+                &self.model,
+                (&self.state.q, &mut self.nodes, &mut lambda),
+                (dq, x),
+                (self.row_scale, self.settings.newton),
+                load_factor,
+            )
         };
         let result = self.newton.solve(&mut sys, &mut self.data, 0.0);
         let work = match &result {
@@ -784,18 +802,7 @@ impl Statics {
         let nd = self.data.layout.n_dofs;
         let lambda0 = self.load_factor;
         let mut lambda = self.state.lambda.clone();
-        let rates = vec![0.0; self.state.x.len()];
         let mut predictor = LoadStep {
-            model: &self.model,
-            q0: &self.state.q,
-            nodes: &mut self.nodes,
-            lambda: &mut lambda,
-            dq: vec![0.0; nd],
-            x: self.state.x.clone(),
-            rates: &rates,
-            row_scale: self.row_scale,
-            newton: self.settings.newton,
-            load_factor: lambda0,
             arc: Some(ArcLength {
                 dl,
                 lambda0,
@@ -804,7 +811,13 @@ impl Statics {
                 xb: Vec::new(),
                 dmu: 0.0,
             }),
-            first: Default::default(),
+            ..LoadStep::new(
+                &self.model,
+                (&self.state.q, &mut self.nodes, &mut lambda),
+                (vec![0.0; nd], self.state.x.clone()),
+                (self.row_scale, self.settings.newton),
+                lambda0,
+            )
         };
         predictor.assemble(&mut self.data, true, 0.0);
         if let Some(i) = self.data.residual.iter().position(|r| !r.is_finite()) {
@@ -923,23 +936,14 @@ impl Statics {
     /// the states are from the equilibrium; more than `1e-3` of their size (the
     /// approximation dynamic relaxation makes otherwise), a warning.
     fn check_states_settled(&mut self) -> Result<(), SolveError> {
-        let nodes = node_states(&self.state);
-        let rates = vec![0.0; self.state.x.len()];
         let mut lambda = self.state.lambda.clone();
-        let mut sys = LoadStep {
-            model: &self.model,
-            q0: &self.state.q,
-            nodes: &mut nodes.clone(),
-            lambda: &mut lambda,
-            dq: vec![0.0; self.data.layout.n_dofs],
-            x: self.state.x.clone(),
-            rates: &rates,
-            row_scale: self.row_scale,
-            newton: self.settings.newton,
-            load_factor: self.load_factor,
-            arc: None,
-            first: Default::default(),
-        };
+        let mut sys = LoadStep::new(
+            &self.model,
+            (&self.state.q, &mut self.nodes, &mut lambda),
+            (vec![0.0; self.data.layout.n_dofs], self.state.x.clone()),
+            (self.row_scale, self.settings.newton),
+            self.load_factor,
+        );
         sys.assemble(&mut self.data, true, 0.0);
         self.data.solver.factorize(&self.data.values)?;
         newton_correction(&mut self.data);

@@ -506,7 +506,7 @@ impl<'a> StepFunction<'a> {
         let first = &self.step.first;
         let dx = &x[self.layout.block(Block::States)];
         for (i, d) in dx.iter().enumerate() {
-            let w1 = (d - h * (1.0 - first.gamma) * s0.w[i]) / (h * first.gamma);
+            let w1 = first.rate_of_increment(h, *d, s0.w[i]);
             end.x[i] = s0.x[i] + d;
             end.xdot[i] = first.rate_from(s0.xdot[i], s0.w[i], w1);
             end.w[i] = w1;
