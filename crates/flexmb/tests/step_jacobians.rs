@@ -8,7 +8,7 @@ mod common;
 
 use flexmb::data::Layout;
 use flexmb::model::parameters::{ParamId, ParamRole, Parameters};
-use flexmb::solve::step::{StartTangent, StepFunction};
+use flexmb::solve::step::{StateTangent, StepFunction};
 use flexmb::{Data, Simulation, State};
 use flexmb_lie::Vec6;
 
@@ -52,6 +52,7 @@ fn relative_difference(a: &[f64], b: &[f64], floor: f64) -> f64 {
 /// product against the direct one, at the predictor of the next step moved by a random
 /// perturbation (a point away from the solution, with non-zero multipliers and zeta).
 fn check(name: &str, sim: &Simulation) {
+    check_end_state(name, sim);
     let h = sim.settings.h;
     let f = sim.step_function(h);
     let layout = sim.data.layout.clone();
@@ -139,11 +140,13 @@ fn check(name: &str, sim: &Simulation) {
     // dR/ds_n along random tangents.
     let n = sim.state.q.len();
     let ns = sim.state.x.len();
-    let tangent = |rand: &mut dyn FnMut() -> f64| StartTangent {
+    let n_rows = sim.state.lambda.len();
+    let tangent = |rand: &mut dyn FnMut() -> f64| StateTangent {
         q: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
         v: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
         vdot: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
         a: (0..n).map(|_| Vec6::from_fn(|_, _| rand())).collect(),
+        lambda: (0..n_rows).map(|_| rand()).collect(),
         x: (0..ns).map(|_| rand()).collect(),
         xdot: (0..ns).map(|_| rand()).collect(),
         w: (0..ns).map(|_| rand()).collect(),
@@ -191,6 +194,109 @@ fn check(name: &str, sim: &Simulation) {
             "{name}: transposed product {right:e} against {left:e}"
         );
     }
+}
+
+/// The components of a state tangent, one vector per kind (compared kind by kind: their
+/// scales differ by powers of h).
+fn components(t: &StateTangent) -> Vec<Vec<f64>> {
+    let mut out: Vec<Vec<f64>> = [&t.q, &t.v, &t.vdot, &t.a]
+        .into_iter()
+        .map(|v| v.iter().flat_map(|x| x.iter().copied()).collect())
+        .collect();
+    out.extend([&t.lambda, &t.x, &t.xdot, &t.w].map(|v| v.clone()));
+    out
+}
+
+/// The end state `s_{n+1}(x, s_n)` of the step: its tangent `end_jvp` along random
+/// `(dx, ds_n)` against central differences (configurations compared on the group), and
+/// `end_vjp` as its transpose.
+fn check_end_state(name: &str, sim: &Simulation) {
+    let h = sim.settings.h;
+    let f = sim.step_function(h);
+    let layout = sim.data.layout.clone();
+    let mut data = Data::new(&sim.model, layout.clone()).expect("data");
+    let mut rand = noise(5);
+    let mut x = f.predict();
+    let x_scale = x.iter().fold(1e-3f64, |m, v| m.max(v.abs()));
+    for v in &mut x {
+        *v += 0.05 * x_scale * rand();
+    }
+    let group = sim.model.group;
+    let (n, ns, n_rows) = (layout.n_nodes, layout.n_states, layout.n_rows);
+    let mut ds = StateTangent::zeros_of(&layout);
+    for i in 0..n {
+        ds.q[i] = Vec6::from_fn(|_, _| rand());
+        ds.v[i] = Vec6::from_fn(|_, _| rand());
+        ds.vdot[i] = Vec6::from_fn(|_, _| rand());
+        ds.a[i] = Vec6::from_fn(|_, _| rand());
+    }
+    for i in 0..ns {
+        (ds.x[i], ds.xdot[i], ds.w[i]) = (rand(), rand(), rand());
+    }
+    let dx: Vec<f64> = (0..x.len()).map(|_| rand() * x_scale).collect();
+    let jv = f.end_jvp(&x, &dx, &ds, None, &mut data);
+    let eps = 1e-6;
+    let end = f.end_state(&x);
+    let moved = |sign: f64| {
+        let mut s: State = sim.state.clone();
+        for i in 0..n {
+            s.q[i] = group.integrate(&s.q[i], &(ds.q[i] * (sign * eps)));
+            s.v[i] += ds.v[i] * (sign * eps);
+            s.vdot[i] += ds.vdot[i] * (sign * eps);
+            s.a[i] += ds.a[i] * (sign * eps);
+        }
+        for i in 0..ns {
+            s.x[i] += ds.x[i] * (sign * eps);
+            s.xdot[i] += ds.xdot[i] * (sign * eps);
+            s.w[i] += ds.w[i] * (sign * eps);
+        }
+        let xm: Vec<f64> = x.iter().zip(&dx).map(|(a, b)| a + sign * eps * b).collect();
+        StepFunction::new(&sim.model, &layout, &s, &sim.settings, h).end_state(&xm)
+    };
+    let (ep, em) = (moved(1.0), moved(-1.0));
+    let mut fd = StateTangent::zeros(n, n_rows, ns);
+    for i in 0..n {
+        let (dp, dm) = (
+            group.difference(&end.q[i], &ep.q[i]),
+            group.difference(&end.q[i], &em.q[i]),
+        );
+        fd.q[i] = (dp - dm) / (2.0 * eps);
+        fd.v[i] = (ep.v[i] - em.v[i]) / (2.0 * eps);
+        fd.vdot[i] = (ep.vdot[i] - em.vdot[i]) / (2.0 * eps);
+        fd.a[i] = (ep.a[i] - em.a[i]) / (2.0 * eps);
+    }
+    let diff = |a: &[f64], b: &[f64]| -> Vec<f64> {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y) / (2.0 * eps))
+            .collect()
+    };
+    fd.lambda = diff(&ep.lambda, &em.lambda);
+    fd.x = diff(&ep.x, &em.x);
+    fd.xdot = diff(&ep.xdot, &em.xdot);
+    fd.w = diff(&ep.w, &em.w);
+    let d = components(&jv)
+        .iter()
+        .zip(&components(&fd))
+        .map(|(a, b)| relative_difference(a, b, 1e-8))
+        .fold(0.0f64, f64::max);
+    assert!(
+        d < 1e-6,
+        "{name}: ds_(n+1) differs from central differences by {d:e}"
+    );
+    // <bar, J (dx, ds)> = <J_x^T bar, dx> + <J_s^T bar, ds>
+    let mut bar = StateTangent::zeros_of(&layout);
+    bar.add_scaled(1.0, &fd);
+    for v in bar.q.iter_mut().chain(bar.v.iter_mut()) {
+        *v = Vec6::from_fn(|_, _| rand());
+    }
+    let (xbar, sbar, _) = f.end_vjp(&x, &bar, None, &mut data);
+    let left = bar.dot(&jv);
+    let right = xbar.iter().zip(&dx).map(|(a, b)| a * b).sum::<f64>() + sbar.dot(&ds);
+    assert!(
+        (left - right).abs() <= 1e-10 * left.abs().max(right.abs()),
+        "{name}: end_vjp {right:e} against end_jvp {left:e}"
+    );
 }
 
 /// `dR/dp` (products with a vector and a transposed vector) against central differences of

@@ -306,23 +306,25 @@ pub fn finish(step: &Start, group: Group, start: &State, total: &[f64], state: &
     }
 }
 
-/// A tangent (or, for the transposed products, a cotangent) of the start of a step `s_n`:
-/// right-trivialized perturbations of `q_n` (`q_n exp(q)`) and changes of `v_n`, `vdot_n`,
-/// `a_n`, one vector of 6 per node each, and of the element states `x_n`, their rates
-/// `xdot_n` and algorithmic rates `w_n`, one per state each.
+/// A tangent (or, for the transposed products, a cotangent) of a state `s`:
+/// right-trivialized perturbations of `q` (`q exp(q)`) and changes of `v`, `vdot`, `a`, one
+/// vector of 6 per node each, of the multipliers `lambda` (one per constraint row; they do
+/// not enter the step residual, criteria read them), and of the element states `x`, their
+/// rates `xdot` and algorithmic rates `w`, one per state each.
 #[derive(Clone, Debug, PartialEq)]
-pub struct StartTangent {
+pub struct StateTangent {
     pub q: Vec<Vec6>,
     pub v: Vec<Vec6>,
     pub vdot: Vec<Vec6>,
     pub a: Vec<Vec6>,
+    pub lambda: Vec<f64>,
     pub x: Vec<f64>,
     pub xdot: Vec<f64>,
     pub w: Vec<f64>,
 }
 
-impl StartTangent {
-    pub fn zeros(n_nodes: usize, n_states: usize) -> Self {
+impl StateTangent {
+    pub fn zeros(n_nodes: usize, n_rows: usize, n_states: usize) -> Self {
         let z = vec![Vec6::zeros(); n_nodes];
         let zs = vec![0.0; n_states];
         Self {
@@ -330,10 +332,16 @@ impl StartTangent {
             v: z.clone(),
             vdot: z.clone(),
             a: z,
+            lambda: vec![0.0; n_rows],
             x: zs.clone(),
             xdot: zs.clone(),
             w: zs,
         }
+    }
+
+    /// The zero tangent of the states of `layout`.
+    pub fn zeros_of(layout: &Layout) -> Self {
+        Self::zeros(layout.n_nodes, layout.n_rows, layout.n_states)
     }
 
     /// Euclidean inner product of the components.
@@ -344,9 +352,24 @@ impl StartTangent {
             + d(&self.v, &other.v)
             + d(&self.vdot, &other.vdot)
             + d(&self.a, &other.a)
+            + s(&self.lambda, &other.lambda)
             + s(&self.x, &other.x)
             + s(&self.xdot, &other.xdot)
             + s(&self.w, &other.w)
+    }
+
+    /// `self += c other`.
+    pub fn add_scaled(&mut self, c: f64, other: &Self) {
+        let d = |a: &mut [Vec6], b: &[Vec6]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y * c);
+        let s = |a: &mut [f64], b: &[f64]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y * c);
+        d(&mut self.q, &other.q);
+        d(&mut self.v, &other.v);
+        d(&mut self.vdot, &other.vdot);
+        d(&mut self.a, &other.a);
+        s(&mut self.lambda, &other.lambda);
+        s(&mut self.x, &other.x);
+        s(&mut self.xdot, &other.xdot);
+        s(&mut self.w, &other.w);
     }
 }
 
@@ -841,21 +864,16 @@ impl<'a> StepFunction<'a> {
         dp: &[f64],
         data: &mut crate::Data,
     ) -> Vec<f64> {
-        use crate::parameter_derivatives::{
-            constraint_force_derivative, residual_derivative, Columns,
-        };
+        use crate::parameter_derivatives::{residual_derivative, Columns};
         let layout = self.layout;
         let (nd, na, so) = (layout.n_dofs, layout.n_active, layout.state_offset());
         let (end, nodes) = self.parameter_point(x);
         let point = self.derivative_point(&end, &nodes);
-        let zeta = self.zeta_rows(x);
         let mut dr = vec![0.0; nd];
         let mut dphi = vec![0.0; layout.n_rows];
         let mut dpsi = vec![0.0; if layout.stabilized { layout.n_rows } else { 0 }];
         let mut de = vec![0.0; layout.n_states];
-        let mut dforce = vec![0.0; nd];
         let mut out = vec![0.0; layout.n_unknowns()];
-        let mut dtotal = vec![0.0; nd];
         for (id, &d) in params.ids().zip(dp) {
             if d == 0.0 {
                 continue;
@@ -885,16 +903,8 @@ impl<'a> StepFunction<'a> {
                     out[nd + na + k] += d * dpsi[row] / self.step.gp;
                 }
             }
-            if layout.stabilized {
-                let model = self.model;
-                let (start_nodes, t) = (&self.start_nodes, self.start.t);
-                constraint_force_derivative(model, params, id, start_nodes, t, &zeta, &mut dforce);
-                for (a, b) in dtotal.iter_mut().zip(&dforce) {
-                    *a += d * b;
-                }
-            }
         }
-        if layout.stabilized && dtotal.iter().any(|&v| v != 0.0) {
+        if let Some(dtotal) = self.stabilization_parameter_move(x, params, dp) {
             let p = self.partials(x, data);
             for &(i, j, v) in &p.f_q {
                 let (n, c) = (j / 6, j % 6);
@@ -992,7 +1002,7 @@ impl<'a> StepFunction<'a> {
     }
 
     /// `(dR/ds_n) ds` at `x`.
-    pub fn start_jvp(&self, x: &[f64], ds: &StartTangent, data: &mut crate::Data) -> Vec<f64> {
+    pub fn start_jvp(&self, x: &[f64], ds: &StateTangent, data: &mut crate::Data) -> Vec<f64> {
         let p = self.partials(x, data);
         let [c1, c2, c3, c4, c5] = self.start_coefficients();
         let n = ds.q.len();
@@ -1035,7 +1045,7 @@ impl<'a> StepFunction<'a> {
     }
 
     /// `(dR/ds_n)^T w` at `x`.
-    pub fn start_vjp(&self, x: &[f64], w: &[f64], data: &mut crate::Data) -> StartTangent {
+    pub fn start_vjp(&self, x: &[f64], w: &[f64], data: &mut crate::Data) -> StateTangent {
         let p = self.partials(x, data);
         let [c1, c2, c3, c4, c5] = self.start_coefficients();
         let n = self.start.q.len();
@@ -1062,14 +1072,204 @@ impl<'a> StepFunction<'a> {
         for &(i, j, v) in &p.f_xd {
             gxd[j - so] += v * w[i];
         }
-        StartTangent {
+        StateTangent {
             q,
             v: (0..n).map(|i| gv[i] * c1 + gvd[i] * c3).collect(),
             vdot: (0..n).map(|i| gvd[i] * c5).collect(),
             a: (0..n).map(|i| gv[i] * c2 + gvd[i] * c4).collect(),
+            lambda: vec![0.0; self.layout.n_rows],
             x: gx,
             xdot: gxd.iter().map(|g| g * d_xd).collect(),
             w: gxd.iter().map(|g| g * d_w).collect(),
         }
+    }
+
+    /// `(dp_{n+1}/dp) dp` of the configuration update: `d(B(q_n; p)^T zeta)/dp dp` (6 per
+    /// node) of the stabilized step, `None` outside it or when no joint parameter moves.
+    fn stabilization_parameter_move(
+        &self,
+        x: &[f64],
+        params: &crate::model::parameters::Parameters,
+        dp: &[f64],
+    ) -> Option<Vec<f64>> {
+        if !self.layout.stabilized {
+            return None;
+        }
+        let zeta = self.zeta_rows(x);
+        let nd = self.layout.n_dofs;
+        let (mut dtotal, mut dforce) = (vec![0.0; nd], vec![0.0; nd]);
+        let mut moved = false;
+        for (id, &d) in params.ids().zip(dp) {
+            if d == 0.0 || !matches!(params.kind(id), crate::model::ParamKind::Joint(..)) {
+                continue;
+            }
+            let (start_nodes, t) = (&self.start_nodes, self.start.t);
+            crate::parameter_derivatives::constraint_force_derivative(
+                self.model,
+                params,
+                id,
+                start_nodes,
+                t,
+                &zeta,
+                &mut dforce,
+            );
+            for (a, b) in dtotal.iter_mut().zip(&dforce) {
+                *a += d * b;
+            }
+            moved = true;
+        }
+        moved.then_some(dtotal)
+    }
+
+    /// The tangent of the end of the step `ds_{n+1}` for changes `dx` of the unknowns, `ds`
+    /// of the start and `dp` of the parameters (`params` with one entry per parameter, or
+    /// `None`): the derivative of the relations of the module documentation,
+    ///
+    /// ```text
+    /// dq_{n+1}    = G dq_n + T (ddq + B(q_n)^T dzeta + K_zeta dq_n + d(B_n^T zeta)/dp dp)
+    /// dv_{n+1}    = c1 dv_n + c2 da_n + gamma' ddq
+    /// dvdot_{n+1} = c3 dv_n + c4 da_n + c5 dvdot_n + beta' ddq
+    /// da_{n+1}    = (ddq - h dv_n - (1/2 - beta) h^2 da_n) / (beta h^2)
+    /// dlambda     = dmu / s
+    /// dx_{n+1} = dx_n + ddx,  dw_{n+1} = (ddx - h (1 - gamma_1) dw_n) / (h gamma_1),
+    /// dxdot_{n+1} = d_w dw_n + d_xd dxdot_n + c_x ddx
+    /// ```
+    ///
+    /// with `G = Ad(exp(-total))`, `T = T(total)`, `K_zeta = d(B(q_n)^T zeta)/dq_n` (the
+    /// terms in `zeta` in the stabilized form only).
+    pub fn end_jvp(
+        &self,
+        x: &[f64],
+        dx: &[f64],
+        ds: &StateTangent,
+        dp: Option<(&crate::model::parameters::Parameters, &[f64])>,
+        data: &mut crate::Data,
+    ) -> StateTangent {
+        let p = self.partials(x, data);
+        let layout = self.layout;
+        let n = layout.n_nodes;
+        let mut dtotal = dx[..layout.n_dofs].to_vec();
+        if layout.stabilized {
+            let dzeta = &dx[layout.block(Block::Stabilization)];
+            for (node, rows) in layout.node_rows.iter().enumerate() {
+                for &(row, slot) in rows {
+                    let z = dzeta[layout.row_unknown[row].expect("active row")];
+                    for i in 0..6 {
+                        dtotal[6 * node + i] += self.b_start[row][6 * slot + i] * z;
+                    }
+                }
+            }
+            for (i, j, v) in self.start_constraint_stiffness(x) {
+                dtotal[i] += v * ds.q[j / 6][j % 6];
+            }
+            if let Some(moved) =
+                dp.and_then(|(params, dp)| self.stabilization_parameter_move(x, params, dp))
+            {
+                dtotal.iter_mut().zip(&moved).for_each(|(a, b)| *a += b);
+            }
+        }
+        let [c1, c2, c3, c4, c5] = self.start_coefficients();
+        let ga = &self.step.params;
+        let h = self.step.h;
+        let mut out = StateTangent::zeros_of(layout);
+        for i in 0..n {
+            let ddq = Vec6::from_column_slice(&dx[6 * i..6 * i + 6]);
+            let dt = Vec6::from_column_slice(&dtotal[6 * i..6 * i + 6]);
+            out.q[i] = p.g[i] * ds.q[i] + p.t[i] * dt;
+            out.v[i] = ds.v[i] * c1 + ds.a[i] * c2 + ddq * self.step.gp;
+            out.vdot[i] = ds.v[i] * c3 + ds.a[i] * c4 + ds.vdot[i] * c5 + ddq * self.step.bp;
+            out.a[i] =
+                (ddq - ds.v[i] * h - ds.a[i] * ((0.5 - ga.beta) * h * h)) / (ga.beta * h * h);
+        }
+        for (k, &row) in layout.active_rows.iter().enumerate() {
+            out.lambda[row] = dx[layout.n_dofs + k] / self.step.scale;
+        }
+        let f = &self.step.first;
+        let (d_w, d_xd) = self.state_start_coefficients();
+        let so = layout.state_offset();
+        for i in 0..layout.n_states {
+            let d = dx[so + i];
+            out.x[i] = ds.x[i] + d;
+            out.w[i] = (d - h * (1.0 - f.gamma) * ds.w[i]) / (h * f.gamma);
+            out.xdot[i] = d_w * ds.w[i] + d_xd * ds.xdot[i] + self.step.cx * d;
+        }
+        out
+    }
+
+    /// The transpose of [`StepFunction::end_jvp`]: for a cotangent `bar` of `s_{n+1}`, the
+    /// cotangents of the unknowns (`n_unknowns`), of the start `s_n`, and, when `params` is
+    /// given, of the parameters (the stabilized form's `d(B(q_n; p)^T zeta)/dp`; empty
+    /// otherwise).
+    pub fn end_vjp(
+        &self,
+        x: &[f64],
+        bar: &StateTangent,
+        params: Option<&crate::model::parameters::Parameters>,
+        data: &mut crate::Data,
+    ) -> (Vec<f64>, StateTangent, Vec<f64>) {
+        let p = self.partials(x, data);
+        let layout = self.layout;
+        let (n, nd) = (layout.n_nodes, layout.n_dofs);
+        let [c1, c2, c3, c4, c5] = self.start_coefficients();
+        let ga = &self.step.params;
+        let h = self.step.h;
+        let bh2 = ga.beta * h * h;
+        let mut xbar = vec![0.0; layout.n_unknowns()];
+        let mut start = StateTangent::zeros_of(layout);
+        // The cotangent of the total increments, T^T qbar_{n+1}.
+        let mut tbar = vec![0.0; nd];
+        for i in 0..n {
+            let t = p.t[i].transpose() * bar.q[i];
+            tbar[6 * i..6 * i + 6].copy_from_slice(t.as_slice());
+            let a = bar.a[i];
+            let dq = t + bar.v[i] * self.step.gp + bar.vdot[i] * self.step.bp + a / bh2;
+            xbar[6 * i..6 * i + 6].copy_from_slice(dq.as_slice());
+            start.q[i] = p.g[i].transpose() * bar.q[i];
+            start.v[i] = bar.v[i] * c1 + bar.vdot[i] * c3 - a * (h / bh2);
+            start.a[i] = bar.v[i] * c2 + bar.vdot[i] * c4 - a * ((0.5 - ga.beta) / ga.beta);
+            start.vdot[i] = bar.vdot[i] * c5;
+        }
+        let mut pbar = Vec::new();
+        if layout.stabilized {
+            for (node, rows) in layout.node_rows.iter().enumerate() {
+                for &(row, slot) in rows {
+                    let z = layout.zeta(layout.row_unknown[row].expect("active row"));
+                    for i in 0..6 {
+                        xbar[z] += self.b_start[row][6 * slot + i] * tbar[6 * node + i];
+                    }
+                }
+            }
+            for (i, j, v) in self.start_constraint_stiffness(x) {
+                start.q[j / 6][j % 6] += v * tbar[i];
+            }
+            if let Some(params) = params {
+                pbar = vec![0.0; params.len()];
+                let mut unit = vec![0.0; params.len()];
+                for (k, id) in params.ids().enumerate() {
+                    if !matches!(params.kind(id), crate::model::ParamKind::Joint(..)) {
+                        continue;
+                    }
+                    unit[k] = 1.0;
+                    if let Some(moved) = self.stabilization_parameter_move(x, params, &unit) {
+                        pbar[k] = moved.iter().zip(&tbar).map(|(a, b)| a * b).sum();
+                    }
+                    unit[k] = 0.0;
+                }
+            }
+        }
+        for (k, &row) in layout.active_rows.iter().enumerate() {
+            xbar[nd + k] += bar.lambda[row] / self.step.scale;
+        }
+        let f = &self.step.first;
+        let (d_w, d_xd) = self.state_start_coefficients();
+        let so = layout.state_offset();
+        for i in 0..layout.n_states {
+            let (bx, bw, bxd) = (bar.x[i], bar.w[i], bar.xdot[i]);
+            xbar[so + i] = bx + bw / (h * f.gamma) + self.step.cx * bxd;
+            start.x[i] = bx;
+            start.w[i] = -bw * (1.0 - f.gamma) / f.gamma + d_w * bxd;
+            start.xdot[i] = d_xd * bxd;
+        }
+        (xbar, start, pbar)
     }
 }
