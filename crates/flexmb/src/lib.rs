@@ -42,6 +42,7 @@ pub mod model;
 pub mod observe;
 pub mod output;
 pub mod parameter_derivatives;
+pub mod sensitivity;
 pub mod sensors;
 pub mod solve;
 pub mod state;

@@ -1,6 +1,6 @@
 //! Sensors: the output channels declared by a model, evaluated from the state.
 
-use crate::data::Data;
+use crate::data::{Data, Layout};
 use crate::elements::{Context, ElementItem, ElementKernel, ElementRef, LocalBuffers, NodeState};
 use crate::joints;
 use crate::model::{Model, SensorFrame, SensorKind};
@@ -84,86 +84,11 @@ impl SensorEvaluator {
     /// Values of all sensors at `state`, multipliers and constraint values from `data`.
     pub fn evaluate(&mut self, model: &Model, data: &Data, state: &State) -> Vec<f64> {
         let nodes = node_states(state);
-        let ctx = Context::at(model, state.t, 1.0);
         let mut buffers = LocalBuffers::default();
         let mut energy = None;
         let mut out = Vec::with_capacity(model.sensors.len());
         for (k, s) in model.sensors.iter().enumerate() {
             let value = match &s.kind {
-                SensorKind::Position {
-                    node,
-                    point,
-                    component,
-                } => nodes[node.0].q.point(point)[*component],
-                SensorKind::Velocity {
-                    node,
-                    point,
-                    component,
-                } => {
-                    crate::elements::point_velocity(model.group, &nodes[node.0], point)[*component]
-                }
-                SensorKind::Quaternion { node, component } => {
-                    nodes[node.0].q.quaternion()[*component]
-                }
-                SensorKind::AngularVelocity {
-                    node,
-                    frame,
-                    component,
-                } => {
-                    let om = nodes[node.0].v.fixed_rows::<3>(3).into_owned();
-                    match frame {
-                        SensorFrame::Body => om[*component],
-                        SensorFrame::Inertial => (nodes[node.0].q.r * om)[*component],
-                    }
-                }
-                SensorKind::JointCoordinate { joint } => {
-                    let j = &model.joints[joint.0];
-                    let raw = joints::coordinate(j, &pair(&nodes, [j.node_a, j.node_b]));
-                    if joints::coordinate_is_angle(j) {
-                        let unwrapped = match self.last_angle[k] {
-                            None => raw,
-                            Some(last) => {
-                                let two_pi = 2.0 * std::f64::consts::PI;
-                                last + (raw - last + std::f64::consts::PI).rem_euclid(two_pi)
-                                    - std::f64::consts::PI
-                            }
-                        };
-                        self.last_angle[k] = Some(unwrapped);
-                        unwrapped
-                    } else {
-                        raw
-                    }
-                }
-                SensorKind::JointForce { joint, component }
-                | SensorKind::JointTorque { joint, component } => {
-                    let j = &model.joints[joint.0];
-                    let start = data.layout.joint_row_start[joint.0];
-                    let n = data.layout.joint_rows[joint.0].len();
-                    let (f, m) = joints::reaction_on_b(
-                        j,
-                        &data.layout.joint_rows[joint.0],
-                        &pair(&nodes, [j.node_a, j.node_b]),
-                        &state.lambda[start..start + n],
-                        state.t,
-                    );
-                    if matches!(s.kind, SensorKind::JointForce { .. }) {
-                        f[*component]
-                    } else {
-                        m[*component]
-                    }
-                }
-                SensorKind::SpringForce { spring } => {
-                    let sp = &model.springs[*spring];
-                    let start = ElementItem::Spring(*spring).state_start(model);
-                    buffers.gather(sp, &nodes, (&state.x, &state.xdot, start));
-                    sp.tension(&ctx, &buffers.local(&nodes))
-                }
-                SensorKind::RopeForce { rope: i } => {
-                    let rope = &model.ropes[*i];
-                    let start = ElementItem::Rope(*i).state_start(model);
-                    buffers.gather(rope, &nodes, (&state.x, &state.xdot, start));
-                    rope.force(&ctx, &buffers.local(&nodes))
-                }
                 SensorKind::KineticEnergy
                 | SensorKind::PotentialEnergy
                 | SensorKind::TotalEnergy => {
@@ -175,30 +100,151 @@ impl SensorEvaluator {
                         _ => ke + pe,
                     }
                 }
-                SensorKind::ConstraintViolation => constraint_violation(model, data, state, &nodes),
-                SensorKind::BeamStrain { beam, component }
-                | SensorKind::BeamStress { beam, component } => {
-                    let b = &model.beams[*beam];
-                    let st = b.state(&[nodes[b.nodes[0].0], nodes[b.nodes[1].0]]);
-                    if matches!(s.kind, SensorKind::BeamStrain { .. }) {
-                        st.strain[*component]
+                SensorKind::JointCoordinate { joint } => {
+                    let raw = sensor_value(model, &data.layout, k, &nodes, state, &mut buffers);
+                    if joints::coordinate_is_angle(&model.joints[joint.0]) {
+                        let unwrapped = self.last_angle[k].map_or(raw, |last| unwrap(raw, last));
+                        self.last_angle[k] = Some(unwrapped);
+                        unwrapped
                     } else {
-                        st.stress[*component]
+                        raw
                     }
                 }
+                _ => sensor_value(model, &data.layout, k, &nodes, state, &mut buffers),
             };
             out.push(value);
         }
         out
     }
 }
+
+/// The angle `raw` plus the multiple of `2 pi` that brings it closest to `near`.
+pub fn unwrap(raw: f64, near: f64) -> f64 {
+    let two_pi = 2.0 * std::f64::consts::PI;
+    near + (raw - near + std::f64::consts::PI).rem_euclid(two_pi) - std::f64::consts::PI
+}
+
+/// The value of sensor `k` of `model` at `state` (its node kinematics `nodes`, multipliers
+/// in the rows of `layout`); joint angles in `(-pi, pi]`, not unwrapped.
+pub fn sensor_value(
+    model: &Model,
+    layout: &Layout,
+    k: usize,
+    nodes: &[NodeState],
+    state: &State,
+    buffers: &mut LocalBuffers,
+) -> f64 {
+    let ctx = Context::at(model, state.t, 1.0);
+    match &model.sensors[k].kind {
+        SensorKind::Position {
+            node,
+            point,
+            component,
+        } => nodes[node.0].q.point(point)[*component],
+        SensorKind::Velocity {
+            node,
+            point,
+            component,
+        } => crate::elements::point_velocity(model.group, &nodes[node.0], point)[*component],
+        SensorKind::Acceleration {
+            node,
+            point,
+            component,
+        } => crate::elements::point_acceleration(model.group, &nodes[node.0], point)[*component],
+        SensorKind::Quaternion { node, component } => nodes[node.0].q.quaternion()[*component],
+        SensorKind::AngularVelocity {
+            node,
+            frame,
+            component,
+        } => {
+            let om = nodes[node.0].v.fixed_rows::<3>(3).into_owned();
+            match frame {
+                SensorFrame::Body => om[*component],
+                SensorFrame::Inertial => (nodes[node.0].q.r * om)[*component],
+            }
+        }
+        SensorKind::AngularAcceleration {
+            node,
+            frame,
+            component,
+        } => {
+            // d(R omega)/dt = R (omega x omega + omegadot) = R omegadot
+            let omd = nodes[node.0].vdot.fixed_rows::<3>(3).into_owned();
+            match frame {
+                SensorFrame::Body => omd[*component],
+                SensorFrame::Inertial => (nodes[node.0].q.r * omd)[*component],
+            }
+        }
+        SensorKind::JointCoordinate { joint } => {
+            let j = &model.joints[joint.0];
+            joints::coordinate(j, &pair(nodes, [j.node_a, j.node_b]))
+        }
+        kind @ (SensorKind::JointForce { joint, component }
+        | SensorKind::JointTorque { joint, component }) => {
+            let j = &model.joints[joint.0];
+            let start = layout.joint_row_start[joint.0];
+            let n = layout.joint_rows[joint.0].len();
+            let (f, m) = joints::reaction_on_b(
+                j,
+                &layout.joint_rows[joint.0],
+                &pair(nodes, [j.node_a, j.node_b]),
+                &state.lambda[start..start + n],
+                state.t,
+            );
+            if matches!(kind, SensorKind::JointForce { .. }) {
+                f[*component]
+            } else {
+                m[*component]
+            }
+        }
+        SensorKind::SpringForce { spring } => {
+            let sp = &model.springs[*spring];
+            let start = ElementItem::Spring(*spring).state_start(model);
+            buffers.gather(sp, nodes, (&state.x, &state.xdot, start));
+            sp.tension(&ctx, &buffers.local(nodes))
+        }
+        SensorKind::RopeForce { rope: i } => {
+            let rope = &model.ropes[*i];
+            let start = ElementItem::Rope(*i).state_start(model);
+            buffers.gather(rope, nodes, (&state.x, &state.xdot, start));
+            rope.force(&ctx, &buffers.local(nodes))
+        }
+        kind @ (SensorKind::KineticEnergy
+        | SensorKind::PotentialEnergy
+        | SensorKind::TotalEnergy) => {
+            let (ke, pe) = energies(model, &layout.elements, state);
+            match kind {
+                SensorKind::KineticEnergy => ke,
+                SensorKind::PotentialEnergy => pe,
+                _ => ke + pe,
+            }
+        }
+        SensorKind::ConstraintViolation => constraint_violation(model, layout, state, nodes),
+        kind @ (SensorKind::BeamStrain { beam, component }
+        | SensorKind::BeamStress { beam, component }) => {
+            let b = &model.beams[*beam];
+            let st = b.state(&[nodes[b.nodes[0].0], nodes[b.nodes[1].0]]);
+            if matches!(kind, SensorKind::BeamStrain { .. }) {
+                st.strain[*component]
+            } else {
+                st.stress[*component]
+            }
+        }
+    }
+}
+
 /// Largest `|Phi|` over the active constraint rows at `state`.
-pub fn constraint_violation(model: &Model, data: &Data, state: &State, nodes: &[NodeState]) -> f64 {
+pub fn constraint_violation(
+    model: &Model,
+    layout: &Layout,
+    state: &State,
+    nodes: &[NodeState],
+) -> f64 {
     let zeros = [0.0; joints::MAX_ROWS];
     let mut worst = 0.0f64;
     for (j, joint) in model.joints.iter().enumerate() {
         let p = pair(nodes, [joint.node_a, joint.node_b]);
-        let rows = &data.layout.joint_rows[j];
+        let rows = &layout.joint_rows[j];
         let jv = joints::evaluate_joint(
             model.group,
             joint,
@@ -209,7 +255,7 @@ pub fn constraint_violation(model: &Model, data: &Data, state: &State, nodes: &[
             None,
         );
         for r in 0..rows.len() {
-            if data.layout.row_unknown[data.layout.joint_row_start[j] + r].is_some() {
+            if layout.row_unknown[layout.joint_row_start[j] + r].is_some() {
                 worst = worst.max(jv.phi[r].abs());
             }
         }

@@ -539,6 +539,19 @@ pub fn point_velocity(group: Group, node: &NodeState, p: &Vec3) -> Vec3 {
     origin + node.q.r * om.cross(p)
 }
 
+/// Inertial acceleration of the point `p` (node frame) of a node: on SE(3) `v = (R^T xdot,
+/// omega)`, so `xddot = R (udot + omega x u)`; on R3xSO(3) `xddot = udot`; plus
+/// `R (omegadot x p + omega x (omega x p))`.
+pub fn point_acceleration(group: Group, node: &NodeState, p: &Vec3) -> Vec3 {
+    let (u, om) = flexmb_lie::split(&node.v);
+    let (ud, omd) = flexmb_lie::split(&node.vdot);
+    let origin = match group {
+        Group::R3xSO3 => ud,
+        Group::SE3 => node.q.r * (ud + om.cross(&u)),
+    };
+    origin + node.q.r * (omd.cross(p) + om.cross(&om.cross(p)))
+}
+
 /// How a parameter derivative was obtained.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DerivativeMethod {

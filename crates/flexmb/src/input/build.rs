@@ -1225,8 +1225,10 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         let ty = t.req("type")?.choice(&[
             "position",
             "velocity",
+            "acceleration",
             "quaternion",
             "angular_velocity",
+            "angular_acceleration",
             "joint_coordinate",
             "joint_force",
             "joint_torque",
@@ -1241,9 +1243,9 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         ])?;
         let why = format!("for a {ty} sensor");
         let uses: &[&str] = match ty {
-            "position" | "velocity" => &["node", "point", "component"],
+            "position" | "velocity" | "acceleration" => &["node", "point", "component"],
             "quaternion" => &["node", "component"],
-            "angular_velocity" => &["node", "component", "frame"],
+            "angular_velocity" | "angular_acceleration" => &["node", "component", "frame"],
             "joint_coordinate" => &["joint"],
             "joint_force" | "joint_torque" => &["joint", "component"],
             "beam_strain" | "beam_stress" => &["beam", "component"],
@@ -1276,37 +1278,54 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             })
         };
         let kind = match ty {
-            "position" | "velocity" => {
+            "position" | "velocity" | "acceleration" => {
                 let node = node()?;
                 let p = opt_point(&t, "point")?.unwrap_or(model.nodes[node.0].frame.x);
                 let point = to_node_frame(model, Some(node), &p);
                 let component = component(XYZ)?;
-                if ty == "position" {
-                    SensorKind::Position {
+                match ty {
+                    "position" => SensorKind::Position {
                         node,
                         point,
                         component,
-                    }
-                } else {
-                    SensorKind::Velocity {
+                    },
+                    "velocity" => SensorKind::Velocity {
                         node,
                         point,
                         component,
-                    }
+                    },
+                    _ => SensorKind::Acceleration {
+                        node,
+                        point,
+                        component,
+                    },
                 }
             }
             "quaternion" => SensorKind::Quaternion {
                 node: node()?,
                 component: component(WXYZ)?,
             },
-            "angular_velocity" => SensorKind::AngularVelocity {
-                node: node()?,
-                frame: match t.opt_choice("frame", &["inertial", "body"])? {
+            "angular_velocity" | "angular_acceleration" => {
+                let node = node()?;
+                let frame = match t.opt_choice("frame", &["inertial", "body"])? {
                     Some("body") => SensorFrame::Body,
                     _ => SensorFrame::Inertial,
-                },
-                component: component(XYZ)?,
-            },
+                };
+                let component = component(XYZ)?;
+                if ty == "angular_velocity" {
+                    SensorKind::AngularVelocity {
+                        node,
+                        frame,
+                        component,
+                    }
+                } else {
+                    SensorKind::AngularAcceleration {
+                        node,
+                        frame,
+                        component,
+                    }
+                }
+            }
             "joint_coordinate" => {
                 let j = joint()?;
                 let k = model.joints[j.0].kind;

@@ -316,6 +316,19 @@ pub enum SensorKind {
         point: Vec3,
         component: usize,
     },
+    /// Acceleration component of a point fixed on a node, inertial frame [m/s^2] (from the
+    /// step's own `vdot`).
+    Acceleration {
+        node: NodeId,
+        point: Vec3,
+        component: usize,
+    },
+    /// Angular acceleration component [rad/s^2] (from the step's own `vdot`).
+    AngularAcceleration {
+        node: NodeId,
+        frame: SensorFrame,
+        component: usize,
+    },
     /// Component of the node's unit quaternion, scalar first (0 = w, 1..3 = x, y, z).
     Quaternion {
         node: NodeId,

@@ -499,12 +499,20 @@ impl Model {
                     node,
                     point,
                     component,
+                }
+                | SensorKind::Acceleration {
+                    node,
+                    point,
+                    component,
                 } => {
                     finite3(point, 2.0 * MAX_KINEMATIC).map_err(|m| fail("point", m))?;
                     (Some(*node), Some((*component, 3)))
                 }
                 SensorKind::Quaternion { node, component } => (Some(*node), Some((*component, 4))),
                 SensorKind::AngularVelocity {
+                    node, component, ..
+                }
+                | SensorKind::AngularAcceleration {
                     node, component, ..
                 } => (Some(*node), Some((*component, 3))),
                 SensorKind::JointCoordinate { joint }

@@ -182,6 +182,29 @@ impl NonlinearSystem for Accelerations<'_> {
     }
 }
 
+/// The scaling of the system for the initial accelerations (see [`Accelerations`]): rows
+/// divided by the largest nodal mass `m`, the matrix `[M B^T 0; B 0 0; E_vd 0 E_xd] / m`,
+/// acceleration-level constraint rows.
+pub(crate) fn acceleration_scaling(model: &Model, load_factor: f64) -> Scaling {
+    let s = 1.0 / mass_scale(model);
+    Scaling {
+        row_scale: s,
+        coef: Coefficients {
+            m: s,
+            c: 0.0,
+            k: 0.0,
+            x: 0.0,
+            xdot: s,
+        },
+        constraint_rhs: ConstraintRhs::Acceleration,
+        load_factor,
+        regularization: 0.0,
+        velocity_scale: 1.0,
+        nodal_damping: 0.0,
+        state_scale: s,
+    }
+}
+
 /// Checks the initial conditions and computes consistent `vdot0`, `a0 = vdot0` and `lambda0`,
 /// and the rates of the element states `xdot0`, `w0 = xdot0` (their equations solved with
 /// the accelerations: `[M B^T 0; B 0 0; E_vd 0 E_xd] [vdot0; mu0; xdot0] = -[...]`).
@@ -197,23 +220,9 @@ pub fn initial_accelerations(
     }
     let zeros = vec![0.0; data.layout.n_rows];
     let no_rates = vec![0.0; data.layout.n_states];
-    let s = 1.0 / mass_scale(model);
-    let mut sc = Scaling {
-        row_scale: s,
-        coef: Coefficients {
-            m: s,
-            c: 0.0,
-            k: 0.0,
-            x: 0.0,
-            xdot: s,
-        },
-        constraint_rhs: ConstraintRhs::Position,
-        load_factor,
-        regularization: 0.0,
-        velocity_scale: 1.0,
-        nodal_damping: 0.0,
-        state_scale: s,
-    };
+    let mut sc = acceleration_scaling(model, load_factor);
+    let s = sc.row_scale;
+    sc.constraint_rhs = ConstraintRhs::Position;
     let mut it = Iterate {
         nodes: &nodes,
         t: state.t,

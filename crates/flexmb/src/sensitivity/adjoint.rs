@@ -1,0 +1,235 @@
+//! The discrete adjoint: a forward run that keeps its trajectory, then one backward sweep
+//! for all criteria (module documentation of [`super`]).
+
+use super::criteria::{weight, History};
+use super::matrix::StepMatrix;
+use super::{pick, state_bytes, Gradients, Problem, SensitivityError, Stats};
+use crate::data::Layout;
+use crate::observe::{Observer, Observers, Sample, StepRecord};
+use crate::solve::step::{StateTangent, StepFunction};
+use crate::solve::trajectory::{Trajectory, TrajectoryStep};
+use crate::state::State;
+use crate::{Data, Model};
+
+/// The forward run's record: the criteria's sensor values at every point and, when they fit
+/// in the memory budget, every step.
+struct Forward<'a> {
+    problem: &'a Problem,
+    layout: &'a Layout,
+    history: History,
+    /// Every step, when kept.
+    steps: Option<Vec<TrajectoryStep>>,
+    count: usize,
+}
+
+impl Observer for Forward<'_> {
+    fn output(&mut self, _: &Sample) -> Result<(), String> {
+        Ok(())
+    }
+    fn wants_steps(&self) -> bool {
+        true
+    }
+    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
+        let p = self.problem;
+        if record.redundant_rows != self.layout.redundant_rows().as_slice() {
+            return Err(super::reselected(record.start.t));
+        }
+        p.criteria
+            .record(&p.model, self.layout, record.end, &mut self.history);
+        if let Some(steps) = &mut self.steps {
+            steps.push(TrajectoryStep {
+                index: record.index,
+                h: record.info.h,
+                start: record.start.clone(),
+                unknowns: record.unknowns.to_vec(),
+                redundant_rows: record.redundant_rows.to_vec(),
+                end: record.end.clone(),
+            });
+        }
+        self.count += 1;
+        Ok(())
+    }
+}
+
+/// The backward sweep's state: one cotangent of the state and of the parameters per
+/// criterion.
+struct Backward<'a> {
+    problem: &'a Problem,
+    layout: &'a Layout,
+    data: Data,
+    matrix: StepMatrix,
+    hs: Vec<f64>,
+    history: &'a History,
+    /// `sbar` per criterion.
+    bars: Vec<StateTangent>,
+    /// `pbar` per criterion (design parameters).
+    pbars: Vec<Vec<f64>>,
+    index: Vec<Option<usize>>,
+    scratch: Model,
+}
+
+impl Backward<'_> {
+    /// Adds `c_n f_s(s_n)` and `c_n f_p(s_n)` of point `n`.
+    fn point(&mut self, n: usize, state: &State) {
+        let p = self.problem;
+        let weights: Vec<f64> = p
+            .criteria
+            .criteria
+            .iter()
+            .map(|c| weight(c.kind, n, &self.hs))
+            .collect();
+        if weights.iter().all(|&w| w == 0.0) {
+            return;
+        }
+        let grads = p.criteria.point_gradients(
+            &p.model,
+            self.layout,
+            state,
+            &self.history.values[n],
+            &weights,
+            (&p.params, &p.design, &mut self.scratch),
+        );
+        for (g, coef) in &grads {
+            for (c, &cc) in coef.iter().enumerate() {
+                if cc != 0.0 {
+                    g.add_to(cc, &mut self.bars[c]);
+                    for &(id, d) in &g.params {
+                        if let Some(k) = self.index[id.0 as usize] {
+                            self.pbars[c][k] += cc * d;
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Step `n` backward: `sbar_n` to `sbar_{n-1}`.
+    fn step(&mut self, step: &TrajectoryStep) -> Result<(), String> {
+        let p = self.problem;
+        let settings = &p.settings;
+        let f = StepFunction::new(&p.model, self.layout, &step.start, settings, step.h);
+        let x = &step.unknowns;
+        let jacobian = f.jacobian(x, &mut self.data);
+        let t = step.end.t;
+        self.matrix
+            .factorize(x.len(), &jacobian, &|| {
+                format!("step {} (t = {t:.6e} s)", step.index)
+            })
+            .map_err(|e| e.to_string())?;
+        for c in 0..self.bars.len() {
+            let (mut mu, mut start, pe) =
+                f.end_vjp(x, &self.bars[c], Some(&p.params), &mut self.data);
+            self.matrix.solve_transpose(&mut mu);
+            start.add_scaled(-1.0, &f.start_vjp(x, &mu, &mut self.data));
+            let pr = f.parameter_vjp(x, &p.params, &mu, &mut self.data);
+            pick(&self.index, &pr, &mut self.pbars[c], -1.0);
+            if !pe.is_empty() {
+                pick(&self.index, &pe, &mut self.pbars[c], 1.0);
+            }
+            self.bars[c] = start;
+        }
+        self.point(step.index - 1, &step.start);
+        Ok(())
+    }
+}
+
+/// The criteria of `problem` and their gradients by the discrete adjoint. `progress` is
+/// called with `(steps done, steps)` during the backward sweep.
+pub fn adjoint(
+    problem: &Problem,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Gradients, SensitivityError> {
+    let (mut sim, tangents) = super::start(problem)?;
+    let layout = sim.data.layout.clone();
+    let settings = &problem.settings;
+    // Every step kept if the run's estimated steps fit in the budget, else checkpoints.
+    let state = state_bytes(&sim.state);
+    let step_bytes = 2 * state + 8 * layout.n_unknowns() + 64;
+    let expected = ((settings.t_end / settings.h).ceil() as usize).max(1) + 1;
+    let budget = problem.memory_budget;
+    let keep_all = expected.saturating_mul(step_bytes) <= budget;
+    let memory_bytes = state + 8 * (sim.data.pattern.len() + 6 * layout.n_unknowns()) + 256;
+    let every = if keep_all {
+        expected
+    } else {
+        // k steps in a segment and N/k checkpoints, each half of the budget.
+        let k = (budget / 2 / step_bytes).max(1);
+        if expected.div_ceil(k) * memory_bytes > budget / 2 {
+            return Err(SensitivityError::Unsupported(format!(
+                "the memory budget of {budget} bytes is too small for the adjoint of {expected} steps (a step takes about {step_bytes} bytes, a checkpoint {memory_bytes}); raise it to at least {} bytes",
+                2 * ((expected as f64 * (step_bytes * memory_bytes) as f64).sqrt() as usize)
+            )));
+        }
+        k
+    };
+    let mut trajectory = (!keep_all).then(|| Trajectory::new(&sim, every));
+    let mut forward = Forward {
+        problem,
+        layout: &layout,
+        history: History::default(),
+        steps: keep_all.then(Vec::new),
+        count: 0,
+    };
+    problem
+        .criteria
+        .record(&problem.model, &layout, &sim.state, &mut forward.history);
+    match &mut trajectory {
+        Some(t) => sim.run(&mut Observers(vec![t, &mut forward]))?,
+        None => sim.run(&mut forward)?,
+    };
+    let n_steps = forward.count;
+    let history = forward.history;
+    let mut stats = Stats {
+        forward_runs: 1,
+        steps: n_steps,
+        ..Stats::default()
+    };
+    let n_c = problem.criteria.len();
+    let mut back = Backward {
+        problem,
+        layout: &layout,
+        data: Data::new(&problem.model, layout.clone()).map_err(crate::SolveError::from)?,
+        matrix: StepMatrix::default(),
+        hs: history.steps(),
+        history: &history,
+        bars: vec![StateTangent::zeros_of(&layout); n_c],
+        pbars: vec![vec![0.0; problem.design.len()]; n_c],
+        index: problem.design_index(),
+        scratch: (*problem.model).clone(),
+    };
+    back.point(n_steps, &sim.state);
+    let mut done = 0;
+    let mut visit = |step: &TrajectoryStep| -> Result<(), String> {
+        back.step(step)?;
+        done += 1;
+        progress(done, n_steps);
+        Ok(())
+    };
+    match (&forward.steps, &trajectory) {
+        (Some(steps), _) => {
+            stats.trajectory_bytes = steps.len() * step_bytes;
+            for step in steps.iter().rev() {
+                visit(step).map_err(crate::SolveError::Output)?;
+            }
+        }
+        (None, Some(t)) => {
+            stats.checkpoints = t.checkpoints();
+            stats.recomputed_steps = n_steps;
+            stats.trajectory_bytes = t.checkpoints() * memory_bytes + every * step_bytes;
+            t.backward(&mut visit)?;
+        }
+        (None, None) => unreachable!("either every step or checkpoints are kept"),
+    }
+    let mut gradients = back.pbars;
+    for (c, g) in gradients.iter_mut().enumerate() {
+        for (k, ds) in tangents.iter().enumerate() {
+            g[k] += back.bars[c].dot(ds);
+        }
+    }
+    Ok(Gradients {
+        values: problem.criteria.values(&history),
+        gradients,
+        fd_steps: None,
+        stats,
+    })
+}

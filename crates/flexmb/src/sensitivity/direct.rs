@@ -1,0 +1,166 @@
+//! Direct differentiation: the tangents `ds_n/dp_k` carried along the run, one linear solve
+//! per parameter and step (module documentation of [`super`]).
+
+use super::criteria::{CriterionKind, History};
+use super::matrix::StepMatrix;
+use super::{Gradients, Problem, SensitivityError, Stats};
+use crate::data::Layout;
+use crate::observe::{Observer, Sample, StepRecord};
+use crate::solve::step::{StateTangent, StepFunction};
+use crate::state::State;
+use crate::{Data, Model};
+
+/// The direct method's observer of a run.
+struct Direct<'a> {
+    problem: &'a Problem,
+    layout: Layout,
+    data: Data,
+    matrix: StepMatrix,
+    /// `ds_n/dp_k`.
+    tangents: Vec<StateTangent>,
+    history: History,
+    /// `df_c/dp_k` at the last point, unweighted: `[criterion][parameter]`.
+    last: Vec<Vec<f64>>,
+    /// The gradients so far.
+    gradients: Vec<Vec<f64>>,
+    /// Scratch: one entry per parameter of the registry.
+    dp: Vec<f64>,
+    scratch: Model,
+    steps: usize,
+}
+
+impl Direct<'_> {
+    /// The criteria's derivatives at a point (unweighted), and the trapezoidal sum.
+    fn point(&mut self, state: &State) {
+        let p = self.problem;
+        let criteria = &p.criteria;
+        criteria.record(&p.model, &self.layout, state, &mut self.history);
+        let n = self.history.t.len() - 1;
+        let values = &self.history.values[n];
+        let ones = vec![1.0; criteria.len()];
+        let index = p.design_index();
+        let mut now = vec![vec![0.0; p.design.len()]; criteria.len()];
+        let grads = criteria.point_gradients(
+            &p.model,
+            &self.layout,
+            state,
+            values,
+            &ones,
+            (&p.params, &p.design, &mut self.scratch),
+        );
+        for (g, coef) in &grads {
+            for (k, ds) in self.tangents.iter().enumerate() {
+                let d = g.dot(ds);
+                for (c, &cc) in coef.iter().enumerate() {
+                    now[c][k] += cc * d;
+                }
+            }
+            for &(id, d) in &g.params {
+                if let Some(k) = index[id.0 as usize] {
+                    for (c, &cc) in coef.iter().enumerate() {
+                        now[c][k] += cc * d;
+                    }
+                }
+            }
+        }
+        if n > 0 {
+            let h = self.history.t[n] - self.history.t[n - 1];
+            for (c, crit) in criteria.criteria.iter().enumerate() {
+                if crit.kind == CriterionKind::Integral {
+                    for k in 0..p.design.len() {
+                        self.gradients[c][k] += 0.5 * h * (self.last[c][k] + now[c][k]);
+                    }
+                }
+            }
+        }
+        self.last = now;
+    }
+
+    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
+        let p = self.problem;
+        if record.redundant_rows != self.layout.redundant_rows().as_slice() {
+            return Err(super::reselected(record.start.t));
+        }
+        let settings = &record.simulation.settings;
+        let f = StepFunction::new(
+            &p.model,
+            &self.layout,
+            record.start,
+            settings,
+            record.info.h,
+        );
+        let x = record.unknowns;
+        let jacobian = f.jacobian(x, &mut self.data);
+        let t = record.end.t;
+        self.matrix
+            .factorize(x.len(), &jacobian, &|| {
+                format!("step {} (t = {t:.6e} s)", record.index)
+            })
+            .map_err(|e| e.to_string())?;
+        for (k, &id) in p.design.iter().enumerate() {
+            let ds = &self.tangents[k];
+            self.dp[id.0 as usize] = 1.0;
+            let mut rhs = f.start_jvp(x, ds, &mut self.data);
+            let dr = f.parameter_jvp(x, &p.params, &self.dp, &mut self.data);
+            for (a, b) in rhs.iter_mut().zip(&dr) {
+                *a = -(*a + b);
+            }
+            self.matrix.solve(&mut rhs);
+            let next = f.end_jvp(x, &rhs, ds, Some((&p.params, &self.dp)), &mut self.data);
+            self.dp[id.0 as usize] = 0.0;
+            self.tangents[k] = next;
+        }
+        self.steps += 1;
+        self.point(record.end);
+        Ok(())
+    }
+}
+
+impl Observer for Direct<'_> {
+    fn output(&mut self, _: &Sample) -> Result<(), String> {
+        Ok(())
+    }
+    fn wants_steps(&self) -> bool {
+        true
+    }
+    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
+        Direct::step(self, record)
+    }
+}
+
+/// The criteria of `problem` and their gradients by direct differentiation.
+pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
+    let (mut sim, tangents) = super::start(problem)?;
+    let layout = sim.data.layout.clone();
+    let n_c = problem.criteria.len();
+    let mut obs = Direct {
+        problem,
+        data: Data::new(&problem.model, layout.clone()).map_err(crate::SolveError::from)?,
+        layout,
+        matrix: StepMatrix::default(),
+        tangents,
+        history: History::default(),
+        last: Vec::new(),
+        gradients: vec![vec![0.0; problem.design.len()]; n_c],
+        dp: vec![0.0; problem.params.len()],
+        scratch: (*problem.model).clone(),
+        steps: 0,
+    };
+    obs.point(&sim.state.clone());
+    sim.run(&mut obs)?;
+    for (c, crit) in problem.criteria.criteria.iter().enumerate() {
+        if crit.kind == CriterionKind::Terminal {
+            obs.gradients[c].clone_from(&obs.last[c]);
+        }
+    }
+    Ok(Gradients {
+        values: problem.criteria.values(&obs.history),
+        gradients: obs.gradients,
+        fd_steps: None,
+        stats: Stats {
+            forward_runs: 1,
+            steps: obs.steps,
+            ..Stats::default()
+        },
+    })
+}

@@ -1,0 +1,75 @@
+//! Central finite differences of the criteria: `2 n_p + 1` runs, for checking the exact
+//! gradients on any model.
+
+use super::criteria::History;
+use super::{Gradients, Problem, SensitivityError, Stats};
+use crate::observe::{Observer, Sample, StepRecord};
+
+/// Records the criteria's sensor values at every point of a run.
+struct Record<'a> {
+    problem: &'a Problem,
+    history: History,
+}
+
+impl Observer for Record<'_> {
+    fn output(&mut self, _: &Sample) -> Result<(), String> {
+        Ok(())
+    }
+    fn wants_steps(&self) -> bool {
+        true
+    }
+    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
+        let p = self.problem;
+        let layout = &record.simulation.data.layout;
+        p.criteria
+            .record(&p.model, layout, record.end, &mut self.history);
+        Ok(())
+    }
+}
+
+/// The criteria of `problem` (one run).
+pub fn criteria_values(problem: &Problem) -> Result<(Vec<f64>, usize), SensitivityError> {
+    let mut sim = crate::Simulation::new(std::sync::Arc::clone(&problem.model), problem.settings)?;
+    let mut rec = Record {
+        problem,
+        history: History::default(),
+    };
+    let layout = sim.data.layout.clone();
+    problem
+        .criteria
+        .record(&problem.model, &layout, &sim.state, &mut rec.history);
+    let stats = sim.run(&mut rec)?;
+    Ok((problem.criteria.values(&rec.history), stats.steps))
+}
+
+/// The criteria of `problem` and their central differences with relative step `step`:
+/// `dJ/dp_k = (J(p + e_k d_k) - J(p - e_k d_k)) / (2 d_k)`, `d_k = step max(|p_k|, 1e-3)`.
+pub fn finite_differences(problem: &Problem, step: f64) -> Result<Gradients, SensitivityError> {
+    let (values, steps) = criteria_values(problem)?;
+    let p0 = problem.values();
+    let mut gradients = vec![vec![0.0; p0.len()]; values.len()];
+    let mut fd_steps = Vec::with_capacity(p0.len());
+    for k in 0..p0.len() {
+        let d = step * p0[k].abs().max(1e-3);
+        let at = |sign: f64| {
+            let mut p = p0.clone();
+            p[k] += sign * d;
+            criteria_values(&problem.with_values(&p)).map(|r| r.0)
+        };
+        let (plus, minus) = (at(1.0)?, at(-1.0)?);
+        for c in 0..values.len() {
+            gradients[c][k] = (plus[c] - minus[c]) / (2.0 * d);
+        }
+        fd_steps.push(d);
+    }
+    Ok(Gradients {
+        values,
+        gradients,
+        fd_steps: Some(fd_steps),
+        stats: Stats {
+            forward_runs: 2 * p0.len() + 1,
+            steps,
+            ..Stats::default()
+        },
+    })
+}

@@ -1,0 +1,214 @@
+//! Sensitivity analysis of a dynamic run: the gradients of criteria with respect to model
+//! parameters, exact for the computed discrete solution (Brüls & Eberhard 2008; Sonneville
+//! & Brüls 2014, Multibody Syst. Dyn. 31, for the Lie group formulation).
+//!
+//! # The discrete equations differentiated
+//!
+//! Step `n` of the Lie group generalized-alpha method ([`crate::solve::step`]) is a system
+//! `R(x_n; s_{n-1}, p) = 0` in its unknowns `x_n = (dq, mu, zeta, dx)` given the start
+//! `s_{n-1} = (q, v, vdot, a, lambda, x, xdot, w)` and the parameters `p`; the end state is
+//! explicit, `s_n = E(x_n, s_{n-1}, p)` (`q_n = q_{n-1} exp(dq + B(q_{n-1})^T zeta)`, the
+//! other relations affine). Configuration tangents live in the algebra: `dq/dp = q
+//! tilde(w)`, `w` a vector of 6 per node ([`StateTangent`]). A criterion is
+//! `J = sum_n c_n f(s_n, p)` ([`criteria`]: `c_n` the terminal or trapezoidal weights).
+//!
+//! **Direct differentiation** (one linear solve per parameter and step, with the exact
+//! Jacobian `J_x = dR/dx` factorized once per step at the converged point):
+//!
+//! ```text
+//! ds_0/dp        from the initial accelerations ([`initial`])
+//! J_x dx_n/dp    = -(dR/ds_{n-1} ds_{n-1}/dp + dR/dp)
+//! ds_n/dp        = E_x dx_n/dp + E_s ds_{n-1}/dp + E_p
+//! dJ/dp          = sum_n c_n (f_s ds_n/dp + f_p)
+//! ```
+//!
+//! **Discrete adjoint** (one backward sweep, one transposed solve per criterion and step,
+//! cost independent of the number of parameters): with `sbar_N = c_N f_s(s_N)` and
+//! `pbar = sum_n c_n f_p(s_n)`, for `n = N, ..., 1`
+//!
+//! ```text
+//! J_x^T mu_n     = E_x^T sbar_n
+//! sbar_{n-1}     = E_s^T sbar_n - (dR/ds_{n-1})^T mu_n + c_{n-1} f_s(s_{n-1})
+//! pbar          += E_p^T sbar_n - (dR/dp)^T mu_n
+//! dJ/dp          = pbar + sbar_0 . ds_0/dp
+//! ```
+//!
+//! The products are those of [`crate::solve::step::StepFunction`] (`start_jvp`, `start_vjp`,
+//! `parameter_jvp`, `parameter_vjp`, `end_jvp`, `end_vjp`, `jacobian`); the same code serves
+//! both methods, so they agree to round-off. The step sizes of the run are taken as given
+//! (an adaptive step sequence is not differentiated). The backward sweep needs every step's
+//! start, unknowns and end: kept in memory when they fit in
+//! [`Problem::memory_budget`], otherwise recomputed from checkpoints every `k` steps
+//! ([`crate::solve::trajectory::Trajectory`]).
+//!
+//! # References
+//! - O. Brüls, P. Eberhard, Sensitivity analysis for dynamic mechanical systems with finite
+//!   rotations, Int. J. Numer. Meth. Eng. 74 (2008) 1897-1927.
+//! - V. Sonneville, O. Brüls, Sensitivity analysis for multibody systems formulated on a Lie
+//!   group, Multibody Syst. Dyn. 31 (2014) 47-67.
+
+pub mod criteria;
+pub mod expression;
+pub mod initial;
+pub mod matrix;
+pub mod sensor_derivative;
+
+mod adjoint;
+mod direct;
+mod finite_differences;
+
+pub use adjoint::adjoint;
+pub use criteria::{CriteriaSet, Criterion, CriterionKind};
+pub use direct::direct;
+pub use finite_differences::finite_differences;
+
+use crate::model::{Model, ParamId, Parameters};
+use crate::solve::step::StateTangent;
+use crate::solve::DynamicSettings;
+use crate::SolveError;
+use std::sync::Arc;
+
+/// What a sensitivity analysis can fail on.
+#[derive(Debug, thiserror::Error)]
+pub enum SensitivityError {
+    #[error(transparent)]
+    Solve(#[from] SolveError),
+    /// A matrix of the derivatives is singular.
+    #[error("sensitivity: {0} is singular; the derivatives are not defined there")]
+    Singular(String),
+    /// The run does something the derivatives do not follow.
+    #[error("sensitivity: {0}")]
+    Unsupported(String),
+}
+
+/// A sensitivity analysis: a dynamic run of `model`, its design parameters and criteria.
+#[derive(Clone)]
+pub struct Problem {
+    pub model: Arc<Model>,
+    pub settings: DynamicSettings,
+    /// The registry of `model`'s parameters.
+    pub params: Parameters,
+    /// The parameters differentiated with respect to.
+    pub design: Vec<ParamId>,
+    pub criteria: CriteriaSet,
+    /// Bytes the adjoint may keep for the trajectory (default [`DEFAULT_MEMORY_BUDGET`]).
+    pub memory_budget: usize,
+}
+
+/// Default memory budget of the adjoint's trajectory: 256 MiB.
+pub const DEFAULT_MEMORY_BUDGET: usize = 256 << 20;
+
+impl Problem {
+    pub fn new(
+        model: Arc<Model>,
+        settings: DynamicSettings,
+        design: Vec<ParamId>,
+        criteria: Vec<Criterion>,
+    ) -> Self {
+        let params = Parameters::new(&model);
+        let criteria = CriteriaSet::new(&model, criteria);
+        Self {
+            model,
+            settings,
+            params,
+            design,
+            criteria,
+            memory_budget: DEFAULT_MEMORY_BUDGET,
+        }
+    }
+
+    /// The design parameters' current values.
+    pub fn values(&self) -> Vec<f64> {
+        self.design
+            .iter()
+            .map(|&id| self.params.value(&self.model, id))
+            .collect()
+    }
+
+    /// The same problem with the design parameters set to `values`.
+    pub fn with_values(&self, values: &[f64]) -> Self {
+        let mut model = (*self.model).clone();
+        for (&id, &v) in self.design.iter().zip(values) {
+            self.params.set(&mut model, id, v);
+        }
+        Self {
+            model: Arc::new(model),
+            ..self.clone()
+        }
+    }
+
+    /// The index in the design of each parameter of the registry (`None`: not a design
+    /// parameter).
+    fn design_index(&self) -> Vec<Option<usize>> {
+        let mut out = vec![None; self.params.len()];
+        for (k, id) in self.design.iter().enumerate() {
+            out[id.0 as usize] = Some(k);
+        }
+        out
+    }
+}
+
+/// The result of a sensitivity analysis.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gradients {
+    /// Value of each criterion.
+    pub values: Vec<f64>,
+    /// `dJ_c/dp_k`, `[criterion][design parameter]`.
+    pub gradients: Vec<Vec<f64>>,
+    /// The step of each parameter (finite differences only).
+    pub fd_steps: Option<Vec<f64>>,
+    pub stats: Stats,
+}
+
+/// What a sensitivity analysis did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Stats {
+    /// Forward runs (finite differences: `2 n_p + 1`).
+    pub forward_runs: usize,
+    /// Steps of the forward run.
+    pub steps: usize,
+    /// Steps recomputed from checkpoints for the backward sweep (adjoint).
+    pub recomputed_steps: usize,
+    /// Checkpoints kept (adjoint; 0 when every step was kept).
+    pub checkpoints: usize,
+    /// Peak bytes of the trajectory kept (adjoint, estimated from the sizes of the stored
+    /// vectors).
+    pub trajectory_bytes: usize,
+}
+
+/// Bytes of a state (its vectors' payload).
+fn state_bytes(s: &crate::State) -> usize {
+    let n = s.q.len();
+    8 * (12 * n + 18 * n + s.lambda.len() + 3 * s.x.len())
+}
+
+/// The design parameters' part of a vector over the whole registry.
+fn pick(index: &[Option<usize>], full: &[f64], out: &mut [f64], sign: f64) {
+    for (i, k) in index.iter().enumerate() {
+        if let Some(k) = k {
+            out[*k] += sign * full[i];
+        }
+    }
+}
+
+/// The simulation of a problem and its consistent start, with the tangents `ds_0/dp_k`.
+fn start(problem: &Problem) -> Result<(crate::Simulation, Vec<StateTangent>), SensitivityError> {
+    let sim = crate::Simulation::new(Arc::clone(&problem.model), problem.settings)?;
+    let redundant = sim.data.layout.redundant_rows();
+    let tangents = initial::initial_tangents(
+        &problem.model,
+        &problem.params,
+        &problem.design,
+        &sim.state,
+        &redundant,
+        problem.settings.load_factor_at(0.0),
+    )?;
+    Ok((sim, tangents))
+}
+
+/// The message of a run whose redundant rows were chosen again.
+fn reselected(t: f64) -> String {
+    format!(
+        "the redundant constraint rows were chosen again at t = {t:.6e} s; the derivatives of a run across such a change are not computed (the multipliers change their meaning)"
+    )
+}
