@@ -37,25 +37,29 @@
 //!
 //! # Functions
 //!
-//! Partial derivatives are listed in argument order, separated by `;`.
+//! Partial derivatives are listed in argument order, separated by `;`. In the `smooth*`
+//! rows, s = sqrt(x^2 + eps^2) for `smoothabs` and s = sqrt((a-b)^2 + eps^2) otherwise.
 //!
-//! | Call                   | Value                                   | Partial derivatives                        |
-//! |------------------------|-----------------------------------------|--------------------------------------------|
-//! | `x ^ y`, `pow(x, y)`   | x^y                                     | y x^(y-1); x^y ln(x) (see below)           |
-//! | `sq(x)`                | x^2                                     | 2x                                         |
-//! | `abs(x)`               | abs(x)                                  | sign(x), 0 at x = 0                        |
-//! | `sqrt(x)`              | square root                             | 1/(2 sqrt(x))                              |
-//! | `exp(x)`               | e^x                                     | e^x                                        |
-//! | `log(x)`               | natural logarithm                       | 1/x                                        |
-//! | `sin(x)`               | sine (radians)                          | cos(x)                                     |
-//! | `cos(x)`               | cosine                                  | -sin(x)                                    |
-//! | `tan(x)`               | tangent                                 | 1 + tan(x)^2                               |
-//! | `min(a, b)`            | smaller argument                        | 1; 0 if a <= b, else 0; 1                  |
-//! | `max(a, b)`            | larger argument                         | 1; 0 if a >= b, else 0; 1                  |
-//! | `atan2(y, x)`          | angle of the point (x, y), in [-pi, pi] | x/(x^2 + y^2); -y/(x^2 + y^2)              |
-//! | `smoothabs(x, eps)`    | s - eps, s = sqrt(x^2 + eps^2)          | x/s; eps/s - 1                             |
-//! | `smoothmax(a, b, eps)` | (a + b + s)/2, s = sqrt((a-b)^2 + eps^2)| (1 + (a-b)/s)/2; (1 - (a-b)/s)/2; eps/(2s) |
-//! | `smoothmin(a, b, eps)` | (a + b - s)/2, s = sqrt((a-b)^2 + eps^2)| (1 - (a-b)/s)/2; (1 + (a-b)/s)/2; -eps/(2s)|
+//! | Call                   | Value                | Partial derivatives                         |
+//! |------------------------|----------------------|---------------------------------------------|
+//! | `x ^ y`, `pow(x, y)`   | x^y                  | y x^(y-1); x^y ln(x) (see below)            |
+//! | `sq(x)`                | x^2                  | 2x                                          |
+//! | `abs(x)`               | abs(x)               | sign(x), 0 at x = 0                         |
+//! | `sqrt(x)`              | square root          | 1/(2 sqrt(x))                               |
+//! | `exp(x)`               | e^x                  | e^x                                         |
+//! | `log(x)`               | natural logarithm    | 1/x                                         |
+//! | `sin(x)`               | sine (radians)       | cos(x)                                      |
+//! | `cos(x)`               | cosine               | -sin(x)                                     |
+//! | `tan(x)`               | tangent              | 1 + tan(x)^2                                |
+//! | `min(a, b)`            | smaller argument     | 1; 0 if a <= b, else 0; 1                   |
+//! | `max(a, b)`            | larger argument      | 1; 0 if a >= b, else 0; 1                   |
+//! | `atan2(y, x)`          | angle of (x, y), rad | x/(x^2 + y^2); -y/(x^2 + y^2)               |
+//! | `smoothabs(x, eps)`    | s - eps              | x/s; eps/s - 1                              |
+//! | `smoothmax(a, b, eps)` | (a + b + s)/2        | (1 + (a-b)/s)/2; (1 - (a-b)/s)/2; eps/(2s)  |
+//! | `smoothmin(a, b, eps)` | (a + b - s)/2        | (1 - (a-b)/s)/2; (1 + (a-b)/s)/2; -eps/(2s) |
+//!
+//! The operators `a + b`, `a - b`, `a * b`, `a / b` and `-a` have their usual derivatives.
+//! `atan2(y, x)` is in [-pi, pi].
 //!
 //! Calling a function with the wrong number of arguments is an error. `min` and `max` are
 //! not differentiable where their arguments are equal: the gradient then goes to the first.
@@ -82,14 +86,16 @@ pub struct Expression {
     ops: Vec<Op>,
 }
 
-/// Why a text is not a valid expression, and where.
+/// Why a text is not a valid expression, and where. Lexical errors (an unexpected character,
+/// an invalid number) are reported before syntax errors; otherwise the first error from the
+/// left is reported.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("{message} at character {position} of '{text}'")]
 pub struct ExpressionError {
     /// The whole text given to [`Expression::parse`].
     pub text: String,
-    /// 1-based column, in characters (not bytes), of the offending token; one past the last
-    /// character for an unexpected end.
+    /// 1-based column, in characters (not bytes), of the offending token: the '(' for an
+    /// unclosed parenthesis, one past the last character for an unexpected end.
     pub position: usize,
     /// What is wrong, e.g. "unknown name 'xyz'".
     pub message: String,
@@ -291,13 +297,13 @@ impl Expression {
         self.forward(values, t).last().copied().unwrap_or(f64::NAN)
     }
 
-    /// Value and gradient: adds d(expr)/d(values[i]) * scale into grad[i] for every variable i
-    /// (grad has the same length as values), returns the value. Reverse mode (one backward
-    /// pass over the tree) or forward mode over the used variables, your choice, but exact.
+    /// Value and gradient: adds `d(expr)/d(values[i]) * scale` into `grad[i]` for every
+    /// variable `i` (`grad` has the same length as `values`), returns the value.
     ///
-    /// This implementation makes one forward and one reverse pass over the tree. A branch
-    /// whose adjoint is exactly zero (e.g. the unused argument of `min`) contributes nothing,
-    /// even where its own derivative is infinite or NaN.
+    /// The derivatives are analytic, computed in reverse mode: one forward pass over the tree
+    /// for the values, one backward pass for the adjoints. A branch whose adjoint is exactly
+    /// zero (e.g. the unused argument of `min`) contributes nothing, even where its own
+    /// derivative is infinite or NaN. The time `t` has no gradient.
     ///
     /// # Panics
     /// If `values` or `grad` is shorter than one plus the largest index of
@@ -471,10 +477,11 @@ impl Parser<'_> {
         }
     }
 
-    /// Every recursion passes through here, so the nesting depth is counted here.
+    /// Every recursion passes through here, so the nesting depth (0 at the top level) is
+    /// counted here.
     fn unary(&mut self) -> Parsed {
         let token = self.peek();
-        if self.depth >= MAX_DEPTH {
+        if self.depth > MAX_DEPTH {
             return Err(self.error(token.pos, "expression nested too deeply"));
         }
         self.depth += 1;
@@ -684,8 +691,8 @@ mod tests {
 
     #[test]
     fn gradients_of_composites() {
-        let texts = "sq(x - 0.5); (x^2 + y^2) * 1e3; smoothmax(abs(x), 2.0, 0.01); \
-            pow(x, 3) - y; exp(sin(x) * cos(y)) / (1 + sq(z)); log(sq(x) + sq(y)) - atan2(z, x) * t; \
+        let texts = "sq(x - 0.5); (x^2 + y^2) * 1e3; smoothmax(abs(x), 2.0, 0.01); pow(x, 3) - y; \
+            exp(sin(x) * cos(y)) / (1 + sq(z)); log(sq(x) + sq(y)) - atan2(z, x) * t; \
             max(x, y) * min(y, z) + smoothabs(x - y, 0.1); -(x - y)^2 / +z + x * x * x; \
             smoothmin(sq(x), y * z, 0.3)^2 + 2^-x + sqrt(sq(y) + 1); x * y * z / (1 + t * x)";
         check_gradients(texts, &POSITIVE);
@@ -735,6 +742,26 @@ mod tests {
         let resolve = |name: &str| name.strip_prefix('s').and_then(|i| i.parse().ok());
         let e = Expression::parse("s5 * s2 + s5 - s0", &resolve);
         assert_eq!(e.map(|e| e.variables()), Ok(vec![0, 2, 5]));
+        let sensors = [
+            "tip_z",
+            "com_x",
+            "com_y",
+            "a",
+            "heave_acc",
+            "x",
+            "ref_signal",
+        ];
+        let resolve = |name: &str| sensors.iter().position(|s| *s == name);
+        for (text, vars) in [
+            ("sq(tip_z - 0.5)", vec![0]),
+            ("(com_x^2 + com_y^2) * 1e3", vec![1, 2]),
+            ("smoothmax(abs(a), 2.0, 0.01)", vec![3]),
+            ("sq(heave_acc)", vec![4]),
+            ("pow(x, 3) - ref_signal", vec![5, 6]),
+        ] {
+            let e = Expression::parse(text, &resolve).map(|e| e.variables());
+            assert_eq!(e, Ok(vars), "{text}");
+        }
     }
 
     #[test]
@@ -760,11 +787,7 @@ mod tests {
                 "function 'atan2' takes 2 arguments, found 1",
             ),
             ("sq()", 1, "function 'sq' takes 1 argument, found 0"),
-            (
-                "max(x, y, z)",
-                1,
-                "function 'max' takes 2 arguments, found 3",
-            ),
+            ("max(x,y,z)", 1, "function 'max' takes 2 arguments, found 3"),
             (
                 "smoothmax(x, y)",
                 1,
@@ -788,19 +811,21 @@ mod tests {
     #[test]
     fn limits() {
         let nested = |open: &str, n, close: &str| format!("{}x{}", open.repeat(n), close.repeat(n));
-        assert_eq!(parse(&nested("(", 60, ")")).eval(&[2.0], 0.0), 2.0);
-        assert_eq!(parse(&nested("sq(", 30, ")")).eval(&[1.0], 0.0), 1.0);
-        for text in [
-            nested("(", 100, ")"),
-            nested("-", 100, ""),
+        assert_eq!(parse(&nested("(", 64, ")")).eval(&[2.0], 0.0), 2.0);
+        assert_eq!(parse(&nested("sq(", 64, ")")).eval(&[1.0], 0.0), 1.0);
+        assert_eq!(parse(&nested("-", 64, "")).eval(&[2.0], 0.0), 2.0);
+        let deep = [
+            nested("(", 65, ")"),
+            nested("-", 65, ""),
             nested("sq(", 200, ")"),
-        ] {
-            assert_eq!(error(&text).1, "expression nested too deeply");
+        ];
+        for text in deep
+            .iter()
+            .chain([&nested("2^", 65, ""), &nested("(", 4000, ")")])
+        {
+            assert_eq!(error(text).1, "expression nested too deeply");
         }
-        assert_eq!(
-            error(&nested("2^", 65, "")).1,
-            "expression nested too deeply"
-        );
+        assert_eq!(error(&nested("(", 65, ")")).0, 66);
         let long = format!("{}x", "x+".repeat(5000));
         let too_long = "expression longer than 10000 characters".to_string();
         assert_eq!(error(&long), (10_001, too_long));
