@@ -25,8 +25,9 @@ fn problem(
         .collect();
     let criteria = criteria
         .iter()
-        .map(|(n, k, t)| Criterion::new(&model, n, *k, t).expect("criterion"))
+        .map(|(n, k, t)| Criterion::new(&model, &[], n, *k, t).expect("criterion"))
         .collect();
+    let criteria = sensitivity::CriteriaSet::new(&model, Vec::new(), criteria);
     Problem::new(model, settings, design, criteria)
 }
 

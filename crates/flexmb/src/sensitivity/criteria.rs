@@ -37,20 +37,63 @@ pub struct Criterion {
     pub expression: Expression,
 }
 
+/// A reference signal `r(t)`: piecewise-linear in time, constant outside its samples (e.g.
+/// read from a CSV file), for criteria such as `sq(z - z_ref)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Reference {
+    pub name: String,
+    /// Sample times, increasing.
+    pub t: Vec<f64>,
+    pub values: Vec<f64>,
+}
+
+impl Reference {
+    /// `r(t)`.
+    pub fn at(&self, t: f64) -> f64 {
+        let i = self.t.partition_point(|&x| x <= t);
+        if i == 0 {
+            self.values[0]
+        } else if i == self.t.len() {
+            self.values[i - 1]
+        } else {
+            let (t0, t1) = (self.t[i - 1], self.t[i]);
+            let s = (t - t0) / (t1 - t0);
+            self.values[i - 1] * (1.0 - s) + self.values[i] * s
+        }
+    }
+}
+
 impl Criterion {
-    /// Parses `text` over the sensors of `model` (by name). A sensor that has no derivative
-    /// (energies, the constraint violation) is refused.
-    pub fn new(model: &Model, name: &str, kind: CriterionKind, text: &str) -> Result<Self, String> {
-        let resolve = |s: &str| model.sensors.iter().position(|x| x.name == s);
+    /// Parses `text` over the sensors of `model` and the `references` (by name). A sensor
+    /// that has no derivative (energies, the constraint violation) is refused.
+    pub fn new(
+        model: &Model,
+        references: &[Reference],
+        name: &str,
+        kind: CriterionKind,
+        text: &str,
+    ) -> Result<Self, String> {
+        let n = model.sensors.len();
+        let resolve = |s: &str| {
+            model
+                .sensors
+                .iter()
+                .position(|x| x.name == s)
+                .or_else(|| references.iter().position(|r| r.name == s).map(|r| n + r))
+        };
         let expression = Expression::parse(text, &resolve).map_err(|e| {
-            let names: Vec<&str> = model.sensors.iter().map(|s| s.name.as_str()).collect();
+            let mut names: Vec<&str> = model.sensors.iter().map(|s| s.name.as_str()).collect();
+            names.extend(references.iter().map(|r| r.name.as_str()));
             if e.message.starts_with("unknown name") {
-                format!("{e} (sensors: {}; and t, pi)", names.join(", "))
+                format!(
+                    "{e} (sensors and references: {}; and t, pi)",
+                    names.join(", ")
+                )
             } else {
                 e.to_string()
             }
         })?;
-        for k in expression.variables() {
+        for k in expression.variables().into_iter().filter(|&k| k < n) {
             let s = &model.sensors[k];
             if !differentiable(&s.kind) {
                 return Err(format!(
@@ -78,10 +121,12 @@ fn sensor_type(kind: &SensorKind) -> &'static str {
     }
 }
 
-/// The criteria of an analysis with the sensors they read.
+/// The criteria of an analysis with the sensors and references they read. Their
+/// expressions' variables are the model's sensors, then the references.
 #[derive(Clone, Debug)]
 pub struct CriteriaSet {
     pub criteria: Vec<Criterion>,
+    pub references: Vec<Reference>,
     /// Sensors read by any criterion (indices in `Model::sensors`), sorted.
     used: Vec<usize>,
     n_sensors: usize,
@@ -105,18 +150,26 @@ impl History {
 }
 
 impl CriteriaSet {
-    pub fn new(model: &Model, criteria: Vec<Criterion>) -> Self {
+    pub fn new(model: &Model, references: Vec<Reference>, criteria: Vec<Criterion>) -> Self {
+        let n_sensors = model.sensors.len();
         let mut used: Vec<usize> = criteria
             .iter()
             .flat_map(|c| c.expression.variables())
+            .filter(|&k| k < n_sensors)
             .collect();
         used.sort_unstable();
         used.dedup();
         Self {
             criteria,
+            references,
             used,
-            n_sensors: model.sensors.len(),
+            n_sensors,
         }
+    }
+
+    /// Number of expression variables: sensors, then references.
+    fn n_variables(&self) -> usize {
+        self.n_sensors + self.references.len()
     }
 
     pub fn len(&self) -> usize {
@@ -132,7 +185,10 @@ impl CriteriaSet {
         history.last_angle.resize(self.n_sensors, None);
         let nodes = crate::sensors::node_states(state);
         let mut buffers = Default::default();
-        let mut values = vec![0.0; self.n_sensors];
+        let mut values = vec![0.0; self.n_variables()];
+        for (r, reference) in self.references.iter().enumerate() {
+            values[self.n_sensors + r] = reference.at(state.t);
+        }
         for &k in &self.used {
             let mut v = crate::sensors::sensor_value(model, layout, k, &nodes, state, &mut buffers);
             if let SensorKind::JointCoordinate { joint } = model.sensors[k].kind {
@@ -184,7 +240,7 @@ impl CriteriaSet {
         params: (&Parameters, &[ParamId], &mut Model),
     ) -> Vec<(SensorGradient, Vec<f64>)> {
         let mut per_sensor = vec![vec![0.0; self.criteria.len()]; self.n_sensors];
-        let mut g = vec![0.0; self.n_sensors];
+        let mut g = vec![0.0; self.n_variables()];
         for (c, crit) in self.criteria.iter().enumerate() {
             if weights[c] == 0.0 {
                 continue;

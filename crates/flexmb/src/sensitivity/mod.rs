@@ -103,10 +103,9 @@ impl Problem {
         model: Arc<Model>,
         settings: DynamicSettings,
         design: Vec<ParamId>,
-        criteria: Vec<Criterion>,
+        criteria: CriteriaSet,
     ) -> Self {
         let params = Parameters::new(&model);
-        let criteria = CriteriaSet::new(&model, criteria);
         Self {
             model,
             settings,
