@@ -6,7 +6,8 @@ use super::reader::{name_list, suggestion, Field, Result, Source, Span, Table, V
 use super::{Analysis, ModelFile};
 use crate::error::ModelError;
 use crate::model::limits::{
-    within, MAX_ANGLE, MAX_KINEMATIC, MAX_PHYSICAL, MAX_TIME, MIN_PHYSICAL, MIN_STEP,
+    within, MAX_ANGLE, MAX_FUNCTION_DEPTH, MAX_FUNCTION_TERMS, MAX_KINEMATIC, MAX_PHYSICAL,
+    MAX_TIME, MIN_PHYSICAL, MIN_STEP,
 };
 use crate::model::{
     box_inertia, clip, frame_from_axis, rotation_from_vector, JointKind, Load, LoadFrame, Model,
@@ -786,9 +787,32 @@ fn resolve_node(
 }
 
 fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
+    read_nested_function(f, 1, 1.0)
+}
+
+/// A time function at nesting level `level` (1 for the outermost), inside scaled functions
+/// whose factors multiply to `scale` (in magnitude).
+fn read_nested_function(f: &Field<'_>, level: usize, scale: f64) -> Result<TimeFunction> {
+    if level > MAX_FUNCTION_DEPTH {
+        return Err(f.err(format!(
+            "functions are nested more than {MAX_FUNCTION_DEPTH} levels deep (see 'Time functions' in docs/model-format.md)"
+        )));
+    }
     let t = f.table()?;
     let kind = t.req("type")?.choice(&[
-        "constant", "linear", "ramp", "step", "sine", "table", "spin_up",
+        "constant",
+        "linear",
+        "ramp",
+        "step",
+        "sine",
+        "table",
+        "spin_up",
+        "bump",
+        "smooth_step",
+        "delay",
+        "window",
+        "sum",
+        "scaled",
     ])?;
     let keys: &[&str] = match kind {
         "constant" => &["type", "value"],
@@ -797,9 +821,16 @@ fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
         "step" => &["type", "t0", "value"],
         "sine" => &["type", "amplitude", "frequency", "phase", "offset"],
         "table" => &["type", "points"],
+        "bump" => &["type", "height", "start", "duration"],
+        "smooth_step" => &["type", "value", "start", "duration"],
+        "delay" => &["type", "delay", "function"],
+        "window" => &["type", "start", "end", "function"],
+        "sum" => &["type", "functions"],
+        "scaled" => &["type", "factor", "function"],
         _ => &["type", "omega", "duration"],
     };
     t.check_keys(keys)?;
+    let inner = |scale: f64| read_nested_function(&t.req("function")?, level + 1, scale);
     // Values (a factor, or rad or m), times, rates and angles, each in its range.
     let num = |k: &str| t.req(k)?.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL);
     let num_or = |k: &str, d: f64| {
@@ -807,6 +838,7 @@ fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
             .map_or(Ok(d), |f| f.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL))
     };
     let time = |k: &str| t.req(k)?.f64_in(-MAX_TIME, MAX_TIME);
+    let time_or = |k: &str, d: f64| t.field(k).map_or(Ok(d), |f| f.f64_in(-MAX_TIME, MAX_TIME));
     Ok(match kind {
         "constant" => TimeFunction::Constant {
             value: num("value")?,
@@ -871,6 +903,66 @@ fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
                 points.push((p[0], p[1]));
             }
             TimeFunction::Table { points }
+        }
+        "bump" => TimeFunction::Bump {
+            height: num("height")?,
+            start: time_or("start", 0.0)?,
+            duration: positive_step(&t.req("duration")?)?,
+        },
+        "smooth_step" => TimeFunction::SmoothStep {
+            value: num("value")?,
+            start: time_or("start", 0.0)?,
+            duration: positive_step(&t.req("duration")?)?,
+        },
+        "delay" => TimeFunction::Delay {
+            delay: time("delay")?,
+            function: Box::new(inner(scale)?),
+        },
+        "window" => {
+            let (start, end) = (time("start")?, time("end")?);
+            if end - start < MIN_STEP {
+                return Err(t.key_err(
+                    "end",
+                    format!("must exceed start = {start} by at least {MIN_STEP:e}, got {end}"),
+                ));
+            }
+            TimeFunction::Window {
+                start,
+                end,
+                function: Box::new(inner(scale)?),
+            }
+        }
+        "sum" => {
+            let ff = t.req("functions")?;
+            let arr = ff.array()?;
+            if arr.is_empty() || arr.len() > MAX_FUNCTION_TERMS {
+                return Err(ff.err(format!(
+                    "must hold 1 to {MAX_FUNCTION_TERMS} functions, got {}",
+                    arr.len()
+                )));
+            }
+            let functions = arr
+                .iter()
+                .enumerate()
+                .map(|(i, v)| read_nested_function(&ff.elem(i, v), level + 1, scale))
+                .collect::<Result<Vec<_>>>()?;
+            TimeFunction::Sum { functions }
+        }
+        "scaled" => {
+            let factor = num("factor")?;
+            let scale = scale * factor.abs();
+            if scale > MAX_PHYSICAL {
+                return Err(t.key_err(
+                    "factor",
+                    format!(
+                        "the factors of the nested scaled functions multiply to {scale:e}, beyond {MAX_PHYSICAL:e} (see 'Ranges' in docs/model-format.md)"
+                    ),
+                ));
+            }
+            TimeFunction::Scaled {
+                factor,
+                function: Box::new(inner(scale)?),
+            }
         }
         _ => TimeFunction::SpinUp {
             omega: t.req("omega")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,

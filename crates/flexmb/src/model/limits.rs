@@ -47,6 +47,13 @@ pub const MAX_ITEMS: usize = 2_000_000;
 /// Most points of one rope: its local matrix is dense, `(6 n)^2` entries.
 pub const MAX_ROPE_POINTS: usize = 64;
 
+/// Most levels of time functions nested in one another, counting the outermost (a `delay`
+/// of a `bump` has 2): evaluation recurses once per level.
+pub const MAX_FUNCTION_DEPTH: usize = 8;
+
+/// Most functions of one `sum` time function.
+pub const MAX_FUNCTION_TERMS: usize = 64;
+
 /// Whether `v` is in `[lo, hi]` (false for NaN).
 pub fn within(v: f64, lo: f64, hi: f64) -> bool {
     lo <= v && v <= hi

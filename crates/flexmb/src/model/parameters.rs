@@ -32,8 +32,11 @@
 //!
 //! Components `<k>` are 0, 1, 2 (x, y, z); matrix indices follow the strain order
 //! `(axial, shear 2, shear 3, torsion, bending 2, bending 3)` for `C` and `(x, y, z)` for `J`.
-//! Time-like fields of time functions (`t0`, `frequency`, `phase`, ...), node positions and
-//! orientations, joint axes, and the geometry of beams are not parameters.
+//! An amplitude of a function nested in a time function has the path of its field:
+//! `load.road.function.function.height` (the bump of a `delay`),
+//! `joint.hub.drive.functions.1.value` (a term of a `sum`), `load.l.function.factor` (of a
+//! `scaled`). Time-like fields of time functions (`t0`, `frequency`, `phase`, `delay`, ...),
+//! node positions and orientations, joint axes, and the geometry of beams are not parameters.
 //!
 //! **Names.** An item is named by its name when that name is non-empty, not all digits and
 //! unique among the items of its kind; otherwise by its 0-based index in the model's list

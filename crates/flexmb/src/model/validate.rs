@@ -5,8 +5,8 @@
 //! (table, index, name) and the field, which the model-file front end maps back to a line.
 
 use super::limits::{
-    within, MAX_ANGLE, MAX_ITEMS, MAX_KINEMATIC, MAX_PHYSICAL, MAX_ROPE_POINTS, MAX_TIME,
-    MIN_PHYSICAL, MIN_RELATIVE_LENGTH, MIN_STEP,
+    within, MAX_ANGLE, MAX_FUNCTION_DEPTH, MAX_FUNCTION_TERMS, MAX_ITEMS, MAX_KINEMATIC,
+    MAX_PHYSICAL, MAX_ROPE_POINTS, MAX_TIME, MIN_PHYSICAL, MIN_RELATIVE_LENGTH, MIN_STEP,
 };
 use super::{ItemRef, JointKind, Model, NodeId, RopePoint, SensorKind, TimeFunction};
 use crate::error::ModelError;
@@ -72,13 +72,31 @@ fn local_frame(f: &Frame) -> Check {
 
 impl TimeFunction {
     /// Finite parameters within the ranges, increasing times, and intervals of at least
-    /// [`MIN_STEP`] (so slopes stay finite).
+    /// [`MIN_STEP`] (so slopes stay finite); functions of functions at most
+    /// [`MAX_FUNCTION_DEPTH`] levels deep, sums of 1 to [`MAX_FUNCTION_TERMS`] functions, and
+    /// the factors of nested scaled functions multiplying to at most [`MAX_PHYSICAL`]. The
+    /// message of an error in a nested function starts with its path (`function.duration`,
+    /// `functions[1].height`).
     pub fn check(&self) -> Result<(), String> {
+        if self.deeper_than(MAX_FUNCTION_DEPTH) {
+            return Err(format!(
+                "functions are nested more than {MAX_FUNCTION_DEPTH} levels deep"
+            ));
+        }
+        self.check_nested(1.0)
+    }
+
+    /// [`TimeFunction::check`] of a function inside scaled functions whose factors multiply
+    /// to `scale`.
+    fn check_nested(&self, scale: f64) -> Result<(), String> {
         let value = |name: &str, v: f64| {
             in_range(v, -MAX_PHYSICAL, MAX_PHYSICAL).map_err(|m| format!("{name} {m}"))
         };
         let time = |name: &str, v: f64| {
             in_range(v, -MAX_TIME, MAX_TIME).map_err(|m| format!("{name} {m}"))
+        };
+        let nested = |path: &str, g: &TimeFunction, scale: f64| {
+            g.check_nested(scale).map_err(|m| format!("{path}.{m}"))
         };
         match self {
             TimeFunction::Constant { value: v } => value("value", *v),
@@ -138,6 +156,64 @@ impl TimeFunction {
                 in_range(*omega, -MAX_KINEMATIC, MAX_KINEMATIC)
                     .map_err(|m| format!("omega {m}"))?;
                 in_range(*duration, MIN_STEP, MAX_TIME).map_err(|m| format!("duration {m}"))
+            }
+            TimeFunction::Bump {
+                height,
+                start,
+                duration,
+            } => {
+                value("height", *height)?;
+                time("start", *start)?;
+                in_range(*duration, MIN_STEP, MAX_TIME).map_err(|m| format!("duration {m}"))
+            }
+            TimeFunction::SmoothStep {
+                value: v,
+                start,
+                duration,
+            } => {
+                value("value", *v)?;
+                time("start", *start)?;
+                in_range(*duration, MIN_STEP, MAX_TIME).map_err(|m| format!("duration {m}"))
+            }
+            TimeFunction::Delay { delay, function } => {
+                time("delay", *delay)?;
+                nested("function", function, scale)
+            }
+            TimeFunction::Window {
+                start,
+                end,
+                function,
+            } => {
+                time("start", *start)?;
+                time("end", *end)?;
+                if end - start < MIN_STEP {
+                    return Err(format!(
+                        "end = {end} must exceed start = {start} by at least {MIN_STEP:e}"
+                    ));
+                }
+                nested("function", function, scale)
+            }
+            TimeFunction::Sum { functions } => {
+                if functions.is_empty() || functions.len() > MAX_FUNCTION_TERMS {
+                    return Err(format!(
+                        "functions must hold 1 to {MAX_FUNCTION_TERMS} functions, got {}",
+                        functions.len()
+                    ));
+                }
+                for (i, g) in functions.iter().enumerate() {
+                    nested(&format!("functions[{i}]"), g, scale)?;
+                }
+                Ok(())
+            }
+            TimeFunction::Scaled { factor, function } => {
+                value("factor", *factor)?;
+                let scale = scale * factor.abs();
+                if scale > MAX_PHYSICAL {
+                    return Err(format!(
+                        "factor {factor} makes the factors of the nested scaled functions multiply to {scale:e}, beyond {MAX_PHYSICAL:e}"
+                    ));
+                }
+                nested("function", function, scale)
             }
         }
     }
