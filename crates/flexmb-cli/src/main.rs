@@ -5,6 +5,8 @@
 //!                       [--checkpoint-interval T]
 //! flexmb run MODEL.toml --resume DIR [--set ...]
 //! flexmb check MODEL.toml [--set ...]
+//! flexmb sensitivity MODEL.toml --out DIR [--method direct|adjoint|fd] [--fd-step S]
+//!                               [--check] [--memory-mb M] [--set ...] [--quiet]
 //! ```
 //!
 //! Contract (README.md, "The `flexmb` command" and "Outputs"): one exit code per class of
@@ -90,6 +92,35 @@ enum Command {
         #[arg(long, value_name = "DIR", conflicts_with = "out")]
         resume: Option<PathBuf>,
     },
+    /// Gradients of the model's [[criterion]] items with respect to its [[design_parameter]]
+    /// items, exact for the computed solution; write gradients.json and gradients.csv into
+    /// DIR.
+    Sensitivity {
+        model: PathBuf,
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// direct (one solve per parameter and step), adjoint (one backward sweep,
+        /// independent of the number of parameters) or fd (central finite differences,
+        /// 2 n_p + 1 runs); default: the file's [sensitivity] method, else adjoint.
+        #[arg(long, value_parser = ["direct", "adjoint", "fd"])]
+        method: Option<String>,
+        /// Relative step of the finite differences (default: the file's fd_step, else 1e-6).
+        #[arg(long, value_name = "S")]
+        fd_step: Option<f64>,
+        /// Check the exact gradients: the adjoint against central finite differences,
+        /// written to gradient_check.csv with their relative differences.
+        #[arg(long)]
+        check: bool,
+        /// Memory the adjoint may keep for the trajectory, in MiB (default: the file's
+        /// memory_budget_mb, else 256); beyond it, steps are recomputed from checkpoints.
+        #[arg(long, value_name = "M")]
+        memory_mb: Option<f64>,
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Read and check a model file (syntax, references, physics, initial conditions).
     Check {
         model: PathBuf,
@@ -132,6 +163,25 @@ fn main() {
                 }
             },
             Command::Check { model, set } => check(&model, &set),
+            Command::Sensitivity {
+                model,
+                out,
+                method,
+                fd_step,
+                check,
+                memory_mb,
+                set,
+                quiet,
+            } => {
+                let options = SensitivityOptions {
+                    method,
+                    fd_step,
+                    check,
+                    memory_mb,
+                    quiet,
+                };
+                sensitivity(&model, &out, &set, options)
+            }
         },
         Err(e) => {
             // Help and version go to stdout and succeed; a closed stdout loses them.
@@ -330,6 +380,128 @@ fn check(model: &Path, set: &[String]) -> i32 {
         file.model.beams.len(),
         file.model.joints.len(),
         unknowns
+    ));
+    exit::OK
+}
+
+/// The options of `flexmb sensitivity`.
+struct SensitivityOptions {
+    method: Option<String>,
+    fd_step: Option<f64>,
+    check: bool,
+    memory_mb: Option<f64>,
+    quiet: bool,
+}
+
+/// `flexmb sensitivity`: the gradients of the model's criteria.
+fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOptions) -> i32 {
+    use flexmb::sensitivity::{self, report, Method};
+    let dir = match OutputDir::prepare(out) {
+        Ok(dir) => dir,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::OUTPUT_FAILED;
+        }
+    };
+    let file = match flexmb::input::read_model_file(model, set) {
+        Ok(file) => file,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::INVALID_MODEL;
+        }
+    };
+    let invalid = |m: &str| {
+        tell(format_args!("error: {}: {m}", model.display()));
+        exit::INVALID_MODEL
+    };
+    let Some(setup) = &file.sensitivity else {
+        return invalid("the model declares no [[design_parameter]] and no [[criterion]]: nothing to differentiate (docs/model-format.md, \"Sensitivity analysis\")");
+    };
+    if setup.design.is_empty() || setup.criteria.is_empty() {
+        return invalid("a sensitivity analysis needs at least one [[design_parameter]] and one [[criterion]]");
+    }
+    let Some(settings) = file.analysis.dynamic() else {
+        return invalid("the sensitivity of a static analysis is not available yet: give a dynamic analysis");
+    };
+    let fd_step = options.fd_step.unwrap_or(setup.fd_step);
+    if !(fd_step.is_finite() && fd_step > 0.0 && fd_step <= 0.1) {
+        tell(format_args!("error: --fd-step must be in (0, 0.1], got {fd_step}"));
+        return exit::USAGE;
+    }
+    let method = match options.method.as_deref() {
+        Some("direct") => Method::Direct,
+        Some("fd") => Method::Fd,
+        Some(_) => Method::Adjoint,
+        None => setup.method,
+    };
+    let mut problem = setup.problem(std::sync::Arc::new(file.model.clone()), *settings);
+    if let Some(m) = options.memory_mb {
+        if !(m.is_finite() && m >= 1.0) {
+            tell(format_args!("error: --memory-mb must be at least 1, got {m}"));
+            return exit::USAGE;
+        }
+        problem.memory_budget = (m * (1 << 20) as f64) as usize;
+    }
+    let bar = progress_bar(options.quiet);
+    let mut progress = |done: usize, total: usize| {
+        bar.set_position((1000 * done / total.max(1)) as u64);
+        bar.set_message("backward sweep");
+    };
+    let started = std::time::Instant::now();
+    let method = if options.check { Method::Adjoint } else { method };
+    let result = sensitivity::gradients(&problem, method, fd_step, &mut progress);
+    bar.finish_and_clear();
+    let g = match result {
+        Ok(g) => g,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::ANALYSIS_FAILED;
+        }
+    };
+    let wall = started.elapsed().as_secs_f64();
+    let values = problem.values();
+    let written = dir
+        .write_file(
+            flexmb::output::GRADIENTS_JSON_FILE,
+            &report::json(setup, &values, method, &g, wall),
+        )
+        .and_then(|()| dir.write_file(flexmb::output::GRADIENTS_CSV_FILE, &report::csv(setup, &g)));
+    if let Err(e) = written {
+        tell(format_args!("error: {e}"));
+        return exit::OUTPUT_FAILED;
+    }
+    for (c, crit) in setup.criteria.criteria.iter().enumerate() {
+        say(format_args!("{} = {:.10e}", crit.name, g.values[c]));
+        for (k, d) in setup.design.iter().enumerate() {
+            say(format_args!("  d/d {:<40} {:>+.10e}", d.path, g.gradients[c][k]));
+        }
+    }
+    if options.check {
+        let fd = match sensitivity::finite_differences(&problem, fd_step) {
+            Ok(fd) => fd,
+            Err(e) => {
+                tell(format_args!("error: finite differences: {e}"));
+                return exit::ANALYSIS_FAILED;
+            }
+        };
+        let (table, worst) = report::check_csv(&setup.design, setup, &g, &fd);
+        if let Err(e) = dir.write_file(flexmb::output::GRADIENT_CHECK_FILE, &table) {
+            tell(format_args!("error: {e}"));
+            return exit::OUTPUT_FAILED;
+        }
+        say(format_args!(
+            "check: adjoint against central differences (relative step {fd_step:e}): largest relative difference {worst:.3e}; table in {}",
+            dir.file(flexmb::output::GRADIENT_CHECK_FILE).display()
+        ));
+    }
+    say(format_args!(
+        "{} criteria, {} parameters by {:?} in {wall:.3} s ({} forward runs, {} steps); results in {}",
+        setup.criteria.len(),
+        setup.design.len(),
+        method,
+        g.stats.forward_runs,
+        g.stats.steps,
+        out.display()
     ));
     exit::OK
 }

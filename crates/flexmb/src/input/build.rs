@@ -32,6 +32,10 @@ const TOP_KEYS: &[&str] = &[
     "rope",
     "beam",
     "sensor",
+    "sensitivity",
+    "design_parameter",
+    "reference",
+    "criterion",
 ];
 /// The keys of a `[[sensor]]`: `name`, `type`, then those a type may use.
 const SENSOR_KEYS: &[&str] = &[
@@ -181,10 +185,12 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     model
         .validate()
         .map_err(|e| map_model_error(src, e, &origins))?;
+    let sensitivity = super::sensitivity::read_sensitivity(&top, &model, src.file)?;
     Ok(ModelFile {
         model,
         analysis,
         description,
+        sensitivity,
     })
 }
 

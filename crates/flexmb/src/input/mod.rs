@@ -33,6 +33,7 @@ mod build;
 mod error;
 mod overrides;
 mod reader;
+mod sensitivity;
 
 pub use error::{InputError, ItemLabel, Location};
 
@@ -50,6 +51,8 @@ pub struct ModelFile {
     pub model: Model,
     pub analysis: Analysis,
     pub description: String,
+    /// The sensitivity analysis it declares, if any.
+    pub sensitivity: Option<crate::sensitivity::Setup>,
 }
 
 /// The analysis requested by the `[solver]` table.

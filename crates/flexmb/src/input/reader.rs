@@ -23,7 +23,7 @@ const RANGES: &str = "see 'Ranges' in docs/model-format.md";
 
 /// The text of the model file, for turning byte offsets into lines and columns.
 pub(crate) struct Source<'a> {
-    file: &'a str,
+    pub file: &'a str,
     text: &'a str,
     line_starts: Vec<usize>,
     /// `(field path, override text)` of every applied `--set`, in order.

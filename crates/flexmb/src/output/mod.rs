@@ -38,13 +38,22 @@ pub const BEAMS_FILE: &str = "beams.csv";
 pub const CHECKPOINT_FILE: &str = "checkpoint.json";
 /// Every result file a run may write. A run removes all of them from its output directory
 /// when it starts (a resumed run keeps them and goes on writing).
-pub const RESULT_FILES: [&str; 5] = [
+pub const RESULT_FILES: [&str; 8] = [
     SUMMARY_FILE,
     SENSORS_FILE,
     NODES_FILE,
     BEAMS_FILE,
     CHECKPOINT_FILE,
+    GRADIENTS_JSON_FILE,
+    GRADIENTS_CSV_FILE,
+    GRADIENT_CHECK_FILE,
 ];
+/// The criteria and their gradients of `flexmb sensitivity` (JSON).
+pub const GRADIENTS_JSON_FILE: &str = "gradients.json";
+/// The same as CSV: `criterion,parameter,value,gradient,scaled_gradient,fd_step`.
+pub const GRADIENTS_CSV_FILE: &str = "gradients.csv";
+/// `flexmb sensitivity --check`: the adjoint against finite differences.
+pub const GRADIENT_CHECK_FILE: &str = "gradient_check.csv";
 /// Where a new summary is written before it is renamed over [`SUMMARY_FILE`].
 const SUMMARY_TEMP_FILE: &str = ".summary.json.tmp";
 /// Where a new checkpoint is written before it is renamed over [`CHECKPOINT_FILE`].
@@ -149,6 +158,11 @@ impl OutputDir {
         self.replace(CHECKPOINT_FILE, CHECKPOINT_TEMP_FILE, text)
     }
 
+    /// Replaces the file `name` atomically, as [`OutputDir::write_summary`] does.
+    pub fn write_file(&self, name: &str, text: &str) -> Result<(), OutputError> {
+        self.replace(name, &format!(".{name}.tmp"), text)
+    }
+
     /// Writes `text` to `name` through the temporary file `temp`, synced and renamed.
     fn replace(&self, name: &str, temp: &str, text: &str) -> Result<(), OutputError> {
         let temp = self.file(temp);
@@ -176,7 +190,7 @@ impl OutputDir {
 /// Appends `x` to `out` in the shortest decimal form that parses back to the same bits:
 /// plain for zero and magnitudes in `[1e-5, 1e16)`, scientific otherwise; `NaN`, `inf` and
 /// `-inf` for non-finite values.
-fn push_number(out: &mut String, x: f64) {
+pub fn push_number(out: &mut String, x: f64) {
     let magnitude = x.abs();
     // `{}` and `{:e}` without a precision both print the shortest round-trip digits.
     let plain = magnitude == 0.0 || (1e-5..1e16).contains(&magnitude) || !x.is_finite();

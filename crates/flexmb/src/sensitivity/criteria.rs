@@ -123,7 +123,7 @@ fn sensor_type(kind: &SensorKind) -> &'static str {
 
 /// The criteria of an analysis with the sensors and references they read. Their
 /// expressions' variables are the model's sensors, then the references.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct CriteriaSet {
     pub criteria: Vec<Criterion>,
     pub references: Vec<Reference>,

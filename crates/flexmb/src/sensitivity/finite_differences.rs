@@ -43,14 +43,15 @@ pub fn criteria_values(problem: &Problem) -> Result<(Vec<f64>, usize), Sensitivi
 }
 
 /// The criteria of `problem` and their central differences with relative step `step`:
-/// `dJ/dp_k = (J(p + e_k d_k) - J(p - e_k d_k)) / (2 d_k)`, `d_k = step max(|p_k|, 1e-3)`.
+/// `dJ/dp_k = (J(p + e_k d_k) - J(p - e_k d_k)) / (2 d_k)`, `d_k = step max(|p_k|, scale_k)`
+/// (the design parameter's typical magnitude, [`Problem::scales`]).
 pub fn finite_differences(problem: &Problem, step: f64) -> Result<Gradients, SensitivityError> {
     let (values, steps) = criteria_values(problem)?;
     let p0 = problem.values();
     let mut gradients = vec![vec![0.0; p0.len()]; values.len()];
     let mut fd_steps = Vec::with_capacity(p0.len());
     for k in 0..p0.len() {
-        let d = step * p0[k].abs().max(1e-3);
+        let d = step * p0[k].abs().max(problem.scales[k]);
         let at = |sign: f64| {
             let mut p = p0.clone();
             p[k] += sign * d;

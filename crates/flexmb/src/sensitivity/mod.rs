@@ -51,6 +51,7 @@ pub mod criteria;
 pub mod expression;
 pub mod initial;
 pub mod matrix;
+pub mod report;
 pub mod sensor_derivative;
 
 mod adjoint;
@@ -58,7 +59,7 @@ mod direct;
 mod finite_differences;
 
 pub use adjoint::adjoint;
-pub use criteria::{CriteriaSet, Criterion, CriterionKind};
+pub use criteria::{CriteriaSet, Criterion, CriterionKind, Reference};
 pub use direct::direct;
 pub use finite_differences::finite_differences;
 
@@ -67,6 +68,73 @@ use crate::solve::step::StateTangent;
 use crate::solve::DynamicSettings;
 use crate::SolveError;
 use std::sync::Arc;
+
+/// How the gradients are computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Direct differentiation ([`direct`]).
+    Direct,
+    /// The discrete adjoint ([`adjoint`]).
+    Adjoint,
+    /// Central finite differences ([`finite_differences`]), for checking.
+    Fd,
+}
+
+/// A design parameter: a model parameter by its path, with the scale of the optimizer's
+/// variable `u = p / scale` and optional bounds on `p`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DesignParameter {
+    pub path: String,
+    pub id: ParamId,
+    pub scale: f64,
+    pub lower: Option<f64>,
+    pub upper: Option<f64>,
+}
+
+/// The sensitivity analysis a model file asks for (`[sensitivity]`, `[[design_parameter]]`,
+/// `[[reference]]`, `[[criterion]]`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Setup {
+    pub design: Vec<DesignParameter>,
+    pub criteria: CriteriaSet,
+    pub method: Method,
+    /// Relative step of the finite differences.
+    pub fd_step: f64,
+    /// Bytes the adjoint may keep for the trajectory.
+    pub memory_budget: usize,
+}
+
+impl Setup {
+    /// The problem of this setup on `model` (the model of the same file) run with
+    /// `settings`.
+    pub fn problem(&self, model: Arc<Model>, settings: DynamicSettings) -> Problem {
+        let design = self.design.iter().map(|d| d.id).collect();
+        Problem {
+            memory_budget: self.memory_budget,
+            scales: self.design.iter().map(|d| d.scale).collect(),
+            ..Problem::new(model, settings, design, self.criteria.clone())
+        }
+    }
+}
+
+/// The gradients of `problem` by `method` (`fd_step`: relative step of finite differences;
+/// `progress`: the adjoint's backward sweep, `(steps done, steps)`).
+pub fn gradients(
+    problem: &Problem,
+    method: Method,
+    fd_step: f64,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Gradients, SensitivityError> {
+    match method {
+        Method::Direct => direct(problem),
+        Method::Adjoint => adjoint(problem, progress),
+        Method::Fd => finite_differences(problem, fd_step),
+    }
+}
+
+/// Default relative step of the finite differences.
+pub const DEFAULT_FD_STEP: f64 = 1e-6;
 
 /// What a sensitivity analysis can fail on.
 #[derive(Debug, thiserror::Error)]
@@ -90,6 +158,9 @@ pub struct Problem {
     pub params: Parameters,
     /// The parameters differentiated with respect to.
     pub design: Vec<ParamId>,
+    /// Their typical magnitudes (the finite differences' step is relative to
+    /// `max(|p|, scale)`); 1 by default.
+    pub scales: Vec<f64>,
     pub criteria: CriteriaSet,
     /// Bytes the adjoint may keep for the trajectory (default [`DEFAULT_MEMORY_BUDGET`]).
     pub memory_budget: usize,
@@ -110,6 +181,7 @@ impl Problem {
             model,
             settings,
             params,
+            scales: vec![1.0; design.len()],
             design,
             criteria,
             memory_budget: DEFAULT_MEMORY_BUDGET,
