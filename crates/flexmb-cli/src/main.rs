@@ -418,14 +418,20 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         return invalid("the model declares no [[design_parameter]] and no [[criterion]]: nothing to differentiate (docs/model-format.md, \"Sensitivity analysis\")");
     };
     if setup.design.is_empty() || setup.criteria.is_empty() {
-        return invalid("a sensitivity analysis needs at least one [[design_parameter]] and one [[criterion]]");
+        return invalid(
+            "a sensitivity analysis needs at least one [[design_parameter]] and one [[criterion]]",
+        );
     }
     let Some(settings) = file.analysis.dynamic() else {
-        return invalid("the sensitivity of a static analysis is not available yet: give a dynamic analysis");
+        return invalid(
+            "the sensitivity of a static analysis is not available yet: give a dynamic analysis",
+        );
     };
     let fd_step = options.fd_step.unwrap_or(setup.fd_step);
     if !(fd_step.is_finite() && fd_step > 0.0 && fd_step <= 0.1) {
-        tell(format_args!("error: --fd-step must be in (0, 0.1], got {fd_step}"));
+        tell(format_args!(
+            "error: --fd-step must be in (0, 0.1], got {fd_step}"
+        ));
         return exit::USAGE;
     }
     let method = match options.method.as_deref() {
@@ -437,7 +443,9 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
     let mut problem = setup.problem(std::sync::Arc::new(file.model.clone()), *settings);
     if let Some(m) = options.memory_mb {
         if !(m.is_finite() && m >= 1.0) {
-            tell(format_args!("error: --memory-mb must be at least 1, got {m}"));
+            tell(format_args!(
+                "error: --memory-mb must be at least 1, got {m}"
+            ));
             return exit::USAGE;
         }
         problem.memory_budget = (m * (1 << 20) as f64) as usize;
@@ -448,7 +456,11 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         bar.set_message("backward sweep");
     };
     let started = std::time::Instant::now();
-    let method = if options.check { Method::Adjoint } else { method };
+    let method = if options.check {
+        Method::Adjoint
+    } else {
+        method
+    };
     let result = sensitivity::gradients(&problem, method, fd_step, &mut progress);
     bar.finish_and_clear();
     let g = match result {
@@ -473,7 +485,10 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
     for (c, crit) in setup.criteria.criteria.iter().enumerate() {
         say(format_args!("{} = {:.10e}", crit.name, g.values[c]));
         for (k, d) in setup.design.iter().enumerate() {
-            say(format_args!("  d/d {:<40} {:>+.10e}", d.path, g.gradients[c][k]));
+            say(format_args!(
+                "  d/d {:<40} {:>+.10e}",
+                d.path, g.gradients[c][k]
+            ));
         }
     }
     if options.check {

@@ -19,7 +19,11 @@ const MAX_SAMPLES: usize = 10_000_000;
 
 /// The sensitivity setup of a model file, `None` when it declares no criterion and no
 /// design parameter; `file` is the model file's path (reference files are relative to it).
-pub(super) fn read_sensitivity(top: &Table<'_>, model: &Model, file: &str) -> Result<Option<Setup>> {
+pub(super) fn read_sensitivity(
+    top: &Table<'_>,
+    model: &Model,
+    file: &str,
+) -> Result<Option<Setup>> {
     let params_items = top.items("design_parameter")?;
     let criteria_items = top.items("criterion")?;
     let settings = top.field("sensitivity").map(|f| f.table()).transpose()?;
@@ -86,9 +90,8 @@ pub(super) fn read_sensitivity(top: &Table<'_>, model: &Model, file: &str) -> Re
         let csv_path = base.join(f.str()?);
         let time_column = t.opt_str("time_column")?.unwrap_or("t");
         let column = t.req("column")?.str()?;
-        let (times, values) = read_signal(&csv_path, time_column, column).map_err(|m| {
-            f.err(format!("{}: {m}", csv_path.display()))
-        })?;
+        let (times, values) = read_signal(&csv_path, time_column, column)
+            .map_err(|m| f.err(format!("{}: {m}", csv_path.display())))?;
         references.push(Reference {
             name,
             t: times,
@@ -104,10 +107,15 @@ pub(super) fn read_sensitivity(top: &Table<'_>, model: &Model, file: &str) -> Re
             (Some(_), None) => (CriterionKind::Terminal, "terminal"),
             (None, Some(_)) => (CriterionKind::Integral, "integral"),
             (Some(_), Some(_)) => {
-                return Err(t.key_name_err("integral", "a criterion is terminal or integral, not both"))
+                return Err(
+                    t.key_name_err("integral", "a criterion is terminal or integral, not both")
+                )
             }
             (None, None) => {
-                return Err(t.key_err("terminal", "is required: give terminal = \"...\" or integral = \"...\""))
+                return Err(t.key_err(
+                    "terminal",
+                    "is required: give terminal = \"...\" or integral = \"...\"",
+                ))
             }
         };
         let f = t.req(key)?;
@@ -125,7 +133,11 @@ pub(super) fn read_sensitivity(top: &Table<'_>, model: &Model, file: &str) -> Re
 
 /// The columns `time_column` and `column` of a CSV file with a header: times increasing,
 /// every value finite.
-fn read_signal(path: &Path, time_column: &str, column: &str) -> std::result::Result<(Vec<f64>, Vec<f64>), String> {
+fn read_signal(
+    path: &Path,
+    time_column: &str,
+    column: &str,
+) -> std::result::Result<(Vec<f64>, Vec<f64>), String> {
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .comment(Some(b'#'))
@@ -134,7 +146,10 @@ fn read_signal(path: &Path, time_column: &str, column: &str) -> std::result::Res
     let headers = reader.headers().map_err(|e| e.to_string())?.clone();
     let find = |name: &str| {
         headers.iter().position(|h| h == name).ok_or_else(|| {
-            format!("no column '{name}' (columns: {})", headers.iter().collect::<Vec<_>>().join(", "))
+            format!(
+                "no column '{name}' (columns: {})",
+                headers.iter().collect::<Vec<_>>().join(", ")
+            )
         })
     };
     let (it, iv) = (find(time_column)?, find(column)?);

@@ -110,7 +110,12 @@ pub fn relative_difference(a: f64, b: f64, floor: f64) -> f64 {
 /// `gradient_check.csv`: `criterion,parameter,exact,fd,fd_step,relative_difference` with
 /// the exact gradient (`exact`, adjoint) against central differences (`fd`). The floor of
 /// the relative difference is `1e-8` times the largest gradient of the criterion.
-pub fn check_csv(design: &[DesignParameter], setup: &Setup, exact: &Gradients, fd: &Gradients) -> (String, f64) {
+pub fn check_csv(
+    design: &[DesignParameter],
+    setup: &Setup,
+    exact: &Gradients,
+    fd: &Gradients,
+) -> (String, f64) {
     let mut out = String::from("criterion,parameter,exact,fd,fd_step,relative_difference\n");
     let mut worst = 0.0f64;
     for (c, crit) in setup.criteria.criteria.iter().enumerate() {
