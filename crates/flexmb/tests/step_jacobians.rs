@@ -284,6 +284,47 @@ fn check_end_state(name: &str, sim: &Simulation) {
         d < 1e-6,
         "{name}: ds_(n+1) differs from central differences by {d:e}"
     );
+    // The stabilized update q_n exp(dq + B(q_n; p)^T zeta) along a joint's position.
+    if layout.stabilized && !sim.model.joints.is_empty() {
+        let params = Parameters::new(&sim.model);
+        let id = params
+            .id(&format!("joint.{}.position.1", sim.model.joints[0].name))
+            .expect("joint position");
+        let mut dp = vec![0.0; params.len()];
+        dp[id.0 as usize] = 1.0;
+        let zero = StateTangent::zeros_of(&layout);
+        let dx0 = vec![0.0; x.len()];
+        let jp = f.end_jvp(&x, &dx0, &zero, Some((&params, &dp)), &mut data);
+        let value = params.value(&sim.model, id);
+        let eps = 1e-6;
+        let end_of = |v: f64| {
+            let mut m = (*sim.model).clone();
+            params.set(&mut m, id, v);
+            let l = Layout::with_rows(&m, true, &layout.redundant_rows());
+            StepFunction::new(&m, &l, &sim.state, &sim.settings, h).end_state(&x)
+        };
+        let (ep, em) = (end_of(value + eps), end_of(value - eps));
+        let mut worst = 0.0f64;
+        let scale = jp.q.iter().fold(1e-12f64, |m, q| m.max(q.abs().max()));
+        for i in 0..n {
+            let fd = (group.difference(&end.q[i], &ep.q[i])
+                - group.difference(&end.q[i], &em.q[i]))
+                / (2.0 * eps);
+            worst = worst.max((fd - jp.q[i]).abs().max() / scale);
+        }
+        assert!(
+            worst < 1e-6,
+            "{name}: dq_(n+1)/dp of a joint position differs by {worst:e}"
+        );
+        assert!(scale > 1e-9, "{name}: zeta moves the configuration");
+        let (_, _, pbar) = f.end_vjp(&x, &jv, Some(&params), &mut data);
+        let left = jv.dot(&jp);
+        assert!(
+            (left - pbar[id.0 as usize]).abs() <= 1e-10 * left.abs().max(1e-300),
+            "{name}: end_vjp's parameter part {} against {left:e}",
+            pbar[id.0 as usize]
+        );
+    }
     // <bar, J (dx, ds)> = <J_x^T bar, dx> + <J_s^T bar, ds>
     let mut bar = StateTangent::zeros_of(&layout);
     bar.add_scaled(1.0, &fd);

@@ -152,15 +152,20 @@ pub fn adjoint(
     let every = if keep_all {
         expected
     } else {
-        // k steps in a segment and N/k checkpoints, each half of the budget.
-        let k = (budget / 2 / step_bytes).max(1);
-        if expected.div_ceil(k) * memory_bytes > budget / 2 {
+        // k steps in a segment and ceil(N/k) checkpoints: the longest segment that fits.
+        let total = |k: usize| k * step_bytes + expected.div_ceil(k) * memory_bytes;
+        let best = ((expected * memory_bytes) as f64 / step_bytes as f64).sqrt() as usize;
+        let best = best.clamp(1, expected);
+        if total(best) > budget {
             return Err(SensitivityError::Unsupported(format!(
-                "the memory budget of {budget} bytes is too small for the adjoint of {expected} steps (a step takes about {step_bytes} bytes, a checkpoint {memory_bytes}); raise it to at least {} bytes",
-                2 * ((expected as f64 * (step_bytes * memory_bytes) as f64).sqrt() as usize)
+                "the memory budget of {budget} bytes is too small for the adjoint of {expected} steps (a step takes about {step_bytes} bytes, a checkpoint {memory_bytes}); it needs at least {} bytes",
+                total(best)
             )));
         }
-        k
+        (best..=expected)
+            .take_while(|&k| total(k) <= budget)
+            .last()
+            .unwrap_or(best)
     };
     let mut trajectory = (!keep_all).then(|| Trajectory::new(&sim, every));
     let mut forward = Forward {

@@ -55,7 +55,15 @@ pub fn finite_differences(problem: &Problem, step: f64) -> Result<Gradients, Sen
         let at = |sign: f64| {
             let mut p = p0.clone();
             p[k] += sign * d;
-            criteria_values(&problem.with_values(&p)).map(|r| r.0)
+            criteria_values(&problem.with_values(&p))
+                .map(|r| r.0)
+                .map_err(|e| {
+                    SensitivityError::Unsupported(format!(
+                        "finite differences: the run with {} = {} (step {d:e}) failed: {e}",
+                        problem.params.path(problem.design[k]),
+                        p[k]
+                    ))
+                })
         };
         let (plus, minus) = (at(1.0)?, at(-1.0)?);
         for c in 0..values.len() {
