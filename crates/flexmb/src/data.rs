@@ -315,6 +315,9 @@ pub struct Data {
     /// One element's local inputs, vector and matrix during assembly (scratch).
     pub local: crate::elements::LocalBuffers,
     pub solver: LinearSolver,
+    /// The positions of the exact step Jacobian of the layout, built on first use by
+    /// [`crate::solve::step::StepFunction`].
+    pub step_jacobian: Option<std::sync::Arc<crate::solve::step::JacobianPattern>>,
 }
 
 impl Data {
@@ -342,6 +345,7 @@ impl Data {
             pattern,
             solver,
             layout,
+            step_jacobian: None,
         })
     }
 }

@@ -313,6 +313,20 @@ pub fn residual_derivative_transpose(
     w: Weights,
     grad: &mut [f64],
 ) {
+    let ids: Vec<ParamId> = params.ids().collect();
+    residual_derivative_transpose_for(model, params, &ids, point, w, grad);
+}
+
+/// [`residual_derivative_transpose`] for the parameters `ids` only: `grad[k]` written for
+/// them, the other entries left as they are.
+pub fn residual_derivative_transpose_for(
+    model: &Model,
+    params: &Parameters,
+    ids: &[ParamId],
+    point: &Point,
+    w: Weights,
+    grad: &mut [f64],
+) {
     let (rows, starts, n_rows) = joints::row_table(model);
     assert_eq!(w.r.len(), 6 * model.nodes.len(), "w.r: 6 per node");
     assert_eq!(w.phi.len(), n_rows, "w.phi: one per constraint row");
@@ -322,7 +336,7 @@ pub fn residual_derivative_transpose(
     );
     assert_eq!(grad.len(), params.len(), "grad: one per parameter");
     let at = At { model, point };
-    for id in params.ids() {
+    for &id in ids {
         let mut sum = 0.0;
         let mut sink = |piece: Piece| match piece {
             Piece::Element(slots, x_start, d) => {

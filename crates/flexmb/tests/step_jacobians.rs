@@ -317,7 +317,8 @@ fn check_end_state(name: &str, sim: &Simulation) {
             "{name}: dq_(n+1)/dp of a joint position differs by {worst:e}"
         );
         assert!(scale > 1e-9, "{name}: zeta moves the configuration");
-        let (_, _, pbar) = f.end_vjp(&x, &jv, Some(&params), &mut data);
+        let all: Vec<_> = params.ids().collect();
+        let (_, _, pbar) = f.end_vjp(&x, &jv, Some((&params, &all)), &mut data);
         let left = jv.dot(&jp);
         assert!(
             (left - pbar[id.0 as usize]).abs() <= 1e-10 * left.abs().max(1e-300),

@@ -109,19 +109,23 @@ impl Backward<'_> {
         let settings = &p.settings;
         let f = StepFunction::new(&p.model, self.layout, &step.start, settings, step.h);
         let x = &step.unknowns;
-        let jacobian = f.jacobian(x, &mut self.data);
+        let (pattern, values) = f.jacobian_values(x, &mut self.data);
         let t = step.end.t;
         self.matrix
-            .factorize(x.len(), &jacobian, &|| {
+            .factorize(&pattern, &values, &|| {
                 format!("step {} (t = {t:.6e} s)", step.index)
             })
             .map_err(|e| e.to_string())?;
         for c in 0..self.bars.len() {
-            let (mut mu, mut start, pe) =
-                f.end_vjp(x, &self.bars[c], Some(&p.params), &mut self.data);
+            let (mut mu, mut start, pe) = f.end_vjp(
+                x,
+                &self.bars[c],
+                Some((&p.params, &p.design)),
+                &mut self.data,
+            );
             self.matrix.solve_transpose(&mut mu);
             start.add_scaled(-1.0, &f.start_vjp(x, &mu, &mut self.data));
-            let pr = f.parameter_vjp(x, &p.params, &mu, &mut self.data);
+            let pr = f.parameter_vjp_for(x, &p.params, &p.design, &mu, &mut self.data);
             pick(&self.index, &pr, &mut self.pbars[c], -1.0);
             if !pe.is_empty() {
                 pick(&self.index, &pe, &mut self.pbars[c], 1.0);

@@ -90,10 +90,10 @@ impl Direct<'_> {
             record.info.h,
         );
         let x = record.unknowns;
-        let jacobian = f.jacobian(x, &mut self.data);
+        let (pattern, values) = f.jacobian_values(x, &mut self.data);
         let t = record.end.t;
         self.matrix
-            .factorize(x.len(), &jacobian, &|| {
+            .factorize(&pattern, &values, &|| {
                 format!("step {} (t = {t:.6e} s)", record.index)
             })
             .map_err(|e| e.to_string())?;

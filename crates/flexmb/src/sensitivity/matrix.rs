@@ -2,48 +2,52 @@
 //! factorized once per step for the solves of a sensitivity analysis: `n_p` forward solves
 //! (direct differentiation) or one transposed solve per criterion (adjoint).
 
-use crate::solve::linear::LinearSolver;
-use crate::solve::step::Triplets;
-use crate::SolveError;
+use crate::solve::linear::{Backend, LinearSolver};
 
-/// A factorized step Jacobian. The triplets' positions change little from step to step (an
-/// entry is left out where it is exactly zero), so the solver, with its symbolic analysis,
-/// is built again only when they change.
+/// Unknowns above which the step Jacobian is factorized by the sparse LU.
+const SPARSE_FROM: usize = 40;
+use super::SensitivityError;
+use crate::solve::step::JacobianPattern;
+use std::sync::Arc;
+
+/// A factorized step Jacobian, on the positions of its layout's [`JacobianPattern`]: the
+/// solver, with its symbolic analysis, is built once per pattern.
 #[derive(Default)]
 pub struct StepMatrix {
-    positions: Vec<(usize, usize)>,
-    values: Vec<f64>,
+    pattern: Option<Arc<JacobianPattern>>,
     solver: Option<LinearSolver>,
 }
 
 impl StepMatrix {
-    /// Factorizes the `n x n` matrix of `triplets` (duplicates summed); `what` names the
-    /// step in the error of a singular matrix.
+    /// Factorizes the matrix of `values` on `pattern`; `what` names the step in the error
+    /// of a singular matrix.
     pub fn factorize(
         &mut self,
-        n: usize,
-        triplets: &Triplets,
+        pattern: &Arc<JacobianPattern>,
+        values: &[f64],
         what: &dyn Fn() -> String,
-    ) -> Result<(), SolveError> {
-        let same = self.solver.as_ref().is_some_and(|s| s.n() == n)
-            && self.positions.len() == triplets.len()
-            && self
-                .positions
-                .iter()
-                .zip(triplets)
-                .all(|(&(i, j), &(a, b, _))| i == a && j == b);
+    ) -> Result<(), SensitivityError> {
+        let same = self
+            .pattern
+            .as_ref()
+            .is_some_and(|p| Arc::ptr_eq(p, pattern));
         if !same {
-            self.positions = triplets.iter().map(|&(i, j, _)| (i, j)).collect();
-            self.solver = Some(LinearSolver::new(n, &self.positions)?);
+            let n = pattern.n;
+            // The step Jacobian is factorized once per step, fresh: a sparse LU pays off on
+            // smaller matrices than in the Newton iteration, which mostly reuses its matrix.
+            let backend = if n > SPARSE_FROM {
+                Backend::Sparse
+            } else {
+                Backend::Dense
+            };
+            let solver = LinearSolver::with_backend(n, &pattern.positions, backend)
+                .map_err(crate::SolveError::from)?;
+            self.solver = Some(solver);
+            self.pattern = Some(Arc::clone(pattern));
         }
-        self.values.clear();
-        self.values.extend(triplets.iter().map(|t| t.2));
         let solver = self.solver.as_mut().expect("built above");
-        solver.factorize(&self.values).map_err(|e| {
-            SolveError::Output(format!(
-                "sensitivity: the exact step Jacobian of {} cannot be factorized ({e}); the derivatives of the step are not defined there",
-                what()
-            ))
+        solver.factorize(values).map_err(|e| {
+            SensitivityError::Singular(format!("the exact step Jacobian of {} ({e})", what()))
         })
     }
 
@@ -61,10 +65,5 @@ impl StepMatrix {
             .as_mut()
             .expect("factorize first")
             .solve_transpose_in_place(b);
-    }
-
-    /// Numeric factorizations so far.
-    pub fn factorizations(&self) -> usize {
-        self.solver.as_ref().map_or(0, |s| s.factorizations())
     }
 }

@@ -61,7 +61,7 @@ mod finite_differences;
 pub use adjoint::adjoint;
 pub use criteria::{CriteriaSet, Criterion, CriterionKind, Reference};
 pub use direct::direct;
-pub use finite_differences::finite_differences;
+pub use finite_differences::{criteria_values, finite_differences};
 
 use crate::model::{Model, ParamId, Parameters};
 use crate::solve::step::StateTangent;

@@ -49,6 +49,7 @@ use crate::state::State;
 use flexmb_lie::{Group, Mat6, Vec6};
 use std::cell::RefCell;
 use std::rc::Rc;
+use std::sync::Arc;
 
 /// The fixed numbers of one step: scheme, size, scaling and loading.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -404,20 +405,119 @@ struct Cached {
 }
 
 /// Partial derivatives of the residual at the end of the step with respect to its
-/// arguments: the right-trivialized configuration `q_{n+1}` (all rows, node columns), the
-/// velocities, the accelerations (node columns) and the multipliers (equilibrium rows).
+/// arguments, each as values on the positions of the step's [`JacobianPattern`]: the
+/// right-trivialized configuration `q_{n+1}` (all rows, node columns), the velocities, the
+/// accelerations (node columns) and the multipliers (equilibrium rows).
 struct Partials {
-    f_q: Triplets,
-    f_v: Triplets,
-    f_vd: Triplets,
-    f_mu: Triplets,
+    pattern: Arc<JacobianPattern>,
+    f_q: Vec<f64>,
+    f_v: Vec<f64>,
+    f_vd: Vec<f64>,
+    f_mu: Vec<f64>,
     /// The element states `x_{n+1}` and their rates `xdot_{n+1}` (all rows, state columns).
-    f_x: Triplets,
-    f_xd: Triplets,
+    f_x: Vec<f64>,
+    f_xd: Vec<f64>,
     /// Tangent operators `T(total)` of the nodes' increments.
     t: Vec<Mat6>,
     /// Transports `G = Ad(exp(-total))`: `q_n exp(d) exp(total) = q_{n+1} exp(G d)`.
     g: Vec<Mat6>,
+    /// The end of the step and its node kinematics (`T = I`): where the parameter
+    /// derivatives are taken.
+    end: State,
+    nodes: Vec<NodeState>,
+}
+
+impl Partials {
+    /// The nonzero entries `(row, column, value)` of one partial derivative.
+    fn entries<'p>(&'p self, values: &'p [f64]) -> impl Iterator<Item = (usize, usize, f64)> + 'p {
+        self.pattern
+            .positions
+            .iter()
+            .zip(values)
+            .filter(|(_, &v)| v != 0.0)
+            .map(|(&(i, j), &v)| (i, j, v))
+    }
+}
+
+/// The positions of the exact step Jacobian of one layout, sorted by row then column
+/// without repeats: the iteration matrix's pattern ([`crate::Data::pattern`], whose repeated
+/// positions are summed) with every node block of a row complete (six columns), plus, in
+/// the stabilized form, the columns of `zeta` that `F_q T B(q_n)^T` fills. Built once per
+/// [`crate::Data`] and kept there: the values of every step's Jacobian go on these
+/// positions, so a solver's symbolic analysis is done once.
+#[derive(Debug)]
+pub struct JacobianPattern {
+    /// Unknowns (rows and columns).
+    pub n: usize,
+    /// `(row, column)`.
+    pub positions: Vec<(usize, usize)>,
+    /// Position of each entry of the iteration matrix's pattern.
+    of_pattern: Vec<usize>,
+    /// Positions of the first of the six entries of each node block `(row, 6 n..6 n + 6)`,
+    /// with the node.
+    blocks: Vec<(usize, usize)>,
+    /// Stabilized form: `(block, constraint row, slot, position)` for every block of node
+    /// `n` and every active row acting on `n`: where `F_q T B(q_n)^T` puts its entries.
+    zeta: Vec<(usize, usize, usize, usize)>,
+}
+
+impl JacobianPattern {
+    fn new(layout: &Layout, pattern: &[(usize, usize)]) -> Self {
+        let nd = layout.n_dofs;
+        let mut positions: Vec<(usize, usize)> = Vec::with_capacity(pattern.len());
+        for &(i, j) in pattern {
+            if j < nd {
+                positions.extend((0..6).map(|c| (i, 6 * (j / 6) + c)));
+            } else {
+                positions.push((i, j));
+            }
+        }
+        if layout.stabilized {
+            let nodes: Vec<(usize, usize)> =
+                positions.iter().filter(|p| p.1 < nd).copied().collect();
+            for (i, j) in nodes {
+                for &(row, _) in &layout.node_rows[j / 6] {
+                    positions.push((i, layout.zeta(layout.row_unknown[row].expect("active row"))));
+                }
+            }
+        }
+        positions.sort_unstable();
+        positions.dedup();
+        let find = |p: &(usize, usize)| {
+            positions
+                .binary_search(p)
+                .expect("a position of the pattern")
+        };
+        let of_pattern = pattern.iter().map(find).collect();
+        let mut blocks = Vec::new();
+        let mut zeta = Vec::new();
+        for (k, &(i, j)) in positions.iter().enumerate() {
+            if j < nd && j % 6 == 0 {
+                let n = j / 6;
+                blocks.push((k, n));
+                if layout.stabilized {
+                    for &(row, slot) in &layout.node_rows[n] {
+                        let z = layout.zeta(layout.row_unknown[row].expect("active row"));
+                        zeta.push((k, row, slot, find(&(i, z))));
+                    }
+                }
+            }
+        }
+        Self {
+            n: layout.n_unknowns(),
+            positions,
+            of_pattern,
+            blocks,
+            zeta,
+        }
+    }
+
+    /// The position of `(row, column)`.
+    fn position(&self, at: (usize, usize)) -> usize {
+        self.positions
+            .binary_search(&at)
+            .expect("a position of the step Jacobian")
+    }
 }
 
 impl<'a> StepFunction<'a> {
@@ -608,17 +708,24 @@ impl<'a> StepFunction<'a> {
         let layout = self.layout;
         let (nd, na) = (layout.n_dofs, layout.n_active);
         let s = self.step.scale;
+        let pattern = self.pattern(data);
         let mut sc = self.step.scaling(0.0);
         let mut take =
             |data: &mut crate::Data, coef: Coefficients, keep: &dyn Fn(usize, usize) -> bool| {
                 sc.coef = coef;
                 self.assemble(data, &nodes, &end, &sc, true);
-                data.pattern
+                let mut out = vec![0.0; pattern.positions.len()];
+                for ((&(i, j), &v), &k) in data
+                    .pattern
                     .iter()
                     .zip(&data.values)
-                    .filter(|(&(i, j), &v)| v != 0.0 && keep(i, j))
-                    .map(|(&(i, j), &v)| (i, j, v))
-                    .collect::<Triplets>()
+                    .zip(&pattern.of_pattern)
+                {
+                    if keep(i, j) {
+                        out[k] += v;
+                    }
+                }
+                out
             };
         let coef = |m, c, k| Coefficients {
             m,
@@ -641,8 +748,10 @@ impl<'a> StepFunction<'a> {
         let mut f_v = take(data, coef(0.0, s, 0.0), &|i, j| {
             j < nd && (i < nd || i >= nd + na)
         });
-        for e in f_v.iter_mut().filter(|e| e.0 >= nd + na && e.0 < so) {
-            e.2 /= self.step.gp;
+        for (v, &(i, _)) in f_v.iter_mut().zip(&pattern.positions) {
+            if i >= nd + na && i < so {
+                *v /= self.step.gp;
+            }
         }
         let f_vd = take(data, coef(s, 0.0, 0.0), &|i, j| {
             (i < nd || i >= so) && j < nd
@@ -661,12 +770,13 @@ impl<'a> StepFunction<'a> {
                 take(data, xd, &|_, j| j >= so),
             )
         } else {
-            (Triplets::new(), Triplets::new())
+            (Vec::new(), Vec::new())
         };
         if layout.stabilized {
-            self.velocity_rows_configuration(&nodes, &end, &mut f_q);
+            self.velocity_rows_configuration(&nodes, &end, &pattern, &mut f_q);
         }
         Partials {
+            pattern,
             f_q,
             f_v,
             f_vd,
@@ -675,13 +785,30 @@ impl<'a> StepFunction<'a> {
             f_xd,
             t,
             g,
+            end,
+            nodes,
         }
+    }
+
+    /// The step Jacobian's positions for `data`'s layout, built on first use and kept in
+    /// `data`.
+    fn pattern(&self, data: &mut crate::Data) -> Arc<JacobianPattern> {
+        Arc::clone(
+            data.step_jacobian
+                .get_or_insert_with(|| Arc::new(JacobianPattern::new(self.layout, &data.pattern))),
+        )
     }
 
     /// `d((B(q) v + Phi_t) / gamma')/dq` of the velocity-level rows: for row `r`,
     /// `v^T dB_r^T/dq` (the joint's `K_c` with the unit multiplier on that row) plus
     /// `dPhi_t/dq = dB_r/dt` (nonzero for a driven angle).
-    fn velocity_rows_configuration(&self, nodes: &[NodeState], end: &State, f_q: &mut Triplets) {
+    fn velocity_rows_configuration(
+        &self,
+        nodes: &[NodeState],
+        end: &State,
+        pattern: &JacobianPattern,
+        f_q: &mut [f64],
+    ) {
         let layout = self.layout;
         let ground = NodeState::ground(Default::default());
         for (j, joint) in self.model.joints.iter().enumerate() {
@@ -717,7 +844,8 @@ impl<'a> StepFunction<'a> {
                 for (ka, n) in slots.iter().enumerate() {
                     if let Some(n) = n {
                         for c in 0..6 {
-                            f_q.push((layout.zeta(k), 6 * n.0 + c, row[6 * ka + c]));
+                            let at = pattern.position((layout.zeta(k), 6 * n.0 + c));
+                            f_q[at] += row[6 * ka + c];
                         }
                     }
                 }
@@ -770,38 +898,52 @@ impl<'a> StepFunction<'a> {
     /// The exact Jacobian `dR/dx` at `x`, built fresh (no regularization):
     /// `[F_q T + gamma' F_v + beta' F_vd | F_mu | F_q T B(q_n)^T]`.
     pub fn jacobian(&self, x: &[f64], data: &mut crate::Data) -> Triplets {
-        let p = self.partials(x, data);
-        let layout = self.layout;
-        let mut out = Triplets::new();
-        for &(i, j, v) in &p.f_q {
-            let (n, c) = (j / 6, j % 6);
-            for k in 0..6 {
-                let fqt = v * p.t[n][(c, k)];
-                out.push((i, 6 * n + k, fqt));
-                for &(row, slot) in &layout.node_rows[n] {
-                    if layout.stabilized {
-                        let z = layout.zeta(layout.row_unknown[row].expect("active row"));
-                        out.push((i, z, fqt * self.b_start[row][6 * slot + k]));
-                    }
-                }
-            }
-        }
-        out.extend(p.f_v.iter().map(|&(i, j, v)| (i, j, v * self.step.gp)));
-        out.extend(p.f_vd.iter().map(|&(i, j, v)| (i, j, v * self.step.bp)));
-        out.extend(p.f_mu.iter().copied());
-        out.extend(p.f_x.iter().copied());
-        out.extend(p.f_xd.iter().map(|&(i, j, v)| (i, j, v * self.step.cx)));
-        out
+        let (pattern, values) = self.jacobian_values(x, data);
+        pattern
+            .positions
+            .iter()
+            .zip(&values)
+            .map(|(&(i, j), &v)| (i, j, v))
+            .collect()
     }
 
-    /// The inputs of [`crate::parameter_derivatives`] at the end of the step: node
-    /// kinematics (`T = I`) and the end state.
-    fn parameter_point(&self, x: &[f64]) -> (State, Vec<NodeState>) {
-        let (end, mut nodes, _) = self.end_nodes(x);
-        for n in &mut nodes {
-            n.t = Mat6::identity();
+    /// The exact Jacobian `dR/dx` at `x` as values on the positions of the layout's
+    /// [`JacobianPattern`] (the same positions at every step of a layout).
+    pub fn jacobian_values(
+        &self,
+        x: &[f64],
+        data: &mut crate::Data,
+    ) -> (Arc<JacobianPattern>, Vec<f64>) {
+        let p = self.partials(x, data);
+        let pattern = &p.pattern;
+        let step = &self.step;
+        let mut out = vec![0.0; pattern.positions.len()];
+        for (k, v) in out.iter_mut().enumerate() {
+            *v = p.f_v[k] * step.gp + p.f_vd[k] * step.bp + p.f_mu[k];
         }
-        (end, nodes)
+        if self.layout.n_states > 0 {
+            for (k, v) in out.iter_mut().enumerate() {
+                *v += p.f_x[k] + p.f_xd[k] * step.cx;
+            }
+        }
+        // F_q T, node block by node block of each row: (F_q T)_k = sum_c F_q,c T(c, k).
+        let mut fqt = Vec::with_capacity(pattern.blocks.len());
+        for &(k, n) in &pattern.blocks {
+            let row = p.t[n].transpose() * Vec6::from_column_slice(&p.f_q[k..k + 6]);
+            for c in 0..6 {
+                out[k + c] += row[c];
+            }
+            fqt.push(row);
+        }
+        // Stabilized: F_q T B(q_n)^T on the zeta columns.
+        let mut block = 0;
+        for &(k, row, slot, at) in &pattern.zeta {
+            while pattern.blocks[block].0 != k {
+                block += 1;
+            }
+            out[at] += fqt[block].dot(&self.b_start[row].fixed_rows::<6>(6 * slot));
+        }
+        (Arc::clone(pattern), out)
     }
 
     /// `alpha dD/dp` of the nodal damping `alpha D v` (pseudo-dynamic statics; none without
@@ -867,8 +1009,9 @@ impl<'a> StepFunction<'a> {
         use crate::parameter_derivatives::{residual_derivative, Columns};
         let layout = self.layout;
         let (nd, na, so) = (layout.n_dofs, layout.n_active, layout.state_offset());
-        let (end, nodes) = self.parameter_point(x);
-        let point = self.derivative_point(&end, &nodes);
+        let partials = self.partials(x, data);
+        let (end, nodes) = (&partials.end, &partials.nodes);
+        let point = self.derivative_point(end, nodes);
         let mut dr = vec![0.0; nd];
         let mut dphi = vec![0.0; layout.n_rows];
         let mut dpsi = vec![0.0; if layout.stabilized { layout.n_rows } else { 0 }];
@@ -906,7 +1049,7 @@ impl<'a> StepFunction<'a> {
         }
         if let Some(dtotal) = self.stabilization_parameter_move(x, params, dp) {
             let p = self.partials(x, data);
-            for &(i, j, v) in &p.f_q {
+            for (i, j, v) in p.entries(&p.f_q) {
                 let (n, c) = (j / 6, j % 6);
                 let moved = p.t[n]
                     .row(c)
@@ -927,13 +1070,28 @@ impl<'a> StepFunction<'a> {
         w: &[f64],
         data: &mut crate::Data,
     ) -> Vec<f64> {
+        let ids: Vec<_> = params.ids().collect();
+        self.parameter_vjp_for(x, params, &ids, w, data)
+    }
+
+    /// [`StepFunction::parameter_vjp`] for the parameters `ids` only (the other entries 0):
+    /// what an adjoint with a few design parameters needs.
+    pub fn parameter_vjp_for(
+        &self,
+        x: &[f64],
+        params: &crate::model::parameters::Parameters,
+        ids: &[crate::model::ParamId],
+        w: &[f64],
+        data: &mut crate::Data,
+    ) -> Vec<f64> {
         use crate::parameter_derivatives::{
-            constraint_force_derivative, residual_derivative_transpose, Weights,
+            constraint_force_derivative, residual_derivative_transpose_for, Weights,
         };
         let layout = self.layout;
         let (nd, na) = (layout.n_dofs, layout.n_active);
-        let (end, nodes) = self.parameter_point(x);
-        let point = self.derivative_point(&end, &nodes);
+        let partials = self.partials(x, data);
+        let (end, nodes) = (&partials.end, &partials.nodes);
+        let point = self.derivative_point(end, nodes);
         let w_r: Vec<f64> = w[..nd].iter().map(|v| v * self.step.scale).collect();
         let w_e: Vec<f64> = w[layout.block(Block::States)]
             .iter()
@@ -954,36 +1112,37 @@ impl<'a> StepFunction<'a> {
             psi: &w_psi,
             e: &w_e,
         };
-        residual_derivative_transpose(self.model, params, &point, weights, &mut grad);
+        residual_derivative_transpose_for(self.model, params, ids, &point, weights, &mut grad);
         if self.step.nodal_damping > 0.0 {
-            for (k, id) in params.ids().enumerate() {
+            for &id in ids {
                 for (node, dd) in self.nodal_damping_derivative(params, id) {
                     let damping = dd.component_mul(&end.v[node.0]);
                     let w_node = &w_r[6 * node.0..6 * node.0 + 6];
-                    grad[k] += damping.iter().zip(w_node).map(|(a, b)| a * b).sum::<f64>();
+                    grad[id.0 as usize] +=
+                        damping.iter().zip(w_node).map(|(a, b)| a * b).sum::<f64>();
                 }
             }
         }
         if layout.stabilized {
             // u = (F_q T)^T w, then u . d(B(q_n)^T zeta)/dp for the joint parameters.
-            let p = self.partials(x, data);
             let mut g = vec![0.0; nd];
-            for &(i, j, v) in &p.f_q {
+            for (i, j, v) in partials.entries(&partials.f_q) {
                 g[j] += v * w[i];
             }
             let u: Vec<f64> = (0..nd / 6)
                 .flat_map(|n| {
-                    let un = p.t[n].transpose() * Vec6::from_column_slice(&g[6 * n..6 * n + 6]);
+                    let t = partials.t[n].transpose();
+                    let un = t * Vec6::from_column_slice(&g[6 * n..6 * n + 6]);
                     un.iter().copied().collect::<Vec<_>>()
                 })
                 .collect();
             let zeta = self.zeta_rows(x);
             let mut dforce = vec![0.0; nd];
-            for (k, id) in params.ids().enumerate() {
+            for &id in ids {
                 let model = self.model;
                 let (start_nodes, t) = (&self.start_nodes, self.start.t);
                 constraint_force_derivative(model, params, id, start_nodes, t, &zeta, &mut dforce);
-                grad[k] += u.iter().zip(&dforce).map(|(a, b)| a * b).sum::<f64>();
+                grad[id.0 as usize] += u.iter().zip(&dforce).map(|(a, b)| a * b).sum::<f64>();
             }
         }
         grad
@@ -1018,17 +1177,17 @@ impl<'a> StepFunction<'a> {
             .collect();
         let mut out = vec![0.0; self.layout.n_unknowns()];
         for (m, d) in [(&p.f_q, &w), (&p.f_v, &dv), (&p.f_vd, &dvd)] {
-            for &(i, j, v) in m {
+            for (i, j, v) in p.entries(m) {
                 out[i] += v * d[j / 6][j % 6];
             }
         }
         // States: x_{n+1} = x_n + dx; xdot_{n+1} = d_w w_n + d_xd xdot_n at fixed dx.
         let (d_w, d_xd) = self.state_start_coefficients();
         let so = self.layout.state_offset();
-        for &(i, j, v) in &p.f_x {
+        for (i, j, v) in p.entries(&p.f_x) {
             out[i] += v * ds.x[j - so];
         }
-        for &(i, j, v) in &p.f_xd {
+        for (i, j, v) in p.entries(&p.f_xd) {
             out[i] += v * (d_w * ds.w[j - so] + d_xd * ds.xdot[j - so]);
         }
         out
@@ -1049,9 +1208,9 @@ impl<'a> StepFunction<'a> {
         let p = self.partials(x, data);
         let [c1, c2, c3, c4, c5] = self.start_coefficients();
         let n = self.start.q.len();
-        let transpose = |m: &Triplets| {
+        let transpose = |m: &[f64]| {
             let mut g = vec![Vec6::zeros(); n];
-            for &(i, j, v) in m {
+            for (i, j, v) in p.entries(m) {
                 g[j / 6][j % 6] += v * w[i];
             }
             g
@@ -1066,10 +1225,10 @@ impl<'a> StepFunction<'a> {
         let so = self.layout.state_offset();
         let (d_w, d_xd) = self.state_start_coefficients();
         let (mut gx, mut gxd) = (vec![0.0; ns], vec![0.0; ns]);
-        for &(i, j, v) in &p.f_x {
+        for (i, j, v) in p.entries(&p.f_x) {
             gx[j - so] += v * w[i];
         }
-        for &(i, j, v) in &p.f_xd {
+        for (i, j, v) in p.entries(&p.f_xd) {
             gxd[j - so] += v * w[i];
         }
         StateTangent {
@@ -1198,13 +1357,16 @@ impl<'a> StepFunction<'a> {
 
     /// The transpose of [`StepFunction::end_jvp`]: for a cotangent `bar` of `s_{n+1}`, the
     /// cotangents of the unknowns (`n_unknowns`), of the start `s_n`, and, when `params` is
-    /// given, of the parameters (the stabilized form's `d(B(q_n; p)^T zeta)/dp`; empty
-    /// otherwise).
+    /// given with the ids wanted, of those parameters (the stabilized form's
+    /// `d(B(q_n; p)^T zeta)/dp`; one entry per parameter of the registry, or empty).
     pub fn end_vjp(
         &self,
         x: &[f64],
         bar: &StateTangent,
-        params: Option<&crate::model::parameters::Parameters>,
+        params: Option<(
+            &crate::model::parameters::Parameters,
+            &[crate::model::ParamId],
+        )>,
         data: &mut crate::Data,
     ) -> (Vec<f64>, StateTangent, Vec<f64>) {
         let p = self.partials(x, data);
@@ -1242,10 +1404,11 @@ impl<'a> StepFunction<'a> {
             for (i, j, v) in self.start_constraint_stiffness(x) {
                 start.q[j / 6][j % 6] += v * tbar[i];
             }
-            if let Some(params) = params {
+            if let Some((params, ids)) = params {
                 pbar = vec![0.0; params.len()];
                 let mut unit = vec![0.0; params.len()];
-                for (k, id) in params.ids().enumerate() {
+                for &id in ids {
+                    let k = id.0 as usize;
                     if !matches!(params.kind(id), crate::model::ParamKind::Joint(..)) {
                         continue;
                     }
