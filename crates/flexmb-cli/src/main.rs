@@ -422,11 +422,6 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
             "a sensitivity analysis needs at least one [[design_parameter]] and one [[criterion]]",
         );
     }
-    let Some(settings) = file.analysis.dynamic() else {
-        return invalid(
-            "the sensitivity of a static analysis is not available yet: give a dynamic analysis",
-        );
-    };
     let fd_step = options.fd_step.unwrap_or(setup.fd_step);
     if !(fd_step.is_finite() && fd_step > 0.0 && fd_step <= 0.1) {
         tell(format_args!(
@@ -440,7 +435,10 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         Some(_) => Method::Adjoint,
         None => setup.method,
     };
-    let mut problem = setup.problem(std::sync::Arc::new(file.model.clone()), *settings);
+    let mut problem = setup.problem(
+        std::sync::Arc::new(file.model.clone()),
+        file.analysis.clone(),
+    );
     if let Some(m) = options.memory_mb {
         if !(m.is_finite() && m >= 1.0) {
             tell(format_args!(

@@ -210,3 +210,26 @@ fn a_model_without_criteria_or_with_a_bad_one_is_refused() {
         "{stderr}"
     );
 }
+
+#[test]
+fn static_bend_and_lee_frame_gradients_agree() {
+    // The 45-degree bend's tip at P = 600 with respect to EI2, EI3, GJ and the load (load
+    // control), Lee's frame's loaded point at P = 15 kN with respect to EA and EI3 (the final
+    // point of an arc-length run). Observed: direct-adjoint 1e-12 or less, adjoint-fd below
+    // 1e-7 (entries above 1e-6 of each criterion's largest gradient).
+    let tight = ["solver.rtol=1e-12"];
+    agree(
+        "examples/bend_45_sensitivity.toml",
+        "bend",
+        &tight,
+        1e-8,
+        1e-5,
+    );
+    agree(
+        "examples/lee_frame_sensitivity.toml",
+        "lee",
+        &tight,
+        1e-8,
+        1e-5,
+    );
+}

@@ -44,7 +44,6 @@ fn problem(file: &str, set: &[&str], expression: &str, prefix: &str, n: usize) -
         .join(file);
     let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
     let f = read_model_file(&path, &set).expect("model");
-    let settings = *f.analysis.dynamic().expect("dynamic");
     let model = Arc::new(f.model);
     let params = Parameters::new(&model);
     let design: Vec<_> = params
@@ -56,7 +55,7 @@ fn problem(file: &str, set: &[&str], expression: &str, prefix: &str, n: usize) -
     let c =
         Criterion::new(&model, &[], "J", CriterionKind::Integral, expression).expect("criterion");
     let criteria = CriteriaSet::new(&model, Vec::new(), vec![c]);
-    Problem::new(model, settings, design, criteria)
+    Problem::new(model, f.analysis, design, criteria)
 }
 
 /// Seconds of the fastest of `runs` calls of `f`.

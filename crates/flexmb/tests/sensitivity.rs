@@ -19,7 +19,6 @@ fn problem(
         .join(file);
     let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
     let f = read_model_file(&path, &set).expect("model");
-    let settings = *f.analysis.dynamic().expect("dynamic");
     let model = Arc::new(f.model);
     let params = flexmb::model::Parameters::new(&model);
     let design = design
@@ -31,7 +30,7 @@ fn problem(
         .map(|(n, k, t)| Criterion::new(&model, &[], n, *k, t).expect("criterion"))
         .collect();
     let criteria = CriteriaSet::new(&model, Vec::new(), criteria);
-    Problem::new(model, settings, design, criteria)
+    Problem::new(model, f.analysis, design, criteria)
 }
 
 /// Largest difference of two gradient tables relative to the largest gradient of each
@@ -98,7 +97,7 @@ fn stabilized_index_2_step() {
             ],
         );
         assert!(
-            p.settings.stabilized(),
+            p.dynamic().unwrap().stabilized(),
             "rho_inf = 1 is the stabilized form"
         );
         agree(&format!("stabilized top {group}"), &p, 1e-9, 1e-5);
@@ -216,7 +215,8 @@ fn acceleration_sensors_are_the_rates_of_the_velocity_sensors() {
         &[],
         &[],
     );
-    let mut sim = flexmb::Simulation::new(Arc::clone(&p.model), p.settings).expect("sim");
+    let mut sim =
+        flexmb::Simulation::new(Arc::clone(&p.model), *p.dynamic().unwrap()).expect("sim");
     let k = |name: &str| p.model.sensors.iter().position(|s| s.name == name).unwrap();
     let (a, v, alpha, om) = (k("acc_y"), k("vel_y"), k("alpha_z"), k("omega_z"));
     let mut rows: Vec<(f64, Vec<f64>)> = Vec::new();

@@ -106,7 +106,7 @@ impl Backward<'_> {
     /// Step `n` backward: `sbar_n` to `sbar_{n-1}`.
     fn step(&mut self, step: &TrajectoryStep) -> Result<(), String> {
         let p = self.problem;
-        let settings = &p.settings;
+        let settings = p.dynamic().map_err(|e| e.to_string())?;
         let f = StepFunction::new(&p.model, self.layout, &step.start, settings, step.h);
         let x = &step.unknowns;
         let (pattern, values) = f.jacobian_values(x, &mut self.data);
@@ -145,7 +145,7 @@ pub fn adjoint(
 ) -> Result<Gradients, SensitivityError> {
     let (mut sim, tangents) = super::start(problem)?;
     let layout = sim.data.layout.clone();
-    let settings = &problem.settings;
+    let settings = problem.dynamic()?;
     // Every step kept if the run's estimated steps fit in the budget, else checkpoints.
     let state = state_bytes(&sim.state);
     let step_bytes = 2 * state + 8 * layout.n_unknowns() + 64;

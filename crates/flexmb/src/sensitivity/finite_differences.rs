@@ -27,9 +27,14 @@ impl Observer for Record<'_> {
     }
 }
 
-/// The criteria of `problem` (one run).
+/// The criteria of `problem` (one run) and its steps.
 pub fn criteria_values(problem: &Problem) -> Result<(Vec<f64>, usize), SensitivityError> {
-    let mut sim = crate::Simulation::new(std::sync::Arc::clone(&problem.model), problem.settings)?;
+    if let crate::input::Analysis::Static(settings) = &problem.analysis {
+        let (statics, history) = super::statics::solve(problem, settings)?;
+        return Ok((problem.criteria.values(&history), statics.stats.steps));
+    }
+    let settings = *problem.dynamic()?;
+    let mut sim = crate::Simulation::new(std::sync::Arc::clone(&problem.model), settings)?;
     let mut rec = Record {
         problem,
         history: History::default(),

@@ -57,12 +57,14 @@ pub mod sensor_derivative;
 mod adjoint;
 mod direct;
 mod finite_differences;
+mod statics;
 
 pub use adjoint::adjoint;
 pub use criteria::{CriteriaSet, Criterion, CriterionKind, Reference};
 pub use direct::direct;
 pub use finite_differences::{criteria_values, finite_differences};
 
+use crate::input::Analysis;
 use crate::model::{Model, ParamId, Parameters};
 use crate::solve::step::StateTangent;
 use crate::solve::DynamicSettings;
@@ -106,14 +108,13 @@ pub struct Setup {
 }
 
 impl Setup {
-    /// The problem of this setup on `model` (the model of the same file) run with
-    /// `settings`.
-    pub fn problem(&self, model: Arc<Model>, settings: DynamicSettings) -> Problem {
+    /// The problem of this setup on `model` (the model of the same file) and its analysis.
+    pub fn problem(&self, model: Arc<Model>, analysis: Analysis) -> Problem {
         let design = self.design.iter().map(|d| d.id).collect();
         Problem {
             memory_budget: self.memory_budget,
             scales: self.design.iter().map(|d| d.scale).collect(),
-            ..Problem::new(model, settings, design, self.criteria.clone())
+            ..Problem::new(model, analysis, design, self.criteria.clone())
         }
     }
 }
@@ -126,10 +127,11 @@ pub fn gradients(
     fd_step: f64,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Gradients, SensitivityError> {
-    match method {
-        Method::Direct => direct(problem),
-        Method::Adjoint => adjoint(problem, progress),
-        Method::Fd => finite_differences(problem, fd_step),
+    match (method, &problem.analysis) {
+        (Method::Fd, _) => finite_differences(problem, fd_step),
+        (method, Analysis::Static(_)) => statics::gradients(problem, method),
+        (Method::Direct, _) => direct(problem),
+        (Method::Adjoint, _) => adjoint(problem, progress),
     }
 }
 
@@ -153,7 +155,8 @@ pub enum SensitivityError {
 #[derive(Clone)]
 pub struct Problem {
     pub model: Arc<Model>,
-    pub settings: DynamicSettings,
+    /// The analysis differentiated: a dynamic run, or a static one (its final point).
+    pub analysis: Analysis,
     /// The registry of `model`'s parameters.
     pub params: Parameters,
     /// The parameters differentiated with respect to.
@@ -172,20 +175,29 @@ pub const DEFAULT_MEMORY_BUDGET: usize = 256 << 20;
 impl Problem {
     pub fn new(
         model: Arc<Model>,
-        settings: DynamicSettings,
+        analysis: Analysis,
         design: Vec<ParamId>,
         criteria: CriteriaSet,
     ) -> Self {
         let params = Parameters::new(&model);
         Self {
             model,
-            settings,
+            analysis,
             params,
             scales: vec![1.0; design.len()],
             design,
             criteria,
             memory_budget: DEFAULT_MEMORY_BUDGET,
         }
+    }
+
+    /// The settings of a dynamic analysis (an error for a static one).
+    pub fn dynamic(&self) -> Result<&DynamicSettings, SensitivityError> {
+        self.analysis.dynamic().ok_or_else(|| {
+            SensitivityError::Unsupported(
+                "this method differentiates a dynamic analysis; a static one goes through sensitivity::gradients".into(),
+            )
+        })
     }
 
     /// The design parameters' current values.
@@ -264,7 +276,8 @@ fn pick(index: &[Option<usize>], full: &[f64], out: &mut [f64], sign: f64) {
 
 /// The simulation of a problem and its consistent start, with the tangents `ds_0/dp_k`.
 fn start(problem: &Problem) -> Result<(crate::Simulation, Vec<StateTangent>), SensitivityError> {
-    let sim = crate::Simulation::new(Arc::clone(&problem.model), problem.settings)?;
+    let settings = *problem.dynamic()?;
+    let sim = crate::Simulation::new(Arc::clone(&problem.model), settings)?;
     let redundant = sim.data.layout.redundant_rows();
     let tangents = initial::initial_tangents(
         &problem.model,
@@ -272,7 +285,7 @@ fn start(problem: &Problem) -> Result<(crate::Simulation, Vec<StateTangent>), Se
         &problem.design,
         &sim.state,
         &redundant,
-        problem.settings.load_factor_at(0.0),
+        settings.load_factor_at(0.0),
     )?;
     Ok((sim, tangents))
 }

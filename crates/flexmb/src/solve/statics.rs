@@ -278,7 +278,7 @@ struct ArcLength {
 
 /// The scaling of statics: the iteration matrix `K_t T` with equilibrium rows times
 /// `row_scale`, loads and gravity times the load factor.
-fn scaling(row_scale: f64, load_factor: f64) -> Scaling {
+pub(crate) fn scaling(row_scale: f64, load_factor: f64) -> Scaling {
     Scaling {
         row_scale,
         coef: Coefficients {
