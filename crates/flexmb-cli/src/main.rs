@@ -7,6 +7,7 @@
 //! flexmb check MODEL.toml [--set ...]
 //! flexmb sensitivity MODEL.toml --out DIR [--method direct|adjoint|fd] [--fd-step S]
 //!                               [--check] [--memory-mb M] [--set ...] [--quiet]
+//! flexmb optimize MODEL.toml --out DIR [--criterion NAME] [--iterations N] [--set ...]
 //! ```
 //!
 //! Contract (README.md, "The `flexmb` command" and "Outputs"): one exit code per class of
@@ -121,6 +122,22 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Lower one [[criterion]] of the model over its [[design_parameter]] items that have
+    /// both bounds (L-BFGS on the adjoint gradients); write optimization.csv (one row per
+    /// iteration) and optimization.json into DIR.
+    Optimize {
+        model: PathBuf,
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// The criterion to lower (default: the first).
+        #[arg(long, value_name = "NAME")]
+        criterion: Option<String>,
+        /// Most L-BFGS iterations.
+        #[arg(long, default_value_t = 20, value_name = "N")]
+        iterations: u64,
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
     /// Read and check a model file (syntax, references, physics, initial conditions).
     Check {
         model: PathBuf,
@@ -163,6 +180,13 @@ fn main() {
                 }
             },
             Command::Check { model, set } => check(&model, &set),
+            Command::Optimize {
+                model,
+                out,
+                criterion,
+                iterations,
+                set,
+            } => optimize(&model, &out, &set, criterion.as_deref(), iterations),
             Command::Sensitivity {
                 model,
                 out,
@@ -514,6 +538,124 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         method,
         g.stats.forward_runs,
         g.stats.steps,
+        out.display()
+    ));
+    exit::OK
+}
+
+/// `flexmb optimize`: lowers a criterion over the bounded design parameters.
+fn optimize(
+    model: &Path,
+    out: &Path,
+    set: &[String],
+    criterion: Option<&str>,
+    iterations: u64,
+) -> i32 {
+    use flexmb::sensitivity::optimize::{optimize, Evaluator};
+    let dir = match OutputDir::prepare(out) {
+        Ok(dir) => dir,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::OUTPUT_FAILED;
+        }
+    };
+    let file = match flexmb::input::read_model_file(model, set) {
+        Ok(file) => file,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::INVALID_MODEL;
+        }
+    };
+    let invalid = |m: String| {
+        tell(format_args!("error: {}: {m}", model.display()));
+        exit::INVALID_MODEL
+    };
+    let Some(setup) = &file.sensitivity else {
+        return invalid("the model declares no [[design_parameter]] and no [[criterion]]".into());
+    };
+    if file.analysis.dynamic().is_none() {
+        return invalid("optimize runs a dynamic analysis".into());
+    }
+    let names: Vec<&str> = setup
+        .criteria
+        .criteria
+        .iter()
+        .map(|c| c.name.as_str())
+        .collect();
+    let index = match criterion {
+        None if !names.is_empty() => 0,
+        None => return invalid("the model declares no [[criterion]]".into()),
+        Some(name) => match names.iter().position(|n| *n == name) {
+            Some(i) => i,
+            None => {
+                return invalid(format!(
+                    "no criterion '{name}' (criteria: {})",
+                    names.join(", ")
+                ))
+            }
+        },
+    };
+    let problem = setup.problem(
+        std::sync::Arc::new(file.model.clone()),
+        file.analysis.clone(),
+    );
+    let mut evaluator = Evaluator::new(problem);
+    let started = std::time::Instant::now();
+    let mut report = |it: &flexmb::sensitivity::optimize::Iteration| {
+        let values: Vec<String> = it.values.iter().map(|v| format!("{v:.6e}")).collect();
+        say(format_args!(
+            "iteration {:>3}: {} = {:.10e} at [{}]",
+            it.iteration,
+            names[index],
+            it.criterion,
+            values.join(", ")
+        ));
+    };
+    let optimum = match optimize(
+        &mut evaluator,
+        &setup.design,
+        index,
+        iterations,
+        &mut report,
+    ) {
+        Ok(o) => o,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::ANALYSIS_FAILED;
+        }
+    };
+    let csv = flexmb::sensitivity::report::optimization_csv(&setup.design, &optimum);
+    let json = serde_json::json!({
+        "criterion": names[index],
+        "parameters": setup.design.iter().map(|d| d.path.clone()).collect::<Vec<_>>(),
+        "status": optimum.status,
+        "runs": optimum.runs,
+        "wall_seconds": started.elapsed().as_secs_f64(),
+        "first": optimum.history.first(),
+        "last": optimum.history.last(),
+    });
+    let mut text = serde_json::to_string_pretty(&json).expect("numbers and strings");
+    text.push('\n');
+    let written = dir
+        .write_file(flexmb::output::OPTIMIZATION_CSV_FILE, &csv)
+        .and_then(|()| dir.write_file(flexmb::output::OPTIMIZATION_JSON_FILE, &text));
+    if let Err(e) = written {
+        tell(format_args!("error: {e}"));
+        return exit::OUTPUT_FAILED;
+    }
+    let (first, last) = (
+        &optimum.history[0],
+        &optimum.history[optimum.history.len() - 1],
+    );
+    say(format_args!(
+        "{}: {:.6e} -> {:.6e} ({:.1} %) in {} iterations, {} runs ({}); history in {}",
+        names[index],
+        first.criterion,
+        last.criterion,
+        100.0 * (last.criterion - first.criterion) / first.criterion.abs().max(f64::MIN_POSITIVE),
+        last.iteration,
+        optimum.runs,
+        optimum.status,
         out.display()
     ));
     exit::OK

@@ -233,3 +233,57 @@ fn static_bend_and_lee_frame_gradients_agree() {
         1e-5,
     );
 }
+
+#[test]
+fn half_car_comfort_gradients_agree() {
+    // The integral of the squared vertical acceleration (chassis and driver's seat) with
+    // respect to the suspension's damping and stiffness; the road bump is a raised cosine
+    // met by the rear wheel a wheelbase later (a delayed function).
+    let set = [TIGHT[0], TIGHT[1], "solver.t_end=0.6"];
+    agree("examples/half_car.toml", "half-car", &set, 1e-8, 1e-5);
+}
+
+#[test]
+fn optimize_lowers_the_half_car_comfort_criterion() {
+    let out = out_dir("optimize");
+    let output = flexmb()
+        .args(["optimize", repo("examples/half_car.toml").to_str().unwrap()])
+        .arg("--out")
+        .arg(&out)
+        .args(["--iterations", "10", "--set", "solver.t_end=0.8"])
+        .output()
+        .expect("runs");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let rows = common::rows(&out.join("optimization.csv"));
+    let column = |r: &Vec<String>, k: usize| r[k].parse::<f64>().unwrap();
+    let (first, last) = (&rows[0], &rows[rows.len() - 1]);
+    // iteration, criterion, 4 parameters, 4 gradients
+    assert_eq!(first.len(), 10);
+    let (f0, f1) = (column(first, 1), column(last, 1));
+    assert!(f1 < 0.8 * f0, "the criterion went from {f0} to {f1}");
+    for r in rows.windows(2) {
+        assert!(
+            column(&r[1], 1) < column(&r[0], 1),
+            "each row improves: {r:?}"
+        );
+    }
+    // The free parameters (the dampers, bounded) moved and stayed in their bounds; the
+    // springs (no bounds) were held.
+    for k in [2, 3] {
+        let c = column(last, k);
+        assert!((100.0..=20000.0).contains(&c) && c != 2000.0, "damper {c}");
+    }
+    assert_eq!(column(last, 4), 30000.0);
+    // At the optimum the dampers' gradient is small against the start's.
+    let g0 = column(first, 6).hypot(column(first, 7));
+    let g1 = column(last, 6).hypot(column(last, 7));
+    assert!(g1 < 1e-2 * g0, "gradient {g0:e} -> {g1:e}");
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("optimization.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["criterion"], "comfort");
+}

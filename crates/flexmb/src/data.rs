@@ -360,7 +360,7 @@ pub fn active_slots(slots: [Option<usize>; 2]) -> impl Iterator<Item = (usize, u
 
 /// Diagonal nodal masses: bodies (mass, and the mean principal inertia about the node) and
 /// the lumped halves of beam elements.
-fn nodal_mass(model: &Model) -> Vec<Vec6> {
+pub(crate) fn nodal_mass(model: &Model) -> Vec<Vec6> {
     let mut out = vec![Vec6::zeros(); model.nodes.len()];
     let mut add = |node: NodeId, m: f64, j: f64| {
         let v = &mut out[node.0];

@@ -38,7 +38,7 @@ pub const BEAMS_FILE: &str = "beams.csv";
 pub const CHECKPOINT_FILE: &str = "checkpoint.json";
 /// Every result file a run may write. A run removes all of them from its output directory
 /// when it starts (a resumed run keeps them and goes on writing).
-pub const RESULT_FILES: [&str; 8] = [
+pub const RESULT_FILES: [&str; 10] = [
     SUMMARY_FILE,
     SENSORS_FILE,
     NODES_FILE,
@@ -47,7 +47,13 @@ pub const RESULT_FILES: [&str; 8] = [
     GRADIENTS_JSON_FILE,
     GRADIENTS_CSV_FILE,
     GRADIENT_CHECK_FILE,
+    OPTIMIZATION_CSV_FILE,
+    OPTIMIZATION_JSON_FILE,
 ];
+/// `flexmb optimize`: one row per iteration, `iteration,criterion,<parameters>,<gradients>`.
+pub const OPTIMIZATION_CSV_FILE: &str = "optimization.csv";
+/// `flexmb optimize`: the criterion, the status, the runs, the first and last iterations.
+pub const OPTIMIZATION_JSON_FILE: &str = "optimization.json";
 /// The criteria and their gradients of `flexmb sensitivity` (JSON).
 pub const GRADIENTS_JSON_FILE: &str = "gradients.json";
 /// The same as CSV: `criterion,parameter,value,gradient,scaled_gradient,fd_step`.

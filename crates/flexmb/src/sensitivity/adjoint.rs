@@ -56,8 +56,8 @@ impl Observer for Forward<'_> {
 struct Backward<'a> {
     problem: &'a Problem,
     layout: &'a Layout,
-    data: Data,
-    matrix: StepMatrix,
+    data: &'a mut Data,
+    matrix: &'a mut StepMatrix,
     hs: Vec<f64>,
     history: &'a History,
     /// `sbar` per criterion.
@@ -109,7 +109,7 @@ impl Backward<'_> {
         let settings = p.dynamic().map_err(|e| e.to_string())?;
         let f = StepFunction::new(&p.model, self.layout, &step.start, settings, step.h);
         let x = &step.unknowns;
-        let (pattern, values) = f.jacobian_values(x, &mut self.data);
+        let (pattern, values) = f.jacobian_values(x, self.data);
         let t = step.end.t;
         self.matrix
             .factorize(&pattern, &values, &|| {
@@ -124,8 +124,8 @@ impl Backward<'_> {
                 &mut self.data,
             );
             self.matrix.solve_transpose(&mut mu);
-            start.add_scaled(-1.0, &f.start_vjp(x, &mu, &mut self.data));
-            let pr = f.parameter_vjp_for(x, &p.params, &p.design, &mu, &mut self.data);
+            start.add_scaled(-1.0, &f.start_vjp(x, &mu, self.data));
+            let pr = f.parameter_vjp_for(x, &p.params, &p.design, &mu, self.data);
             pick(&self.index, &pr, &mut self.pbars[c], -1.0);
             if !pe.is_empty() {
                 pick(&self.index, &pe, &mut self.pbars[c], 1.0);
@@ -137,10 +137,52 @@ impl Backward<'_> {
     }
 }
 
+/// What the adjoint keeps between calls on problems of one structure (an optimizer's
+/// iterations): the scratch data of the layout, with the step Jacobian's positions, and the
+/// factorization's symbolic analysis.
+#[derive(Default)]
+pub struct Workspace {
+    data: Option<Data>,
+    matrix: StepMatrix,
+}
+
+impl Workspace {
+    /// The scratch data for `layout` of `model`: the one kept if it has that layout.
+    fn data(
+        &mut self,
+        model: &crate::Model,
+        layout: &Layout,
+    ) -> Result<&mut Data, SensitivityError> {
+        let fits = self.data.as_ref().is_some_and(|d| {
+            d.layout.active_rows == layout.active_rows
+                && d.layout.stabilized == layout.stabilized
+                && d.layout.n_unknowns() == layout.n_unknowns()
+        });
+        if fits {
+            let data = self.data.as_mut().expect("kept");
+            // The nodal masses are the model's (its parameters may have moved).
+            data.nodal_mass = crate::data::nodal_mass(model);
+        } else {
+            self.data = Some(Data::new(model, layout.clone()).map_err(crate::SolveError::from)?);
+            self.matrix = StepMatrix::default();
+        }
+        Ok(self.data.as_mut().expect("set above"))
+    }
+}
+
 /// The criteria of `problem` and their gradients by the discrete adjoint. `progress` is
 /// called with `(steps done, steps)` during the backward sweep.
 pub fn adjoint(
     problem: &Problem,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Gradients, SensitivityError> {
+    adjoint_in(problem, &mut Workspace::default(), progress)
+}
+
+/// [`adjoint`] with the scratch of `workspace`, kept for the next call.
+pub fn adjoint_in(
+    problem: &Problem,
+    workspace: &mut Workspace,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Gradients, SensitivityError> {
     let (mut sim, tangents) = super::start(problem)?;
@@ -194,11 +236,13 @@ pub fn adjoint(
         ..Stats::default()
     };
     let n_c = problem.criteria.len();
+    workspace.data(&problem.model, &layout)?;
+    let Workspace { data, matrix } = workspace;
     let mut back = Backward {
         problem,
         layout: &layout,
-        data: Data::new(&problem.model, layout.clone()).map_err(crate::SolveError::from)?,
-        matrix: StepMatrix::default(),
+        data: data.as_mut().expect("prepared above"),
+        matrix,
         hs: history.steps(),
         history: &history,
         bars: vec![StateTangent::zeros_of(&layout); n_c],

@@ -51,6 +51,7 @@ pub mod criteria;
 pub mod expression;
 pub mod initial;
 pub mod matrix;
+pub mod optimize;
 pub mod report;
 pub mod sensor_derivative;
 
@@ -59,7 +60,7 @@ mod direct;
 mod finite_differences;
 mod statics;
 
-pub use adjoint::adjoint;
+pub use adjoint::{adjoint, adjoint_in, Workspace};
 pub use criteria::{CriteriaSet, Criterion, CriterionKind, Reference};
 pub use direct::direct;
 pub use finite_differences::{criteria_values, finite_differences};

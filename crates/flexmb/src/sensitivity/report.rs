@@ -138,3 +138,25 @@ pub fn check_csv(
     }
     (out, worst)
 }
+
+/// `optimization.csv`: `iteration,criterion,<path>...,d/d <path>...`, one row per iteration.
+pub fn optimization_csv(design: &[DesignParameter], optimum: &super::optimize::Optimum) -> String {
+    let mut out = String::from("iteration,criterion");
+    for d in design {
+        let _ = write!(out, ",{}", d.path);
+    }
+    for d in design {
+        let _ = write!(out, ",d/d {}", d.path);
+    }
+    out.push('\n');
+    for it in &optimum.history {
+        let _ = write!(out, "{},", it.iteration);
+        push_number(&mut out, it.criterion);
+        for x in it.values.iter().chain(&it.gradient) {
+            out.push(',');
+            push_number(&mut out, *x);
+        }
+        out.push('\n');
+    }
+    out
+}
