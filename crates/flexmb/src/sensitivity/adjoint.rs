@@ -117,12 +117,8 @@ impl Backward<'_> {
             })
             .map_err(|e| e.to_string())?;
         for c in 0..self.bars.len() {
-            let (mut mu, mut start, pe) = f.end_vjp(
-                x,
-                &self.bars[c],
-                Some((&p.params, &p.design)),
-                &mut self.data,
-            );
+            let (mut mu, mut start, pe) =
+                f.end_vjp(x, &self.bars[c], Some((&p.params, &p.design)), self.data);
             self.matrix.solve_transpose(&mut mu);
             start.add_scaled(-1.0, &f.start_vjp(x, &mu, self.data));
             let pr = f.parameter_vjp_for(x, &p.params, &p.design, &mu, self.data);

@@ -109,19 +109,23 @@ impl Variables {
     }
 }
 
+/// A point the optimizer tried: the criterion, the parameters' values, `df/dp`.
+type Tried = (f64, Vec<f64>, Vec<f64>);
+
 /// The cost of argmin: criterion `c` of the evaluator at `z`, both cost and gradient from
 /// one adjoint run (kept for the gradient call at the same point), every run recorded.
 struct Cost<'a> {
     evaluator: RefCell<&'a mut Evaluator>,
     variables: Variables,
     criterion: usize,
-    last: RefCell<Option<(Vec<f64>, f64, Vec<f64>)>>,
-    tried: RefCell<Vec<(f64, Vec<f64>, Vec<f64>)>>,
+    /// The last point asked for (`z`) and its cost and `df/dz`.
+    last: RefCell<Option<(Vec<f64>, Tried)>>,
+    tried: RefCell<Vec<Tried>>,
 }
 
 impl Cost<'_> {
     fn evaluate(&self, z: &[f64]) -> Result<(f64, Vec<f64>), Error> {
-        if let Some((at, f, g)) = &*self.last.borrow() {
+        if let Some((at, (f, _, g))) = &*self.last.borrow() {
             if at.as_slice() == z {
                 return Ok((*f, g.clone()));
             }
@@ -130,8 +134,8 @@ impl Cost<'_> {
         let (f, g) = self.evaluator.borrow_mut().criteria_and_gradients(&p)?;
         let (f, g) = (f[self.criterion], g[self.criterion].clone());
         let gz = self.variables.gradient(&p, &g);
-        self.tried.borrow_mut().push((f, p, g));
-        *self.last.borrow_mut() = Some((z.to_vec(), f, gz.clone()));
+        self.tried.borrow_mut().push((f, p.clone(), g));
+        *self.last.borrow_mut() = Some((z.to_vec(), (f, p, gz.clone())));
         Ok((f, gz))
     }
 }
