@@ -693,8 +693,8 @@ impl<'a> StepFunction<'a> {
         partials
     }
 
-    /// [`StepFunction::partials`], assembled: four assemblies of the iteration matrix with
-    /// one coefficient at a time (six with element states).
+    /// [`StepFunction::partials`], assembled: three assemblies of the iteration matrix with
+    /// one coefficient at a time (five with element states).
     fn compute_partials(&self, x: &[f64], data: &mut crate::Data) -> Partials {
         let (end, mut nodes, total) = self.end_nodes(x);
         let group = self.model.group;
@@ -710,22 +710,27 @@ impl<'a> StepFunction<'a> {
         let s = self.step.scale;
         let pattern = self.pattern(data);
         let mut sc = self.step.scaling(0.0);
+        // The entries of the last assembly where `keep`, on the step Jacobian's positions;
+        // `take` assembles with the coefficients `coef` first.
+        let select = |data: &crate::Data, keep: &dyn Fn(usize, usize) -> bool| {
+            let mut out = vec![0.0; pattern.positions.len()];
+            for ((&(i, j), &v), &k) in data
+                .pattern
+                .iter()
+                .zip(&data.values)
+                .zip(&pattern.of_pattern)
+            {
+                if keep(i, j) {
+                    out[k] += v;
+                }
+            }
+            out
+        };
         let mut take =
             |data: &mut crate::Data, coef: Coefficients, keep: &dyn Fn(usize, usize) -> bool| {
                 sc.coef = coef;
                 self.assemble(data, &nodes, &end, &sc, true);
-                let mut out = vec![0.0; pattern.positions.len()];
-                for ((&(i, j), &v), &k) in data
-                    .pattern
-                    .iter()
-                    .zip(&data.values)
-                    .zip(&pattern.of_pattern)
-                {
-                    if keep(i, j) {
-                        out[k] += v;
-                    }
-                }
-                out
+                select(data, keep)
             };
         let coef = |m, c, k| Coefficients {
             m,
@@ -736,13 +741,12 @@ impl<'a> StepFunction<'a> {
         };
         // The rows of the element states come after the velocity-level rows.
         let so = layout.state_offset();
-        // Position-level rows against the configuration: s (K_t + K_c) and B.
+        // Position-level rows against the configuration: s (K_t + K_c) and B; the
+        // multipliers' columns B^T of the same assembly (they carry no coefficient).
         let mut f_q = take(data, coef(0.0, 0.0, s), &|i, j| {
             j < nd && (i < nd + na || i >= so)
         });
-        let f_mu = take(data, coef(0.0, 0.0, 0.0), &|i, j| {
-            i < nd && (nd..nd + na).contains(&j)
-        });
+        let f_mu = select(data, &|i, j| i < nd && (nd..nd + na).contains(&j));
         // Velocities: s C_t (and the nodal damping) and, on the velocity-level rows,
         // B / gamma'.
         let mut f_v = take(data, coef(0.0, s, 0.0), &|i, j| {
