@@ -417,35 +417,46 @@ struct SensitivityOptions {
     quiet: bool,
 }
 
+/// The output directory of `sensitivity` or `optimize` and the model file, which must
+/// declare design parameters and criteria; the exit code of a failure, said.
+fn prepare_sensitivity(
+    model: &Path,
+    out: &Path,
+    set: &[String],
+) -> Result<(OutputDir, flexmb::input::ModelFile), i32> {
+    let dir = OutputDir::prepare(out).map_err(|e| {
+        tell(format_args!("error: {e}"));
+        exit::OUTPUT_FAILED
+    })?;
+    let file = flexmb::input::read_model_file(model, set).map_err(|e| {
+        tell(format_args!("error: {e}"));
+        exit::INVALID_MODEL
+    })?;
+    let missing = match &file.sensitivity {
+        None => Some("the model declares no [[design_parameter]] and no [[criterion]]: nothing to differentiate (docs/model-format.md, \"Sensitivity analysis\")"),
+        Some(s) if s.design.is_empty() || s.criteria.is_empty() => Some(
+            "a sensitivity analysis needs at least one [[design_parameter]] and one [[criterion]]",
+        ),
+        Some(_) => None,
+    };
+    if let Some(m) = missing {
+        tell(format_args!("error: {}: {m}", model.display()));
+        return Err(exit::INVALID_MODEL);
+    }
+    Ok((dir, file))
+}
+
 /// `flexmb sensitivity`: the gradients of the model's criteria.
 fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOptions) -> i32 {
     use flexmb::sensitivity::{self, report, Method};
-    let dir = match OutputDir::prepare(out) {
-        Ok(dir) => dir,
-        Err(e) => {
-            tell(format_args!("error: {e}"));
-            return exit::OUTPUT_FAILED;
-        }
+    let (dir, file) = match prepare_sensitivity(model, out, set) {
+        Ok(prepared) => prepared,
+        Err(code) => return code,
     };
-    let file = match flexmb::input::read_model_file(model, set) {
-        Ok(file) => file,
-        Err(e) => {
-            tell(format_args!("error: {e}"));
-            return exit::INVALID_MODEL;
-        }
-    };
-    let invalid = |m: &str| {
-        tell(format_args!("error: {}: {m}", model.display()));
-        exit::INVALID_MODEL
-    };
-    let Some(setup) = &file.sensitivity else {
-        return invalid("the model declares no [[design_parameter]] and no [[criterion]]: nothing to differentiate (docs/model-format.md, \"Sensitivity analysis\")");
-    };
-    if setup.design.is_empty() || setup.criteria.is_empty() {
-        return invalid(
-            "a sensitivity analysis needs at least one [[design_parameter]] and one [[criterion]]",
-        );
-    }
+    let setup = file
+        .sensitivity
+        .as_ref()
+        .expect("checked by prepare_sensitivity");
     let fd_step = options.fd_step.unwrap_or(setup.fd_step);
     if !(fd_step.is_finite() && fd_step > 0.0 && fd_step <= 0.1) {
         tell(format_args!(
@@ -552,26 +563,17 @@ fn optimize(
     iterations: u64,
 ) -> i32 {
     use flexmb::sensitivity::optimize::{optimize, Evaluator};
-    let dir = match OutputDir::prepare(out) {
-        Ok(dir) => dir,
-        Err(e) => {
-            tell(format_args!("error: {e}"));
-            return exit::OUTPUT_FAILED;
-        }
+    let (dir, file) = match prepare_sensitivity(model, out, set) {
+        Ok(prepared) => prepared,
+        Err(code) => return code,
     };
-    let file = match flexmb::input::read_model_file(model, set) {
-        Ok(file) => file,
-        Err(e) => {
-            tell(format_args!("error: {e}"));
-            return exit::INVALID_MODEL;
-        }
-    };
+    let setup = file
+        .sensitivity
+        .as_ref()
+        .expect("checked by prepare_sensitivity");
     let invalid = |m: String| {
         tell(format_args!("error: {}: {m}", model.display()));
         exit::INVALID_MODEL
-    };
-    let Some(setup) = &file.sensitivity else {
-        return invalid("the model declares no [[design_parameter]] and no [[criterion]]".into());
     };
     if file.analysis.dynamic().is_none() {
         return invalid("optimize runs a dynamic analysis".into());
@@ -583,8 +585,7 @@ fn optimize(
         .map(|c| c.name.as_str())
         .collect();
     let index = match criterion {
-        None if !names.is_empty() => 0,
-        None => return invalid("the model declares no [[criterion]]".into()),
+        None => 0,
         Some(name) => match names.iter().position(|n| *n == name) {
             Some(i) => i,
             None => {

@@ -13,6 +13,9 @@ use flexmb::{Simulation, State};
 use std::path::PathBuf;
 use std::time::Instant;
 
+mod common;
+use common::peak_memory_mb;
+
 const CASES: &[&str] = &[
     "heavy_top_se3",
     "heavy_top_r3so3",
@@ -31,20 +34,6 @@ fn example(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../../examples")
         .join(name)
-}
-
-/// Peak resident memory of this process [MB] (Linux).
-fn peak_memory_mb() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
-                l.split_whitespace()
-                    .nth(1)
-                    .map(|v| v.parse::<f64>().unwrap_or(0.0) / 1024.0)
-            })
-        })
-        .unwrap_or(f64::NAN)
 }
 
 struct Outcome {

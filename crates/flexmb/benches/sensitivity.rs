@@ -14,6 +14,9 @@ use flexmb::sensitivity::{self, CriteriaSet, Criterion, CriterionKind, Problem};
 use std::sync::Arc;
 use std::time::Instant;
 
+mod common;
+use common::peak_memory_mb;
+
 const CASES: &[&str] = &[
     "right_angle_cantilever",
     "chain_100",
@@ -21,20 +24,6 @@ const CASES: &[&str] = &[
     "memory_16",
     "memory_12",
 ];
-
-/// Peak resident memory of this process [MB] (Linux).
-fn peak_memory_mb() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
-                l.split_whitespace()
-                    .nth(1)
-                    .map(|v| v.parse::<f64>().unwrap_or(0.0) / 1024.0)
-            })
-        })
-        .unwrap_or(f64::NAN)
-}
 
 /// The example `file` with one criterion `expression` (integral) and the first `n` design
 /// parameters of `prefix` (paths starting with it, in registry order).

@@ -5,51 +5,11 @@ use super::criteria::{weight, History};
 use super::matrix::StepMatrix;
 use super::{pick, state_bytes, Gradients, Problem, SensitivityError, Stats};
 use crate::data::Layout;
-use crate::observe::{Observer, Observers, Sample, StepRecord};
+use crate::observe::Observers;
 use crate::solve::step::{StateTangent, StepFunction};
 use crate::solve::trajectory::{Trajectory, TrajectoryStep};
 use crate::state::State;
 use crate::{Data, Model};
-
-/// The forward run's record: the criteria's sensor values at every point and, when they fit
-/// in the memory budget, every step.
-struct Forward<'a> {
-    problem: &'a Problem,
-    layout: &'a Layout,
-    history: History,
-    /// Every step, when kept.
-    steps: Option<Vec<TrajectoryStep>>,
-    count: usize,
-}
-
-impl Observer for Forward<'_> {
-    fn output(&mut self, _: &Sample) -> Result<(), String> {
-        Ok(())
-    }
-    fn wants_steps(&self) -> bool {
-        true
-    }
-    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
-        let p = self.problem;
-        if record.redundant_rows != self.layout.redundant_rows().as_slice() {
-            return Err(super::reselected(record.start.t));
-        }
-        p.criteria
-            .record(&p.model, self.layout, record.end, &mut self.history);
-        if let Some(steps) = &mut self.steps {
-            steps.push(TrajectoryStep {
-                index: record.index,
-                h: record.info.h,
-                start: record.start.clone(),
-                unknowns: record.unknowns.to_vec(),
-                redundant_rows: record.redundant_rows.to_vec(),
-                end: record.end.clone(),
-            });
-        }
-        self.count += 1;
-        Ok(())
-    }
-}
 
 /// The backward sweep's state: one cotangent of the state and of the parameters per
 /// criterion.
@@ -210,7 +170,7 @@ pub fn adjoint_in(
             .unwrap_or(best)
     };
     let mut trajectory = (!keep_all).then(|| Trajectory::new(&sim, every));
-    let mut forward = Forward {
+    let mut forward = super::Recorder {
         problem,
         layout: &layout,
         history: History::default(),

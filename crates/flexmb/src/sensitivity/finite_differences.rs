@@ -3,29 +3,6 @@
 
 use super::criteria::History;
 use super::{Gradients, Problem, SensitivityError, Stats};
-use crate::observe::{Observer, Sample, StepRecord};
-
-/// Records the criteria's sensor values at every point of a run.
-struct Record<'a> {
-    problem: &'a Problem,
-    history: History,
-}
-
-impl Observer for Record<'_> {
-    fn output(&mut self, _: &Sample) -> Result<(), String> {
-        Ok(())
-    }
-    fn wants_steps(&self) -> bool {
-        true
-    }
-    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
-        let p = self.problem;
-        let layout = &record.simulation.data.layout;
-        p.criteria
-            .record(&p.model, layout, record.end, &mut self.history);
-        Ok(())
-    }
-}
 
 /// The criteria of `problem` (one run) and its steps.
 pub fn criteria_values(problem: &Problem) -> Result<(Vec<f64>, usize), SensitivityError> {
@@ -35,11 +12,14 @@ pub fn criteria_values(problem: &Problem) -> Result<(Vec<f64>, usize), Sensitivi
     }
     let settings = *problem.dynamic()?;
     let mut sim = crate::Simulation::new(std::sync::Arc::clone(&problem.model), settings)?;
-    let mut rec = Record {
-        problem,
-        history: History::default(),
-    };
     let layout = sim.data.layout.clone();
+    let mut rec = super::Recorder {
+        problem,
+        layout: &layout,
+        history: History::default(),
+        steps: None,
+        count: 0,
+    };
     problem
         .criteria
         .record(&problem.model, &layout, &sim.state, &mut rec.history);

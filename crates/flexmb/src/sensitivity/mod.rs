@@ -65,11 +65,15 @@ pub use criteria::{CriteriaSet, Criterion, CriterionKind, Reference};
 pub use direct::direct;
 pub use finite_differences::{criteria_values, finite_differences};
 
+use crate::data::Layout;
 use crate::input::Analysis;
 use crate::model::{Model, ParamId, Parameters};
+use crate::observe::{Observer, Sample, StepRecord};
 use crate::solve::step::StateTangent;
+use crate::solve::trajectory::TrajectoryStep;
 use crate::solve::DynamicSettings;
 use crate::SolveError;
+use criteria::History;
 use std::sync::Arc;
 
 /// How the gradients are computed.
@@ -289,6 +293,47 @@ fn start(problem: &Problem) -> Result<(crate::Simulation, Vec<StateTangent>), Se
         settings.load_factor_at(0.0),
     )?;
     Ok((sim, tangents))
+}
+
+/// A forward run's record: the criteria's sensor values at every point and, when asked
+/// (`steps: Some`), every step, for a backward sweep. A run whose redundant rows are chosen
+/// again is stopped: its gradients are not computed.
+struct Recorder<'a> {
+    problem: &'a Problem,
+    layout: &'a Layout,
+    history: History,
+    /// Every step, when kept.
+    steps: Option<Vec<TrajectoryStep>>,
+    count: usize,
+}
+
+impl Observer for Recorder<'_> {
+    fn output(&mut self, _: &Sample) -> Result<(), String> {
+        Ok(())
+    }
+    fn wants_steps(&self) -> bool {
+        true
+    }
+    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
+        let p = self.problem;
+        if record.redundant_rows != self.layout.redundant_rows().as_slice() {
+            return Err(reselected(record.start.t));
+        }
+        p.criteria
+            .record(&p.model, self.layout, record.end, &mut self.history);
+        if let Some(steps) = &mut self.steps {
+            steps.push(TrajectoryStep {
+                index: record.index,
+                h: record.info.h,
+                start: record.start.clone(),
+                unknowns: record.unknowns.to_vec(),
+                redundant_rows: record.redundant_rows.to_vec(),
+                end: record.end.clone(),
+            });
+        }
+        self.count += 1;
+        Ok(())
+    }
 }
 
 /// The message of a run whose redundant rows were chosen again.

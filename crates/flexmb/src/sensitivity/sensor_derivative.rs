@@ -202,60 +202,49 @@ pub fn sensor_gradient(
         .map(|n| n.frame.x.norm())
         .fold(1e-3f64, f64::max);
     let mut out = SensorGradient::default();
-    let mut moved_state = state.clone();
+    // A sensor reads node kinematics from the nodes, the rest from the state.
     let mut moved_nodes: Vec<NodeState> = nodes.clone();
     for &n in &node_list {
+        let base = nodes[n];
         for c in 0..6 {
             let i = 6 * n + c;
-            // configuration, on the group
-            let eps = EPS * if c < 3 { length } else { 1.0 };
-            let g = difference(eps, &mut |e| {
-                let mut d = flexmb_lie::Vec6::zeros();
-                d[c] = e;
-                moved_nodes[n].q = model.group.integrate(&nodes[n].q, &d);
-                moved_state.q[n] = moved_nodes[n].q;
-                let v = crate::sensors::sensor_value(
-                    model,
-                    layout,
-                    k,
-                    &moved_nodes,
-                    &moved_state,
-                    &mut buffers,
-                );
-                fix(v)
-            });
-            moved_nodes[n].q = nodes[n].q;
-            moved_state.q[n] = nodes[n].q;
-            push(&mut out, Entry::Q(i), g);
-            for rate in [Entry::V(i), Entry::Vdot(i)] {
-                let base = match rate {
-                    Entry::V(_) => nodes[n].v,
-                    _ => nodes[n].vdot,
-                };
-                let eps = EPS * base.norm().max(1.0);
+            for entry in [Entry::Q(i), Entry::V(i), Entry::Vdot(i)] {
+                let eps = EPS
+                    * match entry {
+                        Entry::Q(_) if c < 3 => length,
+                        Entry::Q(_) => 1.0,
+                        Entry::V(_) => base.v.norm().max(1.0),
+                        _ => base.vdot.norm().max(1.0),
+                    };
                 let g = difference(eps, &mut |e| {
-                    let mut value = base;
-                    value[c] += e;
-                    match rate {
-                        Entry::V(_) => (moved_nodes[n].v, moved_state.v[n]) = (value, value),
-                        _ => (moved_nodes[n].vdot, moved_state.vdot[n]) = (value, value),
+                    let mut node = base;
+                    match entry {
+                        // the configuration, on the group
+                        Entry::Q(_) => {
+                            let mut d = flexmb_lie::Vec6::zeros();
+                            d[c] = e;
+                            node.q = model.group.integrate(&base.q, &d);
+                        }
+                        Entry::V(_) => node.v[c] += e,
+                        _ => node.vdot[c] += e,
                     }
+                    moved_nodes[n] = node;
                     let v = crate::sensors::sensor_value(
                         model,
                         layout,
                         k,
                         &moved_nodes,
-                        &moved_state,
+                        state,
                         &mut buffers,
                     );
                     fix(v)
                 });
-                (moved_nodes[n].v, moved_state.v[n]) = (nodes[n].v, nodes[n].v);
-                (moved_nodes[n].vdot, moved_state.vdot[n]) = (nodes[n].vdot, nodes[n].vdot);
-                push(&mut out, rate, g);
+                moved_nodes[n] = base;
+                push(&mut out, entry, g);
             }
         }
     }
+    let mut moved_state = state.clone();
     let mut scalar = |entry: Entry, get: &dyn Fn(&mut State) -> &mut f64| {
         let base = *get(&mut moved_state);
         let eps = EPS * base.abs().max(1.0);

@@ -90,13 +90,7 @@ pub(super) fn gradients(problem: &Problem, method: Method) -> Result<Gradients, 
         true,
     );
     let nd = layout.n_dofs;
-    let kmax = data
-        .pattern
-        .iter()
-        .zip(&data.values)
-        .filter(|((i, j), _)| i == j && *i < nd)
-        .fold(0.0f64, |m, (_, v)| m.max(v.abs()));
-    let s = if kmax > 0.0 { 1.0 / kmax } else { 1.0 };
+    let s = crate::solve::statics::stiffness_row_scale(&data).unwrap_or(1.0);
     assemble(
         model,
         &mut data,

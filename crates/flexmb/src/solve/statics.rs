@@ -278,6 +278,20 @@ struct ArcLength {
 
 /// The scaling of statics: the iteration matrix `K_t T` with equilibrium rows times
 /// `row_scale`, loads and gravity times the load factor.
+/// `1 / max diag K_t` of the matrix last assembled in `data` (equilibrium rows), `None`
+/// when that diagonal is zero: the row scale of statics, which brings the stiffness block
+/// to the scale of the constraint block.
+pub(crate) fn stiffness_row_scale(data: &Data) -> Option<f64> {
+    let nd = data.layout.n_dofs;
+    let kmax = data
+        .pattern
+        .iter()
+        .zip(&data.values)
+        .filter(|((i, j), _)| i == j && *i < nd)
+        .fold(0.0f64, |m, (_, v)| m.max(v.abs()));
+    (kmax > 0.0).then(|| 1.0 / kmax)
+}
+
 pub(crate) fn scaling(row_scale: f64, load_factor: f64) -> Scaling {
     Scaling {
         row_scale,
@@ -536,16 +550,7 @@ impl Statics {
             0.0,
         );
         start.assemble(&mut data, true, 0.0);
-        let nd = data.layout.n_dofs;
-        let kmax = data
-            .pattern
-            .iter()
-            .zip(&data.values)
-            .filter(|((i, j), _)| i == j && *i < nd)
-            .fold(0.0f64, |m, (_, v)| m.max(v.abs()));
-        if kmax > 0.0 {
-            row_scale = 1.0 / kmax;
-        }
+        row_scale = stiffness_row_scale(&data).unwrap_or(row_scale);
         let policy = NewtonPolicy {
             settings: settings.newton,
             regularized_solves: 0,
