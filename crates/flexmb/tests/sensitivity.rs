@@ -274,3 +274,53 @@ fn checkpointed_adjoint_gives_the_same_gradients() {
     );
     assert_eq!(all.values, some.values);
 }
+
+#[test]
+fn variable_step_sizes() {
+    // t_end = 0.2045 with h = 1e-2: the step control shortens steps to land on the output
+    // times (every 0.0275 s) and on t_end, so the grid is not uniform; every step's own h
+    // enters its step function and the trapezoidal weights.
+    let p = problem(
+        "heavy_top_sensitivity.toml",
+        &[
+            TIGHT[0],
+            TIGHT[1],
+            "solver.t_end=0.2045",
+            "solver.h=1e-2",
+            "solver.output_interval=0.0275",
+        ],
+        &[
+            "body.top.mass",
+            "body.top.inertia.1",
+            "node.top.angular_velocity_body.1",
+        ],
+        &[
+            ("x", CriterionKind::Terminal, "com_x"),
+            ("nutation", CriterionKind::Integral, "sq(com_z) + t"),
+        ],
+    );
+    let a = agree("variable steps", &p, 1e-9, 1e-5);
+    assert!(
+        a.stats.steps > 21,
+        "the grid has extra steps: {}",
+        a.stats.steps
+    );
+    // The integral of t alone is exact under the trapezoidal rule: t_end^2 / 2.
+    let t_only = problem(
+        "heavy_top_sensitivity.toml",
+        &[
+            "solver.t_end=0.2045",
+            "solver.h=1e-2",
+            "solver.output_interval=0.0275",
+        ],
+        &["body.top.mass"],
+        &[("t", CriterionKind::Integral, "t")],
+    );
+    let g = sensitivity::direct(&t_only).expect("direct");
+    assert!(
+        (g.values[0] - 0.2045f64.powi(2) / 2.0).abs() < 1e-14,
+        "{}",
+        g.values[0]
+    );
+    assert_eq!(g.gradients[0][0], 0.0);
+}
