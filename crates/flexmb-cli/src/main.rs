@@ -110,7 +110,7 @@ enum Command {
         fd_step: Option<f64>,
         /// Check the exact gradients: the adjoint against central finite differences,
         /// written to gradient_check.csv with their relative differences.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "method")]
         check: bool,
         /// Memory the adjoint may keep for the trajectory, in MiB (default: the file's
         /// memory_budget_mb, else 256); beyond it, steps are recomputed from checkpoints.
@@ -124,7 +124,7 @@ enum Command {
     },
     /// Lower one [[criterion]] of the model over its [[design_parameter]] items that have
     /// both bounds (L-BFGS on the adjoint gradients); write optimization.csv (one row per
-    /// iteration) and optimization.json into DIR.
+    /// improvement) and optimization.json into DIR.
     Optimize {
         model: PathBuf,
         #[arg(long, default_value = "out")]
@@ -503,6 +503,9 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
             return exit::ANALYSIS_FAILED;
         }
     };
+    for w in &g.warnings {
+        tell(format_args!("warning: {w}"));
+    }
     let wall = started.elapsed().as_secs_f64();
     let values = problem.values();
     let written = dir
@@ -532,7 +535,7 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
                 return exit::ANALYSIS_FAILED;
             }
         };
-        let (table, worst) = report::check_csv(&setup.design, setup, &g, &fd);
+        let (table, worst) = report::check_csv(setup, &g, &fd);
         if let Err(e) = dir.write_file(flexmb::output::GRADIENT_CHECK_FILE, &table) {
             tell(format_args!("error: {e}"));
             return exit::OUTPUT_FAILED;
@@ -602,11 +605,11 @@ fn optimize(
     );
     let mut evaluator = Evaluator::new(problem);
     let started = std::time::Instant::now();
-    let mut report = |it: &flexmb::sensitivity::optimize::Iteration| {
+    let mut report = |it: &flexmb::sensitivity::optimize::Improvement| {
         let values: Vec<String> = it.values.iter().map(|v| format!("{v:.6e}")).collect();
         say(format_args!(
-            "iteration {:>3}: {} = {:.10e} at [{}]",
-            it.iteration,
+            "evaluation {:>3}: {} = {:.10e} at [{}]",
+            it.evaluation,
             names[index],
             it.criterion,
             values.join(", ")
@@ -630,6 +633,7 @@ fn optimize(
         "criterion": names[index],
         "parameters": setup.design.iter().map(|d| d.path.clone()).collect::<Vec<_>>(),
         "status": optimum.status,
+        "iterations": optimum.iterations,
         "runs": optimum.runs,
         "wall_seconds": started.elapsed().as_secs_f64(),
         "first": optimum.history.first(),
@@ -649,12 +653,12 @@ fn optimize(
         &optimum.history[optimum.history.len() - 1],
     );
     say(format_args!(
-        "{}: {:.6e} -> {:.6e} ({:.1} %) in {} iterations, {} runs ({}); history in {}",
+        "{}: {:.6e} -> {:.6e} ({:.1} %) in {} L-BFGS iterations, {} runs ({}); history in {}",
         names[index],
         first.criterion,
         last.criterion,
         100.0 * (last.criterion - first.criterion) / first.criterion.abs().max(f64::MIN_POSITIVE),
-        last.iteration,
+        optimum.iterations,
         optimum.runs,
         optimum.status,
         out.display()

@@ -261,7 +261,7 @@ fn optimize_lowers_the_half_car_comfort_criterion() {
     let rows = common::rows(&out.join("optimization.csv"));
     let column = |r: &Vec<String>, k: usize| r[k].parse::<f64>().unwrap();
     let (first, last) = (&rows[0], &rows[rows.len() - 1]);
-    // iteration, criterion, 4 parameters, 4 gradients
+    // evaluation, criterion, 4 parameters, 4 gradients
     assert_eq!(first.len(), 10);
     let (f0, f1) = (column(first, 1), column(last, 1));
     assert!(f1 < 0.8 * f0, "the criterion went from {f0} to {f1}");

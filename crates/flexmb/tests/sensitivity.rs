@@ -324,3 +324,137 @@ fn variable_step_sizes() {
     );
     assert_eq!(g.gradients[0][0], 0.0);
 }
+
+/// The error of reading `file` from the examples with `from` replaced by `to` (each must be
+/// in the file).
+fn read_error(file: &str, edits: &[(&str, &str)]) -> String {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples")
+        .join(file);
+    let mut text = std::fs::read_to_string(&path).expect("example");
+    for (from, to) in edits {
+        assert!(text.contains(from), "{from}");
+        text = text.replacen(from, to, 1);
+    }
+    flexmb::input::parse_model_str(&text, file, &[])
+        .expect_err("an error")
+        .to_string()
+}
+
+/// An example, the edits of its text and what the error must say.
+type Case<'a> = (&'a str, &'a [(&'a str, &'a str)], &'a [&'a str]);
+
+#[test]
+fn sensitivity_sections_are_checked_with_file_line_and_field() {
+    let cases: &[Case] = &[
+        // a static analysis: terminal criteria only, no initial velocities
+        (
+            "bend_45_sensitivity.toml",
+            &[("terminal = \"tip_x\"", "integral = \"tip_x\"")],
+            &["bend_45_sensitivity.toml:", "criterion[0].integral", "terminal criteria only"],
+        ),
+        (
+            "bend_45_sensitivity.toml",
+            &[("path = \"load.tip_force.force.2\"", "path = \"node.arc.32.velocity.0\"")],
+            &["design_parameter[3].path", "initial velocity"],
+        ),
+        // bounds must contain the value (the optimizer starts there)
+        (
+            "half_car.toml",
+            &[("lower = 100.0", "lower = 2000.0")],
+            &["half_car.toml:", "design_parameter[0].lower", "must contain the parameter's value 2000"],
+        ),
+        (
+            "half_car.toml",
+            &[("upper = 20000.0\n", "\n")],
+            &["design_parameter[0].upper", "is required with lower"],
+        ),
+        // names: not the built-ins, no commas
+        (
+            "half_car.toml",
+            &[("name = \"comfort\"", "name = \"t\"")],
+            &["criterion[0].name", "built-in"],
+        ),
+        (
+            "half_car.toml",
+            &[("name = \"comfort\"", "name = \"a,b\"")],
+            &["criterion[0].name", "commas"],
+        ),
+        // unknown parameter path, unknown sensor, energy sensors
+        (
+            "half_car.toml",
+            &[("path = \"spring.suspension_front.damping\"", "path = \"spring.suspension_front.dampng\"")],
+            &["design_parameter[0].path", "unknown parameter", "spring.suspension_front.damping"],
+        ),
+        (
+            "heavy_top_sensitivity.toml",
+            &[("terminal = \"com_x\"", "terminal = \"energy + 1\"")],
+            &["criterion[0].terminal", "'energy' (total_energy) has no derivative"],
+        ),
+        (
+            "heavy_top_sensitivity.toml",
+            &[("terminal = \"com_x\"", "terminal = \"sq(com_x\"")],
+            &["criterion[0].terminal", "at character"],
+        ),
+        // a reference file that is not there
+        (
+            "half_car.toml",
+            &[("[[criterion]]\nname = \"comfort\"", "[[reference]]\nname = \"target\"\nfile = \"no_such.csv\"\ncolumn = \"z\"\n\n[[criterion]]\nname = \"comfort\"")],
+            &["reference[0].file", "no_such.csv"],
+        ),
+    ];
+    for (file, edits, expected) in cases {
+        let e = read_error(file, edits);
+        for x in *expected {
+            assert!(e.contains(x), "{file} {edits:?}: '{x}' not in: {e}");
+        }
+    }
+}
+
+#[test]
+fn a_parameter_that_breaks_the_initial_conditions_is_refused() {
+    // Moving the heavy top's pivot across its constrained directions makes the initial
+    // velocities inconsistent: the derivative is refused, naming the parameter.
+    let p = problem(
+        "heavy_top_sensitivity.toml",
+        &["solver.t_end=0.01"],
+        &["joint.pivot.position.0"],
+        &[("x", CriterionKind::Terminal, "com_x")],
+    );
+    let e = sensitivity::direct(&p).expect_err("refused").to_string();
+    assert!(
+        e.contains("joint.pivot.position.0") && e.contains("inconsistent"),
+        "{e}"
+    );
+}
+
+#[test]
+fn references_from_csv_enter_criteria() {
+    // A reference signal r(t) = 2 t read from a CSV file: the integral of (t - r)^2 over
+    // [0, T] is T^3 / 3 exactly under the trapezoidal rule only at the samples, so check it
+    // against the rule itself with the run's steps, and that it carries no gradient.
+    let dir = std::env::temp_dir().join(format!("flexmb-ref-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("r.csv"), "# a ramp\nt,r\n0,0\n1,2\n").unwrap();
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/heavy_top_sensitivity.toml");
+    let text = std::fs::read_to_string(path).unwrap().replace(
+        "[[criterion]]\nname = \"x_G\"",
+        "[[reference]]\nname = \"ramp\"\nfile = \"r.csv\"\ncolumn = \"r\"\n\n[[criterion]]\nname = \"gap\"\nintegral = \"sq(t - ramp)\"\n\n[[criterion]]\nname = \"x_G\"",
+    );
+    let file = dir.join("top.toml");
+    std::fs::write(&file, text).unwrap();
+    let f = read_model_file(&file, &["solver.t_end=0.1".to_string()]).expect("model");
+    let setup = f.sensitivity.clone().expect("sensitivity");
+    let p = setup.problem(Arc::new(f.model.clone()), f.analysis.clone());
+    let g = sensitivity::adjoint(&p, &mut |_, _| {}).expect("adjoint");
+    // (t - 2t)^2 = t^2; trapezoidal with h = 1e-3 on [0, 0.1]: T^3/3 + h^2 T / 6.
+    let (t, h) = (0.1f64, 1e-3f64);
+    let exact = t.powi(3) / 3.0 + h * h * t / 6.0;
+    assert!(
+        (g.values[0] - exact).abs() < 1e-15,
+        "{} against {exact}",
+        g.values[0]
+    );
+    assert!(g.gradients[0].iter().all(|&v| v == 0.0));
+}

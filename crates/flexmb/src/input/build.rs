@@ -185,7 +185,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     model
         .validate()
         .map_err(|e| map_model_error(src, e, &origins))?;
-    let sensitivity = super::sensitivity::read_sensitivity(&top, &model, src.file)?;
+    let sensitivity = super::sensitivity::read_sensitivity(&top, &model, &analysis, src.file)?;
     Ok(ModelFile {
         model,
         analysis,

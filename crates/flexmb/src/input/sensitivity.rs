@@ -17,13 +17,36 @@ type Result<T> = std::result::Result<T, InputError>;
 /// Most samples of a reference signal.
 const MAX_SAMPLES: usize = 10_000_000;
 
+/// A name that a criterion's table writes into `gradients.csv`: like a sensor's, no commas,
+/// quotes or control characters, and not `t` or `pi` (the expressions' built-ins).
+fn check_name(t: &Table<'_>, name: &str) -> Result<()> {
+    if name.contains([',', '"']) || name.chars().any(char::is_control) {
+        return Err(t.key_err(
+            "name",
+            "must not contain commas, double quotes, line breaks or other control characters (it names a column or row of the result files)",
+        ));
+    }
+    if name == "t" || name == "pi" {
+        return Err(t.key_err(
+            "name",
+            format!(
+                "'{name}' is a built-in of the expressions (time, the constant pi); choose another"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The sensitivity setup of a model file, `None` when it declares no criterion and no
 /// design parameter; `file` is the model file's path (reference files are relative to it).
+/// A static `analysis` takes terminal criteria and parameters that enter the equations.
 pub(super) fn read_sensitivity(
     top: &Table<'_>,
     model: &Model,
+    analysis: &super::Analysis,
     file: &str,
 ) -> Result<Option<Setup>> {
+    let statics = matches!(analysis, super::Analysis::Static(_));
     let params_items = top.items("design_parameter")?;
     let criteria_items = top.items("criterion")?;
     let settings = top.field("sensitivity").map(|f| f.table()).transpose()?;
@@ -55,6 +78,11 @@ pub(super) fn read_sensitivity(
         let f = t.req("path")?;
         let path = f.str()?;
         let id = registry.id(path).map_err(|e| f.err(e.to_string()))?;
+        if statics && registry.role(id) == crate::model::ParamRole::InitialState {
+            return Err(f.err(format!(
+                "'{path}' is an initial velocity: a static analysis does not depend on it"
+            )));
+        }
         if let Some(first) = seen.insert(path.to_string(), t.path.clone()) {
             return Err(f.err(format!("parameter '{path}' is already declared by {first}")));
         }
@@ -64,9 +92,28 @@ pub(super) fn read_sensitivity(
         };
         let bound = |key| t.field(key).map(|f| f.f64_in(-1e30, 1e30)).transpose();
         let (lower, upper) = (bound("lower")?, bound("upper")?);
-        if let (Some(l), Some(u)) = (lower, upper) {
-            if l > u {
-                return Err(t.key_err("upper", format!("is below lower ({u} < {l})")));
+        match (lower, upper) {
+            (None, None) => {}
+            (Some(l), Some(u)) => {
+                let value = registry.value(model, id);
+                if !(l < value && value < u) {
+                    return Err(t.key_err(
+                        "lower",
+                        format!("the bounds ({l}, {u}) must contain the parameter's value {value} strictly (the optimizer starts there)"),
+                    ));
+                }
+            }
+            (Some(_), None) => {
+                return Err(t.key_err(
+                    "upper",
+                    "is required with lower (the optimizer moves parameters with both bounds)",
+                ))
+            }
+            (None, Some(_)) => {
+                return Err(t.key_err(
+                    "lower",
+                    "is required with upper (the optimizer moves parameters with both bounds)",
+                ))
             }
         }
         design.push(DesignParameter {
@@ -82,6 +129,7 @@ pub(super) fn read_sensitivity(
     for t in top.items("reference")? {
         t.check_keys(&["name", "file", "time_column", "column"])?;
         let name = super::build::read_name(&t, &mut names, "reference")?;
+        check_name(&t, &name)?;
         if model.sensors.iter().any(|s| s.name == name) {
             return Err(t.key_err("name", format!("'{name}' is already the name of a sensor")));
         }
@@ -103,6 +151,7 @@ pub(super) fn read_sensitivity(
     for t in &criteria_items {
         t.check_keys(&["name", "terminal", "integral"])?;
         let name = super::build::read_name(t, &mut names, "criterion")?;
+        check_name(t, &name)?;
         let (kind, key) = match (t.field("terminal"), t.field("integral")) {
             (Some(_), None) => (CriterionKind::Terminal, "terminal"),
             (None, Some(_)) => (CriterionKind::Integral, "integral"),
@@ -119,6 +168,12 @@ pub(super) fn read_sensitivity(
             }
         };
         let f = t.req(key)?;
+        if statics && kind == CriterionKind::Integral {
+            return Err(t.key_name_err(
+                "integral",
+                "a static analysis has terminal criteria only (its final point): write terminal = \"...\"",
+            ));
+        }
         let c = Criterion::new(model, &references, &name, kind, f.str()?).map_err(|m| f.err(m))?;
         criteria.push(c);
     }

@@ -173,6 +173,7 @@ pub fn adjoint_in(
     let mut forward = super::Recorder {
         problem,
         layout: &layout,
+        redundant: layout.redundant_rows(),
         history: History::default(),
         steps: keep_all.then(Vec::new),
         count: 0,
@@ -240,5 +241,6 @@ pub fn adjoint_in(
         gradients,
         fd_steps: None,
         stats,
+        warnings: sim.warnings,
     })
 }

@@ -74,6 +74,15 @@ impl Criterion {
         text: &str,
     ) -> Result<Self, String> {
         let n = model.sensors.len();
+        // `t` and `pi` are the built-ins: a sensor of that name cannot be read.
+        let words = text.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'));
+        for word in words.filter(|w| *w == "t" || *w == "pi") {
+            if model.sensors.iter().any(|s| s.name == word) {
+                return Err(format!(
+                    "'{word}' is a built-in of the expressions and also a sensor's name: rename the sensor to use it in a criterion"
+                ));
+            }
+        }
         let resolve = |s: &str| {
             model
                 .sensors

@@ -27,6 +27,11 @@ struct Direct<'a> {
     dp: Vec<f64>,
     scratch: Model,
     steps: usize,
+    /// The rows left out as redundant at the start (a run that changes them is refused).
+    redundant: Vec<usize>,
+    /// Weight 1 for every criterion; the index in the design of each registry parameter.
+    ones: Vec<f64>,
+    index: Vec<Option<usize>>,
 }
 
 impl Direct<'_> {
@@ -37,15 +42,14 @@ impl Direct<'_> {
         criteria.record(&p.model, &self.layout, state, &mut self.history);
         let n = self.history.t.len() - 1;
         let values = &self.history.values[n];
-        let ones = vec![1.0; criteria.len()];
-        let index = p.design_index();
+        let (ones, index) = (&self.ones, &self.index);
         let mut now = vec![vec![0.0; p.design.len()]; criteria.len()];
         let grads = criteria.point_gradients(
             &p.model,
             &self.layout,
             state,
             values,
-            &ones,
+            ones,
             (&p.params, &p.design, &mut self.scratch),
         );
         for (g, coef) in &grads {
@@ -78,7 +82,7 @@ impl Direct<'_> {
 
     fn step(&mut self, record: &StepRecord) -> Result<(), String> {
         let p = self.problem;
-        if record.redundant_rows != self.layout.redundant_rows().as_slice() {
+        if record.redundant_rows != self.redundant.as_slice() {
             return Err(super::reselected(record.start.t));
         }
         let settings = &record.simulation.settings;
@@ -145,6 +149,9 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
         dp: vec![0.0; problem.params.len()],
         scratch: (*problem.model).clone(),
         steps: 0,
+        redundant: sim.data.layout.redundant_rows(),
+        ones: vec![1.0; n_c],
+        index: problem.design_index(),
     };
     obs.point(&sim.state.clone());
     sim.run(&mut obs)?;
@@ -162,5 +169,6 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
             steps: obs.steps,
             ..Stats::default()
         },
+        warnings: sim.warnings,
     })
 }

@@ -4,11 +4,14 @@
 use super::criteria::History;
 use super::{Gradients, Problem, SensitivityError, Stats};
 
-/// The criteria of `problem` (one run) and its steps.
-pub fn criteria_values(problem: &Problem) -> Result<(Vec<f64>, usize), SensitivityError> {
+/// The criteria of `problem` (one run), its steps and its warnings.
+pub fn criteria_values(
+    problem: &Problem,
+) -> Result<(Vec<f64>, usize, Vec<String>), SensitivityError> {
     if let crate::input::Analysis::Static(settings) = &problem.analysis {
         let (statics, history) = super::statics::solve(problem, settings)?;
-        return Ok((problem.criteria.values(&history), statics.stats.steps));
+        let steps = statics.stats.steps;
+        return Ok((problem.criteria.values(&history), steps, statics.warnings));
     }
     let settings = *problem.dynamic()?;
     let mut sim = crate::Simulation::new(std::sync::Arc::clone(&problem.model), settings)?;
@@ -16,6 +19,7 @@ pub fn criteria_values(problem: &Problem) -> Result<(Vec<f64>, usize), Sensitivi
     let mut rec = super::Recorder {
         problem,
         layout: &layout,
+        redundant: layout.redundant_rows(),
         history: History::default(),
         steps: None,
         count: 0,
@@ -24,14 +28,18 @@ pub fn criteria_values(problem: &Problem) -> Result<(Vec<f64>, usize), Sensitivi
         .criteria
         .record(&problem.model, &layout, &sim.state, &mut rec.history);
     let stats = sim.run(&mut rec)?;
-    Ok((problem.criteria.values(&rec.history), stats.steps))
+    Ok((
+        problem.criteria.values(&rec.history),
+        stats.steps,
+        sim.warnings,
+    ))
 }
 
 /// The criteria of `problem` and their central differences with relative step `step`:
 /// `dJ/dp_k = (J(p + e_k d_k) - J(p - e_k d_k)) / (2 d_k)`, `d_k = step max(|p_k|, scale_k)`
 /// (the design parameter's typical magnitude, [`Problem::scales`]).
 pub fn finite_differences(problem: &Problem, step: f64) -> Result<Gradients, SensitivityError> {
-    let (values, steps) = criteria_values(problem)?;
+    let (values, steps, warnings) = criteria_values(problem)?;
     let p0 = problem.values();
     let mut gradients = vec![vec![0.0; p0.len()]; values.len()];
     let mut fd_steps = Vec::with_capacity(p0.len());
@@ -65,5 +73,6 @@ pub fn finite_differences(problem: &Problem, step: f64) -> Result<Gradients, Sen
             steps,
             ..Stats::default()
         },
+        warnings,
     })
 }

@@ -96,6 +96,7 @@ pub fn initial_tangents(
     let n_rows = layout.n_rows;
     let mut dr = vec![0.0; nd];
     let (mut dphi, mut de) = (vec![0.0; n_rows], vec![0.0; layout.n_states]);
+    let mut dpsi = vec![0.0; n_rows];
     for &id in ids {
         let mut ds = StateTangent::zeros_of(&layout);
         initial_velocity(model, params, id, &mut ds.v);
@@ -115,10 +116,11 @@ pub fn initial_tangents(
             let columns = Columns {
                 dr: &mut dr,
                 dphi: &mut dphi,
-                dpsi: &mut [],
+                dpsi: &mut dpsi,
                 de: &mut de,
             };
             residual_derivative(model, params, id, &point, columns);
+            consistent(model, &layout, params, id, &dphi, &dpsi)?;
             for i in 0..nd {
                 g[i] += s * dr[i];
             }
@@ -164,6 +166,38 @@ pub fn initial_tangents(
     Ok(out)
 }
 
+/// The initial configuration and velocities do not move with the parameters, so a
+/// parameter that changes `Phi(q_0)` or `B v_0 + Phi_t` at t = 0 (a joint's position across
+/// its constrained directions, a drive's amplitude with `f(0)` or `f'(0)` nonzero) would make
+/// the perturbed initial conditions inconsistent: its derivative is refused.
+fn consistent(
+    model: &Model,
+    layout: &Layout,
+    params: &Parameters,
+    id: ParamId,
+    dphi: &[f64],
+    dpsi: &[f64],
+) -> Result<(), SensitivityError> {
+    let active = |d: &[f64]| {
+        layout
+            .active_rows
+            .iter()
+            .map(|&r| (r, d[r].abs()))
+            .fold((0, 0.0f64), |w, (r, v)| if v > w.1 { (r, v) } else { w })
+    };
+    for (d, what) in [(dphi, "position"), (dpsi, "velocity")] {
+        let (row, v) = active(d);
+        if v > 1e-9 {
+            return Err(SensitivityError::Unsupported(format!(
+                "parameter '{}' moves the {what}-level constraint {} at t = 0 (by {v:.3e} per unit): the initial conditions, which do not move with it, would become inconsistent; its derivative is not defined",
+                params.path(id),
+                layout.describe_row(model, row)
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// `dv_0/dp` of an initial-velocity parameter (zero for the others).
 fn initial_velocity(model: &Model, params: &Parameters, id: ParamId, dv: &mut [Vec6]) {
     if let ParamKind::Node(node, p) = params.kind(id) {
@@ -181,14 +215,6 @@ fn initial_velocity(model: &Model, params: &Parameters, id: ParamId, dv: &mut [V
     }
 }
 
-/// The fourth-order central difference of `f` at step `eps`, for vectors.
-fn difference(eps: f64, f: &mut dyn FnMut(f64) -> Vec<f64>) -> Vec<f64> {
-    let (p1, m1, p2, m2) = (f(eps), f(-eps), f(2.0 * eps), f(-2.0 * eps));
-    (0..p1.len())
-        .map(|i| (8.0 * (p1[i] - m1[i]) - (p2[i] - m2[i])) / (12.0 * eps))
-        .collect()
-}
-
 /// `dx_0/dp`: the initial element states of a copy of the model with `id` moved.
 fn initial_states_derivative(
     model: &Model,
@@ -199,7 +225,7 @@ fn initial_states_derivative(
     let value = params.value(model, id);
     let mut copy = model.clone();
     let eps = 1e-4 * value.abs().max(1e-3);
-    difference(eps, &mut |e| {
+    super::fourth_order_difference(eps, &mut |e| {
         params.set(&mut copy, id, value + e);
         State::initial(&copy, layout).x
     })
@@ -262,15 +288,10 @@ fn acceleration_rows_derivative(
         }
     }
     let value = p.get(joint, &model.nodes);
-    let length = model
-        .nodes
-        .iter()
-        .map(|n| n.frame.x.norm())
-        .fold(1e-3f64, f64::max);
-    let eps = 1e-4 * value.abs().max(length);
+    let eps = 1e-4 * value.abs().max(super::length_scale(model));
     let mut copy = joint.clone();
     let rows = &layout.joint_rows[j];
-    let d = difference(eps, &mut |e| {
+    let d = super::fourth_order_difference(eps, &mut |e| {
         p.set(&mut copy, &model.nodes, value + e);
         rows.iter()
             .map(|&row| {

@@ -34,7 +34,7 @@
 //! ```
 //!
 //! The products are those of [`crate::solve::step::StepFunction`] (`start_jvp`, `start_vjp`,
-//! `parameter_jvp`, `parameter_vjp`, `end_jvp`, `end_vjp`, `jacobian`); the same code serves
+//! `parameter_jvp`, `parameter_vjp_for`, `end_jvp`, `end_vjp`, `jacobian_values`); the same code serves
 //! both methods, so they agree to round-off. The step sizes of the run are taken as given
 //! (an adaptive step sequence is not differentiated). The backward sweep needs every step's
 //! start, unknowns and end: kept in memory when they fit in
@@ -58,7 +58,7 @@ pub mod sensor_derivative;
 mod adjoint;
 mod direct;
 mod finite_differences;
-mod statics;
+pub(crate) mod statics;
 
 pub use adjoint::{adjoint, adjoint_in, Workspace};
 pub use criteria::{CriteriaSet, Criterion, CriterionKind, Reference};
@@ -134,7 +134,7 @@ pub fn gradients(
 ) -> Result<Gradients, SensitivityError> {
     match (method, &problem.analysis) {
         (Method::Fd, _) => finite_differences(problem, fd_step),
-        (method, Analysis::Static(_)) => statics::gradients(problem, method),
+        (method, Analysis::Static(_)) => statics::gradients(problem, method == Method::Direct),
         (Method::Direct, _) => direct(problem),
         (Method::Adjoint, _) => adjoint(problem, progress),
     }
@@ -246,6 +246,9 @@ pub struct Gradients {
     /// The step of each parameter (finite differences only).
     pub fd_steps: Option<Vec<f64>>,
     pub stats: Stats,
+    /// The warnings of the (nominal) run: what it says about its own solution holds for
+    /// the gradients too.
+    pub warnings: Vec<String>,
 }
 
 /// What a sensitivity analysis did.
@@ -262,6 +265,25 @@ pub struct Stats {
     /// Peak bytes of the trajectory kept (adjoint, estimated from the sizes of the stored
     /// vectors).
     pub trajectory_bytes: usize,
+}
+
+/// The fourth-order central difference `(8 (f(e) - f(-e)) - (f(2e) - f(-2e))) / (12 e)` of
+/// a vector function (truncation `O(e^4)`; exact for polynomials of degree up to 4).
+pub(crate) fn fourth_order_difference(eps: f64, f: &mut dyn FnMut(f64) -> Vec<f64>) -> Vec<f64> {
+    let (p1, m1, p2, m2) = (f(eps), f(-eps), f(2.0 * eps), f(-2.0 * eps));
+    (0..p1.len())
+        .map(|i| (8.0 * (p1[i] - m1[i]) - (p2[i] - m2[i])) / (12.0 * eps))
+        .collect()
+}
+
+/// The length scale of a model for differences in positions: the largest distance of a node
+/// from the origin, at least 1 mm.
+pub(crate) fn length_scale(model: &Model) -> f64 {
+    model
+        .nodes
+        .iter()
+        .map(|n| n.frame.x.norm())
+        .fold(1e-3f64, f64::max)
 }
 
 /// Bytes of a state (its vectors' payload).
@@ -282,6 +304,14 @@ fn pick(index: &[Option<usize>], full: &[f64], out: &mut [f64], sign: f64) {
 /// The simulation of a problem and its consistent start, with the tangents `ds_0/dp_k`.
 fn start(problem: &Problem) -> Result<(crate::Simulation, Vec<StateTangent>), SensitivityError> {
     let settings = *problem.dynamic()?;
+    let mut ids = problem.design.clone();
+    ids.sort_unstable();
+    if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
+        return Err(SensitivityError::Unsupported(format!(
+            "parameter '{}' is twice in the design",
+            problem.params.path(w[0])
+        )));
+    }
     let sim = crate::Simulation::new(Arc::clone(&problem.model), settings)?;
     let redundant = sim.data.layout.redundant_rows();
     let tangents = initial::initial_tangents(
@@ -301,6 +331,8 @@ fn start(problem: &Problem) -> Result<(crate::Simulation, Vec<StateTangent>), Se
 struct Recorder<'a> {
     problem: &'a Problem,
     layout: &'a Layout,
+    /// The rows the layout leaves out as redundant.
+    redundant: Vec<usize>,
     history: History,
     /// Every step, when kept.
     steps: Option<Vec<TrajectoryStep>>,
@@ -316,7 +348,7 @@ impl Observer for Recorder<'_> {
     }
     fn step(&mut self, record: &StepRecord) -> Result<(), String> {
         let p = self.problem;
-        if record.redundant_rows != self.layout.redundant_rows().as_slice() {
+        if record.redundant_rows != self.redundant.as_slice() {
             return Err(reselected(record.start.t));
         }
         p.criteria

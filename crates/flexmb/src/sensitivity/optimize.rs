@@ -46,17 +46,24 @@ impl Evaluator {
         values: &[f64],
     ) -> Result<(Vec<f64>, Vec<Vec<f64>>), SensitivityError> {
         let problem = self.problem.with_values(values);
-        let g = adjoint_in(&problem, &mut self.workspace, &mut |_, _| {})?;
+        let g = match problem.analysis {
+            crate::input::Analysis::Dynamic(_) => {
+                adjoint_in(&problem, &mut self.workspace, &mut |_, _| {})?
+            }
+            crate::input::Analysis::Static(_) => super::statics::gradients(&problem, false)?,
+        };
         self.runs += 1;
         Ok((g.values, g.gradients))
     }
 }
 
-/// One iteration of [`optimize`].
+/// A point of [`optimize`] that lowered the criterion below every earlier one (the
+/// starting point first): the accepted iterates and the line search's better trials.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct Iteration {
-    pub iteration: usize,
-    /// The criterion at the iteration's best point.
+pub struct Improvement {
+    /// Which evaluation (forward and adjoint run) it was, from 1.
+    pub evaluation: usize,
+    /// The criterion there.
     pub criterion: f64,
     /// The design parameters there.
     pub values: Vec<f64>,
@@ -67,10 +74,13 @@ pub struct Iteration {
 /// The outcome of [`optimize`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Optimum {
-    pub history: Vec<Iteration>,
+    /// The improvements, in order: the last is the best point.
+    pub history: Vec<Improvement>,
     /// Why the loop stopped (argmin's termination status).
     pub status: String,
-    /// Forward and adjoint runs.
+    /// L-BFGS iterations.
+    pub iterations: u64,
+    /// Evaluations (forward and adjoint runs).
     pub runs: usize,
 }
 
@@ -79,10 +89,25 @@ struct Variables {
     /// Index in the design and bounds of each free parameter.
     free: Vec<(usize, f64, f64)>,
     nominal: Vec<f64>,
+    /// The variables of the nominal values (which map back to them exactly).
+    z0: Vec<f64>,
 }
 
 impl Variables {
+    fn new(free: Vec<(usize, f64, f64)>, nominal: Vec<f64>) -> Self {
+        let mut v = Self {
+            free,
+            nominal,
+            z0: Vec::new(),
+        };
+        v.z0 = v.variables(&v.nominal);
+        v
+    }
+
     fn values(&self, z: &[f64]) -> Vec<f64> {
+        if z == self.z0.as_slice() {
+            return self.nominal.clone();
+        }
         let mut p = self.nominal.clone();
         for (&(k, l, u), &zk) in self.free.iter().zip(z) {
             p[k] = l + (u - l) / (1.0 + (-zk).exp());
@@ -109,41 +134,54 @@ impl Variables {
     }
 }
 
-/// A point the optimizer tried: the criterion, the parameters' values, `df/dp`.
-type Tried = (f64, Vec<f64>, Vec<f64>);
+/// A point asked for: `z`, the cost there and `df/dz`.
+type Evaluated = (Vec<f64>, f64, Vec<f64>);
 
 /// The cost of argmin: criterion `c` of the evaluator at `z`, both cost and gradient from
-/// one adjoint run (kept for the gradient call at the same point), every run recorded.
-struct Cost<'a> {
+/// one adjoint run (kept for the gradient call at the same point); every improvement is
+/// recorded and reported as it is found.
+struct Cost<'a, 'r> {
     evaluator: RefCell<&'a mut Evaluator>,
     variables: Variables,
     criterion: usize,
-    /// The last point asked for (`z`) and its cost and `df/dz`.
-    last: RefCell<Option<(Vec<f64>, Tried)>>,
-    tried: RefCell<Vec<Tried>>,
+    /// The last point asked for (`z`), its cost and `df/dz`.
+    last: RefCell<Option<Evaluated>>,
+    history: RefCell<Vec<Improvement>>,
+    report: RefCell<&'r mut dyn FnMut(&Improvement)>,
 }
 
-impl Cost<'_> {
+impl Cost<'_, '_> {
     fn evaluate(&self, z: &[f64]) -> Result<(f64, Vec<f64>), Error> {
-        if let Some((at, (f, _, g))) = &*self.last.borrow() {
+        if let Some((at, f, g)) = &*self.last.borrow() {
             if at.as_slice() == z {
                 return Ok((*f, g.clone()));
             }
         }
         let p = self.variables.values(z);
-        let (f, g) = self.evaluator.borrow_mut().criteria_and_gradients(&p)?;
+        let mut evaluator = self.evaluator.borrow_mut();
+        let (f, g) = evaluator.criteria_and_gradients(&p)?;
         let (f, g) = (f[self.criterion], g[self.criterion].clone());
         let gz = self.variables.gradient(&p, &g);
-        self.tried.borrow_mut().push((f, p.clone(), g));
-        *self.last.borrow_mut() = Some((z.to_vec(), (f, p, gz.clone())));
+        let mut history = self.history.borrow_mut();
+        if history.last().is_none_or(|best| f < best.criterion) {
+            let it = Improvement {
+                evaluation: evaluator.runs,
+                criterion: f,
+                values: p,
+                gradient: g,
+            };
+            (self.report.borrow_mut())(&it);
+            history.push(it);
+        }
+        *self.last.borrow_mut() = Some((z.to_vec(), f, gz.clone()));
         Ok((f, gz))
     }
 }
 
 /// The cost as argmin holds it (by value), borrowed so that the runs stay readable after.
-struct Shared<'c, 'a>(&'c Cost<'a>);
+struct Shared<'c, 'a, 'r>(&'c Cost<'a, 'r>);
 
-impl CostFunction for Shared<'_, '_> {
+impl CostFunction for Shared<'_, '_, '_> {
     type Param = Vec<f64>;
     type Output = f64;
     fn cost(&self, z: &Vec<f64>) -> Result<f64, Error> {
@@ -151,7 +189,7 @@ impl CostFunction for Shared<'_, '_> {
     }
 }
 
-impl Gradient for Shared<'_, '_> {
+impl Gradient for Shared<'_, '_, '_> {
     type Param = Vec<f64>;
     type Gradient = Vec<f64>;
     fn gradient(&self, z: &Vec<f64>) -> Result<Vec<f64>, Error> {
@@ -161,13 +199,13 @@ impl Gradient for Shared<'_, '_> {
 
 /// Lowers criterion `criterion` of the evaluator's problem over the design parameters that
 /// have both bounds (`design`: the problem's design parameters with their bounds), at most
-/// `max_iterations` L-BFGS iterations; `report` is told each iteration.
+/// `max_iterations` L-BFGS iterations; `report` is told each improvement as it is found.
 pub fn optimize(
     evaluator: &mut Evaluator,
     design: &[DesignParameter],
     criterion: usize,
     max_iterations: u64,
-    report: &mut dyn FnMut(&Iteration),
+    report: &mut dyn FnMut(&Improvement),
 ) -> Result<Optimum, SensitivityError> {
     let nominal = evaluator.problem().values();
     let free: Vec<(usize, f64, f64)> = design
@@ -183,51 +221,28 @@ pub fn optimize(
             "no design parameter has both a lower and an upper bound: nothing to optimize".into(),
         ));
     }
-    let variables = Variables { free, nominal };
-    let z0 = variables.variables(&variables.nominal);
+    let variables = Variables::new(free, nominal);
+    let z0 = variables.z0.clone();
     let cost = Cost {
         evaluator: RefCell::new(evaluator),
         variables,
         criterion,
         last: RefCell::new(None),
-        tried: RefCell::new(Vec::new()),
+        history: RefCell::new(Vec::new()),
+        report: RefCell::new(report),
     };
-    // The starting point, reported as iteration 0.
-    cost.evaluate(&z0)
-        .map_err(|e| SensitivityError::Unsupported(format!("optimization: {e}")))?;
-    let mut history = Vec::new();
-    let first = cost.tried.borrow()[0].clone();
-    let record = |history: &mut Vec<Iteration>,
-                  (f, p, g): (f64, Vec<f64>, Vec<f64>),
-                  report: &mut dyn FnMut(&Iteration)| {
-        let it = Iteration {
-            iteration: history.len(),
-            criterion: f,
-            values: p,
-            gradient: g,
-        };
-        report(&it);
-        history.push(it);
-    };
-    record(&mut history, first, report);
     let solver = LBFGS::new(MoreThuenteLineSearch::new(), 7);
     let result = Executor::new(Shared(&cost), solver)
         .configure(|s| s.param(z0).max_iters(max_iterations))
         .run()
         .map_err(|e| SensitivityError::Unsupported(format!("optimization: {e}")))?;
-    // Each accepted iterate: the best point tried so far after each line search, in order.
-    let mut best = history[0].criterion;
-    for (f, p, g) in cost.tried.borrow().iter().skip(1) {
-        if *f < best {
-            best = *f;
-            record(&mut history, (*f, p.clone(), g.clone()), report);
-        }
-    }
-    let status = result.state().get_termination_status().to_string();
+    let state = result.state();
+    let (status, iterations) = (state.get_termination_status().to_string(), state.get_iter());
     let runs = cost.evaluator.borrow().runs;
     Ok(Optimum {
-        history,
+        history: cost.history.into_inner(),
         status,
+        iterations,
         runs,
     })
 }

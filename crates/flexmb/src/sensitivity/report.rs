@@ -110,12 +110,7 @@ pub fn relative_difference(a: f64, b: f64, floor: f64) -> f64 {
 /// `gradient_check.csv`: `criterion,parameter,exact,fd,fd_step,relative_difference` with
 /// the exact gradient (`exact`, adjoint) against central differences (`fd`). The floor of
 /// the relative difference is `1e-8` times the largest gradient of the criterion.
-pub fn check_csv(
-    design: &[DesignParameter],
-    setup: &Setup,
-    exact: &Gradients,
-    fd: &Gradients,
-) -> (String, f64) {
+pub fn check_csv(setup: &Setup, exact: &Gradients, fd: &Gradients) -> (String, f64) {
     let mut out = String::from("criterion,parameter,exact,fd,fd_step,relative_difference\n");
     let mut worst = 0.0f64;
     for (c, crit) in setup.criteria.criteria.iter().enumerate() {
@@ -123,7 +118,7 @@ pub fn check_csv(
             * exact.gradients[c]
                 .iter()
                 .fold(f64::MIN_POSITIVE, |m, v| m.max(v.abs()));
-        for (k, d) in design.iter().enumerate() {
+        for (k, d) in setup.design.iter().enumerate() {
             let (a, b) = (exact.gradients[c][k], fd.gradients[c][k]);
             let r = relative_difference(a, b, floor);
             worst = worst.max(r);
@@ -139,9 +134,10 @@ pub fn check_csv(
     (out, worst)
 }
 
-/// `optimization.csv`: `iteration,criterion,<path>...,d/d <path>...`, one row per iteration.
+/// `optimization.csv`: `evaluation,criterion,<path>...,d/d <path>...`, one row per
+/// improvement (the starting point first, the best point last).
 pub fn optimization_csv(design: &[DesignParameter], optimum: &super::optimize::Optimum) -> String {
-    let mut out = String::from("iteration,criterion");
+    let mut out = String::from("evaluation,criterion");
     for d in design {
         let _ = write!(out, ",{}", d.path);
     }
@@ -150,7 +146,7 @@ pub fn optimization_csv(design: &[DesignParameter], optimum: &super::optimize::O
     }
     out.push('\n');
     for it in &optimum.history {
-        let _ = write!(out, "{},", it.iteration);
+        let _ = write!(out, "{},", it.evaluation);
         push_number(&mut out, it.criterion);
         for x in it.values.iter().chain(&it.gradient) {
             out.push(',');

@@ -162,10 +162,9 @@ pub fn sensor_parameters(model: &Model, params: &Parameters, k: usize) -> Vec<Pa
         .collect()
 }
 
-/// The fourth-order central difference of `f` at step `eps`.
+/// The fourth-order central difference of a scalar `f` at step `eps`.
 fn difference(eps: f64, f: &mut dyn FnMut(f64) -> f64) -> f64 {
-    let (p1, m1, p2, m2) = (f(eps), f(-eps), f(2.0 * eps), f(-2.0 * eps));
-    (8.0 * (p1 - m1) - (p2 - m2)) / (12.0 * eps)
+    super::fourth_order_difference(eps, &mut |e| vec![f(e)])[0]
 }
 
 /// The derivative of sensor `k` at `state` with respect to the state's entries and, when
@@ -196,11 +195,7 @@ pub fn sensor_gradient(
         }
     };
     let (node_list, rows, states) = support(model, layout, k);
-    let length = model
-        .nodes
-        .iter()
-        .map(|n| n.frame.x.norm())
-        .fold(1e-3f64, f64::max);
+    let length = super::length_scale(model);
     let mut out = SensorGradient::default();
     // A sensor reads node kinematics from the nodes, the rest from the state.
     let mut moved_nodes: Vec<NodeState> = nodes.clone();

@@ -17,7 +17,7 @@
 //! criteria are differentiated at that load.
 
 use super::criteria::{CriterionKind, History};
-use super::{Gradients, Method, Problem, SensitivityError, Stats};
+use super::{Gradients, Problem, SensitivityError, Stats};
 use crate::assembly::{assemble, Iterate};
 use crate::data::{Block, Data};
 use crate::model::ParamId;
@@ -55,8 +55,9 @@ pub(super) fn solve(
     Ok((statics, history))
 }
 
-/// The gradients of the criteria of a static `problem` at its final point.
-pub(super) fn gradients(problem: &Problem, method: Method) -> Result<Gradients, SensitivityError> {
+/// The gradients of the criteria of a static `problem` at its final point, by the adjoint
+/// or, with `direct`, by direct differentiation.
+pub(super) fn gradients(problem: &Problem, direct: bool) -> Result<Gradients, SensitivityError> {
     let crate::input::Analysis::Static(settings) = &problem.analysis else {
         return Err(SensitivityError::Unsupported(
             "not a static analysis".into(),
@@ -68,12 +69,22 @@ pub(super) fn gradients(problem: &Problem, method: Method) -> Result<Gradients, 
     let lambda = statics.load_factor;
     let layout = statics.data.layout.clone();
     let mut data = Data::new(model, layout.clone()).map_err(crate::SolveError::from)?;
-    // K at the solution, unscaled rows (multiplier unknowns = lambda).
-    let nodes = crate::sensors::node_states(state);
+    // The equilibrium's point: no velocities or accelerations (a pseudo-dynamic run ends
+    // with small ones), loads at the time the analysis evaluated them (the load factor; a
+    // pseudo-dynamic run: its end time, with the load factor as scale).
+    let mut nodes = crate::sensors::node_states(state);
+    for n in &mut nodes {
+        n.v = flexmb_lie::Vec6::zeros();
+        n.vdot = flexmb_lie::Vec6::zeros();
+    }
+    let t = match settings.method {
+        crate::solve::StaticMethod::PseudoDynamic => state.t,
+        _ => lambda,
+    };
     let rates = vec![0.0; layout.n_states];
     let it = Iterate {
         nodes: &nodes,
-        t: lambda,
+        t,
         lambda: &state.lambda,
         b_start: &[],
         x: &state.x,
@@ -104,11 +115,12 @@ pub(super) fn gradients(problem: &Problem, method: Method) -> Result<Gradients, 
             "the static tangent at the final load factor {lambda} ({e})"
         ))
     })?;
+    check_equilibrium(&mut data, state, settings)?;
     let point = Point {
         nodes: &nodes,
         x: &state.x,
         xdot: &rates,
-        t: lambda,
+        t,
         lambda: &state.lambda,
         load_factor: lambda,
     };
@@ -151,8 +163,8 @@ pub(super) fn gradients(problem: &Problem, method: Method) -> Result<Gradients, 
         u[layout.block(Block::States)].copy_from_slice(&t.x);
         u
     };
-    match method {
-        Method::Direct | Method::Fd => {
+    match direct {
+        true => {
             let mut dr = vec![0.0; nd];
             let (mut dphi, mut de) = (vec![0.0; layout.n_rows], vec![0.0; layout.n_states]);
             for (k, &id) in problem.design.iter().enumerate() {
@@ -183,7 +195,7 @@ pub(super) fn gradients(problem: &Problem, method: Method) -> Result<Gradients, 
                 }
             }
         }
-        Method::Adjoint => {
+        false => {
             let ids: Vec<ParamId> = problem.design.clone();
             for (c, bar) in bars.iter().enumerate() {
                 let mut a = to_unknowns(bar);
@@ -224,5 +236,29 @@ pub(super) fn gradients(problem: &Problem, method: Method) -> Result<Gradients, 
             steps: statics.stats.steps,
             ..Stats::default()
         },
+        warnings: statics.warnings.clone(),
     })
+}
+
+/// The derivatives of a static solution hold at an equilibrium: one Newton correction from
+/// the final point (`data` holds the residual and the factorized tangent there) must stay
+/// within ten times the Newton tolerance, else the point (e.g. a pseudo-dynamic run that
+/// has not settled) is refused.
+fn check_equilibrium(
+    data: &mut Data,
+    state: &crate::State,
+    settings: &StaticSettings,
+) -> Result<(), SensitivityError> {
+    let mut dx = data.residual.clone();
+    data.solver.solve_in_place(&mut dx);
+    let nd = data.layout.n_dofs;
+    let size = state.q.iter().fold(1.0f64, |m, q| m.max(q.x.norm()));
+    let tolerance = 10.0 * (settings.newton.atol + settings.newton.rtol * size);
+    let moved = dx[..nd].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if moved > tolerance {
+        return Err(SensitivityError::Unsupported(format!(
+            "the final point of the static analysis is not an equilibrium: one Newton correction from it moves the configuration by {moved:.3e} (tolerance {tolerance:.3e}); a pseudo-dynamic run has not settled: increase pseudo_time or pseudo_damping, or use load_control"
+        )));
+    }
+    Ok(())
 }

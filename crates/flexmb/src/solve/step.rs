@@ -425,6 +425,8 @@ struct Partials {
     /// derivatives are taken.
     end: State,
     nodes: Vec<NodeState>,
+    /// `K_zeta = d(B(q_n)^T zeta)/dq_n` (stabilized form; empty otherwise).
+    k_zeta: Triplets,
 }
 
 impl Partials {
@@ -791,6 +793,7 @@ impl<'a> StepFunction<'a> {
             g,
             end,
             nodes,
+            k_zeta: self.start_constraint_stiffness(x),
         }
     }
 
@@ -1171,7 +1174,7 @@ impl<'a> StepFunction<'a> {
         let n = ds.q.len();
         // The configuration moves by G dq_n + T d(B_n^T zeta)/dq_n dq_n.
         let mut kz = vec![Vec6::zeros(); n];
-        for (i, j, v) in self.start_constraint_stiffness(x) {
+        for &(i, j, v) in &p.k_zeta {
             kz[i / 6][i % 6] += v * ds.q[j / 6][j % 6];
         }
         let w: Vec<Vec6> = (0..n).map(|i| p.g[i] * ds.q[i] + p.t[i] * kz[i]).collect();
@@ -1222,7 +1225,7 @@ impl<'a> StepFunction<'a> {
         let (gq, gv, gvd) = (transpose(&p.f_q), transpose(&p.f_v), transpose(&p.f_vd));
         let tg: Vec<Vec6> = (0..n).map(|i| p.t[i].transpose() * gq[i]).collect();
         let mut q: Vec<Vec6> = (0..n).map(|i| p.g[i].transpose() * gq[i]).collect();
-        for (i, j, v) in self.start_constraint_stiffness(x) {
+        for &(i, j, v) in &p.k_zeta {
             q[j / 6][j % 6] += v * tg[i / 6][i % 6];
         }
         let ns = self.layout.n_states;
@@ -1322,7 +1325,7 @@ impl<'a> StepFunction<'a> {
                     }
                 }
             }
-            for (i, j, v) in self.start_constraint_stiffness(x) {
+            for &(i, j, v) in &p.k_zeta {
                 dtotal[i] += v * ds.q[j / 6][j % 6];
             }
             if let Some(moved) =
@@ -1405,7 +1408,7 @@ impl<'a> StepFunction<'a> {
                     }
                 }
             }
-            for (i, j, v) in self.start_constraint_stiffness(x) {
+            for &(i, j, v) in &p.k_zeta {
                 start.q[j / 6][j % 6] += v * tbar[i];
             }
             if let Some((params, ids)) = params {
