@@ -22,7 +22,7 @@ const CASES: &[&str] = &[
     "chain_100",
     "memory_256",
     "memory_16",
-    "memory_12",
+    "memory_14",
 ];
 
 /// The example `file` with one criterion `expression` (integral) and the first `n` design

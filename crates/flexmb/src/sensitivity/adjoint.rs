@@ -145,46 +145,45 @@ pub fn adjoint_in(
     let layout = sim.data.layout.clone();
     let settings = problem.dynamic()?;
     // Every step kept if the run's estimated steps fit in the budget, else checkpoints.
+    // The memory: checkpoints every `k` steps, always (a segment of k steps and the
+    // checkpoints of up to 2 N steps fit the budget, N estimated as t_end / h), and every
+    // step as long as the steps fit beside the checkpoints. A run that takes more steps
+    // than that (steps shortened for output times or after failures) drops the steps it
+    // kept and sweeps from the checkpoints instead.
     let state = state_bytes(&sim.state);
     let step_bytes = 2 * state + 8 * layout.n_unknowns() + 64;
     let expected = ((settings.t_end / settings.h).ceil() as usize).max(1) + 1;
     let budget = problem.memory_budget;
-    let keep_all = expected.saturating_mul(step_bytes) <= budget;
     let memory_bytes = state + 8 * (sim.data.pattern.len() + 6 * layout.n_unknowns()) + 256;
-    let every = if keep_all {
-        expected
-    } else {
-        // k steps in a segment and ceil(N/k) checkpoints: the longest segment that fits.
-        let total = |k: usize| k * step_bytes + expected.div_ceil(k) * memory_bytes;
-        let best = ((expected * memory_bytes) as f64 / step_bytes as f64).sqrt() as usize;
-        let best = best.clamp(1, expected);
-        if total(best) > budget {
-            return Err(SensitivityError::Unsupported(format!(
-                "the memory budget of {budget} bytes is too small for the adjoint of {expected} steps (a step takes about {step_bytes} bytes, a checkpoint {memory_bytes}); it needs at least {} bytes",
-                total(best)
-            )));
-        }
-        (best..=expected)
-            .take_while(|&k| total(k) <= budget)
-            .last()
-            .unwrap_or(best)
-    };
-    let mut trajectory = (!keep_all).then(|| Trajectory::new(&sim, every));
+    let checkpoints_of = |k: usize| (2 * expected / k + 1) * memory_bytes;
+    let total = |k: usize| k * step_bytes + checkpoints_of(k);
+    let best = ((2 * expected * memory_bytes) as f64 / step_bytes as f64).sqrt() as usize;
+    let best = best.clamp(1, expected);
+    if total(best) > budget {
+        return Err(SensitivityError::Unsupported(format!(
+            "the memory budget of {budget} bytes is too small for the adjoint of {expected} steps (a step takes about {step_bytes} bytes, a checkpoint {memory_bytes}); it needs at least {} bytes",
+            total(best)
+        )));
+    }
+    let every = (best..=expected)
+        .take_while(|&k| total(k) <= budget)
+        .last()
+        .unwrap_or(best);
+    let checkpoints_bytes = checkpoints_of(every);
+    let mut trajectory = Trajectory::new(&sim, every);
     let mut forward = super::Recorder {
         problem,
         layout: &layout,
         redundant: layout.redundant_rows(),
         history: History::default(),
-        steps: keep_all.then(Vec::new),
+        steps: Some(Vec::new()),
+        most_steps: budget.saturating_sub(checkpoints_bytes) / step_bytes,
         count: 0,
     };
     problem
         .criteria
         .record(&problem.model, &layout, &sim.state, &mut forward.history);
-    match &mut trajectory {
-        Some(t) => sim.run(&mut Observers(vec![t, &mut forward]))?,
-        None => sim.run(&mut forward)?,
-    };
+    sim.run(&mut Observers(vec![&mut trajectory, &mut forward]))?;
     let n_steps = forward.count;
     let history = forward.history;
     let mut stats = Stats {
@@ -215,20 +214,20 @@ pub fn adjoint_in(
         progress(done, n_steps);
         Ok(())
     };
-    match (&forward.steps, &trajectory) {
-        (Some(steps), _) => {
-            stats.trajectory_bytes = steps.len() * step_bytes;
+    let checkpoints = trajectory.checkpoints() * memory_bytes;
+    match &forward.steps {
+        Some(steps) => {
+            stats.trajectory_bytes = checkpoints + steps.len() * step_bytes;
             for step in steps.iter().rev() {
                 visit(step).map_err(crate::SolveError::Output)?;
             }
         }
-        (None, Some(t)) => {
-            stats.checkpoints = t.checkpoints();
+        None => {
+            stats.checkpoints = trajectory.checkpoints();
             stats.recomputed_steps = n_steps;
-            stats.trajectory_bytes = t.checkpoints() * memory_bytes + every * step_bytes;
-            t.backward(&mut visit)?;
+            stats.trajectory_bytes = checkpoints + every * step_bytes;
+            trajectory.backward(&mut visit)?;
         }
-        (None, None) => unreachable!("either every step or checkpoints are kept"),
     }
     let mut gradients = back.pbars;
     for (c, g) in gradients.iter_mut().enumerate() {

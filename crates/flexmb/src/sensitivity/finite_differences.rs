@@ -22,6 +22,7 @@ pub fn criteria_values(
         redundant: layout.redundant_rows(),
         history: History::default(),
         steps: None,
+        most_steps: 0,
         count: 0,
     };
     problem

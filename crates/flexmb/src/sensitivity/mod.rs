@@ -334,8 +334,9 @@ struct Recorder<'a> {
     /// The rows the layout leaves out as redundant.
     redundant: Vec<usize>,
     history: History,
-    /// Every step, when kept.
+    /// Every step, while kept: `None` from the start, or once more than `most_steps` came.
     steps: Option<Vec<TrajectoryStep>>,
+    most_steps: usize,
     count: usize,
 }
 
@@ -353,6 +354,13 @@ impl Observer for Recorder<'_> {
         }
         p.criteria
             .record(&p.model, self.layout, record.end, &mut self.history);
+        if self
+            .steps
+            .as_ref()
+            .is_some_and(|s| s.len() >= self.most_steps)
+        {
+            self.steps = None;
+        }
         if let Some(steps) = &mut self.steps {
             steps.push(TrajectoryStep {
                 index: record.index,
