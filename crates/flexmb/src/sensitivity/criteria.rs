@@ -238,7 +238,6 @@ impl CriteriaSet {
     /// criterion `c` with weight `weights[c]` at the point, `weights[c] df_c/dsensor`
     /// combined with the sensors' derivatives, returned as one list of
     /// `(sensor gradient, coefficient per criterion)`.
-    #[allow(clippy::too_many_arguments)]
     pub fn point_gradients(
         &self,
         model: &Model,

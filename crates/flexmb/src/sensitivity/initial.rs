@@ -231,15 +231,17 @@ fn initial_states_derivative(
     })
 }
 
+/// A constraint row's slots (node indices, `None` for the ground) and a gradient on them.
+type RowGradient = ([Option<usize>; 2], Vec12);
+
 /// Per constraint row: the slots' nodes and `d(v^T H v + 2 b_t . v)/dv = (H + H^T) v + 2 b_t`
 /// (12: node A, node B).
-#[allow(clippy::type_complexity)]
 fn convective_gradients(
     model: &Model,
     layout: &Layout,
     nodes: &[NodeState],
     t: f64,
-) -> Vec<([Option<usize>; 2], Vec12)> {
+) -> Vec<RowGradient> {
     let ground = NodeState::ground(Default::default());
     let mut out = Vec::with_capacity(layout.n_rows);
     for (j, joint) in model.joints.iter().enumerate() {
@@ -263,7 +265,6 @@ fn convective_gradients(
 /// Adds `dG/dp` of the acceleration-level rows of joint `j` (scaled rows of the initial
 /// system: unscaled) to `g`, for a parameter of that joint: fourth-order central difference
 /// of `b . vdot + v^T H v + 2 b_t . v + Phi_tt` on a copy of the joint.
-#[allow(clippy::too_many_arguments)]
 fn acceleration_rows_derivative(
     model: &Model,
     params: &Parameters,
