@@ -417,13 +417,21 @@ struct SensitivityOptions {
     quiet: bool,
 }
 
-/// The output directory of `sensitivity` or `optimize` and the model file, which must
-/// declare design parameters and criteria; the exit code of a failure, said.
+/// The output directory of `sensitivity` or `optimize`, the model file and its
+/// sensitivity setup (taken out of it), which must declare design parameters and
+/// criteria; the exit code of a failure, said.
 fn prepare_sensitivity(
     model: &Path,
     out: &Path,
     set: &[String],
-) -> Result<(OutputDir, flexmb::input::ModelFile), i32> {
+) -> Result<
+    (
+        OutputDir,
+        flexmb::input::ModelFile,
+        flexmb::sensitivity::Setup,
+    ),
+    i32,
+> {
     let dir = OutputDir::prepare(out).map_err(|e| {
         tell(format_args!("error: {e}"));
         exit::OUTPUT_FAILED
@@ -432,6 +440,7 @@ fn prepare_sensitivity(
         tell(format_args!("error: {e}"));
         exit::INVALID_MODEL
     })?;
+    let mut file = file;
     let missing = match &file.sensitivity {
         None => Some("the model declares no [[design_parameter]] and no [[criterion]]: nothing to differentiate (docs/model-format.md, \"Sensitivity analysis\")"),
         Some(s) if s.design.is_empty() || s.criteria.is_empty() => Some(
@@ -443,20 +452,18 @@ fn prepare_sensitivity(
         tell(format_args!("error: {}: {m}", model.display()));
         return Err(exit::INVALID_MODEL);
     }
-    Ok((dir, file))
+    let setup = file.sensitivity.take().expect("checked above");
+    Ok((dir, file, setup))
 }
 
 /// `flexmb sensitivity`: the gradients of the model's criteria.
 fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOptions) -> i32 {
     use flexmb::sensitivity::{self, report, Method};
-    let (dir, file) = match prepare_sensitivity(model, out, set) {
+    let (dir, file, setup) = match prepare_sensitivity(model, out, set) {
         Ok(prepared) => prepared,
         Err(code) => return code,
     };
-    let setup = file
-        .sensitivity
-        .as_ref()
-        .expect("checked by prepare_sensitivity");
+    let setup = &setup;
     let fd_step = options.fd_step.unwrap_or(setup.fd_step);
     if !(fd_step.is_finite() && fd_step > 0.0 && fd_step <= 0.1) {
         tell(format_args!(
@@ -566,14 +573,11 @@ fn optimize(
     iterations: u64,
 ) -> i32 {
     use flexmb::sensitivity::optimize::{optimize, Evaluator};
-    let (dir, file) = match prepare_sensitivity(model, out, set) {
+    let (dir, file, setup) = match prepare_sensitivity(model, out, set) {
         Ok(prepared) => prepared,
         Err(code) => return code,
     };
-    let setup = file
-        .sensitivity
-        .as_ref()
-        .expect("checked by prepare_sensitivity");
+    let setup = &setup;
     let invalid = |m: String| {
         tell(format_args!("error: {}: {m}", model.display()));
         exit::INVALID_MODEL

@@ -155,24 +155,7 @@ fn check(name: &str, sim: &Simulation) {
         let ds = tangent(&mut rand);
         let jv = f.start_jvp(&x, &ds, &mut data);
         let eps = 1e-6;
-        let moved = |sign: f64| {
-            let mut s: State = sim.state.clone();
-            for i in 0..n {
-                s.q[i] = sim
-                    .model
-                    .group
-                    .integrate(&s.q[i], &(ds.q[i] * (sign * eps)));
-                s.v[i] += ds.v[i] * (sign * eps);
-                s.vdot[i] += ds.vdot[i] * (sign * eps);
-                s.a[i] += ds.a[i] * (sign * eps);
-            }
-            for i in 0..ns {
-                s.x[i] += ds.x[i] * (sign * eps);
-                s.xdot[i] += ds.xdot[i] * (sign * eps);
-                s.w[i] += ds.w[i] * (sign * eps);
-            }
-            s
-        };
+        let moved = |sign: f64| moved_state(sim, &ds, sign * eps);
         let (sp, sm) = (moved(1.0), moved(-1.0));
         let rp =
             StepFunction::new(&sim.model, &layout, &sp, &sim.settings, h).residual(&x, &mut data);
@@ -194,6 +177,24 @@ fn check(name: &str, sim: &Simulation) {
             "{name}: transposed product {right:e} against {left:e}"
         );
     }
+}
+
+/// The simulation's state moved by `c ds` (configurations on the group: `q exp(c ds.q)`;
+/// the multipliers stay, they do not enter the step).
+fn moved_state(sim: &Simulation, ds: &StateTangent, c: f64) -> State {
+    let mut s: State = sim.state.clone();
+    for i in 0..s.q.len() {
+        s.q[i] = sim.model.group.integrate(&s.q[i], &(ds.q[i] * c));
+        s.v[i] += ds.v[i] * c;
+        s.vdot[i] += ds.vdot[i] * c;
+        s.a[i] += ds.a[i] * c;
+    }
+    for i in 0..s.x.len() {
+        s.x[i] += ds.x[i] * c;
+        s.xdot[i] += ds.xdot[i] * c;
+        s.w[i] += ds.w[i] * c;
+    }
+    s
 }
 
 /// The components of a state tangent, one vector per kind (compared kind by kind: their
@@ -238,18 +239,7 @@ fn check_end_state(name: &str, sim: &Simulation) {
     let eps = 1e-6;
     let end = f.end_state(&x);
     let moved = |sign: f64| {
-        let mut s: State = sim.state.clone();
-        for i in 0..n {
-            s.q[i] = group.integrate(&s.q[i], &(ds.q[i] * (sign * eps)));
-            s.v[i] += ds.v[i] * (sign * eps);
-            s.vdot[i] += ds.vdot[i] * (sign * eps);
-            s.a[i] += ds.a[i] * (sign * eps);
-        }
-        for i in 0..ns {
-            s.x[i] += ds.x[i] * (sign * eps);
-            s.xdot[i] += ds.xdot[i] * (sign * eps);
-            s.w[i] += ds.w[i] * (sign * eps);
-        }
+        let s = moved_state(sim, &ds, sign * eps);
         let xm: Vec<f64> = x.iter().zip(&dx).map(|(a, b)| a + sign * eps * b).collect();
         StepFunction::new(&sim.model, &layout, &s, &sim.settings, h).end_state(&xm)
     };

@@ -239,15 +239,17 @@ pub fn sensor_gradient(
             }
         }
     }
-    let mut moved_state = state.clone();
+    // Multipliers and element states: moved on a copy of the state, made only when read.
+    let mut moved_state = (!rows.is_empty() || !states.is_empty()).then(|| state.clone());
     let mut scalar = |entry: Entry, get: &dyn Fn(&mut State) -> &mut f64| {
-        let base = *get(&mut moved_state);
+        let moved_state = moved_state.as_mut().expect("made for rows and states");
+        let base = *get(moved_state);
         let eps = EPS * base.abs().max(1.0);
         let g = difference(eps, &mut |e| {
-            *get(&mut moved_state) = base + e;
-            crate::sensors::sensor_value(model, layout, k, &nodes, &moved_state, &mut buffers)
+            *get(moved_state) = base + e;
+            crate::sensors::sensor_value(model, layout, k, &nodes, moved_state, &mut buffers)
         });
-        *get(&mut moved_state) = base;
+        *get(moved_state) = base;
         push(&mut out, entry, g);
     };
     for &r in &rows {

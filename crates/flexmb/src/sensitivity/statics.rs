@@ -70,17 +70,14 @@ pub(super) fn gradients(problem: &Problem, direct: bool) -> Result<Gradients, Se
     let layout = statics.data.layout.clone();
     let mut data = Data::new(model, layout.clone()).map_err(crate::SolveError::from)?;
     // The equilibrium's point: no velocities or accelerations (a pseudo-dynamic run ends
-    // with small ones), loads at the time the analysis evaluated them (the load factor; a
-    // pseudo-dynamic run: its end time, with the load factor as scale).
+    // with small ones), loads at the state's time, where the analysis evaluated them (the
+    // load factor; a pseudo-dynamic run's end time, with the load factor as scale).
     let mut nodes = crate::sensors::node_states(state);
     for n in &mut nodes {
         n.v = flexmb_lie::Vec6::zeros();
         n.vdot = flexmb_lie::Vec6::zeros();
     }
-    let t = match settings.method {
-        crate::solve::StaticMethod::PseudoDynamic => state.t,
-        _ => lambda,
-    };
+    let t = state.t;
     let rates = vec![0.0; layout.n_states];
     let it = Iterate {
         nodes: &nodes,
@@ -163,67 +160,64 @@ pub(super) fn gradients(problem: &Problem, direct: bool) -> Result<Gradients, Se
         u[layout.block(Block::States)].copy_from_slice(&t.x);
         u
     };
-    match direct {
-        true => {
-            let mut dr = vec![0.0; nd];
-            let (mut dphi, mut de) = (vec![0.0; layout.n_rows], vec![0.0; layout.n_states]);
-            for (k, &id) in problem.design.iter().enumerate() {
-                let columns = Columns {
-                    dr: &mut dr,
-                    dphi: &mut dphi,
-                    dpsi: &mut [],
-                    de: &mut de,
-                };
-                residual_derivative(model, &problem.params, id, &point, columns);
-                let mut rhs = vec![0.0; layout.n_unknowns()];
-                rhs[..nd].iter_mut().zip(&dr).for_each(|(a, b)| *a = -s * b);
-                for (j, &row) in layout.active_rows.iter().enumerate() {
-                    rhs[nd + j] = -dphi[row];
-                }
-                rhs[so..].iter_mut().zip(&de).for_each(|(a, b)| *a = -s * b);
-                data.solver.solve_in_place(&mut rhs);
-                let mut ds = StateTangent::zeros_of(&layout);
-                for (i, q) in ds.q.iter_mut().enumerate() {
-                    q.copy_from_slice(&rhs[6 * i..6 * i + 6]);
-                }
-                for (j, &row) in layout.active_rows.iter().enumerate() {
-                    ds.lambda[row] = rhs[nd + j] / s;
-                }
-                ds.x.copy_from_slice(&rhs[layout.block(Block::States)]);
-                for (c, g) in gradients.iter_mut().enumerate() {
-                    g[k] += bars[c].dot(&ds);
-                }
+    if direct {
+        let mut dr = vec![0.0; nd];
+        let (mut dphi, mut de) = (vec![0.0; layout.n_rows], vec![0.0; layout.n_states]);
+        for (k, &id) in problem.design.iter().enumerate() {
+            let columns = Columns {
+                dr: &mut dr,
+                dphi: &mut dphi,
+                dpsi: &mut [],
+                de: &mut de,
+            };
+            residual_derivative(model, &problem.params, id, &point, columns);
+            let mut rhs = vec![0.0; layout.n_unknowns()];
+            rhs[..nd].iter_mut().zip(&dr).for_each(|(a, b)| *a = -s * b);
+            for (j, &row) in layout.active_rows.iter().enumerate() {
+                rhs[nd + j] = -dphi[row];
+            }
+            rhs[so..].iter_mut().zip(&de).for_each(|(a, b)| *a = -s * b);
+            data.solver.solve_in_place(&mut rhs);
+            let mut ds = StateTangent::zeros_of(&layout);
+            for (i, q) in ds.q.iter_mut().enumerate() {
+                q.copy_from_slice(&rhs[6 * i..6 * i + 6]);
+            }
+            for (j, &row) in layout.active_rows.iter().enumerate() {
+                ds.lambda[row] = rhs[nd + j] / s;
+            }
+            ds.x.copy_from_slice(&rhs[layout.block(Block::States)]);
+            for (c, g) in gradients.iter_mut().enumerate() {
+                g[k] += bars[c].dot(&ds);
             }
         }
-        false => {
-            let ids: Vec<ParamId> = problem.design.clone();
-            for (c, bar) in bars.iter().enumerate() {
-                let mut a = to_unknowns(bar);
-                data.solver.solve_transpose_in_place(&mut a);
-                let mut w_phi = vec![0.0; layout.n_rows];
-                for (j, &row) in layout.active_rows.iter().enumerate() {
-                    w_phi[row] = a[nd + j];
-                }
-                let w_r: Vec<f64> = a[..nd].iter().map(|v| s * v).collect();
-                let w_e: Vec<f64> = a[so..].iter().map(|v| s * v).collect();
-                let weights = Weights {
-                    r: &w_r,
-                    phi: &w_phi,
-                    psi: &[],
-                    e: &w_e,
-                };
-                let mut full = vec![0.0; problem.params.len()];
-                residual_derivative_transpose_for(
-                    model,
-                    &problem.params,
-                    &ids,
-                    &point,
-                    weights,
-                    &mut full,
-                );
-                for (k, id) in ids.iter().enumerate() {
-                    gradients[c][k] -= full[id.0 as usize];
-                }
+    } else {
+        let ids: Vec<ParamId> = problem.design.clone();
+        for (c, bar) in bars.iter().enumerate() {
+            let mut a = to_unknowns(bar);
+            data.solver.solve_transpose_in_place(&mut a);
+            let mut w_phi = vec![0.0; layout.n_rows];
+            for (j, &row) in layout.active_rows.iter().enumerate() {
+                w_phi[row] = a[nd + j];
+            }
+            let w_r: Vec<f64> = a[..nd].iter().map(|v| s * v).collect();
+            let w_e: Vec<f64> = a[so..].iter().map(|v| s * v).collect();
+            let weights = Weights {
+                r: &w_r,
+                phi: &w_phi,
+                psi: &[],
+                e: &w_e,
+            };
+            let mut full = vec![0.0; problem.params.len()];
+            residual_derivative_transpose_for(
+                model,
+                &problem.params,
+                &ids,
+                &point,
+                weights,
+                &mut full,
+            );
+            for (k, id) in ids.iter().enumerate() {
+                gradients[c][k] -= full[id.0 as usize];
             }
         }
     }
