@@ -10,7 +10,7 @@
 //! ground). The matrix is `[[S, G^T], [B, 0]]` with a zero diagonal block for
 //! the multipliers, interleaved body by body.
 
-use flexmb::solve::linear::{Backend, LinearSolver, DENSE_MAX};
+use flexmb::solve::linear::{Backend, Groups, LinearSolver, DENSE_MAX};
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -29,6 +29,8 @@ impl Lcg {
 /// Pattern and two value sets (alternated like successive Newton iterations).
 struct Chain {
     n: usize,
+    /// Each body's unknowns, then each joint's multipliers (saddle).
+    groups: Groups,
     pattern: Vec<(usize, usize)>,
     values: [Vec<f64>; 2],
 }
@@ -59,6 +61,11 @@ fn chain(nb: usize, nc: usize, seed: u64) -> Chain {
             }
         }
     }
+    let mut groups = Groups::default();
+    for b in 0..nb {
+        groups.push(b * bs..b * bs + 6, false);
+        groups.push(b * bs + 6..(b + 1) * bs, true);
+    }
     let mut values = [Vec::new(), Vec::new()];
     for set in &mut values {
         for &(i, j) in &pattern {
@@ -82,12 +89,17 @@ fn chain(nb: usize, nc: usize, seed: u64) -> Chain {
             set.push(v);
         }
     }
-    Chain { n, pattern, values }
+    Chain {
+        n,
+        groups,
+        pattern,
+        values,
+    }
 }
 
 fn time_case(label: &str, sys: &Chain, backend: Backend, reps: usize) {
     let t0 = Instant::now();
-    let mut solver = LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
+    let mut solver = LinearSolver::build(sys.n, &sys.pattern, backend, &sys.groups).unwrap();
     let setup = t0.elapsed().as_secs_f64() * 1e6;
     let mut b = vec![0.0; sys.n];
     // Warm-up: reaches the steady state of all buffers.
@@ -135,6 +147,7 @@ fn main() {
     );
     time_case("dense 110x110 (10 blocks)", &medium, Backend::Dense, 20_000);
     time_case("sparse 11000 (1000 blocks)", &large, Backend::Sparse, 200);
+    time_case("block 11000 (1000 blocks)", &large, Backend::Block, 200);
     println!("-- crossover check --");
     time_case("9x9 on the sparse backend", &small, Backend::Sparse, 50_000);
     time_case(
@@ -143,9 +156,9 @@ fn main() {
         Backend::Sparse,
         5_000,
     );
-    for nb in [2, 3, 4, 5, 6, 8, 14, 20] {
+    for nb in [1, 2, 3, 4, 5, 6, 8, 10, 14, 20] {
         let sys = chain(nb, 5, 4);
-        for backend in [Backend::Dense, Backend::Sparse] {
+        for backend in [Backend::Dense, Backend::Sparse, Backend::Block] {
             time_case(&format!("{} blocks", nb), &sys, backend, 2_000);
         }
     }

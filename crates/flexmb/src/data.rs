@@ -34,7 +34,7 @@
 use crate::elements::ElementRef;
 use crate::joints::{self, Row};
 use crate::model::{JointId, Model, NodeId};
-use crate::solve::linear::{LinearError, LinearSolver};
+use crate::solve::linear::{Groups, LinearError, LinearSolver};
 use flexmb_lie::Vec6;
 use std::ops::Range;
 
@@ -200,6 +200,40 @@ impl Layout {
         }
     }
 
+    /// The groups of unknowns the block LU eliminates together
+    /// ([`crate::solve::linear::Groups`]): each node's six increments; each joint's
+    /// multipliers and, in the stabilized formulation, its stabilization unknowns (saddle
+    /// groups, with a zero diagonal block); each element's states.
+    pub fn groups(&self) -> Groups {
+        let mut groups = Groups::default();
+        for node in 0..self.n_nodes {
+            groups.push(6 * node..6 * node + 6, false);
+        }
+        let blocks = [Block::Multipliers, Block::Stabilization];
+        for block in blocks.into_iter().filter(|&b| !self.block(b).is_empty()) {
+            let first = self.block(block).start;
+            for (j, rows) in self.joint_rows.iter().enumerate() {
+                let start = self.joint_row_start[j];
+                let unknowns = (start..start + rows.len())
+                    .filter_map(|row| self.row_unknown[row])
+                    .map(|k| first + k);
+                groups.push(unknowns, true);
+            }
+        }
+        let offset = self.state_offset();
+        for (e, &start) in self.state_start.iter().enumerate() {
+            let end = self
+                .state_start
+                .get(e + 1)
+                .copied()
+                .unwrap_or(self.n_states);
+            if end > start {
+                groups.push(offset + start..offset + end, false);
+            }
+        }
+        groups
+    }
+
     /// What unknown `i` of the Newton vector is.
     pub fn unknown(&self, i: usize) -> UnknownId {
         let (nd, na) = (self.n_dofs, self.n_active);
@@ -325,7 +359,7 @@ impl Data {
     pub fn new(model: &Model, layout: Layout) -> Result<Self, LinearError> {
         let pattern = crate::assembly::pattern(model, &layout);
         let n = layout.n_unknowns();
-        let solver = LinearSolver::new(n, &pattern)?;
+        let solver = LinearSolver::with_groups(n, &pattern, &layout.groups())?;
         let diagonal_slots = pattern
             .iter()
             .enumerate()

@@ -54,6 +54,11 @@
 //! factor is accessible (faer's supernodal LU hides its factors; it factors a
 //! 1000-body chain about 1.6x faster but solves 2x slower).
 
+mod block;
+
+pub use block::{Groups, GROWTH_LIMIT};
+
+use block::BlockLu;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::lu::partial_pivoting::{factor as dense_factor, solve as dense_solve};
 use faer::perm::PermRef;
@@ -83,6 +88,9 @@ pub const PIVOT_TOLERANCE: f64 = 1e-13;
 pub enum Backend {
     Dense,
     Sparse,
+    /// The block LU of the model's groups of unknowns ([`block`]), with the sparse LU as
+    /// fallback.
+    Block,
 }
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -112,7 +120,26 @@ pub struct LinearSolver {
 enum Inner {
     Dense(DenseLu),
     Sparse(Box<SparseLu>),
+    Block(Box<BlockBackend>),
 }
+
+/// The block LU and the general sparse LU it hands the matrices it rejects to.
+struct BlockBackend {
+    block: BlockLu,
+    /// The pattern, to build the general LU on the first rejection.
+    pattern: Vec<(usize, usize)>,
+    /// The general LU and the CSC position of each triplet.
+    general: Option<(Vec<usize>, Box<SparseLu>)>,
+    /// Rejections in a row; from [`REJECTIONS_BEFORE_GENERAL`] on, the block LU is no
+    /// longer tried.
+    rejections: usize,
+    /// Whether the last factorization is the general LU's.
+    general_active: bool,
+}
+
+/// Consecutive rejections by the block LU after which the solver keeps the general LU
+/// (matrices whose diagonal blocks stay singular, e.g. the statics of a rigid mechanism).
+const REJECTIONS_BEFORE_GENERAL: usize = 3;
 
 struct DenseLu {
     /// Column-major `n x n` matrix, overwritten by its LU factors.
@@ -150,8 +177,27 @@ impl LinearSolver {
         Self::with_backend(n, pattern, backend)
     }
 
-    /// Builds a solver with an explicit backend. For the sparse backend this
-    /// performs the symbolic analysis (fill-reducing ordering).
+    /// Chooses [`Backend::Dense`] when `n <= DENSE_MAX`, [`Backend::Block`] on the given
+    /// groups of unknowns otherwise.
+    ///
+    /// # Panics
+    /// If a pattern entry or a group member lies outside the `n x n` matrix.
+    pub fn with_groups(
+        n: usize,
+        pattern: &[(usize, usize)],
+        groups: &Groups,
+    ) -> Result<Self, LinearError> {
+        let backend = if n <= DENSE_MAX {
+            Backend::Dense
+        } else {
+            Backend::Block
+        };
+        Self::build(n, pattern, backend, groups)
+    }
+
+    /// Builds a solver with an explicit backend (the block backend with every unknown a
+    /// group of its own). For the sparse and block backends this performs the symbolic
+    /// analysis (fill-reducing ordering).
     ///
     /// # Panics
     /// If a pattern entry lies outside the `n x n` matrix.
@@ -159,6 +205,19 @@ impl LinearSolver {
         n: usize,
         pattern: &[(usize, usize)],
         backend: Backend,
+    ) -> Result<Self, LinearError> {
+        Self::build(n, pattern, backend, &Groups::default())
+    }
+
+    /// Builds a solver with an explicit backend and, for the block backend, groups.
+    ///
+    /// # Panics
+    /// If a pattern entry or a group member lies outside the `n x n` matrix.
+    pub fn build(
+        n: usize,
+        pattern: &[(usize, usize)],
+        backend: Backend,
+        groups: &Groups,
     ) -> Result<Self, LinearError> {
         for (k, &(i, j)) in pattern.iter().enumerate() {
             assert!(
@@ -188,33 +247,19 @@ impl LinearSolver {
                 (slots, Inner::Dense(dense))
             }
             Backend::Sparse => {
-                let (col_ptr, row_idx, slots) = compress_pattern(n, pattern);
-                let nnz = row_idx.len();
-                let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-                let params = LuSymbolicParams {
-                    // The simplicial LU exposes U, needed for the pivot check.
-                    supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
-                    ..Default::default()
-                };
-                let symbolic = factorize_symbolic_lu(pattern.as_ref(), params)
-                    .map_err(|e| LinearError::Factorization(format!("{e:?}")))?;
-                let req = StackReq::any_of(&[
-                    simplicial::factorize_simplicial_numeric_lu_scratch::<usize, f64>(n, n),
-                    simplicial::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq),
-                    simplicial::solve_transpose_in_place_scratch::<usize, f64>(n, 1, Par::Seq),
-                ]);
-                let sparse = SparseLu {
-                    pattern,
-                    values: vec![0.0; nnz],
-                    symbolic,
-                    lu: simplicial::SimplicialLu::new(),
-                    row_perm_fwd: (0..n).collect(),
-                    row_perm_inv: (0..n).collect(),
-                    mem: MemBuffer::try_new(req).map_err(|_| {
-                        LinearError::Factorization("out of memory for the LU scratch".into())
-                    })?,
-                };
+                let (slots, sparse) = SparseLu::new(n, pattern)?;
                 (slots, Inner::Sparse(Box::new(sparse)))
+            }
+            Backend::Block => {
+                let (block, slots) = BlockLu::new(n, pattern, groups);
+                let backend = BlockBackend {
+                    block,
+                    pattern: pattern.to_vec(),
+                    general: None,
+                    rejections: 0,
+                    general_active: false,
+                };
+                (slots, Inner::Block(Box::new(backend)))
             }
         };
         Ok(Self {
@@ -232,6 +277,7 @@ impl LinearSolver {
         match self.inner {
             Inner::Dense(_) => Backend::Dense,
             Inner::Sparse(_) => Backend::Sparse,
+            Inner::Block(_) => Backend::Block,
         }
     }
 
@@ -252,6 +298,7 @@ impl LinearSolver {
         match &self.inner {
             Inner::Dense(_) => self.n * self.n,
             Inner::Sparse(s) => s.values.len(),
+            Inner::Block(b) => b.block.stored(),
         }
     }
 
@@ -295,6 +342,7 @@ impl LinearSolver {
         let min_ratio = match &mut self.inner {
             Inner::Dense(d) => d.factorize(n, &self.slots, values)?,
             Inner::Sparse(s) => s.factorize(n, &self.slots, values)?,
+            Inner::Block(b) => b.factorize(n, &self.slots, values)?,
         };
         self.min_pivot_ratio = min_ratio;
         self.factorized = true;
@@ -341,9 +389,9 @@ impl LinearSolver {
         if n == 0 {
             return;
         }
-        let rhs = MatMut::from_column_major_slice_mut(b, n, 1);
         match &mut self.inner {
             Inner::Dense(d) => {
+                let rhs = MatMut::from_column_major_slice_mut(b, n, 1);
                 let lu = MatRef::from_column_major_slice(&d.lu, n, n);
                 let perm = PermRef::new_checked(&d.perm_fwd, &d.perm_inv, n);
                 let stack = MemStack::new(&mut d.mem);
@@ -371,31 +419,11 @@ impl LinearSolver {
                     );
                 }
             }
-            Inner::Sparse(s) => {
-                let s = &mut **s;
-                let row_perm = PermRef::new_checked(&s.row_perm_fwd, &s.row_perm_inv, n);
-                let col_perm = s.symbolic.col_perm();
-                let stack = MemStack::new(&mut s.mem);
-                if transpose {
-                    s.lu.solve_transpose_in_place_with_conj(
-                        row_perm,
-                        col_perm,
-                        Conj::No,
-                        rhs,
-                        Par::Seq,
-                        stack,
-                    );
-                } else {
-                    s.lu.solve_in_place_with_conj(
-                        row_perm,
-                        col_perm,
-                        Conj::No,
-                        rhs,
-                        Par::Seq,
-                        stack,
-                    );
-                }
-            }
+            Inner::Sparse(s) => s.solve(n, b, transpose),
+            Inner::Block(block) => match &mut block.general {
+                Some((_, general)) if block.general_active => general.solve(n, b, transpose),
+                _ => block.block.solve_in_place(b, transpose),
+            },
         }
     }
 }
@@ -435,6 +463,59 @@ impl DenseLu {
 }
 
 impl SparseLu {
+    /// `A x = b` or `A^T x = b` in place with the last factorization.
+    fn solve(&mut self, n: usize, b: &mut [f64], transpose: bool) {
+        let rhs = MatMut::from_column_major_slice_mut(b, n, 1);
+        let row_perm = PermRef::new_checked(&self.row_perm_fwd, &self.row_perm_inv, n);
+        let col_perm = self.symbolic.col_perm();
+        let stack = MemStack::new(&mut self.mem);
+        if transpose {
+            self.lu.solve_transpose_in_place_with_conj(
+                row_perm,
+                col_perm,
+                Conj::No,
+                rhs,
+                Par::Seq,
+                stack,
+            );
+        } else {
+            self.lu
+                .solve_in_place_with_conj(row_perm, col_perm, Conj::No, rhs, Par::Seq, stack);
+        }
+    }
+
+    /// Compresses the pattern and runs the symbolic analysis; returns the CSC position of
+    /// each triplet beside the solver.
+    fn new(n: usize, pattern: &[(usize, usize)]) -> Result<(Vec<usize>, Self), LinearError> {
+        let (col_ptr, row_idx, slots) = compress_pattern(n, pattern);
+        let nnz = row_idx.len();
+        let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+        let params = LuSymbolicParams {
+            // The simplicial LU exposes U, needed for the pivot check.
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
+            ..Default::default()
+        };
+        let symbolic = factorize_symbolic_lu(pattern.as_ref(), params)
+            .map_err(|e| LinearError::Factorization(format!("{e:?}")))?;
+        let req = StackReq::any_of(&[
+            simplicial::factorize_simplicial_numeric_lu_scratch::<usize, f64>(n, n),
+            simplicial::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq),
+            simplicial::solve_transpose_in_place_scratch::<usize, f64>(n, 1, Par::Seq),
+        ]);
+        let sparse = SparseLu {
+            pattern,
+            values: vec![0.0; nnz],
+            symbolic,
+            lu: simplicial::SimplicialLu::new(),
+            row_perm_fwd: (0..n).collect(),
+            row_perm_inv: (0..n).collect(),
+            mem: MemBuffer::try_new(req).map_err(|_| {
+                LinearError::Factorization("out of memory for the LU scratch".into())
+            })?,
+        };
+        Ok((slots, sparse))
+    }
+
     /// Assembles, factors and checks the pivots; returns the smallest relative
     /// pivot.
     fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Result<f64, LinearError> {
@@ -479,6 +560,31 @@ impl SparseLu {
             min_ratio = check_pivot(pivot, max_abs, col_perm.arrays().0[j], min_ratio)?;
         }
         Ok(min_ratio)
+    }
+}
+
+impl BlockBackend {
+    /// The block LU, or the general LU for a matrix the block LU rejects (see
+    /// [`REJECTIONS_BEFORE_GENERAL`]).
+    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Result<f64, LinearError> {
+        self.general_active = false;
+        if self.rejections < REJECTIONS_BEFORE_GENERAL {
+            match self.block.factorize(slots, values) {
+                Ok(ratio) => {
+                    self.rejections = 0;
+                    return Ok(ratio);
+                }
+                Err(block::Rejected) => self.rejections += 1,
+            }
+        }
+        if self.general.is_none() {
+            let (slots, sparse) = SparseLu::new(n, &self.pattern)?;
+            self.general = Some((slots, Box::new(sparse)));
+        }
+        let (general_slots, general) = self.general.as_mut().expect("built above");
+        let ratio = general.factorize(n, general_slots, values)?;
+        self.general_active = true;
+        Ok(ratio)
     }
 }
 
@@ -707,6 +813,8 @@ mod tests {
             let xd = solve_checked(&sys, Backend::Dense, &b, transpose);
             let xs = solve_checked(&sys, Backend::Sparse, &b, transpose);
             assert_close(&xd, &xs, 1e-10);
+            let xb = solve_checked(&sys, Backend::Block, &b, transpose);
+            assert_close(&xd, &xb, 1e-10);
         }
     }
 
@@ -769,11 +877,11 @@ mod tests {
                 pattern: entries.iter().map(|e| e.0).collect(),
                 values: entries.iter().map(|e| e.1).collect(),
             };
-            for backend in [Backend::Dense, Backend::Sparse] {
+            for backend in [Backend::Dense, Backend::Sparse, Backend::Block] {
                 let x = solve_checked(&sys, backend, &b, false);
                 let mut solver = LinearSolver::with_backend(dup.n, &dup.pattern, backend).unwrap();
                 assert_eq!(solver.pattern_len(), 2 * sys.pattern.len());
-                if backend == Backend::Sparse {
+                if backend != Backend::Dense {
                     // Same merged structure as the original pattern.
                     let reference =
                         LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
@@ -797,7 +905,7 @@ mod tests {
                 pattern: sys.pattern.iter().map(|&(i, j)| (j, i)).collect(),
                 values: sys.values.clone(),
             };
-            for backend in [Backend::Dense, Backend::Sparse] {
+            for backend in [Backend::Dense, Backend::Sparse, Backend::Block] {
                 let xt = solve_checked(&sys, backend, &b, true);
                 let x = solve_checked(&transposed, backend, &b, false);
                 assert_close(&x, &xt, 1e-10);
@@ -825,7 +933,7 @@ mod tests {
                     .filter(|(&(i, _), _)| i != row)
                     .map(|(&p, &v)| (p, v))
                     .unzip();
-                for backend in [Backend::Dense, Backend::Sparse] {
+                for backend in [Backend::Dense, Backend::Sparse, Backend::Block] {
                     let mut solver =
                         LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
                     let err = solver.factorize(&values).unwrap_err();
@@ -879,7 +987,7 @@ mod tests {
         // Scaled-down row: pivot ~1e-15 relative to the largest entry.
         let mut scaled = [2.0, 1.0, 0.5, 1.0, 3.0, 1.0, 0.5, 1.0, 4.0];
         scaled[6..].iter_mut().for_each(|v| *v *= 1e-14);
-        for backend in [Backend::Dense, Backend::Sparse] {
+        for backend in [Backend::Dense, Backend::Sparse, Backend::Block] {
             let mut solver = LinearSolver::with_backend(3, &pattern, backend).unwrap();
             assert!(matches!(
                 solver.factorize(&values),
@@ -935,7 +1043,7 @@ mod tests {
         for (ns, nc) in [(14, 6), (300, 100)] {
             let sys = saddle_system(ns, nc, 41);
             let b = random_rhs(sys.n, 42);
-            for backend in [Backend::Dense, Backend::Sparse] {
+            for backend in [Backend::Dense, Backend::Sparse, Backend::Block] {
                 let mut solver = LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
                 let mut rng = Lcg(43);
                 for it in 0..4 {
@@ -969,6 +1077,151 @@ mod tests {
         }
     }
 
+    /// A chain of `nb` bodies (6 unknowns each, diagonally dominant mass block) and `nb`
+    /// joints of `nc` rows (body 0 to the ground, body b to body b - 1), with the coupling
+    /// of the joint's geometric stiffness between neighbouring bodies; the joints' unknowns
+    /// after all the bodies', as in the model's layout. Also returns the groups.
+    fn chain_system(nb: usize, nc: usize, seed: u64) -> (System, Groups) {
+        let mut rng = Lcg(seed);
+        let n = nb * (6 + nc);
+        let mut pattern = Vec::new();
+        let mut values = Vec::new();
+        let mut groups = Groups::default();
+        let mut push = |i, j, v| {
+            pattern.push((i, j));
+            values.push(v);
+        };
+        for b in 0..nb {
+            for i in 0..6 {
+                for j in 0..6 {
+                    let v = if i == j { 10.0 } else { rng.uniform(-1.0, 1.0) };
+                    push(6 * b + i, 6 * b + j, v);
+                    if b > 0 {
+                        push(6 * b + i, 6 * (b - 1) + j, rng.uniform(-0.5, 0.5));
+                        push(6 * (b - 1) + i, 6 * b + j, rng.uniform(-0.5, 0.5));
+                    }
+                }
+            }
+            let rows = 6 * nb + nc * b;
+            for r in 0..nc {
+                for j in 0..6 {
+                    let own = if r == j { 1.0 } else { 0.0 } + rng.uniform(-0.1, 0.1);
+                    push(rows + r, 6 * b + j, own);
+                    push(6 * b + j, rows + r, own);
+                    if b > 0 {
+                        let other = if r == j { -1.0 } else { 0.0 } + rng.uniform(-0.1, 0.1);
+                        push(rows + r, 6 * (b - 1) + j, other);
+                        push(6 * (b - 1) + j, rows + r, other);
+                    }
+                }
+                push(rows + r, rows + r, 0.0);
+            }
+        }
+        for b in 0..nb {
+            groups.push(6 * b..6 * b + 6, false);
+        }
+        for b in 0..nb {
+            groups.push(6 * nb + nc * b..6 * nb + nc * (b + 1), true);
+        }
+        (System { n, pattern, values }, groups)
+    }
+
+    #[test]
+    fn block_lu_of_a_chain_has_no_fill() {
+        let (nb, nc) = (40, 5);
+        let (sys, groups) = chain_system(nb, nc, 51);
+        let b = random_rhs(sys.n, 52);
+        let mut solver = LinearSolver::with_groups(sys.n, &sys.pattern, &groups).unwrap();
+        assert_eq!(solver.backend(), Backend::Block);
+        // Every body with the joint to its parent: one supernode of 11 unknowns whose panels
+        // hold rows of its two neighbours only (the parent body's 6 rows when eliminated
+        // from the tip, the child's 11 from the root; none for the last): no fill.
+        let s = 6 + nc;
+        assert!(solver.nnz() <= nb * s * s + (nb - 1) * 2 * s * s);
+        assert!(solver.nnz() >= nb * s * s + (nb - 1) * 2 * 6 * s);
+        for transpose in [false, true] {
+            solver.factorize(&sys.values).unwrap();
+            let mut x = b.clone();
+            if transpose {
+                solver.solve_transpose_in_place(&mut x);
+            } else {
+                solver.solve_in_place(&mut x);
+            }
+            let expected = solve_checked(&sys, Backend::Dense, &b, transpose);
+            assert_close(&expected, &x, 1e-12);
+        }
+        let Inner::Block(block) = &solver.inner else {
+            unreachable!()
+        };
+        assert!(!block.general_active, "the block LU took this matrix");
+    }
+
+    #[test]
+    fn block_lu_hands_a_rejected_matrix_to_the_general_lu() {
+        let (sys, groups) = chain_system(20, 5, 61);
+        let b = random_rhs(sys.n, 62);
+        let mut solver = LinearSolver::with_groups(sys.n, &sys.pattern, &groups).unwrap();
+        // Without mass, the first body's block [[0, B^T], [B, 0]] is singular (6 + 5
+        // unknowns, rank 10): the block LU rejects the matrix, which is regular through the
+        // next joint; the general LU solves it.
+        let massless = System {
+            n: sys.n,
+            pattern: sys.pattern.clone(),
+            values: sys
+                .pattern
+                .iter()
+                .zip(&sys.values)
+                .map(|(&(i, j), &v)| if i < 6 && j < 6 { 0.0 } else { v })
+                .collect(),
+        };
+        solver.factorize(&massless.values).unwrap();
+        let mut x = b.clone();
+        solver.solve_in_place(&mut x);
+        assert_close(
+            &solve_checked(&massless, Backend::Dense, &b, false),
+            &x,
+            1e-9,
+        );
+        // Good values again: back to the block LU.
+        solver.factorize(&sys.values).unwrap();
+        let Inner::Block(block) = &solver.inner else {
+            unreachable!()
+        };
+        assert!(!block.general_active);
+
+        // [[e, 1], [1, e]] in two groups: whichever goes first, its pivot e is fine against
+        // the largest entry but gives a multiplier 1/e beyond the growth limit. The general
+        // LU, with full partial pivoting, solves it.
+        let e = 1e-8;
+        let two = System {
+            n: 2,
+            pattern: vec![(0, 0), (0, 1), (1, 0), (1, 1)],
+            values: vec![e, 1.0, 1.0, e],
+        };
+        let mut groups = Groups::default();
+        groups.push([0], false);
+        groups.push([1], false);
+        let mut solver = LinearSolver::build(2, &two.pattern, Backend::Block, &groups).unwrap();
+        solver.factorize(&two.values).unwrap();
+        let Inner::Block(block) = &solver.inner else {
+            unreachable!()
+        };
+        assert!(block.general_active);
+        let mut x = vec![1.0, 2.0];
+        solver.solve_in_place(&mut x);
+        assert_close(
+            &solve_checked(&two, Backend::Dense, &[1.0, 2.0], false),
+            &x,
+            1e-14,
+        );
+        // Good values: the block LU.
+        solver.factorize(&[2.0, 1.0, 1.0, 2.0]).unwrap();
+        let Inner::Block(block) = &solver.inner else {
+            unreachable!()
+        };
+        assert!(!block.general_active);
+    }
+
     #[test]
     fn solver_is_send_and_sync() {
         fn assert_send_sync<T: Send + Sync>() {}
@@ -978,7 +1231,7 @@ mod tests {
 
     #[test]
     fn empty_system() {
-        for backend in [Backend::Dense, Backend::Sparse] {
+        for backend in [Backend::Dense, Backend::Sparse, Backend::Block] {
             let mut solver = LinearSolver::with_backend(0, &[], backend).unwrap();
             solver.factorize(&[]).unwrap();
             solver.solve_in_place(&mut []);

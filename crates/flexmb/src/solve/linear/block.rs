@@ -1,0 +1,570 @@
+//! Block LU for the iteration matrices of multibody systems.
+//!
+//! The unknowns of a multibody model come in small groups that the model knows: the six
+//! increments of a node, the multipliers of a joint, its stabilization unknowns, the states
+//! of an element. The iteration matrix couples two groups only where an element or a joint
+//! connects them, so that the graph of the groups is the graph of the mechanism: a tree for
+//! an open chain, a tree plus a few loops for closed mechanisms, a path for a beam.
+//! Eliminating such a graph leaves first creates no fill at all (Baraff 1996, "Linear-time
+//! dynamics using Lagrange multipliers", SIGGRAPH, Sect. 5; Featherstone's articulated
+//! body recursion is the same elimination for trees in minimal coordinates).
+//!
+//! The diagonal block of a joint's multipliers is zero (the matrix is the saddle point
+//! `[[S, B^T], [B, 0]]`), so a joint cannot be eliminated on its own. Each such *saddle*
+//! group is therefore merged into one of the node groups it is coupled to, into a
+//! *supernode* whose diagonal block `[[S_i, B_i^T], [B_i, 0]]` is regular when the joint's
+//! rows `B_i` have full rank on the node's six unknowns and `S_i` (mass and stiffness) is
+//! positive definite on their null space. Each joint goes to the least loaded of its nodes
+//! (ties: the later node, the child in a chain built from the ground), which pairs every body
+//! of a chain with the joint to its parent.
+//!
+//! The factorization is a right-looking supernodal LU:
+//!
+//! * the supernodes are ordered by approximate minimum degree (AMD, Amestoy, Davis & Duff
+//!   1996, as implemented by faer) on the supernode graph: leaves first on a tree;
+//! * the rows of each supernode's panels (positions after the supernode that couple to it,
+//!   in `A` or through fill) are found once, on the symmetrized structure, by the
+//!   elimination tree of the supernodes;
+//! * each supernode's diagonal block is factorized with partial pivoting inside the block,
+//!   `P_k S_kk = L_kk U_kk`, where `S_kk` is the block updated by the earlier supernodes;
+//!   its panels become `L_jk = S_jk U_kk^-1` and `U_kj = L_kk^-1 P_k S_kj`, and the update
+//!   `S_ij -= L_ik U_kj` of the later blocks goes to storage positions computed once.
+//!
+//! Pivoting is static between supernodes. That is safe only when the diagonal blocks are
+//! well conditioned, which the factorization checks for each supernode:
+//!
+//! * every pivot against [`PIVOT_TOLERANCE`](super::PIVOT_TOLERANCE) times the largest
+//!   entry of the matrix (the singularity rule of the other backends);
+//! * the growth of the elimination: the largest product `max_i |l_ic| max_j |u_cj|` of a
+//!   column of `L` and the matching row of `U` (one term of `|L| |U|`, which bounds the
+//!   componentwise backward error of an LU, Higham, "Accuracy and stability of numerical
+//!   algorithms", 2002, Thm. 9.3), against the largest entry of the supernode's blocks
+//!   before its elimination, at most [`GROWTH_LIMIT`]. A static pivot that is small
+//!   against its own column makes this large, as threshold partial pivoting would see it
+//!   (Duff, Erisman & Reid, "Direct methods for sparse matrices", Sect. 5.4). Schur
+//!   complements that grow with the mechanism do not: the block of the root of chain_1000
+//!   holds the articulated inertia of the whole chain, 3e8 times a link's own, and the
+//!   elimination's growth stays below 3 (the solves' backward error measured there is
+//!   1e-15).
+//!
+//! A matrix that fails a check is handed to the general sparse LU with full partial
+//! pivoting by the caller (the statics of a rigid mechanism, whose node blocks have no
+//! mass, is one such case), which also tells a singular matrix from an unlucky pivot
+//! order.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::amd;
+use faer::sparse::SymbolicSparseColMatRef;
+
+/// Largest growth of an elimination the block LU accepts (see the module documentation).
+pub const GROWTH_LIMIT: f64 = 1e4;
+
+/// A partition of the unknowns into the groups the block LU eliminates together.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Groups {
+    /// The unknowns of each group. Unknowns in no group become groups of their own.
+    pub members: Vec<Vec<usize>>,
+    /// Whether a group's own diagonal block is zero in the matrix (constraint multipliers,
+    /// stabilization unknowns): such a group is eliminated together with a neighbour.
+    pub saddle: Vec<bool>,
+}
+
+impl Groups {
+    /// Adds a group (nothing if it is empty).
+    pub fn push(&mut self, members: impl IntoIterator<Item = usize>, saddle: bool) {
+        let members: Vec<usize> = members.into_iter().collect();
+        if !members.is_empty() {
+            self.members.push(members);
+            self.saddle.push(saddle);
+        }
+    }
+}
+
+/// A factorization the block LU does not accept: a tiny or non-finite pivot, a multiplier
+/// beyond [`GROWTH_LIMIT`], or a non-finite entry. The general LU decides what it is.
+#[derive(Debug)]
+pub(super) struct Rejected;
+
+/// One supernode, in elimination order.
+struct Supernode {
+    /// First position and number of unknowns.
+    start: usize,
+    size: usize,
+    /// Range in `BlockLu::rows` of the positions of the rows of `L` (= columns of `U`).
+    rows: std::ops::Range<usize>,
+    /// Offsets in `BlockLu::store` of the diagonal block (`size x size`), of `L`
+    /// (`rows x size`) and of `U` (`size x rows`), all column-major.
+    diag: usize,
+    lower: usize,
+    upper: usize,
+    /// Offset in `BlockLu::targets` of the storage index of each entry of the update
+    /// `L U` (`rows x rows`, column-major).
+    targets: usize,
+}
+
+pub(super) struct BlockLu {
+    /// Position of each unknown in the elimination order, and the unknown at each position.
+    position: Vec<usize>,
+    unknown: Vec<usize>,
+    supernodes: Vec<Supernode>,
+    /// The row positions of every supernode's panels (ranges in [`Supernode::rows`]).
+    rows: Vec<usize>,
+    targets: Vec<usize>,
+    /// Diagonal blocks, panels and fill, in one array.
+    store: Vec<f64>,
+    /// Row interchanges of the diagonal blocks, LAPACK style (row `c` of a block was swapped
+    /// with row `swaps[start + c]` of the block, in the order of `c`).
+    swaps: Vec<usize>,
+    /// A vector in elimination order (solves) and one column of an update.
+    work: Vec<f64>,
+    column: Vec<f64>,
+}
+
+impl BlockLu {
+    /// The symbolic analysis: supernodes, their order, the structure of the factors and the
+    /// storage index of every triplet of `pattern` (returned beside the solver).
+    pub(super) fn new(n: usize, pattern: &[(usize, usize)], groups: &Groups) -> (Self, Vec<usize>) {
+        // Groups, completed with one group per unknown left out.
+        let mut group_of = vec![usize::MAX; n];
+        let mut members = groups.members.clone();
+        let mut saddle = groups.saddle.clone();
+        for (g, m) in members.iter().enumerate() {
+            for &u in m {
+                group_of[u] = g;
+            }
+        }
+        for u in 0..n {
+            if group_of[u] == usize::MAX {
+                group_of[u] = members.len();
+                members.push(vec![u]);
+                saddle.push(false);
+            }
+        }
+        let n_groups = members.len();
+        let adjacency = graph(
+            n_groups,
+            pattern.iter().map(|&(i, j)| (group_of[i], group_of[j])),
+        );
+
+        // Each saddle group joins the least loaded of its regular neighbours (ties: the later
+        // one).
+        let mut host: Vec<usize> = (0..n_groups).collect();
+        let mut load = vec![0usize; n_groups];
+        for g in (0..n_groups).filter(|&g| saddle[g]) {
+            if let Some(&h) = adjacency[g]
+                .iter()
+                .filter(|&&h| !saddle[h])
+                .min_by_key(|&&h| (load[h], std::cmp::Reverse(h)))
+            {
+                host[g] = h;
+                load[h] += 1;
+            }
+        }
+        let mut supernode_of_group = vec![usize::MAX; n_groups];
+        let mut supernode_members: Vec<Vec<usize>> = Vec::new();
+        for g in (0..n_groups).filter(|&g| host[g] == g) {
+            supernode_of_group[g] = supernode_members.len();
+            supernode_members.push(members[g].clone());
+        }
+        for g in (0..n_groups).filter(|&g| host[g] != g) {
+            let s = supernode_of_group[host[g]];
+            supernode_of_group[g] = s;
+            supernode_members[s].extend_from_slice(&members[g]);
+        }
+        let n_super = supernode_members.len();
+        let supernode_graph = graph(
+            n_super,
+            adjacency.iter().enumerate().flat_map(|(g, adj)| {
+                let of = &supernode_of_group;
+                adj.iter().map(move |&h| (of[g], of[h]))
+            }),
+        );
+
+        // Elimination order of the supernodes, then the positions of the unknowns.
+        let order = amd_order(&supernode_graph);
+        let mut position = vec![0usize; n];
+        let mut unknown = Vec::with_capacity(n);
+        let mut starts = Vec::with_capacity(n_super + 1);
+        for &s in &order {
+            starts.push(unknown.len());
+            for &u in &supernode_members[s] {
+                position[u] = unknown.len();
+                unknown.push(u);
+            }
+        }
+        starts.push(n);
+        let mut supernode_at = vec![0usize; n];
+        for k in 0..n_super {
+            supernode_at[starts[k]..starts[k + 1]].fill(k);
+        }
+
+        // Rows of the panels: the couplings of A (symmetrized), then the rows each supernode
+        // passes to its parent in the elimination tree.
+        let mut panel_rows: Vec<Vec<usize>> = vec![Vec::new(); n_super];
+        for &(i, j) in pattern {
+            let (pi, pj) = (position[i], position[j]);
+            let (ki, kj) = (supernode_at[pi], supernode_at[pj]);
+            if ki < kj {
+                panel_rows[ki].push(pj);
+            } else if kj < ki {
+                panel_rows[kj].push(pi);
+            }
+        }
+        for k in 0..n_super {
+            let mut r = std::mem::take(&mut panel_rows[k]);
+            r.sort_unstable();
+            r.dedup();
+            if let Some(&first) = r.first() {
+                let parent = supernode_at[first];
+                let parent_end = starts[parent + 1];
+                panel_rows[parent].extend(r.iter().copied().filter(|&p| p >= parent_end));
+            }
+            panel_rows[k] = r;
+        }
+
+        // Storage.
+        let mut rows = Vec::new();
+        let mut supernodes = Vec::with_capacity(n_super);
+        let mut size_store = 0;
+        let mut n_targets = 0;
+        for k in 0..n_super {
+            let (start, size) = (starts[k], starts[k + 1] - starts[k]);
+            let r = panel_rows[k].len();
+            let first = rows.len();
+            rows.extend_from_slice(&panel_rows[k]);
+            supernodes.push(Supernode {
+                start,
+                size,
+                rows: first..rows.len(),
+                diag: size_store,
+                lower: size_store + size * size,
+                upper: size_store + size * size + r * size,
+                targets: n_targets,
+            });
+            size_store += size * size + 2 * r * size;
+            n_targets += r * r;
+        }
+        let mut lu = Self {
+            position,
+            unknown,
+            supernodes,
+            rows,
+            targets: Vec::with_capacity(n_targets),
+            store: vec![0.0; size_store],
+            swaps: vec![0; n],
+            work: vec![0.0; n],
+            column: Vec::new(),
+        };
+        let mut max_rows = 0;
+        for k in 0..n_super {
+            let panel = &lu.supernodes[k].rows;
+            max_rows = max_rows.max(panel.len());
+            for &pb in &lu.rows[panel.clone()] {
+                for &pa in &lu.rows[panel.clone()] {
+                    let t = lu.index(&supernode_at, pa, pb);
+                    lu.targets.push(t);
+                }
+            }
+        }
+        lu.column = vec![0.0; max_rows];
+        let slots = pattern
+            .iter()
+            .map(|&(i, j)| lu.index(&supernode_at, lu.position[i], lu.position[j]))
+            .collect();
+        (lu, slots)
+    }
+
+    /// Storage index of the entry at positions `(pa, pb)` of the (filled) matrix.
+    fn index(&self, supernode_at: &[usize], pa: usize, pb: usize) -> usize {
+        let (ka, kb) = (supernode_at[pa], supernode_at[pb]);
+        let panel_index = |k: usize, p: usize| {
+            let rows = &self.rows[self.supernodes[k].rows.clone()];
+            rows.binary_search(&p)
+                .expect("the filled structure holds every update")
+        };
+        if ka == kb {
+            let s = &self.supernodes[ka];
+            s.diag + (pa - s.start) + (pb - s.start) * s.size
+        } else if ka > kb {
+            let s = &self.supernodes[kb];
+            let r = s.rows.len();
+            s.lower + panel_index(kb, pa) + (pb - s.start) * r
+        } else {
+            let s = &self.supernodes[ka];
+            s.upper + (pa - s.start) + panel_index(ka, pb) * s.size
+        }
+    }
+
+    /// Number of stored entries (diagonal blocks and panels, fill included).
+    pub(super) fn stored(&self) -> usize {
+        self.store.len()
+    }
+
+    /// Assembles and factorizes; returns the smallest `|pivot| / max_abs`.
+    pub(super) fn factorize(&mut self, slots: &[usize], values: &[f64]) -> Result<f64, Rejected> {
+        self.store.fill(0.0);
+        for (&s, &v) in slots.iter().zip(values) {
+            self.store[s] += v;
+        }
+        let max_bits = self.store.iter().map(|&v| super::abs_bits(v)).max();
+        let max_abs = super::check_max_abs(max_bits, || None).map_err(|_| Rejected)?;
+        let mut min_ratio = f64::INFINITY;
+        for k in 0..self.supernodes.len() {
+            let sn = &self.supernodes[k];
+            let (s, r, start) = (sn.size, sn.rows.len(), sn.start);
+            let (diag, lower, upper, targets) = (sn.diag, sn.lower, sn.upper, sn.targets);
+            // This supernode's blocks, and the storage of the later ones (the updates').
+            let (mine, later) = self.store.split_at_mut(upper + s * r);
+            let (mine, u) = mine.split_at_mut(upper);
+            let (d, l) = mine[diag..].split_at_mut(lower - diag);
+            let block_max = d[..s * s]
+                .iter()
+                .chain(l.iter())
+                .chain(u.iter())
+                .fold(0.0f64, |m, x| m.max(x.abs()));
+            // P D = L U with partial pivoting inside the block; the same interchanges on the
+            // rows of the U panel.
+            for c in 0..s {
+                let p = (c..s)
+                    .max_by(|&a, &b| d[a + c * s].abs().total_cmp(&d[b + c * s].abs()))
+                    .expect("c < s");
+                self.swaps[start + c] = p;
+                if p != c {
+                    for j in 0..s {
+                        d.swap(c + j * s, p + j * s);
+                    }
+                    for j in 0..r {
+                        u.swap(c + j * s, p + j * s);
+                    }
+                }
+                let pivot = d[c + c * s];
+                if !pivot.is_finite() || pivot.abs() <= super::PIVOT_TOLERANCE * max_abs {
+                    return Err(Rejected);
+                }
+                min_ratio = min_ratio.min(pivot.abs() / max_abs);
+                let inv = 1.0 / pivot;
+                for i in c + 1..s {
+                    d[i + c * s] *= inv;
+                }
+                for j in c + 1..s {
+                    let f = d[c + j * s];
+                    if f != 0.0 {
+                        for i in c + 1..s {
+                            d[i + j * s] -= d[i + c * s] * f;
+                        }
+                    }
+                }
+            }
+            // U panel := L_kk^-1 (P U panel).
+            for col in u.chunks_exact_mut(s) {
+                for c in 0..s {
+                    let f = col[c];
+                    if f != 0.0 {
+                        for i in c + 1..s {
+                            col[i] -= d[i + c * s] * f;
+                        }
+                    }
+                }
+            }
+            // L panel := L panel U_kk^-1, column by column, and the growth of this
+            // elimination (module documentation).
+            let mut growth = 0.0f64;
+            for c in 0..s {
+                for t in 0..c {
+                    let f = d[t + c * s];
+                    if f != 0.0 {
+                        let (done, rest) = l.split_at_mut(c * r);
+                        for (x, &y) in rest[..r].iter_mut().zip(&done[t * r..(t + 1) * r]) {
+                            *x -= y * f;
+                        }
+                    }
+                }
+                let inv = 1.0 / d[c + c * s];
+                let mut l_max = 1.0f64;
+                for x in &mut l[c * r..(c + 1) * r] {
+                    *x *= inv;
+                    l_max = l_max.max(x.abs());
+                }
+                let u_row = (c..s)
+                    .map(|j| d[c + j * s])
+                    .chain((0..r).map(|a| u[c + a * s]));
+                let u_max = u_row.fold(0.0f64, |m, x| m.max(x.abs()));
+                growth = growth.max(l_max * u_max);
+            }
+            let growth = growth / block_max;
+            if growth.is_nan() || growth > GROWTH_LIMIT {
+                return Err(Rejected);
+            }
+            // Update of the later blocks: S -= L U, one column at a time.
+            for b in 0..r {
+                let column = &mut self.column[..r];
+                column.fill(0.0);
+                for c in 0..s {
+                    let f = u[c + b * s];
+                    if f != 0.0 {
+                        for (x, &y) in column.iter_mut().zip(&l[c * r..(c + 1) * r]) {
+                            *x += y * f;
+                        }
+                    }
+                }
+                let next = upper + s * r;
+                for (&t, &x) in self.targets[targets + b * r..targets + (b + 1) * r]
+                    .iter()
+                    .zip(column.iter())
+                {
+                    later[t - next] -= x;
+                }
+            }
+        }
+        Ok(min_ratio)
+    }
+
+    /// Solves `A x = b` (`transpose = false`) or `A^T x = b` in place with the last
+    /// factorization.
+    ///
+    /// With `Lt_kk = P_k^T L_kk`, `A = Lt U`. Forward: `y_k = L_kk^-1 P_k (b_k - sum_j L_kj
+    /// y_j)`, backward: `x_k = U_kk^-1 (y_k - sum_j U_kj x_j)`. Transposed: `U^T z = b`
+    /// forward, then `x_k = P_k^T L_kk^-T (z_k - sum_j L_jk^T x_j)` backward.
+    pub(super) fn solve_in_place(&mut self, b: &mut [f64], transpose: bool) {
+        let y = &mut self.work;
+        for (p, &u) in self.unknown.iter().enumerate() {
+            y[p] = b[u];
+        }
+        let store = &self.store;
+        // Forward, in elimination order: each supernode's rows are final once the earlier
+        // ones have passed their updates on.
+        for sn in &self.supernodes {
+            let (s, end) = (sn.size, sn.start + sn.size);
+            let rows = &self.rows[sn.rows.clone()];
+            let r = rows.len();
+            let d = &store[sn.diag..sn.diag + s * s];
+            let (head, later) = y.split_at_mut(end);
+            let seg = &mut head[sn.start..];
+            if transpose {
+                // U_kk^T z_k = y_k (lower), then y_j -= U_kj^T z_k.
+                for c in 0..s {
+                    let dot: f64 = d[c * s..c * s + c]
+                        .iter()
+                        .zip(&seg[..c])
+                        .map(|(a, z)| a * z)
+                        .sum();
+                    seg[c] = (seg[c] - dot) / d[c + c * s];
+                }
+                let u = &store[sn.upper..sn.upper + s * r];
+                for (col, &p) in u.chunks_exact(s).zip(rows) {
+                    let dot: f64 = col.iter().zip(seg.iter()).map(|(a, z)| a * z).sum();
+                    later[p - end] -= dot;
+                }
+            } else {
+                // y_k = L_kk^-1 P_k y_k, then y_j -= L_jk y_k.
+                for c in 0..s {
+                    seg.swap(c, self.swaps[sn.start + c]);
+                }
+                for c in 0..s {
+                    let f = seg[c];
+                    let (done, rest) = seg.split_at_mut(c + 1);
+                    let _ = done;
+                    for (x, &a) in rest.iter_mut().zip(&d[c * s + c + 1..(c + 1) * s]) {
+                        *x -= a * f;
+                    }
+                }
+                let l = &store[sn.lower..sn.lower + r * s];
+                for (col, &f) in l.chunks_exact(r.max(1)).zip(seg.iter()) {
+                    for (&p, &a) in rows.iter().zip(col) {
+                        later[p - end] -= a * f;
+                    }
+                }
+            }
+        }
+        // Backward, in reverse order: each supernode needs the later ones' solution.
+        for sn in self.supernodes.iter().rev() {
+            let (s, end) = (sn.size, sn.start + sn.size);
+            let rows = &self.rows[sn.rows.clone()];
+            let r = rows.len();
+            let d = &store[sn.diag..sn.diag + s * s];
+            let (head, later) = y.split_at_mut(end);
+            let seg = &mut head[sn.start..];
+            if transpose {
+                // x_k = P_k^T L_kk^-T (z_k - L_jk^T x_j).
+                let l = &store[sn.lower..sn.lower + r * s];
+                for (col, x) in l.chunks_exact(r.max(1)).zip(seg.iter_mut()) {
+                    let dot: f64 = col.iter().zip(rows).map(|(a, &p)| a * later[p - end]).sum();
+                    *x -= dot;
+                }
+                for c in (0..s).rev() {
+                    let dot: f64 = d[c * s + c + 1..(c + 1) * s]
+                        .iter()
+                        .zip(&seg[c + 1..])
+                        .map(|(a, x)| a * x)
+                        .sum();
+                    seg[c] -= dot;
+                }
+                for c in (0..s).rev() {
+                    seg.swap(c, self.swaps[sn.start + c]);
+                }
+            } else {
+                // x_k = U_kk^-1 (y_k - U_kj x_j).
+                let u = &store[sn.upper..sn.upper + s * r];
+                for (col, &p) in u.chunks_exact(s).zip(rows) {
+                    let f = later[p - end];
+                    for (x, &a) in seg.iter_mut().zip(col) {
+                        *x -= a * f;
+                    }
+                }
+                for c in (0..s).rev() {
+                    let v = seg[c] / d[c + c * s];
+                    seg[c] = v;
+                    for (x, &a) in seg[..c].iter_mut().zip(&d[c * s..c * s + c]) {
+                        *x -= a * v;
+                    }
+                }
+            }
+        }
+        for (p, &u) in self.unknown.iter().enumerate() {
+            b[u] = y[p];
+        }
+    }
+}
+
+/// The sorted, deduplicated adjacency lists of a graph on `n` vertices given by its edges
+/// (both directions added, loops left out).
+fn graph(n: usize, edges: impl Iterator<Item = (usize, usize)>) -> Vec<Vec<usize>> {
+    let mut adjacency = vec![Vec::new(); n];
+    for (a, b) in edges {
+        if a != b {
+            adjacency[a].push(b);
+            adjacency[b].push(a);
+        }
+    }
+    for a in &mut adjacency {
+        a.sort_unstable();
+        a.dedup();
+    }
+    adjacency
+}
+
+/// Approximate minimum degree order of a graph: `order[k]` is the vertex eliminated `k`-th.
+fn amd_order(adjacency: &[Vec<usize>]) -> Vec<usize> {
+    let n = adjacency.len();
+    let mut col_ptr = Vec::with_capacity(n + 1);
+    col_ptr.push(0);
+    let mut row_idx = Vec::new();
+    for a in adjacency {
+        row_idx.extend_from_slice(a);
+        col_ptr.push(row_idx.len());
+    }
+    let (mut perm, mut perm_inv) = (vec![0usize; n], vec![0usize; n]);
+    let a = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
+    let mut mem = MemBuffer::new(amd::order_scratch::<usize>(n, row_idx.len()));
+    match amd::order(
+        &mut perm,
+        &mut perm_inv,
+        a,
+        amd::Control::default(),
+        MemStack::new(&mut mem),
+    ) {
+        Ok(_) => perm,
+        // Only an index overflow can fail: keep the natural order.
+        Err(_) => (0..n).collect(),
+    }
+}
