@@ -4,8 +4,8 @@
 
 use crate::solve::linear::{Backend, LinearSolver};
 
-/// Unknowns above which the step Jacobian is factorized by the sparse LU.
-const SPARSE_FROM: usize = 40;
+/// Unknowns above which the step Jacobian is factorized by the block LU.
+const BLOCK_FROM: usize = 40;
 use super::SensitivityError;
 use crate::solve::step::JacobianPattern;
 use std::sync::Arc;
@@ -33,14 +33,14 @@ impl StepMatrix {
             .is_some_and(|p| Arc::ptr_eq(p, pattern));
         if !same {
             let n = pattern.n;
-            // The step Jacobian is factorized once per step, fresh: a sparse LU pays off on
+            // The step Jacobian is factorized once per step, fresh: the block LU pays off on
             // smaller matrices than in the Newton iteration, which mostly reuses its matrix.
-            let backend = if n > SPARSE_FROM {
-                Backend::Sparse
+            let backend = if n > BLOCK_FROM {
+                Backend::Block
             } else {
                 Backend::Dense
             };
-            let solver = LinearSolver::with_backend(n, &pattern.positions, backend)
+            let solver = LinearSolver::build(n, &pattern.positions, backend, &pattern.groups)
                 .map_err(crate::SolveError::from)?;
             self.solver = Some(solver);
             self.pattern = Some(Arc::clone(pattern));

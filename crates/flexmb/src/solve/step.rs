@@ -461,6 +461,8 @@ pub struct JacobianPattern {
     /// Stabilized form: `(block, constraint row, slot, position)` for every block of node
     /// `n` and every active row acting on `n`: where `F_q T B(q_n)^T` puts its entries.
     zeta: Vec<(usize, usize, usize, usize)>,
+    /// The layout's groups of unknowns, for the block LU ([`Layout::groups`]).
+    pub groups: crate::solve::linear::Groups,
 }
 
 impl JacobianPattern {
@@ -511,6 +513,7 @@ impl JacobianPattern {
             of_pattern,
             blocks,
             zeta,
+            groups: layout.groups(),
         }
     }
 
