@@ -69,6 +69,19 @@ pub enum Formulation {
     Auto,
 }
 
+/// How the configuration update of a step is built from the scheme's increment
+/// (module documentation of [`super::step`], "Configuration update").
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum LieUpdate {
+    /// `q_{n+1} = q_n exp(dq)` (Brüls & Cardona 2010, Eq. (41)).
+    #[default]
+    BrulsCardona,
+    /// `q_{n+1} = q_n exp(dq + sigma h^3 [v_n, a_n])`: the Lie bracket term of the exact
+    /// local flow (`sigma = 1/12`) or a larger weight that also cancels part of the
+    /// scheme's own error for fast rotation (see `BENCHMARKS.md`, "Error constant").
+    Commutator { sigma: f64 },
+}
+
 /// The member of the generalized-alpha family to use.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Scheme {
@@ -128,6 +141,9 @@ pub struct DynamicSettings {
     pub newton: NewtonSettings,
     pub formulation: Formulation,
     pub scheme: Scheme,
+    /// The configuration update ([`LieUpdate`]).
+    #[serde(default)]
+    pub lie_update: LieUpdate,
     /// Nodal viscous damping `alpha D v` [1/s] (0: none); for pseudo-dynamic statics.
     pub nodal_damping: f64,
     /// Loads and gravity grow linearly from 0 over this time and then stay \[s\] (0: applied
@@ -212,6 +228,9 @@ impl DynamicSettings {
                 }
             }
         }
+        if let LieUpdate::Commutator { sigma } = self.lie_update {
+            SettingsError::range("lie_update_sigma", sigma, 0.0, 1.0)?;
+        }
         let p = self.scheme.parameters(self.rho_inf);
         let derived = [p.beta_prime(self.h), p.gamma_prime(self.h)];
         if derived.iter().any(|d| !d.is_normal()) {
@@ -245,6 +264,7 @@ impl DynamicSettings {
             newton: NewtonSettings::default(),
             formulation: Formulation::Auto,
             scheme: Scheme::GeneralizedAlpha,
+            lie_update: LieUpdate::BrulsCardona,
             nodal_damping: 0.0,
             load_ramp: 0.0,
             load_scale: 1.0,
@@ -1081,6 +1101,7 @@ impl StepSystem<'_> {
     /// `dq + B(q_n)^T zeta` into `total` (stabilized), `dq` otherwise.
     fn update_total(&mut self, layout: &Layout) {
         step::total_increments(layout, self.dq, self.zeta, self.b_start, self.total);
+        step::commutator_correction(&self.start, self.model.group, self.saved, self.total);
     }
 
     /// Final configuration and algorithmic acceleration.

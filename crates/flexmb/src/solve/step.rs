@@ -9,7 +9,7 @@
 //! `s_n = (q_n, v_n, vdot_n, a_n, x_n, xdot_n, w_n)` the end of the step is
 //!
 //! ```text
-//! q_{n+1}    = q_n exp(dq + B(q_n)^T zeta)                      (B^T zeta: stabilized only)
+//! q_{n+1}    = q_n exp(dq + B(q_n)^T zeta + c_n)        (B^T zeta: stabilized only)
 //! a_{n+1}    = (dq - h v_n - (1/2 - beta) h^2 a_n) / (beta h^2)
 //! v_{n+1}    = v_n + (1 - gamma) h a_n + gamma h a_{n+1}
 //! vdot_{n+1} = ((1 - alpha_m) a_{n+1} + alpha_m a_n - alpha_f vdot_n) / (1 - alpha_f)
@@ -31,6 +31,22 @@
 //! ```
 //!
 //! at `t_{n+1}` and the end values above, `m` the largest nodal mass.
+//!
+//! **Configuration update** ([`super::LieUpdate`]). Brüls & Cardona (2010, Eq. (41)) take
+//! `c_n = 0`. The exact flow of `q' = q tilde(v)` over one step is `q(t_n) exp(Theta(h))`
+//! with `Theta' = dexp_{-Theta}^{-1} v`, i.e. `Theta(h) = h v + h^2/2 vdot + h^3/6 (vddot
+//! + 1/2 [v, vdot]) + O(h^4)` (the second Magnus term, Iserles, Munthe-Kaas, Nørsett &
+//! Zanna 2000, Acta Numerica 9, Sect. 4; Arnold, Brüls & Cardona 2015, Numer. Math. 129,
+//! Sect. 4, where this bracket enters the local error of the configuration). The
+//! `commutator` update adds `c_n = sigma h^3 [v_n, a_n]` (`[.,.]` the bracket of the
+//! group's algebra, [`flexmb_lie::Group::ad`]; `a_n` stands for `vdot` to `O(h)`, which is
+//! all an `O(h^3)` term needs); `sigma = 1/12` restores the bracket of the exact flow,
+//! larger `sigma` also cancel part of the scheme's own `h^3 vddot` defect when `vddot` is
+//! parallel to `[v, vdot]` (fast-spinning tops). Holzinger, Arnold & Gerstmayr's modified
+//! kinematic relations (Exudyn's default Lie group integrator) amount to a term of this
+//! form (`BENCHMARKS.md`, "Error constant: variants compared"). `c_n` depends on the start
+//! only: the Newton matrix is unchanged, and the step's derivatives with respect to the
+//! start carry `dc_n = sigma h^3 (ad(v_n) da_n - ad(a_n) dv_n)`.
 //!
 //! The Newton iteration of [`super::dynamics`] builds the same relations incrementally
 //! ([`predict`], [`correct`], [`finish`]); [`StepFunction`] evaluates them from `x`
@@ -72,6 +88,8 @@ pub struct Start {
     pub load_factor: f64,
     /// Nodal viscous damping \[1/s\].
     pub nodal_damping: f64,
+    /// The configuration update.
+    pub lie_update: super::LieUpdate,
 }
 
 impl Start {
@@ -101,6 +119,7 @@ impl Start {
             scale: 0.0,
             load_factor: settings.load_factor_at(t_new),
             nodal_damping: settings.nodal_damping,
+            lie_update: settings.lie_update,
         }
         .with_mass(mass)
     }
@@ -113,6 +132,15 @@ impl Start {
             mass,
             scale: 1.0 / (self.bp * mass),
             ..self
+        }
+    }
+
+    /// The weight `sigma h^3` of the configuration update's bracket term `c_n` (0 for the
+    /// Brüls-Cardona update).
+    pub fn commutator_weight(&self) -> f64 {
+        match self.lie_update {
+            super::LieUpdate::BrulsCardona => 0.0,
+            super::LieUpdate::Commutator { sigma } => sigma * self.h.powi(3),
         }
     }
 
@@ -222,6 +250,22 @@ pub fn total_increments(
                     total[6 * n + i] += b_start[row][6 * slot + i] * z;
                 }
             }
+        }
+    }
+}
+
+/// Adds the configuration update's bracket term `c_n = sigma h^3 [v_n, a_n]` of each node
+/// to `total` (module documentation; nothing for the Brüls-Cardona update).
+#[inline]
+pub fn commutator_correction(step: &Start, group: Group, start: &State, total: &mut [f64]) {
+    let c = step.commutator_weight();
+    if c == 0.0 {
+        return;
+    }
+    for (i, (v, a)) in start.v.iter().zip(&start.a).enumerate() {
+        let d = group.ad(v) * a * c;
+        for k in 0..6 {
+            total[6 * i + k] += d[k];
         }
     }
 }
@@ -593,6 +637,7 @@ impl<'a> StepFunction<'a> {
         let mut total = Vec::new();
         let dq = &x[layout.block(Block::NodeIncrements)];
         total_increments(layout, dq, zeta, &self.b_start, &mut total);
+        commutator_correction(&self.step, self.model.group, self.start, &mut total);
         total
     }
 
@@ -1155,6 +1200,31 @@ impl<'a> StepFunction<'a> {
         grad
     }
 
+    /// `dc_n = sigma h^3 (ad(v_n) da_n - ad(a_n) dv_n)` of node `i`: how the bracket term
+    /// of the configuration update moves with the start (module documentation).
+    fn commutator_jvp(&self, i: usize, dv: &Vec6, da: &Vec6) -> Vec6 {
+        let c = self.step.commutator_weight();
+        if c == 0.0 {
+            return Vec6::zeros();
+        }
+        let g = self.model.group;
+        (g.ad(&self.start.v[i]) * da - g.ad(&self.start.a[i]) * dv) * c
+    }
+
+    /// The transpose of [`StepFunction::commutator_jvp`]: the cotangents `(vbar, abar)`
+    /// of `v_n` and `a_n` for a cotangent `cbar` of `c_n`.
+    fn commutator_vjp(&self, i: usize, cbar: &Vec6) -> (Vec6, Vec6) {
+        let c = self.step.commutator_weight();
+        if c == 0.0 {
+            return (Vec6::zeros(), Vec6::zeros());
+        }
+        let g = self.model.group;
+        (
+            -(g.ad(&self.start.a[i]).transpose() * cbar) * c,
+            g.ad(&self.start.v[i]).transpose() * cbar * c,
+        )
+    }
+
     /// Coefficients of `v_{n+1}` and `vdot_{n+1}` in `(v_n, a_n, vdot_n)` at fixed `dq`.
     fn start_coefficients(&self) -> [f64; 5] {
         let p = &self.step.params;
@@ -1177,7 +1247,12 @@ impl<'a> StepFunction<'a> {
         for &(i, j, v) in &p.k_zeta {
             kz[i / 6][i % 6] += v * ds.q[j / 6][j % 6];
         }
-        let w: Vec<Vec6> = (0..n).map(|i| p.g[i] * ds.q[i] + p.t[i] * kz[i]).collect();
+        let w: Vec<Vec6> = (0..n)
+            .map(|i| {
+                let dc = self.commutator_jvp(i, &ds.v[i], &ds.a[i]);
+                p.g[i] * ds.q[i] + p.t[i] * (kz[i] + dc)
+            })
+            .collect();
         let dv: Vec<Vec6> = (0..n).map(|i| ds.v[i] * c1 + ds.a[i] * c2).collect();
         let dvd: Vec<Vec6> = (0..n)
             .map(|i| ds.v[i] * c3 + ds.a[i] * c4 + ds.vdot[i] * c5)
@@ -1228,6 +1303,8 @@ impl<'a> StepFunction<'a> {
         for &(i, j, v) in &p.k_zeta {
             q[j / 6][j % 6] += v * tg[i / 6][i % 6];
         }
+        let commutator: Vec<(Vec6, Vec6)> =
+            (0..n).map(|i| self.commutator_vjp(i, &tg[i])).collect();
         let ns = self.layout.n_states;
         let so = self.layout.state_offset();
         let (d_w, d_xd) = self.state_start_coefficients();
@@ -1240,9 +1317,13 @@ impl<'a> StepFunction<'a> {
         }
         StateTangent {
             q,
-            v: (0..n).map(|i| gv[i] * c1 + gvd[i] * c3).collect(),
+            v: (0..n)
+                .map(|i| gv[i] * c1 + gvd[i] * c3 + commutator[i].0)
+                .collect(),
             vdot: (0..n).map(|i| gvd[i] * c5).collect(),
-            a: (0..n).map(|i| gv[i] * c2 + gvd[i] * c4).collect(),
+            a: (0..n)
+                .map(|i| gv[i] * c2 + gvd[i] * c4 + commutator[i].1)
+                .collect(),
             lambda: vec![0.0; self.layout.n_rows],
             x: gx,
             xdot: gxd.iter().map(|g| g * d_xd).collect(),
@@ -1292,7 +1373,7 @@ impl<'a> StepFunction<'a> {
     /// `None`): the derivative of the relations of the module documentation,
     ///
     /// ```text
-    /// dq_{n+1}    = G dq_n + T (ddq + B(q_n)^T dzeta + K_zeta dq_n + d(B_n^T zeta)/dp dp)
+    /// dq_{n+1}    = G dq_n + T (ddq + B(q_n)^T dzeta + K_zeta dq_n + d(B_n^T zeta)/dp dp + dc_n)
     /// dv_{n+1}    = c1 dv_n + c2 da_n + gamma' ddq
     /// dvdot_{n+1} = c3 dv_n + c4 da_n + c5 dvdot_n + beta' ddq
     /// da_{n+1}    = (ddq - h dv_n - (1/2 - beta) h^2 da_n) / (beta h^2)
@@ -1302,7 +1383,8 @@ impl<'a> StepFunction<'a> {
     /// ```
     ///
     /// with `G = Ad(exp(-total))`, `T = T(total)`, `K_zeta = d(B(q_n)^T zeta)/dq_n` (the
-    /// terms in `zeta` in the stabilized form only).
+    /// terms in `zeta` in the stabilized form only) and `dc_n` the move of the bracket term
+    /// of the configuration update (module documentation; 0 for Brüls-Cardona).
     pub fn end_jvp(
         &self,
         x: &[f64],
@@ -1340,7 +1422,8 @@ impl<'a> StepFunction<'a> {
         let mut out = StateTangent::zeros_of(layout);
         for i in 0..n {
             let ddq = Vec6::from_column_slice(&dx[6 * i..6 * i + 6]);
-            let dt = Vec6::from_column_slice(&dtotal[6 * i..6 * i + 6]);
+            let dt = Vec6::from_column_slice(&dtotal[6 * i..6 * i + 6])
+                + self.commutator_jvp(i, &ds.v[i], &ds.a[i]);
             out.q[i] = p.g[i] * ds.q[i] + p.t[i] * dt;
             out.v[i] = ds.v[i] * c1 + ds.a[i] * c2 + ddq * self.step.gp;
             out.vdot[i] = ds.v[i] * c3 + ds.a[i] * c4 + ds.vdot[i] * c5 + ddq * self.step.bp;
@@ -1397,6 +1480,9 @@ impl<'a> StepFunction<'a> {
             start.v[i] = bar.v[i] * c1 + bar.vdot[i] * c3 - a * (h / bh2);
             start.a[i] = bar.v[i] * c2 + bar.vdot[i] * c4 - a * ((0.5 - ga.beta) / ga.beta);
             start.vdot[i] = bar.vdot[i] * c5;
+            let (vbar, abar) = self.commutator_vjp(i, &t);
+            start.v[i] += vbar;
+            start.a[i] += abar;
         }
         let mut pbar = Vec::new();
         if layout.stabilized {
