@@ -76,9 +76,10 @@ pub enum LieUpdate {
     /// `q_{n+1} = q_n exp(dq)` (Brüls & Cardona 2010, Eq. (41)).
     #[default]
     BrulsCardona,
-    /// `q_{n+1} = q_n exp(dq + sigma h^3 [v_n, a_n])`: the Lie bracket term of the exact
-    /// local flow (`sigma = 1/12`) or a larger weight that also cancels part of the
-    /// scheme's own error for fast rotation (see `BENCHMARKS.md`, "Error constant").
+    /// `q_{n+1} = q_n exp(dq + sigma h^2 [v_n, v_{n+1}])`: the Lie bracket term of the
+    /// exact local flow (`sigma = 1/12`, the two-term Magnus update) or a larger weight that
+    /// also cancels part of the scheme's own error for fast rotation (step module
+    /// documentation; `BENCHMARKS.md`, "Error constant: variants compared").
     Commutator { sigma: f64 },
 }
 
@@ -1101,7 +1102,8 @@ impl StepSystem<'_> {
     /// `dq + B(q_n)^T zeta` into `total` (stabilized), `dq` otherwise.
     fn update_total(&mut self, layout: &Layout) {
         step::total_increments(layout, self.dq, self.zeta, self.b_start, self.total);
-        step::commutator_correction(&self.start, self.model.group, self.saved, self.total);
+        let (group, v_1) = (self.model.group, &self.state.v);
+        step::commutator_correction(&self.start, group, self.saved, v_1, self.total);
     }
 
     /// Final configuration and algorithmic acceleration.
@@ -1128,6 +1130,16 @@ impl NonlinearSystem for StepSystem<'_> {
             matrix,
             self.nodes,
         );
+        if matrix {
+            // The commutator update: the increments' columns take T (I + E) (step module
+            // documentation); the stabilized form's zeta columns take it too, which costs
+            // that form's Newton iteration a contraction of order sigma h |v| only.
+            for (node, v) in self.nodes.iter_mut().zip(&self.saved.v) {
+                if let Some(e) = self.start.increment_map(self.model.group, v) {
+                    node.t *= e;
+                }
+            }
+        }
         let sc = self.start.scaling(regularization);
         let it = Iterate {
             nodes: self.nodes,
