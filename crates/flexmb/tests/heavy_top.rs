@@ -137,3 +137,26 @@ fn heavy_top_commutator_update_converges_second_order_and_reduces_the_error() {
         );
     }
 }
+
+/// The commutator update runs for every rho_inf on both groups (its bracket formed with
+/// start values only, `[v_n, a_n]`, lost stability at rho_inf = 0.9) and stays within 1.5x
+/// of the Brüls-Cardona error, also with the larger weight sigma = 0.2.
+#[test]
+fn heavy_top_commutator_update_runs_for_every_rho_inf() {
+    let sigma_02 = [
+        "solver.lie_update=commutator",
+        "solver.lie_update_sigma=0.2",
+    ];
+    for file in ["heavy_top_r3so3.toml", "heavy_top.toml"] {
+        for rho in [0.0, 0.5, 0.9, 1.0] {
+            let (plain, _) = com_error(file, 1e-3, rho);
+            for set in [&["solver.lie_update=commutator"][..], &sigma_02[..]] {
+                let (e, _) = com_error_with(file, 1e-3, rho, set);
+                assert!(
+                    e < 1.5 * plain,
+                    "{file}, rho_inf {rho}, {set:?}: {e} against {plain}"
+                );
+            }
+        }
+    }
+}
