@@ -73,7 +73,7 @@ pub enum Formulation {
 /// (module documentation of [`super::step`], "Configuration update").
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum LieUpdate {
-    /// `q_{n+1} = q_n exp(dq)` (Brüls & Cardona 2010, Eq. (41)).
+    /// `q_{n+1} = q_n exp(dq)` (Brüls & Cardona 2010, Eqs. (40)-(44)).
     #[default]
     BrulsCardona,
     /// `q_{n+1} = q_n exp(dq + sigma h^2 [v_n, v_{n+1}])`: the Lie bracket term of the

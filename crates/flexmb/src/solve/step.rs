@@ -32,14 +32,17 @@
 //!
 //! at `t_{n+1}` and the end values above, `m` the largest nodal mass.
 //!
-//! **Configuration update** ([`super::LieUpdate`]). Brüls & Cardona (2010, Eq. (41)) take
-//! `c_n = 0`. The exact flow of `q' = q tilde(v)` over one step is `q(t_n) exp(Theta(h))`
-//! with `Theta' = dexp_{-Theta}^{-1} v`, i.e. `Theta(h) = h v + h^2/2 vdot + h^3/6 (vddot
-//! + 1/2 [v, vdot]) + O(h^4)`: the bracket is the second Magnus term (Iserles,
-//! Munthe-Kaas, Nørsett & Zanna 2000, Acta Numerica 9, Sect. 4, whose two-term Magnus
-//! update is `h/2 (v_n + v_{n+1}) + h^2/12 [v_n, v_{n+1}]`); Arnold, Brüls & Cardona
-//! (2015, Numer. Math. 129, Sect. 4) show it in the local error of the configuration. The
-//! `commutator` update adds
+//! **Configuration update** ([`super::LieUpdate`]). Brüls & Cardona (2010, Eqs.
+//! (40)-(44)) take `c_n = 0`. The exact flow of `q' = q tilde(v)` over one step is
+//! `q(t_n) exp(Theta(h))` with `Theta' = dexp_{-Theta}^{-1} v` (`Theta' = v + 1/2 [Theta, v]
+//! + ...`), so that, differentiating three times at `Theta = 0`,
+//! `Theta(h) = h v + h^2/2 vdot + h^3/6 (vddot + 1/2 [v, vdot]) + O(h^4)`: the bracket is
+//! the second term of the Magnus expansion (Iserles, Munthe-Kaas, Nørsett & Zanna 2000,
+//! "Lie-group methods", Acta Numerica 9; its two-term truncation for a linearly
+//! interpolated velocity is `h/2 (v_n + v_{n+1}) + h^2/12 [v_n, v_{n+1}]`), and the
+//! Brüls-Cardona increment has no such term. (The error analysis of the Lie group scheme
+//! is Arnold, Brüls & Cardona 2015, Numer. Math. 129; the expansion above is derived here.)
+//! The `commutator` update adds
 //!
 //! ```text
 //! c_n = sigma h^2 [v_n, v_{n+1}]       ([.,.] the algebra's bracket, flexmb_lie::Group::ad)
