@@ -70,6 +70,20 @@ impl Group {
         }
     }
 
+    /// Small adjoint `ad(v)`: `ad(a) b = [a, b]`, the Lie bracket of the algebra (R3xSO(3):
+    /// the rotation parts only, `[a, b] = (0, omega_a x omega_b)`; SE(3): [`se3::ad`]).
+    pub fn ad(self, v: &Vec6) -> Mat6 {
+        match self {
+            Group::R3xSO3 => {
+                let (_, omega) = split(v);
+                let mut m = Mat6::zeros();
+                m.fixed_view_mut::<3, 3>(3, 3).copy_from(&so3::hat(&omega));
+                m
+            }
+            Group::SE3 => se3::ad(v),
+        }
+    }
+
     /// Tangent operator `T(w)`: `exp(w + dw) = exp(w) exp(T(w) dw)`.
     pub fn tangent(self, w: &Vec6) -> Mat6 {
         match self {

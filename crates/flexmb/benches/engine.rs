@@ -19,6 +19,7 @@ use common::peak_memory_mb;
 const CASES: &[&str] = &[
     "heavy_top_se3",
     "heavy_top_r3so3",
+    "heavy_top_updates",
     "chain_10",
     "chain_100",
     "chain_1000",
@@ -64,26 +65,58 @@ fn solve(file: &str, overrides: &[String]) -> Outcome {
 /// Heavy top with rho_inf = 0.6 to t = 1 s at several steps: error of the centre of mass
 /// against the reference x_G(1 s) (benchmarks.md Sect. 1.2) and solve time.
 fn heavy_top(file: &str) {
-    let reference = [0.17334396, 0.64008859, -0.74849079];
     println!("| case | h [s] | steps | error x_G(1 s) [m] | solve time [ms] | time/step [us] | Newton it./step |");
     println!("|---|---|---|---|---|---|---|");
-    for h in [1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 4.5e-5, 3.125e-5] {
-        let o = solve(
-            file,
+    let steps = [1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 4.5e-5, 3.125e-5];
+    heavy_top_rows(file, file, &[], &steps);
+}
+
+/// The configuration updates of the generalized-alpha step compared on the heavy top
+/// (BENCHMARKS.md, "Error constant: variants compared"): each update on both groups.
+fn heavy_top_updates() {
+    println!("| update, group | h [s] | steps | error x_G(1 s) [m] | solve time [ms] | time/step [us] | Newton it./step |");
+    println!("|---|---|---|---|---|---|---|");
+    let updates: [(&str, &[&str]); 3] = [
+        ("bruls_cardona", &[]),
+        ("commutator 1/12", &["solver.lie_update=commutator"]),
+        (
+            "commutator 0.2",
             &[
-                format!("solver.h={h}"),
-                "solver.rho_inf=0.6".into(),
-                "solver.t_end=1.0".into(),
-                "solver.output_interval=0".into(),
+                "solver.lie_update=commutator",
+                "solver.lie_update_sigma=0.2",
             ],
-        );
+        ),
+    ];
+    let steps = [1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5];
+    for (name, set) in updates {
+        for (group, file) in [
+            ("R3xSO(3)", "heavy_top_r3so3.toml"),
+            ("SE(3)", "heavy_top.toml"),
+        ] {
+            heavy_top_rows(&format!("{name}, {group}"), file, set, &steps);
+        }
+    }
+}
+
+/// One table row per step size of the heavy top `file` with the overrides `set`.
+fn heavy_top_rows(case: &str, file: &str, set: &[&str], steps: &[f64]) {
+    let reference = [0.17334396, 0.64008859, -0.74849079];
+    for &h in steps {
+        let mut overrides: Vec<String> = vec![
+            format!("solver.h={h}"),
+            "solver.rho_inf=0.6".into(),
+            "solver.t_end=1.0".into(),
+            "solver.output_interval=0".into(),
+        ];
+        overrides.extend(set.iter().map(|s| s.to_string()));
+        let o = solve(file, &overrides);
         let x = o.state.q[0].x;
         let err = ((x[0] - reference[0]).powi(2)
             + (x[1] - reference[1]).powi(2)
             + (x[2] - reference[2]).powi(2))
         .sqrt();
         println!(
-            "| {file} | {h:.3e} | {} | {err:.3e} | {:.2} | {:.2} | {:.2} |",
+            "| {case} | {h:.3e} | {} | {err:.3e} | {:.2} | {:.2} | {:.2} |",
             o.steps,
             o.seconds * 1e3,
             o.seconds * 1e6 / o.steps as f64,
@@ -242,6 +275,7 @@ fn run_case(case: &str) {
         c if c.starts_with("beam_") => long_beam(c[5..].parse().expect("beam size")),
         "heavy_top_se3" => heavy_top("heavy_top.toml"),
         "heavy_top_r3so3" => heavy_top("heavy_top_r3so3.toml"),
+        "heavy_top_updates" => heavy_top_updates(),
         c if c.starts_with("chain_") => chain(c[6..].parse().expect("chain size")),
         c if c.starts_with("springs_") => springs(c[8..].parse().expect("chain size")),
         other => panic!("unknown case {other}; cases: {CASES:?}"),
@@ -267,6 +301,9 @@ fn main() {
         if *case == "springs_500" {
             println!("\n| case | steps | solve time [ms] | time/step [us] | time/step/spring [us] | Newton it./step |");
             println!("|---|---|---|---|---|---|");
+        }
+        if *case == "heavy_top_updates" {
+            println!();
         }
         if *case == "chain_10" {
             println!("\n| case | steps | solve time [s] | time/step [us] | time/step/link [us] | Newton it./step | peak memory [MB] |");

@@ -1464,3 +1464,32 @@ fn rope_errors_name_the_key() {
         &["unknown key 'nod'"],
     );
 }
+
+#[test]
+fn lie_update_is_read_and_checked_at_its_key() {
+    use flexmb::solve::LieUpdate;
+    assert_eq!(
+        dynamic(&good(&[]).unwrap()).lie_update,
+        LieUpdate::BrulsCardona
+    );
+    let s = dynamic(&good(&["solver.lie_update=commutator"]).unwrap());
+    assert_eq!(s.lie_update, LieUpdate::Commutator { sigma: 1.0 / 12.0 });
+    let s = dynamic(
+        &good(&[
+            "solver.lie_update=commutator",
+            "solver.lie_update_sigma=0.2",
+        ])
+        .unwrap(),
+    );
+    assert_eq!(s.lie_update, LieUpdate::Commutator { sigma: 0.2 });
+    let e = good(&["solver.lie_update=magnus"]).unwrap_err().to_string();
+    assert_contains(&e, &["lie_update", "bruls_cardona", "commutator"]);
+    let e = good(&["solver.lie_update_sigma=0.2"])
+        .unwrap_err()
+        .to_string();
+    assert_contains(&e, &["lie_update_sigma", "only allowed"]);
+    let e = good(&["solver.lie_update=commutator", "solver.lie_update_sigma=2"])
+        .unwrap_err()
+        .to_string();
+    assert_contains(&e, &["lie_update_sigma"]);
+}

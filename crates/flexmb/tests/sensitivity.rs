@@ -105,6 +105,35 @@ fn stabilized_index_2_step() {
 }
 
 #[test]
+fn commutator_configuration_update() {
+    // q_{n+1} = q_n exp(dq + sigma h^3 [v_n, a_n]): the update depends on v_n and a_n.
+    for group in ["SE3", "R3xSO3"] {
+        let g = format!("model.group={group}");
+        let p = problem(
+            "heavy_top_sensitivity.toml",
+            &[
+                "solver.rtol=1e-10",
+                "solver.t_end=0.1",
+                "solver.lie_update=commutator",
+                "solver.lie_update_sigma=0.5",
+                "solver.rho_inf=0.6",
+                &g,
+            ],
+            &[
+                "body.top.mass",
+                "body.top.inertia.0",
+                "node.top.angular_velocity_body.1",
+            ],
+            &[
+                ("x", CriterionKind::Terminal, "com_x + 0.3 * com_z"),
+                ("reaction", CriterionKind::Integral, "sq(reaction_z)"),
+            ],
+        );
+        agree(&format!("commutator update {group}"), &p, 1e-9, 1e-5);
+    }
+}
+
+#[test]
 fn element_states_and_their_initial_values() {
     // The Maxwell branch starts unstressed, z_0 = l(q_0) - l0: its initial state depends
     // on the rest length (dz_0/dp), the relaxation parameters enter its state equation.

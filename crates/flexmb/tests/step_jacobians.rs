@@ -508,6 +508,24 @@ fn heavy_top_step_jacobians_match_finite_differences_on_both_groups() {
 }
 
 #[test]
+fn commutator_update_step_jacobians_match_finite_differences() {
+    // The configuration update q_n exp(dq + sigma h^3 [v_n, a_n]) moves with v_n and a_n;
+    // a large sigma makes that dependence visible in the differences.
+    let set = [
+        "solver.lie_update=commutator",
+        "solver.lie_update_sigma=0.9",
+    ];
+    for file in ["heavy_top.toml", "heavy_top_r3so3.toml"] {
+        let sim = simulation(file, &set, 5);
+        check(&format!("{file}, commutator update"), &sim);
+    }
+    let mut with_index2 = set.to_vec();
+    with_index2.push("solver.formulation=index2");
+    let sim = simulation("chain_10.toml", &with_index2, 5);
+    check("chain_10, commutator update, stabilized index 2", &sim);
+}
+
+#[test]
 fn chain_step_jacobians_match_finite_differences() {
     check("chain_10", &simulation("chain_10.toml", &[], 5));
 }

@@ -309,6 +309,8 @@ const SOLVER_DYNAMIC_KEYS: &[&str] = &[
     "hht_alpha",
     "newmark_beta",
     "newmark_gamma",
+    "lie_update",
+    "lie_update_sigma",
 ];
 /// Keys of `[solver]` that only a static analysis has.
 const SOLVER_STATIC_KEYS: &[&str] = &[
@@ -458,6 +460,23 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
             "index2" => crate::solve::Formulation::StabilizedIndex2,
             _ => crate::solve::Formulation::Auto,
         };
+    }
+    let lie_update = t
+        .field("lie_update")
+        .map(|f| f.choice(&["bruls_cardona", "commutator"]))
+        .transpose()?;
+    if t.has("lie_update_sigma") && lie_update != Some("commutator") {
+        return Err(t.key_err(
+            "lie_update_sigma",
+            "only allowed with lie_update = \"commutator\"".to_string(),
+        ));
+    }
+    if lie_update == Some("commutator") {
+        let sigma = match t.field("lie_update_sigma") {
+            Some(f) => f.f64()?,
+            None => 1.0 / 12.0,
+        };
+        s.lie_update = crate::solve::LieUpdate::Commutator { sigma };
     }
     let scheme = t
         .field("scheme")

@@ -69,6 +69,20 @@ pub enum Formulation {
     Auto,
 }
 
+/// How the configuration update of a step is built from the scheme's increment
+/// (module documentation of [`super::step`], "Configuration update").
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum LieUpdate {
+    /// `q_{n+1} = q_n exp(dq)` (Brüls & Cardona 2010, Eqs. (40)-(44)).
+    #[default]
+    BrulsCardona,
+    /// `q_{n+1} = q_n exp(dq + sigma h^2 [v_n, v_{n+1}])`: the Lie bracket term of the
+    /// exact local flow (`sigma = 1/12`, the two-term Magnus update) or a larger weight that
+    /// also cancels part of the scheme's own error for fast rotation (step module
+    /// documentation; `BENCHMARKS.md`, "Error constant: variants compared").
+    Commutator { sigma: f64 },
+}
+
 /// The member of the generalized-alpha family to use.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Scheme {
@@ -128,6 +142,9 @@ pub struct DynamicSettings {
     pub newton: NewtonSettings,
     pub formulation: Formulation,
     pub scheme: Scheme,
+    /// The configuration update ([`LieUpdate`]).
+    #[serde(default)]
+    pub lie_update: LieUpdate,
     /// Nodal viscous damping `alpha D v` [1/s] (0: none); for pseudo-dynamic statics.
     pub nodal_damping: f64,
     /// Loads and gravity grow linearly from 0 over this time and then stay \[s\] (0: applied
@@ -212,6 +229,9 @@ impl DynamicSettings {
                 }
             }
         }
+        if let LieUpdate::Commutator { sigma } = self.lie_update {
+            SettingsError::range("lie_update_sigma", sigma, 0.0, 1.0)?;
+        }
         let p = self.scheme.parameters(self.rho_inf);
         let derived = [p.beta_prime(self.h), p.gamma_prime(self.h)];
         if derived.iter().any(|d| !d.is_normal()) {
@@ -245,6 +265,7 @@ impl DynamicSettings {
             newton: NewtonSettings::default(),
             formulation: Formulation::Auto,
             scheme: Scheme::GeneralizedAlpha,
+            lie_update: LieUpdate::BrulsCardona,
             nodal_damping: 0.0,
             load_ramp: 0.0,
             load_scale: 1.0,
@@ -1081,6 +1102,8 @@ impl StepSystem<'_> {
     /// `dq + B(q_n)^T zeta` into `total` (stabilized), `dq` otherwise.
     fn update_total(&mut self, layout: &Layout) {
         step::total_increments(layout, self.dq, self.zeta, self.b_start, self.total);
+        let (group, v_1) = (self.model.group, &self.state.v);
+        step::commutator_correction(&self.start, group, self.saved, v_1, self.total);
     }
 
     /// Final configuration and algorithmic acceleration.
@@ -1107,6 +1130,16 @@ impl NonlinearSystem for StepSystem<'_> {
             matrix,
             self.nodes,
         );
+        if matrix {
+            // The commutator update: the increments' columns take T (I + E) (step module
+            // documentation); the stabilized form's zeta columns take it too, which costs
+            // that form's Newton iteration a contraction of order sigma h |v| only.
+            for (node, v) in self.nodes.iter_mut().zip(&self.saved.v) {
+                if let Some(e) = self.start.increment_map(self.model.group, v) {
+                    node.t *= e;
+                }
+            }
+        }
         let sc = self.start.scaling(regularization);
         let it = Iterate {
             nodes: self.nodes,

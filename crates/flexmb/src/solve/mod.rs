@@ -15,7 +15,9 @@ pub mod statics;
 pub mod step;
 pub mod trajectory;
 
-pub use dynamics::{DynamicSettings, Formulation, IntoShared, Scheme, Simulation, Stats, StepInfo};
+pub use dynamics::{
+    DynamicSettings, Formulation, IntoShared, LieUpdate, Scheme, Simulation, Stats, StepInfo,
+};
 pub use generalized_alpha::{FirstOrderParameters, GaParameters};
 pub use initial::{initial_accelerations, prepare_layout};
 pub use newton::{NewtonError, NewtonSettings, Verification};

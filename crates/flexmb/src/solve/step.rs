@@ -9,7 +9,7 @@
 //! `s_n = (q_n, v_n, vdot_n, a_n, x_n, xdot_n, w_n)` the end of the step is
 //!
 //! ```text
-//! q_{n+1}    = q_n exp(dq + B(q_n)^T zeta)                      (B^T zeta: stabilized only)
+//! q_{n+1}    = q_n exp(dq + B(q_n)^T zeta + c_n)   (B^T zeta: stabilized only; c_n below)
 //! a_{n+1}    = (dq - h v_n - (1/2 - beta) h^2 a_n) / (beta h^2)
 //! v_{n+1}    = v_n + (1 - gamma) h a_n + gamma h a_{n+1}
 //! vdot_{n+1} = ((1 - alpha_m) a_{n+1} + alpha_m a_n - alpha_f vdot_n) / (1 - alpha_f)
@@ -31,6 +31,34 @@
 //! ```
 //!
 //! at `t_{n+1}` and the end values above, `m` the largest nodal mass.
+//!
+//! **Configuration update** ([`super::LieUpdate`]). Brüls & Cardona (2010, Eqs.
+//! (40)-(44)) take `c_n = 0`. The exact flow of `q' = q tilde(v)` over one step is
+//! `q(t_n) exp(Theta(h))` with `Theta' = dexp_{-Theta}^{-1} v` (`Theta' = v + 1/2 [Theta, v]
+//! + ...`), so that, differentiating three times at `Theta = 0`,
+//! `Theta(h) = h v + h^2/2 vdot + h^3/6 (vddot + 1/2 [v, vdot]) + O(h^4)`: the bracket is
+//! the second term of the Magnus expansion (Iserles, Munthe-Kaas, Nørsett & Zanna 2000,
+//! "Lie-group methods", Acta Numerica 9; its two-term truncation for a linearly
+//! interpolated velocity is `h/2 (v_n + v_{n+1}) + h^2/12 [v_n, v_{n+1}]`), and the
+//! Brüls-Cardona increment has no such term. (The error analysis of the Lie group scheme
+//! is Arnold, Brüls & Cardona 2015, Numer. Math. 129; the expansion above is derived here.)
+//! The `commutator` update adds
+//!
+//! ```text
+//! c_n = sigma h^2 [v_n, v_{n+1}]       ([.,.] the algebra's bracket, flexmb_lie::Group::ad)
+//! ```
+//!
+//! (`= sigma h^3 [v_n, vdot] + O(h^4)`): `sigma = 1/12` restores the bracket of the exact
+//! flow; a larger `sigma` also cancels part of the scheme's own `h^3 vddot` defect where
+//! `vddot` is nearly parallel to `[v, vdot]` (fast-spinning tops). Holzinger, Arnold &
+//! Gerstmayr's modified kinematic relations (Exudyn's default Lie group integrator)
+//! amount, at convergence, to a term of this form (`BENCHMARKS.md`, "Error constant:
+//! variants compared"). The same term with `a_n` in place of `v_{n+1}/h` (a function of the
+//! start only) was tried and loses stability for `rho_inf = 0.9`, like Exudyn's variant.
+//! `c_n` moves with `dq` through `v_{n+1}`: `d total / d dq = I + E`,
+//! `E = sigma h^2 gamma' ad(v_n)`, so the iteration matrix takes `T (I + E)` in place of `T`
+//! on the increments' columns, and `dc_n = sigma h^2 (ad(v_n) dv_{n+1} - ad(v_{n+1}) dv_n)`
+//! with `dv_{n+1}` from the start at fixed `dq`.
 //!
 //! The Newton iteration of [`super::dynamics`] builds the same relations incrementally
 //! ([`predict`], [`correct`], [`finish`]); [`StepFunction`] evaluates them from `x`
@@ -72,6 +100,8 @@ pub struct Start {
     pub load_factor: f64,
     /// Nodal viscous damping \[1/s\].
     pub nodal_damping: f64,
+    /// The configuration update.
+    pub lie_update: super::LieUpdate,
 }
 
 impl Start {
@@ -101,6 +131,7 @@ impl Start {
             scale: 0.0,
             load_factor: settings.load_factor_at(t_new),
             nodal_damping: settings.nodal_damping,
+            lie_update: settings.lie_update,
         }
         .with_mass(mass)
     }
@@ -114,6 +145,22 @@ impl Start {
             scale: 1.0 / (self.bp * mass),
             ..self
         }
+    }
+
+    /// The weight `sigma h^2` of the configuration update's bracket term `c_n` (0 for the
+    /// Brüls-Cardona update).
+    pub fn commutator_weight(&self) -> f64 {
+        match self.lie_update {
+            super::LieUpdate::BrulsCardona => 0.0,
+            super::LieUpdate::Commutator { sigma } => sigma * self.h * self.h,
+        }
+    }
+
+    /// `I + E`, `E = sigma h^2 gamma' ad(v_n)`: how the total increment moves with `dq`
+    /// (`None` for the Brüls-Cardona update, where it is the identity).
+    pub fn increment_map(&self, group: Group, v_n: &Vec6) -> Option<Mat6> {
+        let w = self.commutator_weight();
+        (w != 0.0).then(|| Mat6::identity() + group.ad(v_n) * (w * self.gp))
     }
 
     /// The scaling of the step's iteration matrix `c_m M + c_c C_t + c_k K_t T` (divided by
@@ -222,6 +269,29 @@ pub fn total_increments(
                     total[6 * n + i] += b_start[row][6 * slot + i] * z;
                 }
             }
+        }
+    }
+}
+
+/// Adds the configuration update's bracket term `c_n = sigma h^2 [v_n, v_{n+1}]` of each
+/// node to `total` (module documentation; nothing for the Brüls-Cardona update); `v_1`
+/// holds `v_{n+1}`.
+#[inline]
+pub fn commutator_correction(
+    step: &Start,
+    group: Group,
+    start: &State,
+    v_1: &[Vec6],
+    total: &mut [f64],
+) {
+    let c = step.commutator_weight();
+    if c == 0.0 {
+        return;
+    }
+    for (i, (v, v1)) in start.v.iter().zip(v_1).enumerate() {
+        let d = group.ad(v) * v1 * c;
+        for k in 0..6 {
+            total[6 * i + k] += d[k];
         }
     }
 }
@@ -419,6 +489,9 @@ struct Partials {
     f_xd: Vec<f64>,
     /// Tangent operators `T(total)` of the nodes' increments.
     t: Vec<Mat6>,
+    /// `I + E`: how the total increments move with `dq` (module documentation; empty for
+    /// the Brüls-Cardona update).
+    e: Vec<Mat6>,
     /// Transports `G = Ad(exp(-total))`: `q_n exp(d) exp(total) = q_{n+1} exp(G d)`.
     g: Vec<Mat6>,
     /// The end of the step and its node kinematics (`T = I`): where the parameter
@@ -589,13 +662,14 @@ impl<'a> StepFunction<'a> {
         x
     }
 
-    /// `dq + B(q_n)^T zeta` of the unknowns `x`.
-    fn total(&self, x: &[f64]) -> Vec<f64> {
+    /// `dq + B(q_n)^T zeta + c_n` of the unknowns `x` (`v_1` the end velocities of `x`).
+    fn total(&self, x: &[f64], v_1: &[Vec6]) -> Vec<f64> {
         let layout = self.layout;
         let zeta = &x[layout.block(Block::Stabilization)];
         let mut total = Vec::new();
         let dq = &x[layout.block(Block::NodeIncrements)];
         total_increments(layout, dq, zeta, &self.b_start, &mut total);
+        commutator_correction(&self.step, self.model.group, self.start, v_1, &mut total);
         total
     }
 
@@ -620,7 +694,7 @@ impl<'a> StepFunction<'a> {
                 / (1.0 - p.alpha_f);
             end.a[i] = a1;
         }
-        let total = self.total(x);
+        let total = self.total(x, &end.v);
         for (i, q) in end.q.iter_mut().enumerate() {
             *q = self
                 .model
@@ -792,6 +866,9 @@ impl<'a> StepFunction<'a> {
             f_mu,
             f_x,
             f_xd,
+            e: (0..nodes.len())
+                .filter_map(|i| self.step.increment_map(group, &self.start.v[i]))
+                .collect(),
             t,
             g,
             end,
@@ -938,10 +1015,12 @@ impl<'a> StepFunction<'a> {
         }
         // F_q T, node block by node block of each row: (F_q T)_k = sum_c F_q,c T(c, k).
         let mut fqt = Vec::with_capacity(pattern.blocks.len());
+        // The increments' columns take F_q T (I + E) (module documentation).
         for &(k, n) in &pattern.blocks {
             let row = p.t[n].transpose() * Vec6::from_column_slice(&p.f_q[k..k + 6]);
+            let columns = p.e.get(n).map_or(row, |e| e.transpose() * row);
             for c in 0..6 {
-                out[k + c] += row[c];
+                out[k + c] += columns[c];
             }
             fqt.push(row);
         }
@@ -1158,6 +1237,32 @@ impl<'a> StepFunction<'a> {
         grad
     }
 
+    /// `dc_n = sigma h^2 (ad(v_n) dv_{n+1} - ad(v_{n+1}) dv_n)` of node `i` at fixed `dq`,
+    /// `dv_{n+1} = c1 dv_n + c2 da_n`: how the bracket term of the configuration update
+    /// moves with the start (module documentation); `v_1` is `v_{n+1}`.
+    fn commutator_jvp(&self, i: usize, v_1: &Vec6, dv: &Vec6, da: &Vec6) -> Vec6 {
+        let w = self.step.commutator_weight();
+        if w == 0.0 {
+            return Vec6::zeros();
+        }
+        let [c1, c2, ..] = self.start_coefficients();
+        let g = self.model.group;
+        (g.ad(&self.start.v[i]) * (dv * c1 + da * c2) - g.ad(v_1) * dv) * w
+    }
+
+    /// The transpose of [`StepFunction::commutator_jvp`]: the cotangents `(vbar, abar)`
+    /// of `v_n` and `a_n` for a cotangent `cbar` of `c_n`.
+    fn commutator_vjp(&self, i: usize, v_1: &Vec6, cbar: &Vec6) -> (Vec6, Vec6) {
+        let w = self.step.commutator_weight();
+        if w == 0.0 {
+            return (Vec6::zeros(), Vec6::zeros());
+        }
+        let [c1, c2, ..] = self.start_coefficients();
+        let g = self.model.group;
+        let u = g.ad(&self.start.v[i]).transpose() * cbar;
+        ((u * c1 - g.ad(v_1).transpose() * cbar) * w, u * (c2 * w))
+    }
+
     /// Coefficients of `v_{n+1}` and `vdot_{n+1}` in `(v_n, a_n, vdot_n)` at fixed `dq`.
     fn start_coefficients(&self) -> [f64; 5] {
         let p = &self.step.params;
@@ -1180,7 +1285,12 @@ impl<'a> StepFunction<'a> {
         for &(i, j, v) in &p.k_zeta {
             kz[i / 6][i % 6] += v * ds.q[j / 6][j % 6];
         }
-        let w: Vec<Vec6> = (0..n).map(|i| p.g[i] * ds.q[i] + p.t[i] * kz[i]).collect();
+        let w: Vec<Vec6> = (0..n)
+            .map(|i| {
+                let dc = self.commutator_jvp(i, &p.end.v[i], &ds.v[i], &ds.a[i]);
+                p.g[i] * ds.q[i] + p.t[i] * (kz[i] + dc)
+            })
+            .collect();
         let dv: Vec<Vec6> = (0..n).map(|i| ds.v[i] * c1 + ds.a[i] * c2).collect();
         let dvd: Vec<Vec6> = (0..n)
             .map(|i| ds.v[i] * c3 + ds.a[i] * c4 + ds.vdot[i] * c5)
@@ -1231,6 +1341,9 @@ impl<'a> StepFunction<'a> {
         for &(i, j, v) in &p.k_zeta {
             q[j / 6][j % 6] += v * tg[i / 6][i % 6];
         }
+        let commutator: Vec<(Vec6, Vec6)> = (0..n)
+            .map(|i| self.commutator_vjp(i, &p.end.v[i], &tg[i]))
+            .collect();
         let ns = self.layout.n_states;
         let so = self.layout.state_offset();
         let (d_w, d_xd) = self.state_start_coefficients();
@@ -1243,9 +1356,13 @@ impl<'a> StepFunction<'a> {
         }
         StateTangent {
             q,
-            v: (0..n).map(|i| gv[i] * c1 + gvd[i] * c3).collect(),
+            v: (0..n)
+                .map(|i| gv[i] * c1 + gvd[i] * c3 + commutator[i].0)
+                .collect(),
             vdot: (0..n).map(|i| gvd[i] * c5).collect(),
-            a: (0..n).map(|i| gv[i] * c2 + gvd[i] * c4).collect(),
+            a: (0..n)
+                .map(|i| gv[i] * c2 + gvd[i] * c4 + commutator[i].1)
+                .collect(),
             lambda: vec![0.0; self.layout.n_rows],
             x: gx,
             xdot: gxd.iter().map(|g| g * d_xd).collect(),
@@ -1295,7 +1412,8 @@ impl<'a> StepFunction<'a> {
     /// `None`): the derivative of the relations of the module documentation,
     ///
     /// ```text
-    /// dq_{n+1}    = G dq_n + T (ddq + B(q_n)^T dzeta + K_zeta dq_n + d(B_n^T zeta)/dp dp)
+    /// dq_{n+1}    = G dq_n + T ((I + E) ddq + B(q_n)^T dzeta + K_zeta dq_n
+    ///                            + d(B_n^T zeta)/dp dp + dc_n)
     /// dv_{n+1}    = c1 dv_n + c2 da_n + gamma' ddq
     /// dvdot_{n+1} = c3 dv_n + c4 da_n + c5 dvdot_n + beta' ddq
     /// da_{n+1}    = (ddq - h dv_n - (1/2 - beta) h^2 da_n) / (beta h^2)
@@ -1305,7 +1423,8 @@ impl<'a> StepFunction<'a> {
     /// ```
     ///
     /// with `G = Ad(exp(-total))`, `T = T(total)`, `K_zeta = d(B(q_n)^T zeta)/dq_n` (the
-    /// terms in `zeta` in the stabilized form only).
+    /// terms in `zeta` in the stabilized form only), and `E` and `dc_n` of the bracket term
+    /// of the configuration update (module documentation; 0 for Brüls-Cardona).
     pub fn end_jvp(
         &self,
         x: &[f64],
@@ -1343,7 +1462,11 @@ impl<'a> StepFunction<'a> {
         let mut out = StateTangent::zeros_of(layout);
         for i in 0..n {
             let ddq = Vec6::from_column_slice(&dx[6 * i..6 * i + 6]);
-            let dt = Vec6::from_column_slice(&dtotal[6 * i..6 * i + 6]);
+            let mut dt = Vec6::from_column_slice(&dtotal[6 * i..6 * i + 6])
+                + self.commutator_jvp(i, &p.end.v[i], &ds.v[i], &ds.a[i]);
+            if let Some(e) = p.e.get(i) {
+                dt += (e - Mat6::identity()) * ddq;
+            }
             out.q[i] = p.g[i] * ds.q[i] + p.t[i] * dt;
             out.v[i] = ds.v[i] * c1 + ds.a[i] * c2 + ddq * self.step.gp;
             out.vdot[i] = ds.v[i] * c3 + ds.a[i] * c4 + ds.vdot[i] * c5 + ddq * self.step.bp;
@@ -1394,12 +1517,16 @@ impl<'a> StepFunction<'a> {
             let t = p.t[i].transpose() * bar.q[i];
             tbar[6 * i..6 * i + 6].copy_from_slice(t.as_slice());
             let a = bar.a[i];
-            let dq = t + bar.v[i] * self.step.gp + bar.vdot[i] * self.step.bp + a / bh2;
+            let moved = p.e.get(i).map_or(t, |e| e.transpose() * t);
+            let dq = moved + bar.v[i] * self.step.gp + bar.vdot[i] * self.step.bp + a / bh2;
             xbar[6 * i..6 * i + 6].copy_from_slice(dq.as_slice());
             start.q[i] = p.g[i].transpose() * bar.q[i];
             start.v[i] = bar.v[i] * c1 + bar.vdot[i] * c3 - a * (h / bh2);
             start.a[i] = bar.v[i] * c2 + bar.vdot[i] * c4 - a * ((0.5 - ga.beta) / ga.beta);
             start.vdot[i] = bar.vdot[i] * c5;
+            let (vbar, abar) = self.commutator_vjp(i, &p.end.v[i], &t);
+            start.v[i] += vbar;
+            start.a[i] += abar;
         }
         let mut pbar = Vec::new();
         if layout.stabilized {
