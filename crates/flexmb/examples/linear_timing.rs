@@ -148,6 +148,9 @@ fn main() {
     time_case("dense 110x110 (10 blocks)", &medium, Backend::Dense, 20_000);
     time_case("sparse 11000 (1000 blocks)", &large, Backend::Sparse, 200);
     time_case("block 11000 (1000 blocks)", &large, Backend::Block, 200);
+    let huge = chain(10_000, 5, 5);
+    time_case("sparse 110000 (10000 blocks)", &huge, Backend::Sparse, 10);
+    time_case("block 110000 (10000 blocks)", &huge, Backend::Block, 20);
     println!("-- crossover check --");
     time_case("9x9 on the sparse backend", &small, Backend::Sparse, 50_000);
     time_case(

@@ -319,7 +319,8 @@ impl LinearSolver {
     }
 
     /// `min_k |u_kk| / max_ij |a_ij|` of the last successful factorization
-    /// (`None` before any). A cheap conditioning indicator: values close to
+    /// (`None` before any; the block LU divides each pivot by the largest entry of its
+    /// own column instead, see [`block`]). A cheap conditioning indicator: values close to
     /// [`PIVOT_TOLERANCE`] announce a nearly singular iteration matrix.
     pub fn min_pivot_ratio(&self) -> Option<f64> {
         self.factorized.then_some(self.min_pivot_ratio)
