@@ -10,7 +10,7 @@
 //! ground). The matrix is `[[S, G^T], [B, 0]]` with a zero diagonal block for
 //! the multipliers, interleaved body by body.
 
-use flexmb::solve::linear::{Backend, Groups, LinearSolver, DENSE_MAX};
+use flexmb::solve::linear::{Backend, GroupKind, Groups, LinearSolver, DENSE_MAX};
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -63,8 +63,8 @@ fn chain(nb: usize, nc: usize, seed: u64) -> Chain {
     }
     let mut groups = Groups::default();
     for b in 0..nb {
-        groups.push(b * bs..b * bs + 6, false);
-        groups.push(b * bs + 6..(b + 1) * bs, true);
+        groups.push(b * bs..b * bs + 6, GroupKind::Regular);
+        groups.push(b * bs + 6..(b + 1) * bs, GroupKind::Multipliers);
     }
     let mut values = [Vec::new(), Vec::new()];
     for set in &mut values {

@@ -34,7 +34,7 @@
 use crate::elements::ElementRef;
 use crate::joints::{self, Row};
 use crate::model::{JointId, Model, NodeId};
-use crate::solve::linear::{Groups, LinearError, LinearSolver};
+use crate::solve::linear::{GroupKind, Groups, LinearError, LinearSolver};
 use flexmb_lie::Vec6;
 use std::ops::Range;
 
@@ -207,17 +207,25 @@ impl Layout {
     pub fn groups(&self) -> Groups {
         let mut groups = Groups::default();
         for node in 0..self.n_nodes {
-            groups.push(6 * node..6 * node + 6, false);
+            groups.push(6 * node..6 * node + 6, GroupKind::Regular);
         }
-        let blocks = [Block::Multipliers, Block::Stabilization];
-        for block in blocks.into_iter().filter(|&b| !self.block(b).is_empty()) {
-            let first = self.block(block).start;
-            for (j, rows) in self.joint_rows.iter().enumerate() {
-                let start = self.joint_row_start[j];
-                let unknowns = (start..start + rows.len())
-                    .filter_map(|row| self.row_unknown[row])
-                    .map(|k| first + k);
-                groups.push(unknowns, true);
+        let joint_unknowns = |j: usize, first: usize| {
+            let start = self.joint_row_start[j];
+            (start..start + self.joint_rows[j].len())
+                .filter_map(|row| self.row_unknown[row])
+                .map(move |k| first + k)
+        };
+        let (multipliers, stabilization) = (
+            self.block(Block::Multipliers).start,
+            self.block(Block::Stabilization).start,
+        );
+        for j in 0..self.joint_rows.len() {
+            let lambda = groups.push(joint_unknowns(j, multipliers), GroupKind::Multipliers);
+            if let (Some(of), true) = (lambda, self.stabilized) {
+                groups.push(
+                    joint_unknowns(j, stabilization),
+                    GroupKind::Stabilization { of },
+                );
             }
         }
         let offset = self.state_offset();
@@ -227,9 +235,7 @@ impl Layout {
                 .get(e + 1)
                 .copied()
                 .unwrap_or(self.n_states);
-            if end > start {
-                groups.push(offset + start..offset + end, false);
-            }
+            groups.push(offset + start..offset + end, GroupKind::Regular);
         }
         groups
     }

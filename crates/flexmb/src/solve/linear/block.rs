@@ -15,8 +15,13 @@
 //! *supernode* whose diagonal block `[[S_i, B_i^T], [B_i, 0]]` is regular when the joint's
 //! rows `B_i` have full rank on the node's six unknowns and `S_i` (mass and stiffness) is
 //! positive definite on their null space. Each joint goes to the least loaded of its nodes
-//! (ties: the later node, the child in a chain built from the ground), which pairs every body
-//! of a chain with the joint to its parent.
+//! that still has room for its rows (at most six rows on a node's six unknowns; ties: the
+//! later node, the child in a chain built from the ground), which pairs every body of a
+//! chain with the joint to its parent; its stabilization unknowns go with its multipliers.
+//! A joint that finds no room closes a loop (a four-bar's fourth joint): it becomes a *cut*
+//! supernode of its own, eliminated after all the others, when the Schur complement has
+//! filled its diagonal block with `-B S^-1 B^T` (the loop-closure equations of the
+//! articulated-body methods for closed chains).
 //!
 //! The factorization is a right-looking supernodal LU:
 //!
@@ -69,19 +74,39 @@ pub const GROWTH_LIMIT: f64 = 1e6;
 pub struct Groups {
     /// The unknowns of each group. Unknowns in no group become groups of their own.
     pub members: Vec<Vec<usize>>,
-    /// Whether a group's own diagonal block is zero in the matrix (constraint multipliers,
-    /// stabilization unknowns): such a group is eliminated together with a neighbour.
-    pub saddle: Vec<bool>,
+    /// What each group is.
+    pub kinds: Vec<GroupKind>,
+}
+
+/// What a group of unknowns is, for the block LU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GroupKind {
+    /// Unknowns with a diagonal block of their own (a node's increments, an element's
+    /// states).
+    Regular,
+    /// A joint's multipliers: a zero diagonal block; eliminated with a regular neighbour
+    /// that has room for its rows (one per unknown), or after all its neighbours when none
+    /// has (a joint that closes a loop).
+    Multipliers,
+    /// The stabilization unknowns of the joint whose multipliers are group `of`:
+    /// eliminated with them.
+    Stabilization { of: usize },
 }
 
 impl Groups {
-    /// Adds a group (nothing if it is empty).
-    pub fn push(&mut self, members: impl IntoIterator<Item = usize>, saddle: bool) {
+    /// Adds a group and returns its index (nothing, and `None`, if it is empty).
+    pub fn push(
+        &mut self,
+        members: impl IntoIterator<Item = usize>,
+        kind: GroupKind,
+    ) -> Option<usize> {
         let members: Vec<usize> = members.into_iter().collect();
-        if !members.is_empty() {
-            self.members.push(members);
-            self.saddle.push(saddle);
+        if members.is_empty() {
+            return None;
         }
+        self.members.push(members);
+        self.kinds.push(kind);
+        Some(self.members.len() - 1)
     }
 }
 
@@ -135,7 +160,7 @@ impl BlockLu {
         // Groups, completed with one group per unknown left out.
         let mut group_of = vec![usize::MAX; n];
         let mut members = groups.members.clone();
-        let mut saddle = groups.saddle.clone();
+        let mut kinds = groups.kinds.clone();
         for (g, m) in members.iter().enumerate() {
             for &u in m {
                 group_of[u] = g;
@@ -145,7 +170,7 @@ impl BlockLu {
             if group_of[u] == usize::MAX {
                 group_of[u] = members.len();
                 members.push(vec![u]);
-                saddle.push(false);
+                kinds.push(GroupKind::Regular);
             }
         }
         let n_groups = members.len();
@@ -154,18 +179,28 @@ impl BlockLu {
             pattern.iter().map(|&(i, j)| (group_of[i], group_of[j])),
         );
 
-        // Each saddle group joins the least loaded of its regular neighbours (ties: the later
-        // one).
+        // Each joint's multipliers join the least loaded of the regular neighbours that still
+        // have room for its rows (ties: the later one), its stabilization unknowns with them.
+        // A joint with no such neighbour (one that closes a loop) stays on its own: a *cut*
+        // supernode, eliminated after the others, when their elimination has filled its
+        // diagonal block with `-B S^-1 B^T`.
         let mut host: Vec<usize> = (0..n_groups).collect();
-        let mut load = vec![0usize; n_groups];
-        for g in (0..n_groups).filter(|&g| saddle[g]) {
+        let mut rows = vec![0usize; n_groups];
+        let regular = |h: usize| kinds[h] == GroupKind::Regular;
+        for g in (0..n_groups).filter(|&g| kinds[g] == GroupKind::Multipliers) {
+            let size = members[g].len();
             if let Some(&h) = adjacency[g]
                 .iter()
-                .filter(|&&h| !saddle[h])
-                .min_by_key(|&&h| (load[h], std::cmp::Reverse(h)))
+                .filter(|&&h| regular(h) && rows[h] + size <= members[h].len())
+                .min_by_key(|&&h| (rows[h], std::cmp::Reverse(h)))
             {
                 host[g] = h;
-                load[h] += 1;
+                rows[h] += size;
+            }
+        }
+        for g in 0..n_groups {
+            if let GroupKind::Stabilization { of } = kinds[g] {
+                host[g] = host[of];
             }
         }
         let mut supernode_of_group = vec![usize::MAX; n_groups];
@@ -188,8 +223,14 @@ impl BlockLu {
             }),
         );
 
-        // Elimination order of the supernodes, then the positions of the unknowns.
-        let order = postorder(&supernode_graph, &amd_order(&supernode_graph));
+        // Elimination order of the supernodes (the cut ones last), then the positions of the
+        // unknowns.
+        let cut: Vec<bool> = (0..n_groups)
+            .filter(|&g| host[g] == g)
+            .map(|g| !regular(g))
+            .collect();
+        let mut order = postorder(&supernode_graph, &amd_order(&supernode_graph));
+        order.sort_by_key(|&k| cut[k]);
         let mut position = vec![0usize; n];
         let mut unknown = Vec::with_capacity(n);
         let mut starts = Vec::with_capacity(n_super + 1);

@@ -66,7 +66,7 @@
 
 pub mod block;
 
-pub use block::{Groups, GROWTH_LIMIT};
+pub use block::{GroupKind, Groups, GROWTH_LIMIT};
 
 use block::BlockLu;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
@@ -1129,10 +1129,13 @@ mod tests {
             }
         }
         for b in 0..nb {
-            groups.push(6 * b..6 * b + 6, false);
+            groups.push(6 * b..6 * b + 6, GroupKind::Regular);
         }
         for b in 0..nb {
-            groups.push(6 * nb + nc * b..6 * nb + nc * (b + 1), true);
+            groups.push(
+                6 * nb + nc * b..6 * nb + nc * (b + 1),
+                GroupKind::Multipliers,
+            );
         }
         (System { n, pattern, values }, groups)
     }
@@ -1165,6 +1168,49 @@ mod tests {
             unreachable!()
         };
         assert!(!block.general_active, "the block LU took this matrix");
+    }
+
+    #[test]
+    fn block_lu_of_closed_loops_and_branches() {
+        // The chain of 30 bodies closed by a joint of 3 rows between the last body and the
+        // first (a loop), and a branch: a second joint of 2 rows from body 10 to body 20.
+        let (nb, nc) = (30, 5);
+        let (mut sys, mut groups) = chain_system(nb, nc, 71);
+        let mut rng = Lcg(72);
+        for (a, b, rows) in [(nb - 1, 0, 3), (10, 20, 2)] {
+            let first = sys.n;
+            sys.n += rows;
+            for r in 0..rows {
+                for j in 0..6 {
+                    for (body, sign) in [(a, 1.0), (b, -1.0)] {
+                        let v = if r == j { sign } else { 0.0 } + rng.uniform(-0.1, 0.1);
+                        sys.pattern.push((first + r, 6 * body + j));
+                        sys.values.push(v);
+                        sys.pattern.push((6 * body + j, first + r));
+                        sys.values.push(v);
+                    }
+                }
+            }
+            groups.push(first..first + rows, GroupKind::Multipliers);
+        }
+        let b = random_rhs(sys.n, 73);
+        let mut solver = LinearSolver::with_groups(sys.n, &sys.pattern, &groups).unwrap();
+        assert_eq!(solver.backend(), Backend::Block);
+        solver.factorize(&sys.values).unwrap();
+        let Inner::Block(block) = &solver.inner else {
+            unreachable!()
+        };
+        assert!(!block.general_active, "the block LU took this matrix");
+        for transpose in [false, true] {
+            let mut x = b.clone();
+            if transpose {
+                solver.solve_transpose_in_place(&mut x);
+            } else {
+                solver.solve_in_place(&mut x);
+            }
+            let expected = solve_checked(&sys, Backend::Dense, &b, transpose);
+            assert_close(&expected, &x, 1e-11);
+        }
     }
 
     #[test]
@@ -1210,8 +1256,8 @@ mod tests {
             values: vec![e, 1.0, 1.0, e],
         };
         let mut groups = Groups::default();
-        groups.push([0], false);
-        groups.push([1], false);
+        groups.push([0], GroupKind::Regular);
+        groups.push([1], GroupKind::Regular);
         let mut solver = LinearSolver::build(2, &two.pattern, Backend::Block, &groups).unwrap();
         solver.factorize(&two.values).unwrap();
         let Inner::Block(block) = &solver.inner else {
