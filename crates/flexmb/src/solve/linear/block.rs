@@ -110,7 +110,7 @@ impl Groups {
     }
 }
 
-/// A factorization the block LU does not accept: a tiny or non-finite pivot, a multiplier
+/// A factorization the block LU does not accept: a tiny or non-finite pivot, a growth
 /// beyond [`GROWTH_LIMIT`], or a non-finite entry. The general LU decides what it is.
 #[derive(Debug)]
 pub(super) struct Rejected;
@@ -133,8 +133,7 @@ struct Supernode {
 }
 
 pub(super) struct BlockLu {
-    /// Position of each unknown in the elimination order, and the unknown at each position.
-    position: Vec<usize>,
+    /// The unknown at each position of the elimination order.
     unknown: Vec<usize>,
     supernodes: Vec<Supernode>,
     /// The row positions of every supernode's panels (ranges in [`Supernode::rows`]).
@@ -293,16 +292,14 @@ impl BlockLu {
             size_store += size * size + 2 * r * size;
             n_targets += r * r;
         }
-        let lu_position = position.clone();
         let mut lu = Self {
-            position,
             unknown,
             supernodes,
             rows,
             targets: Vec::with_capacity(n_targets),
             store: vec![0.0; size_store],
             swaps: vec![0; n],
-            slot_columns: pattern.iter().map(|&(_, j)| lu_position[j]).collect(),
+            slot_columns: pattern.iter().map(|&(_, j)| position[j]).collect(),
             column_max: vec![0.0; n],
             work: vec![0.0; n],
             column: Vec::new(),
@@ -321,7 +318,7 @@ impl BlockLu {
         lu.column = vec![0.0; max_rows];
         let slots = pattern
             .iter()
-            .map(|&(i, j)| lu.index(&supernode_at, lu.position[i], lu.position[j]))
+            .map(|&(i, j)| lu.index(&supernode_at, position[i], position[j]))
             .collect();
         (lu, slots)
     }
