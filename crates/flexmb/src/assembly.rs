@@ -14,6 +14,26 @@
 //! `K_c = d(B^T lambda)/dq`. The same routine serves the consistent initial accelerations
 //! (`c_m = s = 1/m`, `c_c = c_k = 0`, right-hand side the convective terms) and statics
 //! (`c_m = c_c = 0`).
+//!
+//! **Threads, and why the bits do not depend on them.** With one thread
+//! ([`crate::parallel::Threads::sequential`], the setting `threads = 1` or a model below
+//! [`crate::parallel::MIN_PARALLEL_ITEMS`] items) one loop visits the elements, then the
+//! joints, and adds each contribution to the residual as it comes; rayon is not used. With
+//! more, the elements and the joints are cut into leaves of a fixed number of items and
+//! evaluated in parallel, each item writing only what is its own:
+//!
+//! * its matrix entries, into its own range of `Data::values` (the pattern gives every item
+//!   a fixed, contiguous range: no sum is made there, the linear solver sums duplicates in
+//!   pattern order as before);
+//! * its local vector (an element), or its rows of `Phi` and `B` and the right-hand sides of
+//!   its constraint equations (a joint), into per-item storage ([`ParallelScratch`]).
+//!
+//! The only floating-point sums shared between items, the nodes' equations, are then made
+//! on the calling thread, element after element and joint after joint in the order of the
+//! sequential loop and with the same operations ([`add_element`], [`add_joint`]). Every
+//! number is therefore the same bits with 1, 2 or any number of threads
+//! (`tests/threads.rs`), and a run keeps its bits when its thread count changes (a resumed
+//! checkpoint may use another).
 
 use crate::data::{active_slots, Data, Layout};
 use crate::elements::{
