@@ -11,8 +11,8 @@
 //! Each case runs in a child process so that its peak memory (VmHWM) is its own.
 //!
 //! `FLEXMB_THREADS=N` assembles on `N` threads whatever the size of the model (the size
-//! threshold of `flexmb::parallel` is bypassed, so that the crossover can be measured);
-//! without it every case runs on one thread. `threads` runs beams and chains alternately on
+//! threshold of `flexmb::parallel` is bypassed for the dynamic cases, so that the crossover
+//! can be measured); without it every case runs on one thread. `threads` runs beams and chains alternately on
 //! 1 and 2 threads, `FLEXMB_REPEAT` times each (default 5), and prints the best and the
 //! median of each.
 
@@ -51,20 +51,22 @@ struct Outcome {
     state: State,
 }
 
-/// The threads of this run's assembly: `FLEXMB_THREADS`, forced whatever the model's size,
-/// else one.
+/// The number of threads of this run: `FLEXMB_THREADS`, else one.
+fn thread_count() -> usize {
+    std::env::var("FLEXMB_THREADS").map_or(1, |n| n.parse().expect("FLEXMB_THREADS: a number"))
+}
+
+/// The threads of this run's assembly, forced whatever the model's size.
 fn threads() -> flexmb::parallel::Threads {
-    match std::env::var("FLEXMB_THREADS") {
-        Ok(n) => flexmb::parallel::Threads::forced(n.parse().expect("FLEXMB_THREADS: a number")),
-        Err(_) => flexmb::parallel::Threads::sequential(),
-    }
+    flexmb::parallel::Threads::forced(thread_count())
 }
 
 fn solve(file: &str, overrides: &[String]) -> Outcome {
     let mf = read_model_file(&example(file), overrides).expect("model file");
-    let Analysis::Dynamic(settings) = mf.analysis else {
+    let Analysis::Dynamic(mut settings) = mf.analysis else {
         panic!("{file} is not a dynamic analysis")
     };
+    settings.threads = thread_count();
     let mut sim = Simulation::new(&mf.model, settings).expect("initial conditions");
     sim.data.threads = threads();
     let t0 = Instant::now();
@@ -143,9 +145,10 @@ fn right_angle_cantilever() {
 /// Roll-up (static, 10 elements): adaptive load stepping.
 fn roll_up() {
     let mf = read_model_file(&example("roll_up.toml"), &[]).expect("model file");
-    let Analysis::Static(settings) = mf.analysis else {
+    let Analysis::Static(mut settings) = mf.analysis else {
         panic!("roll_up.toml is static")
     };
+    settings.threads = thread_count();
     let t0 = Instant::now();
     let mut statics = flexmb::solve::Statics::new(&mf.model, settings).expect("starts");
     let stats = statics
@@ -189,6 +192,7 @@ fn long_beam(n: usize) {
     );
     let mut s = flexmb::DynamicSettings::new(0.02, 1e-3);
     s.rho_inf = 0.5;
+    s.threads = thread_count();
     timed_row(
         &format!("beam_{n}"),
         n,
@@ -250,7 +254,9 @@ fn springs(n: usize) {
             }),
         });
     }
-    let sim = Simulation::new(&m, flexmb::DynamicSettings::new(0.2, 1e-3)).expect("starts");
+    let mut s = flexmb::DynamicSettings::new(0.2, 1e-3);
+    s.threads = thread_count();
+    let sim = Simulation::new(&m, s).expect("starts");
     timed_row(&format!("springs_{n}"), n, sim);
 }
 
