@@ -29,9 +29,11 @@
 //!   its constraint equations (a joint), into per-item storage ([`ParallelScratch`]).
 //!
 //! The only floating-point sums shared between items, the nodes' equations, are then made
-//! on the calling thread, element after element and joint after joint in the order of the
-//! sequential loop and with the same operations ([`add_element`], [`add_joint`]). Every
-//! number is therefore the same bits with 1, 2 or any number of threads
+//! node by node (in parallel too: a node's sum is its own), each from zero over the node's
+//! terms in the order of the sequential loop (its elements in element order, the nodal
+//! damping, its joints' rows in joint order) and with the same operations as
+//! [`add_element`], [`add_nodal_damping`] and [`add_joint`]. No sum depends on how the work
+//! is cut. Every number is therefore the same bits with 1, 2 or any number of threads
 //! (`tests/threads.rs`), and a run keeps its bits when its thread count changes (a resumed
 //! checkpoint may use another).
 
@@ -41,6 +43,7 @@ use crate::elements::{
 };
 use crate::joints::{self, ConstraintKernel};
 use crate::model::{Model, NodeId};
+use rayon::prelude::*;
 
 /// What the constraint rows of the right-hand side hold.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -628,6 +631,16 @@ pub struct ParallelScratch {
     vel: Vec<f64>,
     /// One [`LocalBuffers`] per leaf of elements.
     buffers: Vec<LocalBuffers>,
+    /// The terms of each node's equations, in the order [`traverse`] adds them (node `n`:
+    /// `terms[terms_start[n]..terms_start[n + 1]]`, then its joints' from `joint_terms`).
+    terms_start: Vec<usize>,
+    /// Elements' terms: the start of the slot's 6 rows in `element_r`.
+    terms: Vec<usize>,
+    /// Joints' terms of node `n`: `joint_terms[joint_terms_start[n]..]`, as `(row, slot)`.
+    joint_terms_start: Vec<usize>,
+    joint_terms: Vec<(usize, usize)>,
+    /// The elements that own states.
+    with_states: Vec<usize>,
 }
 
 impl ParallelScratch {
@@ -663,6 +676,37 @@ impl ParallelScratch {
             joint(&pass, j, out, &mut count);
         }
         joint_pos.push(count.0);
+        // Each node's terms, element after element (slot after slot), then joint after
+        // joint (active row after row, slot after slot): the order of `traverse`.
+        let mut by_node = vec![Vec::new(); layout.n_nodes];
+        let mut with_states = Vec::new();
+        for (e, element) in layout.elements.iter().enumerate() {
+            let kernel = element.kernel(model);
+            for k in 0..kernel.n_slots() {
+                if let Some(node) = kernel.node(k) {
+                    by_node[node.0].push(element_r_start[e] + 6 * k);
+                }
+            }
+            if kernel.n_states() > 0 {
+                with_states.push(e);
+            }
+        }
+        let mut by_node_joints = vec![Vec::new(); layout.n_nodes];
+        for (j, joint) in model.joints.iter().enumerate() {
+            let start = layout.joint_row_start[j];
+            for row in start..start + layout.joint_rows[j].len() {
+                if layout.row_unknown[row].is_none() {
+                    continue;
+                }
+                for (slot, node) in [joint.node_a, joint.node_b].into_iter().enumerate() {
+                    if let Some(node) = node {
+                        by_node_joints[node.0].push((row, slot));
+                    }
+                }
+            }
+        }
+        let (terms_start, terms) = flatten(by_node);
+        let (joint_terms_start, joint_terms) = flatten(by_node_joints);
         Self {
             element_pos,
             joint_pos,
@@ -671,17 +715,33 @@ impl ParallelScratch {
             rhs: vec![0.0; layout.n_rows],
             vel: vec![0.0; layout.n_rows],
             buffers: vec![LocalBuffers::default(); n_elements.div_ceil(LEAF)],
+            terms_start,
+            terms,
+            joint_terms_start,
+            joint_terms,
+            with_states,
         }
     }
+}
+
+/// Lists one after the other, and where each starts (`lists.len() + 1`).
+fn flatten<T>(lists: Vec<Vec<T>>) -> (Vec<usize>, Vec<T>) {
+    let mut starts = vec![0];
+    let mut all = Vec::new();
+    for list in lists {
+        all.extend(list);
+        starts.push(all.len());
+    }
+    (starts, all)
 }
 
 /// [`traverse`] on the threads of `pool`: the elements and the joints are evaluated in
 /// parallel, each writing its own entries of `values` (positions fixed by the pattern) and
 /// its own results (local vector, rows of `Phi` and `B`, right-hand sides) into per-item
-/// storage; the sums into the nodes' equations are then made on this thread, item after item
-/// in the order of [`traverse`], with the same operations: the same bits whatever the
-/// number of threads, and the same as [`traverse`]. `values` is empty for the residual
-/// only.
+/// storage; then the nodes' equations are summed node by node ([`NodeSums`]), each node's
+/// terms in the order of [`traverse`] and with the same operations: the same bits whatever
+/// the number of threads, and the same as [`traverse`]. `values` is `None` for the
+/// residual only.
 fn traverse_parallel(
     p: &Pass,
     nodal_mass: &[flexmb_lie::Vec6],
@@ -706,6 +766,11 @@ fn traverse_parallel(
         rhs,
         vel,
         buffers,
+        terms_start,
+        terms,
+        joint_terms_start,
+        joint_terms,
+        with_states,
     } = scratch;
     let (element_values, rest) = values.split_at_mut(if matrix { joint_pos[0] } else { 0 });
     let n_joint_values = joint_pos[joint_pos.len() - 1] - joint_pos[0];
@@ -733,25 +798,40 @@ fn traverse_parallel(
             || joint_work.run(p, 0..n_joint_leaves, joint_values, joint_out),
         )
     });
-    // The sums, in the order of `traverse`.
-    residual.iter_mut().for_each(|r| *r = 0.0);
-    for e in 0..layout.elements.len() {
+    // The nodes' equations, node by node in parallel, each summing its terms in the order
+    // of `traverse` with the same operations; the other equations are copied.
+    let (nodes_residual, others) = residual.split_at_mut(layout.n_dofs);
+    let sums = NodeSums {
+        terms_start,
+        terms,
+        joint_terms_start,
+        joint_terms,
+        element_r,
+        b_rows,
+        nodal_mass,
+    };
+    pool.install(|| {
+        nodes_residual
+            .par_chunks_mut(6 * LEAF)
+            .enumerate()
+            .for_each(|(leaf, chunk)| sums.leaf(p, leaf * LEAF, chunk));
+    });
+    others.iter_mut().for_each(|r| *r = 0.0);
+    let state_offset = layout.state_offset();
+    for &e in with_states.iter() {
         let kernel = layout.elements[e].kernel(p.model);
-        let r = &element_r[element_r_start[e]..element_r_start[e + 1]];
-        add_element(p, &kernel, layout.state_start[e], r, residual);
+        let (n_slots, n_states) = (kernel.n_slots(), kernel.n_states());
+        let r = &element_r[element_r_start[e] + 6 * n_slots..];
+        let xs = state_offset + layout.state_start[e];
+        for i in 0..n_states {
+            residual[xs + i] = p.sc.state_scale * r[i];
+        }
     }
-    add_nodal_damping(p, nodal_mass, residual);
-    for j in 0..p.model.joints.len() {
-        let start = layout.joint_row_start[j];
-        let rows = start..start + layout.joint_rows[j].len();
-        add_joint(
-            p,
-            j,
-            &b_rows[rows.clone()],
-            &rhs[rows.clone()],
-            &vel[rows],
-            residual,
-        );
+    for (k, &row) in layout.active_rows.iter().enumerate() {
+        residual[layout.n_dofs + k] = rhs[row];
+        if layout.stabilized {
+            residual[layout.zeta(k)] = vel[row];
+        }
     }
     if matrix {
         let mut sink = Values {
@@ -764,6 +844,48 @@ fn traverse_parallel(
             sink.values.len(),
             "assembly order differs from the pattern"
         );
+    }
+}
+
+/// The sums of the nodes' equations in [`traverse_parallel`].
+struct NodeSums<'s> {
+    terms_start: &'s [usize],
+    terms: &'s [usize],
+    joint_terms_start: &'s [usize],
+    joint_terms: &'s [(usize, usize)],
+    element_r: &'s [f64],
+    b_rows: &'s [Vec12],
+    nodal_mass: &'s [flexmb_lie::Vec6],
+}
+
+impl NodeSums<'_> {
+    /// The equations of the nodes from `first` on (`chunk`: 6 per node): from zero, `s r` of
+    /// each element (as [`add_element`]), the nodal damping (as [`add_nodal_damping`]),
+    /// `s b lambda` of each joint row (as [`add_joint`]), in that order.
+    fn leaf(&self, p: &Pass, first: usize, chunk: &mut [f64]) {
+        let sc = &p.sc;
+        for (n, out) in (first..).zip(chunk.chunks_exact_mut(6)) {
+            out.iter_mut().for_each(|r| *r = 0.0);
+            for &at in &self.terms[self.terms_start[n]..self.terms_start[n + 1]] {
+                for i in 0..6 {
+                    out[i] += sc.row_scale * self.element_r[at + i];
+                }
+            }
+            if sc.nodal_damping > 0.0 {
+                let v = &p.it.nodes[n].v;
+                for i in 0..6 {
+                    out[i] += sc.row_scale * sc.nodal_damping * self.nodal_mass[n][i] * v[i];
+                }
+            }
+            let joints =
+                &self.joint_terms[self.joint_terms_start[n]..self.joint_terms_start[n + 1]];
+            for &(row, slot) in joints {
+                let lam = p.it.lambda[row];
+                for i in 0..6 {
+                    out[i] += sc.row_scale * self.b_rows[row][6 * slot + i] * lam;
+                }
+            }
+        }
     }
 }
 
