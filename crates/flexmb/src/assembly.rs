@@ -786,36 +786,36 @@ fn traverse_parallel(
     };
     let n_element_leaves = layout.elements.len().div_ceil(LEAF);
     let n_joint_leaves = p.model.joints.len().div_ceil(LEAF);
-    let joint_out = JointRows {
-        phi,
-        b: b_rows,
-        rhs,
-        vel,
-    };
+    let (nodes_residual, others) = residual.split_at_mut(layout.n_dofs);
+    // One call into the pool (waking its threads is the cost that matters on small models).
     pool.install(|| {
+        let joint_out = JointRows {
+            phi,
+            b: &mut *b_rows,
+            rhs: &mut rhs[..],
+            vel: &mut vel[..],
+        };
         rayon::join(
             || element_work.run(p, 0..n_element_leaves, element_values, element_r, buffers),
             || joint_work.run(p, 0..n_joint_leaves, joint_values, joint_out),
-        )
-    });
-    // The nodes' equations, node by node in parallel, each summing its terms in the order
-    // of `traverse` with the same operations; the other equations are copied.
-    let (nodes_residual, others) = residual.split_at_mut(layout.n_dofs);
-    let sums = NodeSums {
-        terms_start,
-        terms,
-        joint_terms_start,
-        joint_terms,
-        element_r,
-        b_rows,
-        nodal_mass,
-    };
-    pool.install(|| {
+        );
+        // The nodes' equations, node by node in parallel, each summing its terms in the
+        // order of `traverse` with the same operations.
+        let sums = NodeSums {
+            terms_start,
+            terms,
+            joint_terms_start,
+            joint_terms,
+            element_r,
+            b_rows,
+            nodal_mass,
+        };
         nodes_residual
             .par_chunks_mut(6 * LEAF)
             .enumerate()
             .for_each(|(leaf, chunk)| sums.leaf(p, leaf * LEAF, chunk));
     });
+    // The other equations are copied.
     others.iter_mut().for_each(|r| *r = 0.0);
     let state_offset = layout.state_offset();
     for &e in with_states.iter() {
