@@ -1,7 +1,8 @@
 //! Parallel assembly gives the same bits as the sequential one, whatever the number of
 //! threads: whole runs (a beam above the size threshold, a rigid chain, spring-dampers with
-//! element states, the stabilized formulation, statics) and single assemblies (every kind of
-//! constraint right-hand side, with and without the matrix). Equality is on the bits of
+//! element states, the stabilized formulation, statics, sensitivity gradients by the direct
+//! and adjoint methods) and single assemblies (every kind of constraint right-hand side, with
+//! and without the matrix). Equality is on the bits of
 //! every number, not within a tolerance.
 
 use flexmb::assembly::{assemble, ConstraintRhs, Iterate, Scaling};
@@ -297,4 +298,35 @@ fn single_assembly_same_bits_for_every_right_hand_side() {
             }
         }
     }
+}
+
+#[test]
+fn sensitivity_gradients_same_bits_on_1_and_2_threads() {
+    // 150 + 150 beam elements: the forward run, the direct method's and the adjoint's
+    // assemblies all parallel with 2 threads.
+    let gradients = |threads: usize| {
+        let set: Vec<String> = [
+            "beam.0.elements=150",
+            "beam.1.elements=150",
+            "solver.t_end=0.5",
+            &format!("solver.threads={threads}"),
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        let file = read_model_file(&example("right_angle_cantilever_sensitivity.toml"), &set)
+            .expect("model file");
+        let setup = file.sensitivity.as_ref().expect("sensitivity");
+        let problem = setup.problem(std::sync::Arc::new(file.model.clone()), file.analysis);
+        let mut out = Vec::new();
+        for g in [
+            flexmb::sensitivity::direct(&problem).expect("direct"),
+            flexmb::sensitivity::adjoint(&problem, &mut |_, _| {}).expect("adjoint"),
+        ] {
+            out.extend(g.values.iter().map(|v| v.to_bits()));
+            out.extend(g.gradients.iter().flatten().map(|v| v.to_bits()));
+        }
+        out
+    };
+    assert_eq!(gradients(1), gradients(2));
 }
