@@ -32,7 +32,7 @@
 //! node by node (in parallel too: a node's sum is its own), each from zero over the node's
 //! terms in the order of the sequential loop (its elements in element order, the nodal
 //! damping, its joints' rows in joint order) and with the same operations as
-//! [`add_element`], [`add_nodal_damping`] and [`add_joint`]. No sum depends on how the work
+//! `add_element`, `add_nodal_damping` and `add_joint`. No sum depends on how the work
 //! is cut. Every number is therefore the same bits with 1, 2 or any number of threads
 //! (`tests/threads.rs`), and a run keeps its bits when its thread count changes (a resumed
 //! checkpoint may use another).
