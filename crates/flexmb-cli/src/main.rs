@@ -2,12 +2,13 @@
 //!
 //! ```text
 //! flexmb run MODEL.toml --out DIR [--set key.path=value ...] [--quiet] [--verify]
-//!                       [--checkpoint-interval T]
-//! flexmb run MODEL.toml --resume DIR [--set ...]
+//!                       [--checkpoint-interval T] [--threads N]
+//! flexmb run MODEL.toml --resume DIR [--set ...] [--threads N]
 //! flexmb check MODEL.toml [--set ...]
 //! flexmb sensitivity MODEL.toml --out DIR [--method direct|adjoint|fd] [--fd-step S]
-//!                               [--check] [--memory-mb M] [--set ...] [--quiet]
+//!                               [--check] [--memory-mb M] [--set ...] [--quiet] [--threads N]
 //! flexmb optimize MODEL.toml --out DIR [--criterion NAME] [--iterations N] [--set ...]
+//!                            [--threads N]
 //! ```
 //!
 //! Contract (README.md, "The `flexmb` command" and "Outputs"): one exit code per class of
@@ -92,6 +93,11 @@ enum Command {
         /// them.
         #[arg(long, value_name = "DIR", conflicts_with = "out")]
         resume: Option<PathBuf>,
+        /// Threads of the assembly: 0 for all cores, 1 for a sequential run (timing); the
+        /// results are the same bits whatever the number (default: the file's
+        /// solver.threads, else all cores).
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(0..=1024))]
+        threads: Option<u16>,
     },
     /// Gradients of the model's [[criterion]] items with respect to its [[design_parameter]]
     /// items, exact for the computed solution; write gradients.json and gradients.csv into
@@ -121,6 +127,11 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Threads of the assembly: 0 for all cores, 1 for a sequential run (timing); the
+        /// results are the same bits whatever the number (default: the file's
+        /// solver.threads, else all cores).
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(0..=1024))]
+        threads: Option<u16>,
     },
     /// Lower one [[criterion]] of the model over its [[design_parameter]] items that have
     /// both bounds (L-BFGS on the adjoint gradients); write optimization.csv (one row per
@@ -137,6 +148,11 @@ enum Command {
         iterations: u64,
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
+        /// Threads of the assembly: 0 for all cores, 1 for a sequential run (timing); the
+        /// results are the same bits whatever the number (default: the file's
+        /// solver.threads, else all cores).
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(0..=1024))]
+        threads: Option<u16>,
     },
     /// Read and check a model file (syntax, references, physics, initial conditions).
     Check {
@@ -157,6 +173,7 @@ fn main() {
                 verify,
                 checkpoint_interval,
                 resume,
+                threads,
             } => match checkpoint_interval {
                 Some(t) if !(t.is_finite() && t > 0.0) => {
                     tell(format_args!(
@@ -172,7 +189,7 @@ fn main() {
                     run(
                         &model,
                         resume.as_deref().unwrap_or(&out),
-                        &set,
+                        &with_threads(set, threads),
                         quiet,
                         verify,
                         options,
@@ -186,7 +203,14 @@ fn main() {
                 criterion,
                 iterations,
                 set,
-            } => optimize(&model, &out, &set, criterion.as_deref(), iterations),
+                threads,
+            } => optimize(
+                &model,
+                &out,
+                &with_threads(set, threads),
+                criterion.as_deref(),
+                iterations,
+            ),
             Command::Sensitivity {
                 model,
                 out,
@@ -196,6 +220,7 @@ fn main() {
                 memory_mb,
                 set,
                 quiet,
+                threads,
             } => {
                 let options = SensitivityOptions {
                     method,
@@ -204,7 +229,7 @@ fn main() {
                     memory_mb,
                     quiet,
                 };
-                sensitivity(&model, &out, &set, options)
+                sensitivity(&model, &out, &with_threads(set, threads), options)
             }
         },
         Err(e) => {
@@ -218,6 +243,14 @@ fn main() {
         }
     };
     std::process::exit(code);
+}
+
+/// The overrides with `--threads` as the last: `solver.threads` set like any key of the file.
+fn with_threads(mut set: Vec<String>, threads: Option<u16>) -> Vec<String> {
+    if let Some(n) = threads {
+        set.push(format!("solver.threads={n}"));
+    }
+    set
 }
 
 /// `flexmb run`: takes over the output directory, reads the model and runs it.

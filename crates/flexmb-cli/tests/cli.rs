@@ -197,3 +197,46 @@ fn verify_reports_the_largest_error_of_an_accepted_step() {
     assert!(status.success());
     assert!(summary(&plain).get("verify").is_none());
 }
+
+#[test]
+fn run_threads_write_the_same_bytes() {
+    // 150 + 150 beam elements: above the size below which a model stays sequential.
+    let run = |threads: &str| {
+        let out = out_dir(&format!("threads_{threads}"));
+        let status = flexmb()
+            .args([
+                "run",
+                repo("examples/right_angle_cantilever.toml")
+                    .to_str()
+                    .unwrap(),
+                "--out",
+            ])
+            .arg(&out)
+            .args([
+                "--set",
+                "beam.0.elements=150",
+                "--set",
+                "beam.1.elements=150",
+                "--set",
+                "solver.t_end=1.5",
+                "--threads",
+                threads,
+            ])
+            .status()
+            .expect("runs");
+        assert!(status.success());
+        ["sensors.csv", "nodes.csv", "beams.csv"]
+            .map(|f| std::fs::read(out.join(f)).expect("result file"))
+    };
+    assert!(run("1") == run("2"), "the result files differ");
+    let status = flexmb()
+        .args(["run", repo("examples/pendulum.toml").to_str().unwrap()])
+        .args(["--threads", "2000"])
+        .status()
+        .expect("runs");
+    assert_eq!(
+        status.code(),
+        Some(64),
+        "a thread count out of range is a usage error"
+    );
+}

@@ -5,8 +5,16 @@
 //! ```text
 //! cargo bench -p flexmb --bench engine              # all cases, each in its own process
 //! cargo bench -p flexmb --bench engine -- chain_1000  # one case
+//! FLEXMB_THREADS=2 cargo bench -p flexmb --bench engine -- beam_10000  # on 2 threads
+//! cargo bench -p flexmb --bench engine -- threads   # the table of 1 against 2 threads
 //! ```
 //! Each case runs in a child process so that its peak memory (VmHWM) is its own.
+//!
+//! `FLEXMB_THREADS=N` assembles on `N` threads whatever the size of the model (the size
+//! threshold of `flexmb::parallel` is bypassed for the dynamic cases, so that the crossover
+//! can be measured); without it every case runs on one thread. `threads` runs beams and chains alternately on
+//! 1 and 2 threads, `FLEXMB_REPEAT` times each (default 5), and prints the best and the
+//! median of each.
 
 use flexmb::input::{read_model_file, Analysis};
 use flexmb::{Simulation, State};
@@ -45,12 +53,24 @@ struct Outcome {
     state: State,
 }
 
+/// The number of threads of this run: `FLEXMB_THREADS`, else one.
+fn thread_count() -> usize {
+    std::env::var("FLEXMB_THREADS").map_or(1, |n| n.parse().expect("FLEXMB_THREADS: a number"))
+}
+
+/// The threads of this run's assembly, forced whatever the model's size.
+fn threads() -> flexmb::parallel::Threads {
+    flexmb::parallel::Threads::forced(thread_count())
+}
+
 fn solve(file: &str, overrides: &[String]) -> Outcome {
     let mf = read_model_file(&example(file), overrides).expect("model file");
-    let Analysis::Dynamic(settings) = mf.analysis else {
+    let Analysis::Dynamic(mut settings) = mf.analysis else {
         panic!("{file} is not a dynamic analysis")
     };
+    settings.threads = thread_count();
     let mut sim = Simulation::new(&mf.model, settings).expect("initial conditions");
+    sim.data.threads = threads();
     let t0 = Instant::now();
     let stats = sim
         .run(&mut |_: &flexmb::observe::Sample| Ok(()))
@@ -166,9 +186,10 @@ fn right_angle_cantilever() {
 /// Roll-up (static, 10 elements): adaptive load stepping.
 fn roll_up() {
     let mf = read_model_file(&example("roll_up.toml"), &[]).expect("model file");
-    let Analysis::Static(settings) = mf.analysis else {
+    let Analysis::Static(mut settings) = mf.analysis else {
         panic!("roll_up.toml is static")
     };
+    settings.threads = thread_count();
     let t0 = Instant::now();
     let mut statics = flexmb::solve::Statics::new(&mf.model, settings).expect("starts");
     let stats = statics
@@ -212,6 +233,7 @@ fn long_beam(n: usize) {
     );
     let mut s = flexmb::DynamicSettings::new(0.02, 1e-3);
     s.rho_inf = 0.5;
+    s.threads = thread_count();
     timed_row(
         &format!("beam_{n}"),
         n,
@@ -222,6 +244,7 @@ fn long_beam(n: usize) {
 /// Runs `sim` and prints its row: steps, solve time, time per step and per item (`n` of
 /// them: elements, springs), Newton iterations per step.
 fn timed_row(case: &str, n: usize, mut sim: Simulation) {
+    sim.data.threads = threads();
     let t0 = Instant::now();
     let stats = sim
         .run(&mut |_: &flexmb::observe::Sample| Ok(()))
@@ -306,7 +329,9 @@ fn springs(n: usize) {
             }),
         });
     }
-    let sim = Simulation::new(&m, flexmb::DynamicSettings::new(0.2, 1e-3)).expect("starts");
+    let mut s = flexmb::DynamicSettings::new(0.2, 1e-3);
+    s.threads = thread_count();
+    let sim = Simulation::new(&m, s).expect("starts");
     timed_row(&format!("springs_{n}"), n, sim);
 }
 
@@ -324,12 +349,73 @@ fn run_case(case: &str) {
     }
 }
 
+/// Time per step [us] of `case` on `threads` threads, in a child process (the 4th column of
+/// its row).
+fn time_per_step(case: &str, threads: usize) -> f64 {
+    let exe = std::env::current_exe().expect("own path");
+    let out = std::process::Command::new(&exe)
+        .arg(case)
+        .env("FLEXMB_THREADS", threads.to_string())
+        .output()
+        .expect("child");
+    assert!(
+        out.status.success(),
+        "{case} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let row = String::from_utf8_lossy(&out.stdout);
+    row.split('|')
+        .nth(4)
+        .and_then(|c| c.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no time in {row}"))
+}
+
+/// Beams and chains on 1 and 2 threads, alternately, `FLEXMB_REPEAT` times each: best and
+/// median time per step and the speedup of the best.
+fn threads_table() {
+    let repeat: usize =
+        std::env::var("FLEXMB_REPEAT").map_or(5, |r| r.parse().expect("FLEXMB_REPEAT: a number"));
+    println!("| case | items | 1 thread, best [us/step] | median | 2 threads, best [us/step] | median | speedup (best) | speedup (median) |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for (case, items) in [
+        ("beam_100", 101),
+        ("chain_100", 200),
+        ("beam_300", 301),
+        ("beam_1000", 1001),
+        ("chain_1000", 2000),
+        ("beam_10000", 10001),
+    ] {
+        let (mut one, mut two) = (Vec::new(), Vec::new());
+        for _ in 0..repeat {
+            one.push(time_per_step(case, 1));
+            two.push(time_per_step(case, 2));
+        }
+        let best = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
+        let median = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            let n = v.len();
+            0.5 * (v[(n - 1) / 2] + v[n / 2])
+        };
+        let (b1, b2) = (best(&one), best(&two));
+        let (m1, m2) = (median(&mut one), median(&mut two));
+        println!(
+            "| {case} | {items} | {b1:.1} | {m1:.1} | {b2:.1} | {m2:.1} | {:.2} | {:.2} |",
+            b1 / b2,
+            m1 / m2
+        );
+    }
+}
+
 fn main() {
     // `cargo bench` passes `--bench`; ignore flags.
     let args: Vec<String> = std::env::args()
         .skip(1)
         .filter(|a| !a.starts_with("--"))
         .collect();
+    if args.first().map(String::as_str) == Some("threads") {
+        threads_table();
+        return;
+    }
     if let Some(case) = args.first() {
         run_case(case);
         return;

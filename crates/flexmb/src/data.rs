@@ -354,6 +354,10 @@ pub struct Data {
     pub b_rows: Vec<crate::elements::Vec12>,
     /// One element's local inputs, vector and matrix during assembly (scratch).
     pub local: crate::elements::LocalBuffers,
+    /// The threads of the assembly (sequential unless set: [`Data::with_threads`]).
+    pub threads: crate::parallel::Threads,
+    /// Per-item results of the parallel assembly (built on its first use for this layout).
+    pub parallel: Option<crate::assembly::ParallelScratch>,
     pub solver: LinearSolver,
     /// The positions of the exact step Jacobian of the layout, built on first use by
     /// [`crate::solve::step::StepFunction`].
@@ -382,11 +386,19 @@ impl Data {
             nodal_mass: nodal_mass(model),
             b_rows: vec![crate::elements::Vec12::zeros(); layout.n_rows],
             local: Default::default(),
+            threads: Default::default(),
+            parallel: None,
             pattern,
             solver,
             layout,
             step_jacobian: None,
         })
+    }
+
+    /// The same data assembling on `threads` (the results are the same bits).
+    pub fn with_threads(mut self, threads: crate::parallel::Threads) -> Self {
+        self.threads = threads;
+        self
     }
 }
 

@@ -42,7 +42,7 @@ pub struct RunOptions {
     /// Go on from the `checkpoint.json` of `out` (opened with [`OutputDir::reopen`]): the
     /// result files are cut back to the steps it recorded and the run continues them, as
     /// the run that wrote it would have (bit for bit). The model must be the same and so
-    /// must the solver settings, except a later `t_end`.
+    /// must the solver settings, except a later `t_end` and the number of threads.
     pub resume: bool,
 }
 
@@ -373,11 +373,13 @@ fn start_dynamic<'m>(
             path.display()
         )));
     }
+    // The threads change nothing in the results: a run may go on with another number.
     let mut written = saved.checkpoint.settings;
     written.t_end = settings.t_end;
+    written.threads = settings.threads;
     if written != *settings {
         return Err(bad(format!(
-            "{}: the solver settings differ from those the checkpoint was written with (only t_end may change)",
+            "{}: the solver settings differ from those the checkpoint was written with (only t_end and threads may change)",
             path.display()
         )));
     }
@@ -388,11 +390,12 @@ fn start_dynamic<'m>(
         )));
     }
     let RunCheckpoint {
-        checkpoint,
+        mut checkpoint,
         files,
         outputs,
         sensors,
     } = saved;
+    checkpoint.settings.threads = settings.threads;
     let sim = Simulation::resume(checkpoint, settings.t_end)?;
     Ok((sim, Outputs::reopen(out, model, &files, outputs, sensors)))
 }

@@ -18,6 +18,7 @@
 //! | [`elements`] | force elements (rigid body, beam, load, spring) behind small capability traits |
 //! | [`joints`] | holonomic constraints built from two primitives |
 //! | [`assembly`] | the residual and iteration matrix at an explicit iterate, in one traversal |
+//! | [`parallel`] | the threads of the assembly: the setting, the size below which a model stays sequential |
 //! | [`parameter_derivatives`] | derivatives of the equations with respect to model parameters |
 //! | [`solve`] | the Newton solver, the generalized-alpha step as functions, dynamics (step control, checkpoints), statics (load control, arc length, pseudo-dynamic), initial conditions, the trajectory for a backward sweep, the linear solver |
 //! | [`sensors`] | output channels |
@@ -41,6 +42,7 @@ pub mod joints;
 pub mod model;
 pub mod observe;
 pub mod output;
+pub mod parallel;
 pub mod parameter_derivatives;
 pub mod sensitivity;
 pub mod sensors;

@@ -242,6 +242,28 @@ fn overrides_replace_and_insert_values() {
     );
 }
 
+#[test]
+fn threads_read_and_checked_at_their_key() {
+    assert_eq!(
+        dynamic(&good(&[]).unwrap()).threads,
+        0,
+        "all cores by default"
+    );
+    assert_eq!(dynamic(&good(&["solver.threads=2"]).unwrap()).threads, 2);
+    for (value, says) in [
+        ("-1", "must be 0 (all cores) or a number of threads, got -1"),
+        ("5000", "must be between 0 (all cores) and 1024, got 5000"),
+        ("1.5", "solver.threads"),
+    ] {
+        let e = good(&[&format!("solver.threads={value}")])
+            .err()
+            .unwrap_or_else(|| panic!("threads = {value} was accepted"))
+            .to_string();
+        println!("{e}");
+        assert_contains(&e, &["good.toml:9:", "field 'solver.threads'", says]);
+    }
+}
+
 fn bad(name: &str) -> String {
     let path: PathBuf = [env!("CARGO_MANIFEST_DIR"), "tests", "data", "bad", name]
         .iter()

@@ -344,6 +344,13 @@ impl LocalBuffers {
         )
     }
 
+    /// The first `n` entries of the local vector of [`LocalBuffers::split`]: what the last
+    /// evaluation wrote there.
+    #[inline]
+    pub fn vector(&self, n: usize) -> &[f64] {
+        &self.r[..n]
+    }
+
     /// The gathered inputs (`nodes`: those given to [`LocalBuffers::gather`]).
     pub fn local<'s>(&'s self, nodes: &'s [NodeState]) -> Local<'s> {
         Local {

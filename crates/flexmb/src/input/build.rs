@@ -292,8 +292,8 @@ fn blame<'k>(t: &Table<'_>, keys: &[&'k str]) -> &'k str {
         .unwrap_or(&keys[0])
 }
 
-/// Keys of `[solver]` common to both analyses (the Newton settings).
-const SOLVER_SHARED_KEYS: &[&str] = &["analysis", "rtol", "atol", "max_iterations"];
+/// Keys of `[solver]` common to both analyses (the Newton settings and the threads).
+const SOLVER_SHARED_KEYS: &[&str] = &["analysis", "rtol", "atol", "max_iterations", "threads"];
 /// Keys of `[solver]` that only a dynamic analysis has.
 const SOLVER_DYNAMIC_KEYS: &[&str] = &[
     "t_end",
@@ -349,13 +349,27 @@ fn read_solver(t: &Table<'_>) -> Result<Analysis> {
         (s.newton, Analysis::Static(s))
     };
     let newton = read_newton(t, newton)?;
+    let threads = match t.field("threads") {
+        Some(f) => {
+            let n = f.int()?;
+            let n = usize::try_from(n).map_err(|_| {
+                f.err(format!(
+                    "must be 0 (all cores) or a number of threads, got {n}"
+                ))
+            })?;
+            Some(n)
+        }
+        None => None,
+    };
     let analysis = match analysis {
         Analysis::Dynamic(mut s) => {
             s.newton = newton;
+            s.threads = threads.unwrap_or(s.threads);
             Analysis::Dynamic(s)
         }
         Analysis::Static(mut s) => {
             s.newton = newton;
+            s.threads = threads.unwrap_or(s.threads);
             Analysis::Static(s)
         }
     };

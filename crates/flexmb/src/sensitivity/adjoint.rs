@@ -108,6 +108,7 @@ impl Workspace {
         &mut self,
         model: &crate::Model,
         layout: &Layout,
+        threads: &crate::parallel::Threads,
     ) -> Result<&mut Data, SensitivityError> {
         let fits = self.data.as_ref().is_some_and(|d| {
             d.layout.active_rows == layout.active_rows
@@ -119,7 +120,8 @@ impl Workspace {
             // The nodal masses are the model's (its parameters may have moved).
             data.nodal_mass = crate::data::nodal_mass(model);
         } else {
-            self.data = Some(Data::new(model, layout.clone()).map_err(crate::SolveError::from)?);
+            let data = Data::new(model, layout.clone()).map_err(crate::SolveError::from)?;
+            self.data = Some(data.with_threads(threads.clone()));
             self.matrix = StepMatrix::default();
         }
         Ok(self.data.as_mut().expect("set above"))
@@ -192,7 +194,7 @@ pub fn adjoint_in(
         ..Stats::default()
     };
     let n_c = problem.criteria.len();
-    workspace.data(&problem.model, &layout)?;
+    workspace.data(&problem.model, &layout, &sim.data.threads)?;
     let Workspace { data, matrix } = workspace;
     let mut back = Backward {
         problem,

@@ -139,7 +139,9 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
     let n_c = problem.criteria.len();
     let mut obs = Direct {
         problem,
-        data: Data::new(&problem.model, layout.clone()).map_err(crate::SolveError::from)?,
+        data: Data::new(&problem.model, layout.clone())
+            .map_err(crate::SolveError::from)?
+            .with_threads(sim.data.threads.clone()),
         layout,
         matrix: StepMatrix::default(),
         tangents,

@@ -51,6 +51,7 @@ use crate::elements::{NodeState, Vec12};
 use crate::error::{SettingsError, SolveError};
 use crate::model::Model;
 use crate::observe::{Observer, Sample, StepRecord};
+use crate::parallel::Threads;
 use crate::sensors::node_states_into;
 use crate::state::State;
 use flexmb_lie::Vec6;
@@ -157,6 +158,11 @@ pub struct DynamicSettings {
     /// estimated error ([`Simulation::verification`]); costs one more factorization per
     /// step.
     pub verify: bool,
+    /// Threads of the assembly (0: all cores; 1: sequential): the results are the same bits
+    /// whatever the number, and models below [`crate::parallel::MIN_PARALLEL_ITEMS`] items
+    /// stay sequential.
+    #[serde(default)]
+    pub threads: usize,
 }
 
 impl DynamicSettings {
@@ -240,6 +246,7 @@ impl DynamicSettings {
                 format!("{:e} s gives a non-finite beta' or gamma'", self.h),
             ));
         }
+        check_threads(self.threads)?;
         self.newton.check()
     }
 
@@ -270,8 +277,21 @@ impl DynamicSettings {
             load_ramp: 0.0,
             load_scale: 1.0,
             verify: false,
+            threads: 0,
         }
     }
+}
+
+/// Rejects a thread count above [`crate::parallel::MAX_THREADS`].
+pub(crate) fn check_threads(threads: usize) -> Result<(), SettingsError> {
+    use crate::parallel::MAX_THREADS;
+    if threads > MAX_THREADS {
+        return Err(SettingsError::new(
+            &["threads"],
+            format!("must be between 0 (all cores) and {MAX_THREADS}, got {threads}"),
+        ));
+    }
+    Ok(())
 }
 
 /// Work done by a solver, for summaries and for spotting cost changes in review.
@@ -514,13 +534,14 @@ impl Simulation {
         model.validate()?;
         settings.check()?;
         let (layout, warnings) = prepare_layout(&model);
-        let mut data = Data::new(&model, layout.clone())?;
+        let threads = Threads::for_model(&model, settings.threads);
+        let mut data = Data::new(&model, layout.clone())?.with_threads(threads.clone());
         let mut state = State::initial(&model, &layout);
         initial_accelerations(&model, &mut data, &mut state, settings.load_factor_at(0.0))?;
         if settings.stabilized() {
             let mut stabilized = layout;
             stabilized.stabilized = true;
-            data = Data::new(&model, stabilized)?;
+            data = Data::new(&model, stabilized)?.with_threads(threads);
         }
         let policy = Self::policy(&settings);
         Ok(Self {
@@ -631,7 +652,8 @@ impl Simulation {
             ));
         }
         let layout = Layout::with_rows(&model, settings.stabilized(), &c.redundant_rows);
-        let mut data = Data::new(&model, layout)?;
+        let threads = Threads::for_model(&model, settings.threads);
+        let mut data = Data::new(&model, layout)?.with_threads(threads);
         let mut newton = NewtonSolver::new(Self::policy(&settings), settings.verify);
         let holds_values = c.matrix.is_some();
         if let Some(values) = c.matrix {
@@ -988,7 +1010,7 @@ impl Simulation {
         let Ok(data) = Data::new(model, layout) else {
             return false;
         };
-        self.data = data;
+        self.data = data.with_threads(self.data.threads.clone());
         for &row in &redundant {
             self.state.lambda[row] = 0.0;
         }

@@ -83,6 +83,10 @@ pub struct StaticSettings {
     /// Re-check every converged load step with a Newton correction from the accepted
     /// configuration and record the largest estimated error ([`Statics::verification`]).
     pub verify: bool,
+    /// Threads of the assembly (0: all cores; 1: sequential), as
+    /// [`super::DynamicSettings::threads`].
+    #[serde(default)]
+    pub threads: usize,
 }
 
 impl StaticSettings {
@@ -99,6 +103,7 @@ impl StaticSettings {
             target_iterations: 6,
             adaptive: true,
             verify: false,
+            threads: 0,
             pseudo_time: 1.0,
             pseudo_damping: 20.0,
             newton: NewtonSettings {
@@ -195,6 +200,7 @@ impl StaticSettings {
                 ),
             ));
         }
+        super::dynamics::check_threads(self.threads)?;
         self.newton.check()
     }
 }
@@ -534,7 +540,8 @@ impl Statics {
         settings.check()?;
         let (layout, warnings) = prepare_layout(&model);
         let mut state = State::initial(&model, &layout);
-        let mut data = Data::new(&model, layout)?;
+        let threads = crate::parallel::Threads::for_model(&model, settings.threads);
+        let mut data = Data::new(&model, layout)?.with_threads(threads);
         for v in state.v.iter_mut() {
             *v = Vec6::zeros();
         }
@@ -895,6 +902,7 @@ impl Statics {
         d.newton.atol = s.newton.atol;
         d.newton.max_iterations = s.newton.max_iterations;
         d.verify = s.verify;
+        d.threads = s.threads;
         let mut sim = super::Simulation::new(&self.model, d)?;
         sim.interrupt.clone_from(&self.interrupt);
         let mut last_speed = 0.0f64;
