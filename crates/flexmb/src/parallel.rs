@@ -69,6 +69,28 @@ impl Threads {
     }
 }
 
+impl Threads {
+    /// `f(i, &mut items[i])` for every item, on the pool's threads when there is one (in
+    /// chunks of at least [`MIN_CHUNK`]). Each call touches its own item only, so the
+    /// results are those of the sequential loop, bit for bit.
+    pub(crate) fn for_each<T: Send>(&self, items: &mut [T], f: impl Fn(usize, &mut T) + Sync) {
+        use rayon::prelude::*;
+        match self.pool() {
+            Some(pool) => pool.install(|| {
+                items
+                    .par_iter_mut()
+                    .with_min_len(MIN_CHUNK)
+                    .enumerate()
+                    .for_each(|(i, x)| f(i, x))
+            }),
+            None => items.iter_mut().enumerate().for_each(|(i, x)| f(i, x)),
+        }
+    }
+}
+
+/// Smallest number of nodes a thread takes in [`Threads::for_each`].
+pub const MIN_CHUNK: usize = 256;
+
 /// The items whose contributions the assembly computes in parallel: force elements and joints.
 pub fn parallel_items(model: &Model) -> usize {
     crate::elements::ElementItem::all(model).count() + model.joints.len()

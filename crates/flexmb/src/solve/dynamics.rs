@@ -1080,7 +1080,7 @@ impl Simulation {
         let result = self.newton.solve(&mut sys, &mut self.data, h);
         match result {
             Ok(info) => {
-                sys.finish(&self.data.layout);
+                sys.finish(&self.data.layout, &self.data.threads);
                 let it = &mut self.integrator;
                 it.previous.h = h;
                 it.previous.vdot.clone_from(&it.saved.vdot);
@@ -1129,7 +1129,7 @@ impl StepSystem<'_> {
     }
 
     /// Final configuration and algorithmic acceleration.
-    fn finish(&mut self, layout: &Layout) {
+    fn finish(&mut self, layout: &Layout, threads: &crate::parallel::Threads) {
         self.update_total(layout);
         step::finish(
             &self.start,
@@ -1137,6 +1137,7 @@ impl StepSystem<'_> {
             self.saved,
             self.total,
             self.state,
+            threads,
         );
     }
 }
@@ -1151,6 +1152,7 @@ impl NonlinearSystem for StepSystem<'_> {
             self.total,
             matrix,
             self.nodes,
+            &data.threads,
         );
         if matrix {
             // The commutator update: the increments' columns take T (I + E) (step module

@@ -73,6 +73,7 @@ use crate::data::{Block, Layout};
 use crate::elements::{Coefficients, NodeState, Vec12};
 use crate::joints::ConstraintKernel;
 use crate::model::Model;
+use crate::parallel::Threads;
 use crate::state::State;
 use flexmb_lie::{Group, Mat6, Vec6};
 use std::cell::RefCell;
@@ -297,7 +298,8 @@ pub fn commutator_correction(
 }
 
 /// Node kinematics of the iterate: `q = q_n exp(total)`, `v` and `vdot` from `state` and,
-/// when `tangents`, the tangent operators `T(total)` (otherwise left as they are).
+/// when `tangents`, the tangent operators `T(total)` (otherwise left as they are); node by
+/// node on `threads`.
 #[inline]
 pub fn kinematics(
     group: Group,
@@ -306,8 +308,9 @@ pub fn kinematics(
     total: &[f64],
     tangents: bool,
     nodes: &mut [NodeState],
+    threads: &Threads,
 ) {
-    for (i, node) in nodes.iter_mut().enumerate() {
+    threads.for_each(nodes, |i, node| {
         let inc = Vec6::from_column_slice(&total[6 * i..6 * i + 6]);
         node.q = group.integrate(&start.q[i], &inc);
         node.v = state.v[i];
@@ -315,7 +318,7 @@ pub fn kinematics(
         if tangents {
             node.t = group.tangent(&inc);
         }
-    }
+    });
 }
 
 /// Applies a Newton correction `dx`: `dq += dx`, `v += gamma' dx`, `vdot += beta' dx`,
@@ -361,16 +364,24 @@ pub fn correct(
 /// acceleration `a_{n+1} = (alpha_f vdot_n + (1 - alpha_f) vdot_{n+1} - alpha_m a_n) /
 /// (1 - alpha_m)` and the states' algorithmic rates `w_{n+1}` likewise.
 #[inline]
-pub fn finish(step: &Start, group: Group, start: &State, total: &[f64], state: &mut State) {
+pub fn finish(
+    step: &Start,
+    group: Group,
+    start: &State,
+    total: &[f64],
+    state: &mut State,
+    threads: &Threads,
+) {
     let p = &step.params;
     for i in 0..start.x.len() {
         state.w[i] = step.first.rate(start.xdot[i], state.xdot[i], start.w[i]);
     }
-    for i in 0..start.q.len() {
+    threads.for_each(&mut state.q, |i, q| {
         let inc = Vec6::from_column_slice(&total[6 * i..6 * i + 6]);
-        let mut q = group.integrate(&start.q[i], &inc);
+        *q = group.integrate(&start.q[i], &inc);
         q.orthonormalize();
-        state.q[i] = q;
+    });
+    for i in 0..start.q.len() {
         state.a[i] = (start.vdot[i] * p.alpha_f + state.vdot[i] * (1.0 - p.alpha_f)
             - start.a[i] * p.alpha_m)
             / (1.0 - p.alpha_m);
@@ -720,7 +731,16 @@ impl<'a> StepFunction<'a> {
     fn end_nodes(&self, x: &[f64]) -> (State, Vec<NodeState>, Vec<f64>) {
         let (end, total) = self.end_state_and_total(x);
         let mut nodes = self.start_nodes.clone();
-        kinematics(self.model.group, self.start, &end, &total, true, &mut nodes);
+        let sequential = Threads::sequential();
+        kinematics(
+            self.model.group,
+            self.start,
+            &end,
+            &total,
+            true,
+            &mut nodes,
+            &sequential,
+        );
         (end, nodes, total)
     }
 
