@@ -207,8 +207,8 @@ fn roll_up() {
 /// A straight cantilever of `n` elements (10 m, right-angle cantilever section) under
 /// gravity: 20 steps of h = 1e-3 s.
 fn long_beam(n: usize) {
-    use flexmb::model::{BeamSection, JointKind, Model};
-    use flexmb_lie::{Frame, Group, Mat3, Vec3};
+    use flexmb::model::{BeamSection, Model};
+    use flexmb_lie::{Frame, Group, Vec3};
     let section = BeamSection::diagonal([1e6, 1e6, 1e6, 1e3, 1e3, 1e3], 1.0, [20.0, 10.0, 10.0]);
     let mut m = Model::new(Group::SE3);
     m.gravity = Vec3::new(0.0, 0.0, -9.81);
@@ -222,15 +222,7 @@ fn long_beam(n: usize) {
         &Vec3::z(),
         &section,
     );
-    m.add_joint(
-        "clamp",
-        JointKind::Fixed,
-        None,
-        Some(root),
-        Vec3::zeros(),
-        Mat3::identity(),
-        None,
-    );
+    m.add_clamp("clamp", root);
     let mut s = flexmb::DynamicSettings::new(0.02, 1e-3);
     s.rho_inf = 0.5;
     s.threads = thread_count();

@@ -2,9 +2,9 @@
 
 mod common;
 
-use flexmb::model::{BeamSection, JointKind, Load, LoadFrame, Model, TimeFunction};
+use flexmb::model::{BeamSection, Load, LoadFrame, Model, TimeFunction};
 use flexmb::{DynamicSettings, Simulation};
-use flexmb_lie::{Frame, Group, Mat3, Vec3};
+use flexmb_lie::{Frame, Group, Vec3};
 
 /// Extremum over `t0 <= t <= t1` of a sensor series: `(t, value)`.
 fn extremum(series: &[(f64, f64)], t0: f64, t1: f64, max: bool) -> (f64, f64) {
@@ -191,15 +191,7 @@ fn rayleigh_damping_gives_the_modal_damping_ratio() {
         &section,
     );
     let tip = *ids.last().unwrap();
-    m.add_joint(
-        "clamp",
-        JointKind::Fixed,
-        None,
-        Some(root),
-        Vec3::zeros(),
-        Mat3::identity(),
-        None,
-    );
+    m.add_clamp("clamp", root);
     m.loads.push(Load {
         name: "tap".into(),
         node: tip,

@@ -53,15 +53,7 @@ fn assembled_stiffness_matches_finite_differences_of_the_residual() {
         &Vec3::z(),
         &section,
     );
-    m.add_joint(
-        "clamp",
-        JointKind::Fixed,
-        None,
-        Some(root),
-        Vec3::zeros(),
-        Mat3::identity(),
-        None,
-    );
+    m.add_clamp("clamp", root);
     m.add_joint(
         "pin",
         JointKind::Spherical,

@@ -460,15 +460,7 @@ fn beam(mass_kind: BeamMass) -> Model {
         Vec3::new(0.1, 0.0, 0.0),
         Mat3::identity() * 0.01,
     );
-    m.add_joint(
-        "clamp",
-        JointKind::Fixed,
-        None,
-        Some(root),
-        Vec3::zeros(),
-        Mat3::identity(),
-        None,
-    );
+    m.add_clamp("clamp", root);
     m
 }
 

@@ -9,7 +9,7 @@ use flexmb::assembly::{assemble, ConstraintRhs, Iterate, Scaling};
 use flexmb::data::{Data, Layout};
 use flexmb::elements::{Coefficients, NodeState};
 use flexmb::input::{read_model_file, Analysis};
-use flexmb::model::{BeamSection, JointKind, Model, NodeId, Relaxation, SpringDamper};
+use flexmb::model::{BeamSection, Model, NodeId, Relaxation, SpringDamper};
 use flexmb::parallel::{Threads, MIN_PARALLEL_ITEMS};
 use flexmb::{DynamicSettings, Simulation, State};
 use flexmb_lie::{Frame, Group, Mat3, Vec3, Vec6};
@@ -45,15 +45,7 @@ fn cantilever(n: usize) -> Model {
         &Vec3::z(),
         &section,
     );
-    m.add_joint(
-        "clamp",
-        JointKind::Fixed,
-        None,
-        Some(root),
-        Vec3::zeros(),
-        Mat3::identity(),
-        None,
-    );
+    m.add_clamp("clamp", root);
     m
 }
 

@@ -609,6 +609,13 @@ impl Model {
         JointId(self.joints.len() - 1)
     }
 
+    /// Adds a fixed joint from the ground to `node` at the node's initial frame (a clamp)
+    /// and returns its id.
+    pub fn add_clamp(&mut self, name: &str, node: NodeId) -> JointId {
+        let at = self.nodes[node.0].frame;
+        self.add_joint(name, JointKind::Fixed, None, Some(node), at.x, at.r, None)
+    }
+
     /// Finds a node by name (the first of that name).
     pub fn node_id(&self, name: &str) -> Option<NodeId> {
         self.nodes.iter().position(|n| n.name == name).map(NodeId)
