@@ -778,12 +778,8 @@ fn traverse_parallel(
     let element_work = ElementWork {
         pos: element_pos,
         r_start: element_r_start,
-        matrix,
     };
-    let joint_work = JointWork {
-        pos: joint_pos,
-        matrix,
-    };
+    let joint_work = JointWork { pos: joint_pos };
     let n_element_leaves = layout.elements.len().div_ceil(LEAF);
     let n_joint_leaves = p.model.joints.len().div_ceil(LEAF);
     let (nodes_residual, others) = residual.split_at_mut(layout.n_dofs);
@@ -796,8 +792,27 @@ fn traverse_parallel(
             vel: &mut vel[..],
         };
         rayon::join(
-            || element_work.run(p, 0..n_element_leaves, element_values, element_r, buffers),
-            || joint_work.run(p, 0..n_joint_leaves, joint_values, joint_out),
+            || {
+                let out = (&mut element_r[..], &mut buffers[..]);
+                run_leaves(
+                    &element_work,
+                    p,
+                    0..n_element_leaves,
+                    matrix,
+                    element_values,
+                    out,
+                )
+            },
+            || {
+                run_leaves(
+                    &joint_work,
+                    p,
+                    0..n_joint_leaves,
+                    matrix,
+                    joint_values,
+                    joint_out,
+                )
+            },
         );
         // The nodes' equations, node by node in parallel, each summing its terms in the
         // order of `traverse` with the same operations.
@@ -889,66 +904,115 @@ impl NodeSums<'_> {
     }
 }
 
-/// The elements' part of [`traverse_parallel`].
+/// One kind of item of [`traverse_parallel`] (elements, joints): what each item writes
+/// besides its matrix entries, and how a run of items is evaluated.
+trait Items: Sync {
+    /// The items' own outputs, for a run of consecutive items.
+    type Out<'o>: Send;
+    /// Position of each item's first matrix entry (one more entry than items).
+    fn pos(&self) -> &[usize];
+    /// Number of items.
+    fn count(&self, p: &Pass) -> usize;
+    /// Splits the outputs of items `first..` at item `at`; `leaves` is the number of leaves
+    /// of the first part.
+    fn split<'o>(
+        &self,
+        p: &Pass,
+        out: Self::Out<'o>,
+        first: usize,
+        at: usize,
+        leaves: usize,
+    ) -> (Self::Out<'o>, Self::Out<'o>);
+    /// Evaluates `items` in order into `out` and `sink`.
+    fn leaf<S: Sink>(
+        &self,
+        p: &Pass,
+        items: std::ops::Range<usize>,
+        out: Self::Out<'_>,
+        sink: &mut S,
+    );
+}
+
+/// Evaluates the items of `leaves` (leaf `k`: items `k LEAF ..`) into `values` (their
+/// entries; empty without matrix) and `out`, splitting the leaves in halves that run in
+/// parallel. Every item writes only its own places, so the cut does not change the results.
+fn run_leaves<W: Items>(
+    w: &W,
+    p: &Pass,
+    leaves: std::ops::Range<usize>,
+    matrix: bool,
+    values: &mut [f64],
+    out: W::Out<'_>,
+) {
+    let first = leaves.start * LEAF;
+    if leaves.is_empty() {
+        return;
+    }
+    if leaves.len() == 1 {
+        let items = first..(leaves.end * LEAF).min(w.count(p));
+        if matrix {
+            let mut sink = Values { values, pos: 0 };
+            w.leaf(p, items, out, &mut sink);
+            debug_assert_eq!(sink.pos, sink.values.len());
+        } else {
+            w.leaf(p, items, out, &mut NoMatrix);
+        }
+        return;
+    }
+    let mid = (leaves.start + leaves.end) / 2;
+    let at = mid * LEAF;
+    let split = if matrix {
+        w.pos()[at] - w.pos()[first]
+    } else {
+        0
+    };
+    let (v1, v2) = values.split_at_mut(split);
+    let (o1, o2) = w.split(p, out, first, at, mid - leaves.start);
+    rayon::join(
+        || run_leaves(w, p, leaves.start..mid, matrix, v1, o1),
+        || run_leaves(w, p, mid..leaves.end, matrix, v2, o2),
+    );
+}
+
+/// The elements' part of [`traverse_parallel`]: their local vectors (at `r_start`) and one
+/// set of buffers per leaf.
 struct ElementWork<'s> {
     pos: &'s [usize],
     r_start: &'s [usize],
-    matrix: bool,
 }
 
-impl ElementWork<'_> {
-    /// Evaluates the elements of `leaves` (leaf `k`: elements `k LEAF ..`) into `values`
-    /// (their entries; empty without matrix) and `r` (their local vectors), splitting the
-    /// leaves in halves that run in parallel.
-    fn run(
+impl Items for ElementWork<'_> {
+    type Out<'o> = (&'o mut [f64], &'o mut [LocalBuffers]);
+
+    fn pos(&self) -> &[usize] {
+        self.pos
+    }
+
+    fn count(&self, p: &Pass) -> usize {
+        p.layout.elements.len()
+    }
+
+    fn split<'o>(
         &self,
-        p: &Pass,
-        leaves: std::ops::Range<usize>,
-        values: &mut [f64],
-        r: &mut [f64],
-        buffers: &mut [LocalBuffers],
-    ) {
-        let n = p.layout.elements.len();
-        let first = leaves.start * LEAF;
-        if leaves.is_empty() {
-            return;
-        }
-        if leaves.len() == 1 {
-            let items = first..(leaves.end * LEAF).min(n);
-            let buffers = &mut buffers[0];
-            if self.matrix {
-                let mut sink = Values { values, pos: 0 };
-                self.leaf(p, items, r, buffers, &mut sink);
-                debug_assert_eq!(sink.pos, sink.values.len());
-            } else {
-                self.leaf(p, items, r, buffers, &mut NoMatrix);
-            }
-            return;
-        }
-        let mid = (leaves.start + leaves.end) / 2;
-        let at = mid * LEAF;
-        let split = if self.matrix {
-            self.pos[at] - self.pos[first]
-        } else {
-            0
-        };
-        let (v1, v2) = values.split_at_mut(split);
+        _: &Pass,
+        (r, buffers): Self::Out<'o>,
+        first: usize,
+        at: usize,
+        leaves: usize,
+    ) -> (Self::Out<'o>, Self::Out<'o>) {
         let (r1, r2) = r.split_at_mut(self.r_start[at] - self.r_start[first]);
-        let (b1, b2) = buffers.split_at_mut(mid - leaves.start);
-        rayon::join(
-            || self.run(p, leaves.start..mid, v1, r1, b1),
-            || self.run(p, mid..leaves.end, v2, r2, b2),
-        );
+        let (b1, b2) = buffers.split_at_mut(leaves);
+        ((r1, b1), (r2, b2))
     }
 
     fn leaf<S: Sink>(
         &self,
         p: &Pass,
         items: std::ops::Range<usize>,
-        r: &mut [f64],
-        buffers: &mut LocalBuffers,
+        (r, buffers): Self::Out<'_>,
         sink: &mut S,
     ) {
+        let buffers = &mut buffers[0];
         let base = self.r_start[items.start];
         for e in items {
             let n = element(p, e, buffers, sink).n_local();
@@ -958,48 +1022,36 @@ impl ElementWork<'_> {
     }
 }
 
-/// The joints' part of [`traverse_parallel`].
+/// The joints' part of [`traverse_parallel`]: their rows.
 struct JointWork<'s> {
     pos: &'s [usize],
-    matrix: bool,
 }
 
-impl JointWork<'_> {
-    /// Evaluates the joints of `leaves` (leaf `k`: joints `k LEAF ..`) into `values` (their
-    /// entries; empty without matrix) and `out` (their rows), splitting the leaves in halves
-    /// that run in parallel.
-    fn run(&self, p: &Pass, leaves: std::ops::Range<usize>, values: &mut [f64], out: JointRows) {
-        let layout = p.layout;
-        let n = p.model.joints.len();
-        let first = leaves.start * LEAF;
-        if leaves.is_empty() {
-            return;
-        }
-        if leaves.len() == 1 {
-            let items = first..(leaves.end * LEAF).min(n);
-            if self.matrix {
-                let mut sink = Values { values, pos: 0 };
-                self.leaf(p, items, out, &mut sink);
-                debug_assert_eq!(sink.pos, sink.values.len());
-            } else {
-                self.leaf(p, items, out, &mut NoMatrix);
-            }
-            return;
-        }
-        let mid = (leaves.start + leaves.end) / 2;
-        let at = mid * LEAF;
-        let split = if self.matrix {
-            self.pos[at] - self.pos[first]
-        } else {
-            0
-        };
-        let (v1, v2) = values.split_at_mut(split);
-        let rows = layout.joint_row_start[at] - layout.joint_row_start[first];
+impl Items for JointWork<'_> {
+    type Out<'o> = JointRows<'o>;
+
+    fn pos(&self) -> &[usize] {
+        self.pos
+    }
+
+    fn count(&self, p: &Pass) -> usize {
+        p.model.joints.len()
+    }
+
+    fn split<'o>(
+        &self,
+        p: &Pass,
+        out: Self::Out<'o>,
+        first: usize,
+        at: usize,
+        _: usize,
+    ) -> (Self::Out<'o>, Self::Out<'o>) {
+        let rows = p.layout.joint_row_start[at] - p.layout.joint_row_start[first];
         let (phi1, phi2) = out.phi.split_at_mut(rows);
         let (b1, b2) = out.b.split_at_mut(rows);
         let (rhs1, rhs2) = out.rhs.split_at_mut(rows);
         let (vel1, vel2) = out.vel.split_at_mut(rows);
-        let (out1, out2) = (
+        (
             JointRows {
                 phi: phi1,
                 b: b1,
@@ -1012,14 +1064,16 @@ impl JointWork<'_> {
                 rhs: rhs2,
                 vel: vel2,
             },
-        );
-        rayon::join(
-            || self.run(p, leaves.start..mid, v1, out1),
-            || self.run(p, mid..leaves.end, v2, out2),
-        );
+        )
     }
 
-    fn leaf<S: Sink>(&self, p: &Pass, items: std::ops::Range<usize>, out: JointRows, sink: &mut S) {
+    fn leaf<S: Sink>(
+        &self,
+        p: &Pass,
+        items: std::ops::Range<usize>,
+        out: Self::Out<'_>,
+        sink: &mut S,
+    ) {
         let layout = p.layout;
         let base = layout
             .joint_row_start
