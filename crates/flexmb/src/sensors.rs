@@ -3,9 +3,9 @@
 use crate::data::{Data, Layout};
 use crate::elements::{Context, ElementItem, ElementKernel, ElementRef, LocalBuffers, NodeState};
 use crate::joints;
-use crate::model::{Model, SensorFrame, SensorKind};
+use crate::model::{JointId, Model, SensorFrame, SensorKind};
 use crate::state::State;
-use flexmb_lie::Mat6;
+use flexmb_lie::{Mat6, Vec3};
 
 /// Node kinematics of a state (tangent operators identity).
 pub fn node_states(state: &State) -> Vec<NodeState> {
@@ -181,16 +181,7 @@ pub fn sensor_value(
         }
         kind @ (SensorKind::JointForce { joint, component }
         | SensorKind::JointTorque { joint, component }) => {
-            let j = &model.joints[joint.0];
-            let start = layout.joint_row_start[joint.0];
-            let n = layout.joint_rows[joint.0].len();
-            let (f, m) = joints::reaction_on_b(
-                j,
-                &layout.joint_rows[joint.0],
-                &pair(nodes, [j.node_a, j.node_b]),
-                &state.lambda[start..start + n],
-                state.t,
-            );
+            let (f, m) = joint_reaction(model, layout, *joint, nodes, state);
             if matches!(kind, SensorKind::JointForce { .. }) {
                 f[*component]
             } else {
@@ -228,6 +219,72 @@ pub fn sensor_value(
                 st.strain[*component]
             } else {
                 st.stress[*component]
+            }
+        }
+    }
+}
+
+/// Force and torque (about the joint point) exerted by joint `joint` on its node B,
+/// inertial frame, from the multipliers of `state` (\[N\], \[N m\]).
+pub fn joint_reaction(
+    model: &Model,
+    layout: &Layout,
+    joint: JointId,
+    nodes: &[NodeState],
+    state: &State,
+) -> (Vec3, Vec3) {
+    let j = &model.joints[joint.0];
+    let start = layout.joint_row_start[joint.0];
+    let rows = &layout.joint_rows[joint.0];
+    joints::reaction_on_b(
+        j,
+        rows,
+        &pair(nodes, [j.node_a, j.node_b]),
+        &state.lambda[start..start + rows.len()],
+        state.t,
+    )
+}
+
+/// The point of joint `joint` (origin of its frame on node B, or on node A when B is the
+/// ground), inertial \[m\].
+pub fn joint_point(model: &Model, joint: JointId, nodes: &[NodeState]) -> Vec3 {
+    let j = &model.joints[joint.0];
+    let (fa, fb) = joints::node_frames(j, &pair(nodes, [j.node_a, j.node_b]));
+    match j.node_b {
+        Some(_) => fb.compose(&j.frame_b).x,
+        None => fa.compose(&j.frame_a).x,
+    }
+}
+
+/// The unit of a sensor's values, for labels: `m`, `m/s`, `rad`, `N`, ...; empty for a
+/// number without unit (a quaternion component, a strain).
+pub fn unit(kind: &SensorKind) -> &'static str {
+    match kind {
+        SensorKind::Position { .. } => "m",
+        SensorKind::Velocity { .. } => "m/s",
+        SensorKind::Acceleration { .. } => "m/s^2",
+        SensorKind::AngularAcceleration { .. } => "rad/s^2",
+        SensorKind::AngularVelocity { .. } => "rad/s",
+        SensorKind::Quaternion { .. } => "",
+        SensorKind::JointCoordinate { .. } => "rad or m",
+        SensorKind::JointForce { .. }
+        | SensorKind::SpringForce { .. }
+        | SensorKind::RopeForce { .. } => "N",
+        SensorKind::JointTorque { .. } => "N m",
+        SensorKind::KineticEnergy | SensorKind::PotentialEnergy | SensorKind::TotalEnergy => "J",
+        SensorKind::ConstraintViolation => "m or rad",
+        SensorKind::BeamStrain { component, .. } => {
+            if *component < 3 {
+                ""
+            } else {
+                "1/m"
+            }
+        }
+        SensorKind::BeamStress { component, .. } => {
+            if *component < 3 {
+                "N"
+            } else {
+                "N m"
             }
         }
     }

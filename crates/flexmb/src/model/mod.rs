@@ -9,6 +9,7 @@
 //!
 //! Units are SI throughout (m, kg, s, N, rad) unless a model chooses consistent others.
 
+pub mod display;
 pub mod limits;
 pub mod parameters;
 mod time_function;
@@ -406,6 +407,9 @@ pub struct Model {
     pub ropes: Vec<Rope>,
     pub beams: Vec<Beam>,
     pub sensors: Vec<Sensor>,
+    /// What the bodies and beams look like in the results (no effect on the mechanics).
+    #[serde(default)]
+    pub display: display::Display,
 }
 
 /// Reference to one item of a model and one of its fields, for error messages.
@@ -433,6 +437,7 @@ impl Model {
             ropes: Vec::new(),
             beams: Vec::new(),
             sensors: Vec::new(),
+            display: display::Display::default(),
         }
     }
 

@@ -1,0 +1,15 @@
+//! The results of a flexmb run, for people to look at.
+//!
+//! A run's results are one [`Results`]: the model's metadata ([`ModelInfo`]: names, the
+//! bodies, beams and joints, the display geometry, the sensors and their units), one
+//! [`Snapshot`] per output step (time or load factor, node configurations and velocities,
+//! joint points and reactions, beam strains and stress resultants, sensor values) and the
+//! solver's statistics per step ([`StepStat`]). They are written as the run goes into the
+//! HDF5 results file and read back from it; the plots, the Paraview series and the browser
+//! animation are drawn from a [`Results`].
+
+pub mod info;
+pub mod snapshot;
+
+pub use info::ModelInfo;
+pub use snapshot::{Results, Snapshot, StepStat};
