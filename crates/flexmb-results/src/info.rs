@@ -80,15 +80,18 @@ pub struct ShapeInfo {
     /// `box`, `cylinder` (along its z axis), `sphere` or `mesh`.
     pub kind: String,
     /// Box: side lengths; cylinder: diameter, diameter, length; sphere: the diameter three
-    /// times; mesh: the scale three times \[m\].
+    /// times; mesh: the sides of the box around its vertices \[m\].
     pub size: [f64; 3],
     /// Placement in the node frame: position \[m\] and unit quaternion `w, x, y, z`.
     pub position: [f64; 3],
     pub orientation: [f64; 4],
     /// Red, green, blue in [0, 1].
     pub colour: [f64; 3],
-    /// Mesh only: the mesh file as given in the model file.
+    /// Mesh only: the mesh file as given in the model file, its vertices in the shape frame
+    /// \[m\] and its triangles (vertex indices, counter-clockwise seen from outside).
     pub mesh: String,
+    pub vertices: Vec<[f64; 3]>,
+    pub triangles: Vec<[u32; 3]>,
 }
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -200,23 +203,38 @@ fn quaternion(r: &Mat3) -> [f64; 4] {
 }
 
 fn shape_info(s: &flexmb::model::display::Shape) -> ShapeInfo {
-    let (size, mesh) = match &s.kind {
-        ShapeKind::Box { size } => ((*size).into(), String::new()),
-        ShapeKind::Cylinder { radius, length } => {
-            ([2.0 * radius, 2.0 * radius, *length], String::new())
-        }
-        ShapeKind::Sphere { radius } => ([2.0 * radius; 3], String::new()),
-        ShapeKind::Mesh { path, scale } => ([*scale; 3], path.clone()),
-    };
-    ShapeInfo {
+    let mut info = ShapeInfo {
         node: s.node.0,
         kind: s.kind.name().into(),
-        size,
         position: s.frame.x.into(),
         orientation: quaternion(&s.frame.r),
         colour: s.colour,
-        mesh,
+        ..Default::default()
+    };
+    match &s.kind {
+        ShapeKind::Box { size } => info.size = (*size).into(),
+        ShapeKind::Cylinder { radius, length } => info.size = [2.0 * radius, 2.0 * radius, *length],
+        ShapeKind::Sphere { radius } => info.size = [2.0 * radius; 3],
+        ShapeKind::Mesh {
+            path,
+            vertices,
+            triangles,
+        } => {
+            let (lo, hi) = vertices.iter().fold(
+                (Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY)),
+                |(lo, hi), v| (lo.inf(v), hi.sup(v)),
+            );
+            info.size = if vertices.is_empty() {
+                [0.0; 3]
+            } else {
+                (hi - lo).into()
+            };
+            info.mesh = path.clone();
+            info.vertices = vertices.iter().map(|&v| v.into()).collect();
+            info.triangles = triangles.clone();
+        }
     }
+    info
 }
 
 /// The size of the model: the diagonal of the box around its initial node positions, at
@@ -269,7 +287,7 @@ pub fn default_shape(b: &flexmb::model::RigidBody, extent: f64, colour: [f64; 3]
         position: b.com.into(),
         orientation: quaternion(&r),
         colour,
-        mesh: String::new(),
+        ..Default::default()
     }
 }
 

@@ -36,9 +36,14 @@ pub enum ShapeKind {
     Cylinder { radius: f64, length: f64 },
     /// A sphere centred on the origin.
     Sphere { radius: f64 },
-    /// A triangle mesh read from an STL or OBJ file (the path as given, resolved against
-    /// the model file's folder), its coordinates multiplied by `scale`.
-    Mesh { path: String, scale: f64 },
+    /// A triangle mesh read from an STL or OBJ file when the model file is read: `path` as
+    /// given in the model file, the vertices (already multiplied by the file's `scale`) \[m\]
+    /// and the triangles (three vertex indices each, counter-clockwise seen from outside).
+    Mesh {
+        path: String,
+        vertices: Vec<Vec3>,
+        triangles: Vec<[u32; 3]>,
+    },
 }
 
 /// The drawn radius of the beam elements `first .. first + count` of [`super::Model::beams`]
