@@ -13,9 +13,10 @@
 //! results of an earlier run).
 
 use crate::input::{Analysis, ModelFile};
-use crate::observe::{Observer, Observers, Sample};
+use crate::observe::{Observer, Observers, Sample, StepRecord};
 use crate::output::{
-    ErrorKind, OutputDir, OutputError, ResultFiles, Status, Summary, CHECKPOINT_FILE,
+    ErrorKind, OutputDir, OutputError, ResultFiles, Status, Store, StoreFormat, Summary,
+    CHECKPOINT_FILE,
 };
 use crate::sensors::SensorEvaluator;
 use crate::solve::dynamics::Checkpoint;
@@ -69,6 +70,20 @@ pub fn run(
     progress: &mut dyn FnMut(f64, f64),
     interrupt: Option<Arc<AtomicBool>>,
 ) -> Report {
+    run_with(file, out, options, &[], progress, interrupt)
+}
+
+/// [`run`] with more result files: one [`Store`] of each of `formats`, written at every
+/// output step beside the CSV files (a file that cannot be written fails the run as a CSV
+/// file would; the time spent writing it counts as output time).
+pub fn run_with(
+    file: &ModelFile,
+    out: &OutputDir,
+    options: RunOptions,
+    formats: &[&dyn StoreFormat],
+    progress: &mut dyn FnMut(f64, f64),
+    interrupt: Option<Arc<AtomicBool>>,
+) -> Report {
     let start = Instant::now();
     let model = &file.model;
     let (analysis, t_end) = match &file.analysis {
@@ -92,14 +107,16 @@ pub fn run(
     }
     let ended = match &file.analysis {
         Analysis::Dynamic(settings) => {
-            run_dynamic(model, settings, out, options, progress, interrupt)
+            run_dynamic(model, settings, out, options, formats, progress, interrupt)
         }
         Analysis::Static(_) if options.resume || options.checkpoint_interval.is_some() => {
             Ended::rejected(SolveError::Checkpoint(
                 "only a dynamic analysis has checkpoints".into(),
             ))
         }
-        Analysis::Static(settings) => run_static(model, settings, out, progress, interrupt),
+        Analysis::Static(settings) => {
+            run_static(model, settings, out, formats, progress, interrupt)
+        }
     };
     let output_seconds = ended.output_seconds;
     ended.record(&mut summary);
@@ -203,6 +220,7 @@ struct Outputs<'m> {
     model: &'m crate::Model,
     sensors: SensorEvaluator,
     files: ResultFiles,
+    stores: Vec<Box<dyn Store>>,
     rows: usize,
     seconds: f64,
 }
@@ -212,6 +230,7 @@ impl<'m> Outputs<'m> {
     fn reopen(
         out: &OutputDir,
         model: &'m crate::Model,
+        formats: &[&dyn StoreFormat],
         files: &[(String, u64)],
         rows: usize,
         sensors: SensorEvaluator,
@@ -220,34 +239,64 @@ impl<'m> Outputs<'m> {
             model,
             sensors,
             files: ResultFiles::reopen(out, files)?,
+            stores: formats
+                .iter()
+                .map(|f| f.reopen(out, model, files))
+                .collect::<Result<_, _>>()?,
             rows,
             seconds: 0.0,
         })
     }
 
     /// Creates the files; `first` names the first column (`time` or `load_factor`).
-    fn create(out: &OutputDir, first: &str, model: &'m crate::Model) -> Result<Self, OutputError> {
+    fn create(
+        out: &OutputDir,
+        first: &str,
+        model: &'m crate::Model,
+        formats: &[&dyn StoreFormat],
+    ) -> Result<Self, OutputError> {
         let names = SensorEvaluator::names(model);
+        let analysis = if first == "time" { "dynamic" } else { "static" };
         Ok(Self {
             model,
             sensors: SensorEvaluator::new(model),
             files: ResultFiles::create(out, first, model, &names)?,
+            stores: formats
+                .iter()
+                .map(|f| f.create(out, model, analysis))
+                .collect::<Result<_, _>>()?,
             rows: 0,
             seconds: 0.0,
         })
     }
 
+    /// The files and their lengths (the marks of the stores too), for a checkpoint.
+    fn lengths(&self) -> Vec<(String, u64)> {
+        let mut out = self.files.lengths();
+        out.extend(self.stores.iter().flat_map(|s| s.marks()));
+        out
+    }
+
     /// Appends the rows of one output step.
-    fn write(
-        &mut self,
-        x: f64,
-        data: &crate::Data,
-        state: &crate::State,
-    ) -> Result<(), OutputError> {
+    fn write(&mut self, sample: &crate::observe::Sample) -> Result<(), OutputError> {
         let t0 = Instant::now();
-        let values = self.sensors.evaluate(self.model, data, state);
-        self.files.write_step(x, &values, self.model, state)?;
+        let values = self.sensors.evaluate(self.model, sample.data, sample.state);
+        self.files
+            .write_step(sample.at, &values, self.model, sample.state)?;
+        for store in &mut self.stores {
+            store.write(sample, &values)?;
+        }
         self.rows += 1;
+        self.seconds += t0.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Passes an accepted step to the stores.
+    fn step(&mut self, record: &StepRecord) -> Result<(), OutputError> {
+        let t0 = Instant::now();
+        for store in &mut self.stores {
+            store.step(record)?;
+        }
         self.seconds += t0.elapsed().as_secs_f64();
         Ok(())
     }
@@ -260,13 +309,28 @@ struct ResultSink<'m> {
     error: Option<OutputError>,
 }
 
-impl Observer for ResultSink<'_> {
-    fn output(&mut self, s: &Sample) -> Result<(), String> {
-        self.outputs.write(s.at, s.data, s.state).map_err(|e| {
+impl ResultSink<'_> {
+    /// Keeps the first write error and gives the solver its message.
+    fn keep(&mut self, result: Result<(), OutputError>) -> Result<(), String> {
+        result.map_err(|e| {
             let message = e.to_string();
             self.error = Some(e);
             message
         })
+    }
+}
+
+impl Observer for ResultSink<'_> {
+    fn output(&mut self, s: &Sample) -> Result<(), String> {
+        let result = self.outputs.write(s);
+        self.keep(result)
+    }
+    fn wants_steps(&self) -> bool {
+        !self.outputs.stores.is_empty()
+    }
+    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
+        let result = self.outputs.step(record);
+        self.keep(result)
     }
 }
 
@@ -313,6 +377,7 @@ fn run_static(
     model: &crate::Model,
     settings: &StaticSettings,
     out: &OutputDir,
+    formats: &[&dyn StoreFormat],
     progress: &mut dyn FnMut(f64, f64),
     interrupt: Option<Arc<AtomicBool>>,
 ) -> Ended {
@@ -325,7 +390,7 @@ fn run_static(
         report: progress,
         end: settings.load_factor,
     };
-    let outputs = Outputs::create(out, "load_factor", model);
+    let outputs = Outputs::create(out, "load_factor", model, formats);
     let (result, outputs, error) = observed(outputs, progress, |sink, progress| {
         statics.run(&mut Observers(vec![sink, progress]))
     });
@@ -352,10 +417,11 @@ fn start_dynamic<'m>(
     settings: &DynamicSettings,
     out: &OutputDir,
     options: RunOptions,
+    formats: &[&dyn StoreFormat],
 ) -> Result<(Simulation, Result<Outputs<'m>, OutputError>), SolveError> {
     if !options.resume {
         let sim = Simulation::new(model, *settings)?;
-        return Ok((sim, Outputs::create(out, "time", model)));
+        return Ok((sim, Outputs::create(out, "time", model, formats)));
     }
     let bad = |m: String| SolveError::Checkpoint(m);
     let path = out.file(CHECKPOINT_FILE);
@@ -397,7 +463,10 @@ fn start_dynamic<'m>(
     } = saved;
     checkpoint.settings.threads = settings.threads;
     let sim = Simulation::resume(checkpoint, settings.t_end)?;
-    Ok((sim, Outputs::reopen(out, model, &files, outputs, sensors)))
+    Ok((
+        sim,
+        Outputs::reopen(out, model, formats, &files, outputs, sensors),
+    ))
 }
 
 /// Writes the checkpoint of a dynamic run and of its result files.
@@ -408,7 +477,7 @@ fn write_checkpoint(
 ) -> Result<(), OutputError> {
     let saved = RunCheckpoint {
         checkpoint: sim.checkpoint(),
-        files: outputs.files.lengths(),
+        files: outputs.lengths(),
         outputs: outputs.rows,
         sensors: outputs.sensors.clone(),
     };
@@ -423,10 +492,11 @@ fn run_dynamic(
     settings: &DynamicSettings,
     out: &OutputDir,
     options: RunOptions,
+    formats: &[&dyn StoreFormat],
     progress: &mut dyn FnMut(f64, f64),
     interrupt: Option<Arc<AtomicBool>>,
 ) -> Ended {
-    let (mut sim, outputs) = match start_dynamic(model, settings, out, options) {
+    let (mut sim, outputs) = match start_dynamic(model, settings, out, options, formats) {
         Ok(started) => started,
         Err(e) => return Ended::rejected(e),
     };

@@ -36,13 +36,22 @@ pub const NODES_FILE: &str = "nodes.csv";
 pub const BEAMS_FILE: &str = "beams.csv";
 /// The memory of a dynamic run, to resume it (`flexmb run --resume DIR`).
 pub const CHECKPOINT_FILE: &str = "checkpoint.json";
+/// The HDF5 results file (written by the `flexmb-results` crate's store).
+pub const RESULTS_H5_FILE: &str = "results.h5";
+/// The plot of the sensors a run draws at its end (`flexmb run`).
+pub const SUMMARY_PLOT_FILE: &str = "summary.png";
+/// The browser animation of a run (`flexmb run --view`).
+pub const VIEW_FILE: &str = "view.html";
 /// Every result file a run may write. A run removes all of them from its output directory
 /// when it starts (a resumed run keeps them and goes on writing).
-pub const RESULT_FILES: [&str; 10] = [
+pub const RESULT_FILES: [&str; 13] = [
     SUMMARY_FILE,
     SENSORS_FILE,
     NODES_FILE,
     BEAMS_FILE,
+    RESULTS_H5_FILE,
+    SUMMARY_PLOT_FILE,
+    VIEW_FILE,
     CHECKPOINT_FILE,
     GRADIENTS_JSON_FILE,
     GRADIENTS_CSV_FILE,
@@ -439,6 +448,42 @@ impl ResultFiles {
         }
         Ok(())
     }
+}
+
+/// A results file written beside the CSV files, step by step, by a format that lives outside
+/// the engine (the HDF5 file of `flexmb-results`): [`crate::driver::run_with`] creates one
+/// per [`StoreFormat`] and calls it at every output step after the CSV rows.
+pub trait Store {
+    /// Appends one output step; `sensors` are its sensor values (computed once for all files).
+    fn write(
+        &mut self,
+        sample: &crate::observe::Sample,
+        sensors: &[f64],
+    ) -> Result<(), OutputError>;
+    /// Records an accepted step of a dynamic run (called before the output of its time).
+    fn step(&mut self, record: &crate::observe::StepRecord) -> Result<(), OutputError>;
+    /// Where the file stands, for a checkpoint: names and counts that
+    /// [`StoreFormat::reopen`] gets back to go on from there.
+    fn marks(&self) -> Vec<(String, u64)>;
+}
+
+/// How to create (or reopen, for a resumed run) a [`Store`] in an output directory.
+pub trait StoreFormat {
+    /// A new file for a run of `model`; `analysis` is `dynamic` or `static`.
+    fn create(
+        &self,
+        dir: &OutputDir,
+        model: &crate::Model,
+        analysis: &str,
+    ) -> Result<Box<dyn Store>, OutputError>;
+    /// The file of an earlier run, cut back to the `marks` its checkpoint recorded (all the
+    /// marks of the checkpoint: the store picks its own).
+    fn reopen(
+        &self,
+        dir: &OutputDir,
+        model: &crate::Model,
+        marks: &[(String, u64)],
+    ) -> Result<Box<dyn Store>, OutputError>;
 }
 
 /// Where a run stands, `status` in `summary.json`.
