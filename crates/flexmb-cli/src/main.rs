@@ -98,6 +98,16 @@ enum Command {
         /// solver.threads, else all cores).
         #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(0..=1024))]
         threads: Option<u16>,
+        /// The results file: h5 writes DIR/results.h5 as the run goes (docs/results-format.md),
+        /// none writes only the CSV files (and then no plot and no animation).
+        #[arg(long, value_parser = ["h5", "none"], default_value = "h5")]
+        results: String,
+        /// Do not draw DIR/summary.png (the sensors' histories) at the end of the run.
+        #[arg(long)]
+        no_plot: bool,
+        /// Write DIR/view.html, the run's 3D animation for a web browser, at its end.
+        #[arg(long)]
+        view: bool,
     },
     /// Gradients of the model's [[criterion]] items with respect to its [[design_parameter]]
     /// items, exact for the computed solution; write gradients.json and gradients.csv into
@@ -174,6 +184,9 @@ fn main() {
                 checkpoint_interval,
                 resume,
                 threads,
+                results,
+                no_plot,
+                view,
             } => match checkpoint_interval {
                 Some(t) if !(t.is_finite() && t > 0.0) => {
                     tell(format_args!(
@@ -186,6 +199,11 @@ fn main() {
                         checkpoint_interval,
                         resume: resume.is_some(),
                     };
+                    let files = RunFiles {
+                        results: results == "h5",
+                        plot: results == "h5" && !no_plot,
+                        view: results == "h5" && view,
+                    };
                     run(
                         &model,
                         resume.as_deref().unwrap_or(&out),
@@ -193,6 +211,7 @@ fn main() {
                         quiet,
                         verify,
                         options,
+                        files,
                     )
                 }
             },
@@ -253,6 +272,17 @@ fn with_threads(mut set: Vec<String>, threads: Option<u16>) -> Vec<String> {
     set
 }
 
+/// The files of `flexmb run` beyond the CSV files and the summary.
+#[derive(Clone, Copy)]
+struct RunFiles {
+    /// `results.h5`, written as the run goes.
+    results: bool,
+    /// `summary.png`, drawn at the end from the results file.
+    plot: bool,
+    /// `view.html`, written at the end from the results file.
+    view: bool,
+}
+
 /// `flexmb run`: takes over the output directory, reads the model and runs it.
 fn run(
     model: &Path,
@@ -261,6 +291,7 @@ fn run(
     quiet: bool,
     verify: bool,
     options: flexmb::driver::RunOptions,
+    files: RunFiles,
 ) -> i32 {
     let interrupt = match signals::Interrupt::install() {
         Ok(i) => Some(i),
@@ -308,10 +339,13 @@ fn run(
         flexmb::input::Analysis::Static(s) => s.verify = verify,
     }
     let bar = progress_bar(quiet);
-    let result = flexmb::driver::run(
+    let h5 = flexmb_results::h5::H5Format;
+    let formats: &[&dyn flexmb::output::StoreFormat] = if files.results { &[&h5] } else { &[] };
+    let result = flexmb::driver::run_with(
         &file,
         &dir,
         options,
+        formats,
         &mut |t, t_end| {
             bar.set_position((1000.0 * t / t_end).round() as u64);
             bar.set_message(format!("t = {t:.4} s"));
@@ -325,6 +359,9 @@ fn run(
         return exit::OUTPUT_FAILED;
     }
     let code = report(model, out, &result.summary, interrupt);
+    if result.summary.steps > 0 || result.summary.outputs > 0 {
+        draw(&dir, files);
+    }
     match result.unwritten {
         // The outcome was said above; summary.json could not record it.
         Some(e) => {
@@ -333,6 +370,23 @@ fn run(
         }
         None => code,
     }
+}
+
+/// Draws what `files` asks for from the results file of the run in `dir` (also after a
+/// failed or interrupted run: the steps up to its end). A drawing that fails is a warning:
+/// the results themselves are written.
+fn draw(dir: &OutputDir, files: RunFiles) {
+    if !(files.plot || files.view) {
+        return;
+    }
+    let results = match flexmb_results::h5::read(dir.path()) {
+        Ok(r) => r,
+        Err(e) => {
+            tell(format_args!("warning: no plot or animation: {e}"));
+            return;
+        }
+    };
+    let _ = results;
 }
 
 /// Says how a run ended (closing line, warnings, error) and returns its exit code.
