@@ -164,6 +164,20 @@ enum Command {
         #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(0..=1024))]
         threads: Option<u16>,
     },
+    /// Draw sensor histories from a results file (RESULTS: a results.h5, or the output
+    /// directory of a run) into a PNG or SVG file.
+    Plot {
+        results: PathBuf,
+        /// Sensors to draw (default: all).
+        sensors: Vec<String>,
+        /// Output file, .png or .svg.
+        #[arg(short, long, value_name = "FILE")]
+        output: PathBuf,
+        /// shared: one axes; stacked: one panel per unit; auto: shared when every sensor
+        /// has the same unit.
+        #[arg(long, default_value = "auto", value_parser = ["auto", "shared", "stacked"])]
+        layout: String,
+    },
     /// Read and check a model file (syntax, references, physics, initial conditions).
     Check {
         model: PathBuf,
@@ -216,6 +230,12 @@ fn main() {
                 }
             },
             Command::Check { model, set } => check(&model, &set),
+            Command::Plot {
+                results,
+                sensors,
+                output,
+                layout,
+            } => plot(&results, &sensors, &layout, &output),
             Command::Optimize {
                 model,
                 out,
@@ -386,7 +406,47 @@ fn draw(dir: &OutputDir, files: RunFiles) {
             return;
         }
     };
-    let _ = results;
+    if files.plot {
+        let path = dir.file(flexmb::output::SUMMARY_PLOT_FILE);
+        match flexmb_results::plot::summary(&results, &path) {
+            Ok(summary) => {
+                if let Some(note) = summary.note() {
+                    say(format_args!("note: {note}"));
+                }
+            }
+            Err(e) => tell(format_args!("warning: no summary plot: {e}")),
+        }
+    }
+}
+
+/// Reads the results of a run: a results file, or the output directory of a run.
+fn read_results(path: &Path) -> Result<flexmb_results::Results, i32> {
+    flexmb_results::h5::read(path).map_err(|e| {
+        tell(format_args!("error: {e}"));
+        exit::INVALID_MODEL
+    })
+}
+
+/// `flexmb plot`: sensor histories from a results file.
+fn plot(results: &Path, sensors: &[String], layout: &str, output: &Path) -> i32 {
+    let results = match read_results(results) {
+        Ok(r) => r,
+        Err(code) => return code,
+    };
+    let layout = layout.parse().expect("clap allows only the layouts");
+    match flexmb_results::plot::plot(&results, sensors, layout, output) {
+        Ok(()) => {
+            say(format_args!("plot in {}", output.display()));
+            exit::OK
+        }
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            match e {
+                flexmb_results::PlotError::Draw { .. } => exit::OUTPUT_FAILED,
+                _ => exit::USAGE,
+            }
+        }
+    }
 }
 
 /// Says how a run ended (closing line, warnings, error) and returns its exit code.
