@@ -8,6 +8,7 @@
 //! HDF5 results file and read back from it; the plots, the Paraview series and the browser
 //! animation are drawn from a [`Results`].
 
+pub mod geometry;
 pub mod info;
 pub mod snapshot;
 
