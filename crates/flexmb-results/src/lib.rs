@@ -11,6 +11,8 @@
 pub mod geometry;
 pub mod info;
 pub mod snapshot;
+pub mod vtk;
 
 pub use info::ModelInfo;
 pub use snapshot::{Results, Snapshot, StepStat};
+pub use vtk::{export_vtk, VtkError, VtkSeries};
