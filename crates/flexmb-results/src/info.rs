@@ -41,9 +41,10 @@ pub struct BodyInfo {
 /// A beam element.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct BeamInfo {
-    /// Element name, `<beam>.<k>`.
+    /// Element name, `<beam>[<k>]`.
     pub name: String,
-    /// The `[[beam]]` it belongs to (the name before the last dot).
+    /// The `[[beam]]` it belongs to (the name before `[<k>]`; the whole name when it does
+    /// not end so).
     pub member: String,
     /// Its two nodes (indices in [`ModelInfo::nodes`]).
     pub nodes: [usize; 2],
@@ -156,7 +157,7 @@ impl ModelInfo {
                 .zip(radius)
                 .map(|(b, r)| BeamInfo {
                     name: b.name.clone(),
-                    member: b.name.rsplit_once('.').map_or(&*b.name, |(m, _)| m).into(),
+                    member: member_of(&b.name).into(),
                     nodes: [b.nodes[0].0, b.nodes[1].0],
                     radius: r.unwrap_or_else(|| default_radius(b, extent)),
                 })
@@ -195,6 +196,14 @@ impl ModelInfo {
     /// Index of the sensor called `name`.
     pub fn sensor(&self, name: &str) -> Option<usize> {
         self.sensors.iter().position(|s| s.name == name)
+    }
+}
+
+/// The `[[beam]]` of an element named `<beam>[<k>]`, or the whole name.
+fn member_of(element: &str) -> &str {
+    match element.strip_suffix(']').and_then(|s| s.rsplit_once('[')) {
+        Some((member, k)) if !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()) => member,
+        _ => element,
     }
 }
 
@@ -302,5 +311,19 @@ pub fn default_radius(b: &flexmb::model::Beam, extent: f64) -> f64 {
         (2.0 * rho_j / rho_a).sqrt().min(cap)
     } else {
         cap
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::member_of;
+
+    #[test]
+    fn an_elements_member_is_its_name_before_the_index() {
+        assert_eq!(member_of("leg1[0]"), "leg1");
+        assert_eq!(member_of("arm.a[12]"), "arm.a");
+        assert_eq!(member_of("rod"), "rod");
+        assert_eq!(member_of("rod[x]"), "rod[x]");
+        assert_eq!(member_of("rod[]"), "rod[]");
     }
 }

@@ -6,13 +6,17 @@
 //! joint points and reactions, beam strains and stress resultants, sensor values) and the
 //! solver's statistics per step ([`StepStat`]). They are written as the run goes into the
 //! HDF5 results file and read back from it; the plots, the Paraview series and the browser
-//! animation are drawn from a [`Results`] ([`plot`]: sensor histories).
+//! animation are drawn from a [`Results`] ([`plot`]: sensor histories; [`vtk`]: the Paraview
+//! series).
 
+pub mod geometry;
 pub mod h5;
 pub mod info;
 pub mod plot;
 pub mod snapshot;
+pub mod vtk;
 
 pub use info::ModelInfo;
 pub use plot::{Layout, PlotError, Summary};
 pub use snapshot::{Results, Snapshot, StepStat};
+pub use vtk::{export_vtk, VtkError, VtkSeries};
