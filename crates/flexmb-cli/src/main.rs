@@ -178,6 +178,14 @@ enum Command {
         #[arg(long, default_value = "auto", value_parser = ["auto", "shared", "stacked"])]
         layout: String,
     },
+    /// Write a Paraview time series (DIR/results.pvd and one .vtu file per output step and
+    /// kind: beams, bodies, frames, joints) from a results file or a run's directory.
+    ExportVtk {
+        results: PathBuf,
+        /// Output directory (created if needed).
+        #[arg(short, long, value_name = "DIR")]
+        output: PathBuf,
+    },
     /// Read and check a model file (syntax, references, physics, initial conditions).
     Check {
         model: PathBuf,
@@ -236,6 +244,7 @@ fn main() {
                 output,
                 layout,
             } => plot(&results, &sensors, &layout, &output),
+            Command::ExportVtk { results, output } => export_vtk(&results, &output),
             Command::Optimize {
                 model,
                 out,
@@ -425,6 +434,28 @@ fn read_results(path: &Path) -> Result<flexmb_results::Results, i32> {
         tell(format_args!("error: {e}"));
         exit::INVALID_MODEL
     })
+}
+
+/// `flexmb export-vtk`: the Paraview series of a results file.
+fn export_vtk(results: &Path, output: &Path) -> i32 {
+    let results = match read_results(results) {
+        Ok(r) => r,
+        Err(code) => return code,
+    };
+    match flexmb_results::export_vtk(&results, output) {
+        Ok(series) => {
+            say(format_args!(
+                "{} files; open {} in Paraview",
+                series.files,
+                series.pvd.display()
+            ));
+            exit::OK
+        }
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            exit::OUTPUT_FAILED
+        }
+    }
 }
 
 /// `flexmb plot`: sensor histories from a results file.

@@ -24,8 +24,9 @@
 
 use crate::info::ModelInfo;
 use crate::snapshot::{Results, Snapshot, StepStat};
-use flexmb::observe::{Sample, StepRecord};
+use flexmb::observe::Sample;
 use flexmb::output::{OutputDir, OutputError, Store, StoreFormat, RESULTS_H5_FILE};
+use flexmb::solve::StepInfo;
 use hdf5::types::VarLenUnicode;
 use hdf5::{Dataset, File, H5Type, Hyperslab, SliceOrIndex};
 use std::path::{Path, PathBuf};
@@ -383,8 +384,8 @@ impl Store for H5Store {
         self.append(&snap).map_err(h5_error(&path, "cannot write"))
     }
 
-    fn step(&mut self, record: &StepRecord) -> Result<(), OutputError> {
-        self.push_step(StepStat::of(record));
+    fn step(&mut self, info: &StepInfo) -> Result<(), OutputError> {
+        self.push_step(StepStat::of(info));
         Ok(())
     }
 

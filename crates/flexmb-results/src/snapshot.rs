@@ -6,9 +6,9 @@ use flexmb::data::Data;
 use flexmb::elements::point_velocity;
 use flexmb::input::{Analysis, ModelFile};
 use flexmb::model::JointId;
-use flexmb::observe::{Observer, Sample, StepRecord};
+use flexmb::observe::{Observer, Sample};
 use flexmb::sensors::{joint_point, joint_reaction, node_states, SensorEvaluator};
-use flexmb::solve::{Simulation, Statics};
+use flexmb::solve::{Simulation, Statics, StepInfo};
 use flexmb::{Model, SolveError, State};
 use flexmb_lie::Vec3;
 use serde::{Deserialize, Serialize};
@@ -55,8 +55,7 @@ pub struct StepStat {
 }
 
 impl StepStat {
-    pub fn of(record: &StepRecord) -> Self {
-        let i = record.info;
+    pub fn of(i: &StepInfo) -> Self {
         Self {
             at: i.t,
             h: i.h,
@@ -159,11 +158,8 @@ impl Observer for Recorder {
         self.results.snapshots.push(snap);
         Ok(())
     }
-    fn wants_steps(&self) -> bool {
-        true
-    }
-    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
-        self.results.steps.push(StepStat::of(record));
+    fn accepted(&mut self, info: &StepInfo) -> Result<(), String> {
+        self.results.steps.push(StepStat::of(info));
         Ok(())
     }
 }

@@ -13,14 +13,14 @@
 //! results of an earlier run).
 
 use crate::input::{Analysis, ModelFile};
-use crate::observe::{Observer, Observers, Sample, StepRecord};
+use crate::observe::{Observer, Observers, Sample};
 use crate::output::{
     ErrorKind, OutputDir, OutputError, ResultFiles, Status, Store, StoreFormat, Summary,
     CHECKPOINT_FILE,
 };
 use crate::sensors::SensorEvaluator;
 use crate::solve::dynamics::Checkpoint;
-use crate::solve::{DynamicSettings, Simulation, StaticSettings, Statics};
+use crate::solve::{DynamicSettings, Simulation, StaticSettings, Statics, StepInfo};
 use crate::SolveError;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -291,14 +291,9 @@ impl<'m> Outputs<'m> {
         Ok(())
     }
 
-    /// Passes an accepted step to the stores.
-    fn step(&mut self, record: &StepRecord) -> Result<(), OutputError> {
-        let t0 = Instant::now();
-        for store in &mut self.stores {
-            store.step(record)?;
-        }
-        self.seconds += t0.elapsed().as_secs_f64();
-        Ok(())
+    /// Passes an accepted step to the stores (they keep it for their next output step).
+    fn step(&mut self, info: &StepInfo) -> Result<(), OutputError> {
+        self.stores.iter_mut().try_for_each(|s| s.step(info))
     }
 }
 
@@ -325,11 +320,8 @@ impl Observer for ResultSink<'_> {
         let result = self.outputs.write(s);
         self.keep(result)
     }
-    fn wants_steps(&self) -> bool {
-        !self.outputs.stores.is_empty()
-    }
-    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
-        let result = self.outputs.step(record);
+    fn accepted(&mut self, info: &StepInfo) -> Result<(), String> {
+        let result = self.outputs.step(info);
         self.keep(result)
     }
 }

@@ -5,7 +5,8 @@
 //! A dynamic run calls [`Observer::output`] at `t = 0` and at every output time, and, when
 //! [`Observer::wants_steps`], [`Observer::step`] after every accepted step with a
 //! [`StepRecord`]: the start `s_n`, the step size, the converged unknowns `x_{n+1}` and the
-//! end `s_{n+1}` (what [`crate::solve::step::StepFunction`] needs to re-evaluate the step).
+//! end `s_{n+1}` (what [`crate::solve::step::StepFunction`] needs to re-evaluate the step);
+//! [`Observer::accepted`] gets every accepted step's statistics, for all observers.
 //! A static run calls `output` at load factor 0 and after every converged load step.
 
 use crate::data::Data;
@@ -56,6 +57,11 @@ pub trait Observer {
     fn step(&mut self, _record: &StepRecord) -> Result<(), String> {
         Ok(())
     }
+    /// Called after every accepted step of a dynamic run with its statistics (costs the run
+    /// nothing more: no copy of the step is kept).
+    fn accepted(&mut self, _info: &StepInfo) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 /// A closure is an observer of the output points.
@@ -80,5 +86,8 @@ impl Observer for Observers<'_> {
             .iter_mut()
             .filter(|o| o.wants_steps())
             .try_for_each(|o| o.step(record))
+    }
+    fn accepted(&mut self, info: &StepInfo) -> Result<(), String> {
+        self.0.iter_mut().try_for_each(|o| o.accepted(info))
     }
 }

@@ -25,6 +25,7 @@ const BEAM_KEYS: &[&str] = &[
     "velocity",
     "angular_velocity",
     "mass_matrix",
+    "display_radius",
 ];
 
 /// Most elements of one `[[beam]]`.
@@ -337,6 +338,13 @@ pub(super) fn read_beams(
         let key = if t.has("arc") { "arc" } else { "end" };
         let first = model.beams.len();
         origins.beam_elements.insert(name.clone(), first..first + n);
+        if let Some(radius) = super::display::read_radius(&t)? {
+            model.display.tubes.push(crate::model::display::Tube {
+                first,
+                count: n,
+                radius,
+            });
+        }
         for i in 0..n {
             let element = format!("{name}[{i}]");
             model.add_beam_with_mass(

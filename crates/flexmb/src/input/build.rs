@@ -559,7 +559,7 @@ struct NodeInit {
     angular_velocity: Vec3,
 }
 
-fn read_orientation(f: &Field<'_>) -> Result<Mat3> {
+pub(super) fn read_orientation(f: &Field<'_>) -> Result<Mat3> {
     let t = f.table()?;
     let forms = ["rotation_vector", "quaternion", "axis", "matrix"];
     t.check_keys(&[
@@ -716,7 +716,7 @@ fn read_nodes_and_bodies(
 ) -> Result<()> {
     let mut node_names = HashMap::new();
     for t in top.items("node")? {
-        let mut keys = vec!["name"];
+        let mut keys = vec!["name", "display"];
         keys.extend_from_slice(NODE_STATE_KEYS);
         t.check_keys(&keys)?;
         let name = read_name(&t, &mut node_names, "node")?;
@@ -724,13 +724,14 @@ fn read_nodes_and_bodies(
             return Err(t.key_err("name", "'ground' is reserved for the fixed inertial frame"));
         }
         let init = read_node_init(&t)?;
-        add_node(model, origins, &name, init);
+        let node = add_node(model, origins, &name, init);
+        super::display::read_shapes(&t, node, &mut model.display.shapes)?;
         origins.nodes.push(Origin::of(&t));
     }
 
     let bodies = top.items("body")?;
     let mut body_names = HashMap::new();
-    let mut body_keys = vec!["name", "node", "mass", "com", "inertia"];
+    let mut body_keys = vec!["name", "node", "mass", "com", "inertia", "display"];
     body_keys.extend_from_slice(NODE_STATE_KEYS);
     // Pass 1: names, and the nodes of the bodies that bring their own.
     let mut own_nodes = Vec::with_capacity(bodies.len());
@@ -780,6 +781,7 @@ fn read_nodes_and_bodies(
         let com = opt_point(t, "com")?.unwrap_or_else(Vec3::zeros);
         let inertia = read_inertia(&t.req("inertia")?, mass)?;
         model.add_body(name, node, mass, com, inertia);
+        super::display::read_shapes(t, node, &mut model.display.shapes)?;
         origins.bodies.push(Origin::of(t));
     }
     Ok(())

@@ -461,7 +461,7 @@ pub trait Store {
         sensors: &[f64],
     ) -> Result<(), OutputError>;
     /// Records an accepted step of a dynamic run (called before the output of its time).
-    fn step(&mut self, record: &crate::observe::StepRecord) -> Result<(), OutputError>;
+    fn step(&mut self, info: &crate::solve::StepInfo) -> Result<(), OutputError>;
     /// Where the file stands, for a checkpoint: names and counts that
     /// [`StoreFormat::reopen`] gets back to go on from there.
     fn marks(&self) -> Vec<(String, u64)>;

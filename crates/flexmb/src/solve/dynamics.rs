@@ -789,6 +789,7 @@ impl Simulation {
             }
             let target = self.control.target(&self.settings);
             let info = self.step()?;
+            observer.accepted(&info).map_err(SolveError::Output)?;
             if wants_steps {
                 let record = StepRecord {
                     simulation: self,
