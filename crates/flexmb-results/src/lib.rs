@@ -10,6 +10,8 @@
 
 pub mod info;
 pub mod snapshot;
+pub mod view;
 
 pub use info::ModelInfo;
 pub use snapshot::{Results, Snapshot, StepStat};
+pub use view::{write_html, ViewError};
