@@ -11,7 +11,9 @@
 //! the page's scripts (inflating the data, the first frames) run before the screenshot is
 //! taken, and `--dump-dom` in the same run shows that the page finished: the viewer marks the
 //! document element `data-ready="true"` and sets the title to `flexmb ready` once it has drawn
-//! the frame that the URL's `#frame=K&paused` chose.
+//! the frame that the URL's `#frame=K&paused` chose. `--enable-logging=stderr --v=0` brings the
+//! page's console to Chromium's stderr, where the tests want none. (A canvas resized after
+//! its last draw comes out blank in such a screenshot: the viewer draws again on a resize.)
 //!
 //! The screenshots (and the pages) are kept in `target/browser-screenshots/`, or in
 //! `FLEXMB_SCREENSHOT_DIR`; their paths are printed (`cargo test -- --nocapture`).
@@ -119,6 +121,8 @@ fn screenshot(page: &Path, fragment: &str, png: &Path) -> (Shot, String) {
             "--disable-component-update",
             "--disable-sync",
             "--hide-scrollbars",
+            "--enable-logging=stderr",
+            "--v=0",
             &format!("--user-data-dir={}", profile.display()),
             &format!("--window-size={WIDTH},{HEIGHT}"),
             "--virtual-time-budget=5000",
@@ -154,6 +158,18 @@ fn screenshot(page: &Path, fragment: &str, png: &Path) -> (Shot, String) {
     assert!(
         status.success() && png.exists(),
         "Chromium failed on {url} ({status}):\n{log}"
+    );
+    // The page's console stays quiet (an uncaught error, or the viewer's own report of one,
+    // would show here), but for the software renderer's notes on reading pixels back (the
+    // screenshot's doing).
+    let console: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains(":CONSOLE") && !l.contains("GL Driver Message"))
+        .collect();
+    assert!(
+        console.is_empty(),
+        "the page wrote to its console on {url}:\n{}",
+        console.join("\n")
     );
 
     let decoder = png::Decoder::new(std::io::BufReader::new(

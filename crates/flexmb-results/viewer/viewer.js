@@ -15,13 +15,15 @@
  * axes. The side panel plots a sensor with a cursor at the current frame.
  *
  * Playback: the slider picks a snapshot (no interpolation between snapshots). Playing moves
- * a clock through the run at the chosen speed: 1x is real time for a dynamic run, and the
- * whole load (a load factor of 1) in 10 s for a static one.
+ * a clock through the run at the chosen speed: 1x is real time for a dynamic run, and every
+ * load step in 10 s for a static one (whose load factor need not grow: arc-length runs turn
+ * back). The sensor plot's abscissa is the time or the load factor.
  *
  * Deterministic entry (for tests and links): the page reads location.hash, e.g.
  * "#frame=12&paused" (a snapshot index, from 0) or "#t=0.5" (the snapshot nearest that time
  * or load factor), "paused" to stay still, and optionally "colour=M2" (beam colour: none, N,
- * V2, V3, T, M2, M3, eps, gamma2, gamma3, kappa1, kappa2, kappa3), "sensor=NAME", "up=z".
+ * V2, V3, T, M2, M3, eps, gamma2, gamma3, kappa1, kappa2, kappa3), "sensor=NAME", "up=z",
+ * "seethrough" (bodies' surfaces see-through).
  * The frame is set through the slider, as a user would. Once that frame is drawn, the
  * document element gets data-ready="true" and, when the hash chose a frame, the document's
  * title becomes "flexmb ready".
@@ -225,7 +227,7 @@
       this.data = data;
       this.frame = 0;
       this.playing = false;
-      this.clock = run.at[0];
+      this.clock = 0;
       this.lastTick = null;
       this.needsRender = true;
       this.readyPending = false;
@@ -267,7 +269,9 @@
         this.renderer.setSize(w, h, false);
         this.camera.aspect = w / h;
         this.camera.updateProjectionMatrix();
-        // A resized canvas is blank: draw it again before the page is painted.
+        // Until the user moves the camera, the view keeps framing the whole motion. A
+        // resized canvas is blank: draw it again before the page is painted.
+        if (this.controls && !this.userMoved) this.fitView();
         if (this.controls) this.render();
         else this.needsRender = true;
       };
@@ -362,8 +366,16 @@
       const joints = this.data.joints;
       this.jointMesh = null;
       if (joints.length === 0) return;
+      // A ball of about 1 % of the model, but no bigger than the bodies' middle dimension
+      // (a long chain of small links) and bigger than the beams' tubes.
+      let radius = 0.012 * this.size;
+      const middles = this.data.shapes.map((s) => [...s.size].sort((a, b) => a - b)[1]).filter((d) => d > 0);
+      if (middles.length) {
+        middles.sort((a, b) => a - b);
+        radius = Math.min(radius, 0.6 * middles[middles.length >> 1]);
+      }
       const beamRadius = this.data.beams.reduce((m, b) => Math.max(m, b.radius), 0);
-      this.jointRadius = Math.max(0.012 * this.size, 1.5 * beamRadius);
+      this.jointRadius = Math.max(radius, 1.5 * beamRadius);
       const material = new THREE.MeshStandardMaterial({ color: 0xe2832f, roughness: 0.4, metalness: 0.1 });
       this.jointMesh = new THREE.InstancedMesh(new THREE.SphereGeometry(1, 16, 12), material, joints.length);
       this.jointMesh.frustumCulled = false;
@@ -454,7 +466,7 @@
         const p = [0, 0, 0];
         p[i] = 1.12 * length;
         label.position.set(...p);
-        label.scale.setScalar(0.22 * length);
+        label.scale.setScalar(0.034); // of the view's height: the same size at any zoom
         helpers.add(label);
       });
       this.axesLength = length;
@@ -481,6 +493,7 @@
       this.controls.enableDamping = true;
       this.controls.dampingFactor = 0.12;
       this.controls.addEventListener('change', () => (this.needsRender = true));
+      this.controls.addEventListener('start', () => (this.userMoved = true));
       this.setupHelpers();
     }
 
@@ -530,9 +543,15 @@
       const first = data.first === 'load_factor' ? 'load factor' : 'time';
       this.isTime = first === 'time';
       const last = run.frames - 1;
-      const span = run.at[last] - run.at[0];
+      // Playback runs along a track: the time, or for a static run (whose load factor may go
+      // back and forth, as in an arc-length continuation) the snapshot number.
+      this.track = this.isTime ? run.at : run.at.map((_, k) => k);
+      const span = this.track[last] - this.track[0];
       const steps = [];
-      for (let k = 1; k < run.frames; k++) steps.push(run.at[k] - run.at[k - 1]);
+      for (let k = 1; k < run.frames; k++) {
+        const step = Math.abs(run.at[k] - run.at[k - 1]);
+        if (step > 0) steps.push(step);
+      }
       steps.sort((x, y) => x - y);
       const typical = steps.length ? steps[steps.length >> 1] : 1;
       this.decimals = clamp(Math.ceil(-Math.log10(typical || 1)) + 1, 0, 8);
@@ -567,11 +586,14 @@
       slider.max = String(last);
       slider.addEventListener('input', () => {
         const k = parseInt(slider.value, 10);
-        this.clock = run.at[k];
+        this.clock = this.track[k];
         this.showFrame(k);
       });
       $('play').addEventListener('click', () => (this.playing ? this.pause() : this.play()));
-      $('fit').addEventListener('click', () => this.fitView());
+      $('fit').addEventListener('click', () => {
+        this.userMoved = false;
+        this.fitView();
+      });
       document.addEventListener('keydown', (e) => {
         const tag = e.target && e.target.tagName;
         if (tag === 'SELECT' || (tag === 'INPUT' && e.target.type !== 'range')) return;
@@ -586,8 +608,8 @@
       });
 
       // Speeds: 1-2-5 steps around the default, which plays the run in about 10 s (real
-      // time for runs of 2 to 60 s).
-      const unit = this.isTime ? 1 : 0.1; // run units per second at 1x
+      // time for runs of 2 to 60 s; every load step in 10 s for a static run).
+      const unit = this.isTime ? 1 : Math.max(1, last) / 10; // track units per second at 1x
       this.speedUnit = unit;
       const wanted = span > 0 ? span / 10 / unit : 1;
       const preferred = this.isTime && span >= 2 && span <= 60 ? 1 : roundToSeries(wanted);
@@ -603,7 +625,7 @@
           speed.appendChild(o);
         }
       }
-      speed.title = this.isTime ? '1× is real time' : '1× is a load factor of 1 in 10 s';
+      speed.title = this.isTime ? '1× is real time' : '1× plays every load step in 10 s';
 
       // Display toggles.
       const toggle = (id, apply) => {
@@ -616,6 +638,7 @@
       };
       $('show-frames').checked = data.bodies.length > 0 && data.bodies.length <= 10;
       toggle('show-shapes', (on) => this.shapeObjects.forEach((o) => (o.visible = on)));
+      toggle('see-through', (on) => this.shapeObjects.forEach((o) => seeThrough(o, on)));
       toggle('show-frames', (on) => this.triads.forEach((o) => (o.visible = on)));
       toggle('show-beams', (on) => this.beamGroup && (this.beamGroup.visible = on));
       toggle('show-joints', (on) => this.jointGroup && (this.jointGroup.visible = on));
@@ -625,6 +648,7 @@
         if (none) $(id).closest('label').hidden = true;
       };
       disable('show-shapes', this.shapeObjects.length === 0);
+      disable('see-through', this.shapeObjects.length === 0);
       disable('show-frames', data.bodies.length === 0);
       disable('show-beams', data.beams.length === 0);
       disable('show-joints', data.joints.length === 0);
@@ -700,16 +724,12 @@
       return Number.isFinite(at) ? at.toFixed(this.decimals) : '–';
     }
 
+    /** The first snapshot nearest `at` (a time or load factor). */
     nearestFrame(at) {
       const a = this.run.at;
-      let lo = 0;
-      let hi = a.length - 1;
-      while (hi - lo > 1) {
-        const mid = (lo + hi) >> 1;
-        if (a[mid] <= at) lo = mid;
-        else hi = mid;
-      }
-      return Math.abs(a[hi] - at) < Math.abs(a[lo] - at) ? hi : lo;
+      let best = 0;
+      for (let k = 1; k < a.length; k++) if (Math.abs(a[k] - at) < Math.abs(a[best] - at)) best = k;
+      return best;
     }
 
     /** Moves the slider to frame k, as a user would. */
@@ -740,6 +760,10 @@
         this.setUp(params.get('up'));
         this.fitView();
         this.updateGridNote();
+      }
+      if (params.has('seethrough')) {
+        $('see-through').checked = true;
+        $('see-through').dispatchEvent(new Event('change'));
       }
       if (params.has('colour') && this.quantities.some((q) => q.key === params.get('colour'))) {
         this.setColourBy(params.get('colour'));
@@ -973,8 +997,13 @@
         lo -= pad;
         hi += pad;
       }
-      const t0 = at[0];
-      const t1 = at[at.length - 1] > t0 ? at[at.length - 1] : t0 + 1;
+      // The abscissa spans the run's times or load factors (which need not grow).
+      let t0 = Math.min(...at);
+      let t1 = Math.max(...at);
+      if (!(t1 > t0)) {
+        t0 -= 0.5;
+        t1 += 0.5;
+      }
 
       const yTicks = niceTicks(lo, hi, 4);
       ctx.font = '10px system-ui, sans-serif';
@@ -1070,18 +1099,19 @@
             this.clock += dt * parseFloat($('speed').value) * this.speedUnit;
           }
           this.lastTick = now;
-          const end = run.at[run.frames - 1];
+          const track = this.track;
+          const end = track[run.frames - 1];
           if (this.clock > end) {
             if ($('loop').checked) {
-              this.clock = run.at[0] + ((this.clock - run.at[0]) % Math.max(end - run.at[0], 1e-300));
+              this.clock = track[0] + ((this.clock - track[0]) % Math.max(end - track[0], 1e-300));
             } else {
               this.clock = end;
               this.pause();
             }
           }
           let k = this.frame;
-          if (run.at[k] > this.clock) k = 0;
-          while (k + 1 < run.frames && run.at[k + 1] <= this.clock) k++;
+          if (track[k] > this.clock) k = 0;
+          while (k + 1 < run.frames && track[k + 1] <= this.clock) k++;
           if (k !== this.frame) this.showFrame(k);
         }
         if (this.controls.update()) this.needsRender = true;
@@ -1142,6 +1172,7 @@
       polygonOffsetUnits: 1,
     });
     const mesh = new THREE.Mesh(geometry, material);
+    mesh.renderOrder = 1; // after the opaque objects, when see-through
     const object = new THREE.Group();
     object.add(mesh);
     if (s.kind === 'box' || s.kind === 'cylinder') {
@@ -1155,6 +1186,18 @@
     const [w, x, y, z] = s.orientation;
     object.quaternion.set(x, y, z, w);
     return object;
+  }
+
+  /** Makes a shape's surfaces see-through (its edges stay), or opaque again. */
+  function seeThrough(object, on) {
+    object.traverse((o) => {
+      if (o.isMesh) {
+        o.material.transparent = on;
+        o.material.opacity = on ? 0.3 : 1;
+        o.material.depthWrite = !on;
+        o.material.needsUpdate = true;
+      }
+    });
   }
 
   const SPRING_COILS = 10;
@@ -1198,7 +1241,8 @@
     ctx.fillText(text, 32, 34);
     const texture = new THREE.CanvasTexture(canvas);
     texture.colorSpace = THREE.SRGBColorSpace;
-    return new THREE.Sprite(new THREE.SpriteMaterial({ map: texture, depthTest: false, transparent: true }));
+    const material = new THREE.SpriteMaterial({ map: texture, depthTest: false, transparent: true, sizeAttenuation: false });
+    return new THREE.Sprite(material);
   }
 
   // ---------------------------------------------------------------------------------------
