@@ -1085,7 +1085,7 @@
         ctx.fill();
       }
       $('readout').textContent =
-        `${sensor.name} = ${fmt(v, 6)}${sensor.unit ? ' ' + sensor.unit : ''} at ${this.isTime ? 't' : 'λ'} = ${this.formatAt(at[k])}${this.isTime ? ' s' : ''}`;
+        `${sensor.name} = ${fmt(v, 8)}${sensor.unit ? ' ' + sensor.unit : ''} at ${this.isTime ? 't' : 'λ'} = ${this.formatAt(at[k])}${this.isTime ? ' s' : ''}`;
     }
 
     // --- the loop --------------------------------------------------------------------------
