@@ -14,9 +14,11 @@ pub mod h5;
 pub mod info;
 pub mod plot;
 pub mod snapshot;
+pub mod view;
 pub mod vtk;
 
 pub use info::ModelInfo;
 pub use plot::{Layout, PlotError, Summary};
 pub use snapshot::{Results, Snapshot, StepStat};
+pub use view::{write_html, ViewError};
 pub use vtk::{export_vtk, VtkError, VtkSeries};
