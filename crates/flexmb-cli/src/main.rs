@@ -186,6 +186,14 @@ enum Command {
         #[arg(short, long, value_name = "DIR")]
         output: PathBuf,
     },
+    /// Write the 3D animation of a run as one HTML file (opens in a web browser, no network
+    /// needed) from a results file or a run's directory.
+    View {
+        results: PathBuf,
+        /// Output file (.html).
+        #[arg(short, long, value_name = "FILE")]
+        output: PathBuf,
+    },
     /// Read and check a model file (syntax, references, physics, initial conditions).
     Check {
         model: PathBuf,
@@ -245,6 +253,7 @@ fn main() {
                 layout,
             } => plot(&results, &sensors, &layout, &output),
             Command::ExportVtk { results, output } => export_vtk(&results, &output),
+            Command::View { results, output } => view(&results, &output),
             Command::Optimize {
                 model,
                 out,
@@ -426,6 +435,16 @@ fn draw(dir: &OutputDir, files: RunFiles) {
             Err(e) => tell(format_args!("warning: no summary plot: {e}")),
         }
     }
+    if files.view {
+        let path = dir.file(flexmb::output::VIEW_FILE);
+        match flexmb_results::write_html(&results, &path) {
+            Ok(()) => say(format_args!(
+                "animation in {}: open it in a web browser",
+                path.display()
+            )),
+            Err(e) => tell(format_args!("warning: no animation: {e}")),
+        }
+    }
 }
 
 /// Reads the results of a run: a results file, or the output directory of a run.
@@ -434,6 +453,27 @@ fn read_results(path: &Path) -> Result<flexmb_results::Results, i32> {
         tell(format_args!("error: {e}"));
         exit::INVALID_MODEL
     })
+}
+
+/// `flexmb view`: the browser animation of a results file.
+fn view(results: &Path, output: &Path) -> i32 {
+    let results = match read_results(results) {
+        Ok(r) => r,
+        Err(code) => return code,
+    };
+    match flexmb_results::write_html(&results, output) {
+        Ok(()) => {
+            say(format_args!(
+                "animation in {}: open it in a web browser",
+                output.display()
+            ));
+            exit::OK
+        }
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            exit::OUTPUT_FAILED
+        }
+    }
 }
 
 /// `flexmb export-vtk`: the Paraview series of a results file.

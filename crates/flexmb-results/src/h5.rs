@@ -14,8 +14,8 @@
 //!   a dataset whose rows would be empty (no joints, no beams, ...) is not written;
 //! * names beside the data: `nodes/names`, `joints/names`, `beams/names`, `sensors/names`,
 //!   `sensors/units`;
-//! * one row per accepted step: `solver/at`, `solver/h`, `solver/iterations`,
-//!   `solver/rejected`, `solver/fresh_matrix` (0 or 1).
+//! * one row per accepted step: `solver/steps`, a compound of `at`, `h`, `iterations`,
+//!   `rejected` and `fresh_matrix` (a [`StepStat`]).
 //!
 //! Every output step is complete on disk before the run goes on: the rows of a step (and
 //! the solver's steps since the last output) are written, `time` (`load_factor`) last, and
@@ -35,7 +35,7 @@ use std::path::{Path, PathBuf};
 pub const VERSION: u32 = 1;
 /// Rows a chunk holds at most, and its size aimed at \[bytes\].
 const CHUNK_ROWS: usize = 1024;
-const CHUNK_BYTES: usize = 256 * 1024;
+const CHUNK_BYTES: usize = 8 * 1024;
 
 /// Why a results file cannot be read.
 #[derive(Debug, thiserror::Error)]
@@ -146,83 +146,22 @@ impl Column {
     }
 }
 
-/// The solver's per-step datasets.
-struct StepColumns {
-    at: Column,
-    h: Column,
-    iterations: Column,
-    rejected: Column,
-    fresh: Column,
-}
-
-impl StepColumns {
-    const NAMES: [&'static str; 5] = [
-        "solver/at",
-        "solver/h",
-        "solver/iterations",
-        "solver/rejected",
-        "solver/fresh_matrix",
-    ];
-
-    fn create(file: &File) -> hdf5::Result<Self> {
-        let [a, h, i, r, f] = Self::NAMES;
-        Ok(Self {
-            at: Column::create::<f64>(file, a, &[])?,
-            h: Column::create::<f64>(file, h, &[])?,
-            iterations: Column::create::<u32>(file, i, &[])?,
-            rejected: Column::create::<u32>(file, r, &[])?,
-            fresh: Column::create::<u8>(file, f, &[])?,
-        })
-    }
-
-    fn open(file: &File) -> hdf5::Result<Self> {
-        let [a, h, i, r, f] = Self::NAMES;
-        Ok(Self {
-            at: Column::open(file, a)?,
-            h: Column::open(file, h)?,
-            iterations: Column::open(file, i)?,
-            rejected: Column::open(file, r)?,
-            fresh: Column::open(file, f)?,
-        })
-    }
-
-    fn all(&self) -> [&Column; 5] {
-        [
-            &self.at,
-            &self.h,
-            &self.iterations,
-            &self.rejected,
-            &self.fresh,
-        ]
-    }
-
-    /// Appends `steps` at row `at`; `at` (the time) last.
-    fn append(&self, at: usize, steps: &[StepStat]) -> hdf5::Result<()> {
-        let column = |f: fn(&StepStat) -> f64| steps.iter().map(f).collect::<Vec<_>>();
-        self.h.append(at, &column(|s| s.h))?;
-        let iterations: Vec<u32> = steps.iter().map(|s| s.iterations).collect();
-        self.iterations.append(at, &iterations)?;
-        let rejected: Vec<u32> = steps.iter().map(|s| s.rejected).collect();
-        self.rejected.append(at, &rejected)?;
-        let fresh: Vec<u8> = steps.iter().map(|s| s.fresh_matrix as u8).collect();
-        self.fresh.append(at, &fresh)?;
-        self.at.append(at, &column(|s| s.at))
-    }
-}
-
 /// The HDF5 results file of a run being written.
 pub struct H5Store {
     file: File,
     path: PathBuf,
     time: Column,
     columns: Vec<(Column, Row)>,
-    steps: StepColumns,
+    steps: Column,
     /// Output steps written.
     rows: usize,
     /// Solver steps written, and those waiting for the next output step.
     step_rows: usize,
     pending: Vec<StepStat>,
 }
+
+/// The dataset of the solver's steps.
+const STEPS: &str = "solver/steps";
 
 /// Marks of the store in a checkpoint.
 const MARK_OUTPUTS: &str = "results.h5:outputs";
@@ -300,7 +239,7 @@ impl H5Store {
             .map(|(name, shape, row)| Ok((Column::create::<f64>(&file, name, &shape)?, row)))
             .collect::<hdf5::Result<_>>()?;
         let time = Column::create::<f64>(&file, &info.first, &[])?;
-        let steps = StepColumns::create(&file)?;
+        let steps = Column::create::<StepStat>(&file, STEPS, &[])?;
         file.flush()?;
         Ok(Self {
             file,
@@ -325,8 +264,8 @@ impl H5Store {
             .map(|(name, _, row)| Ok((Column::open(&file, name)?, row)))
             .collect::<hdf5::Result<_>>()?;
         let time = Column::open(&file, &info.first)?;
-        let steps = StepColumns::open(&file)?;
-        if time.rows() < rows || steps.at.rows() < step_rows {
+        let steps = Column::open(&file, STEPS)?;
+        if time.rows() < rows || steps.rows() < step_rows {
             return Err(hdf5::Error::from(
                 "the file holds fewer steps than the checkpoint recorded",
             ));
@@ -335,9 +274,7 @@ impl H5Store {
         for (c, _) in &columns {
             c.resize(rows)?;
         }
-        for c in steps.all() {
-            c.resize(step_rows)?;
-        }
+        steps.resize(step_rows)?;
         file.flush()?;
         Ok(Self {
             file,
@@ -485,34 +422,10 @@ pub fn read(path: &Path) -> Result<Results, ReadError> {
             fill(s, name, chunk);
         }
     }
-    let read_f64 = |name: &str| file.dataset(name).and_then(|d| d.read_raw::<f64>());
-    let read_u32 = |name: &str| file.dataset(name).and_then(|d| d.read_raw::<u32>());
-    let at = read_f64("solver/at").map_err(bad)?;
-    let h = read_f64("solver/h").map_err(bad)?;
-    let iterations = read_u32("solver/iterations").map_err(bad)?;
-    let rejected = read_u32("solver/rejected").map_err(bad)?;
-    let fresh: Vec<u8> = file
-        .dataset("solver/fresh_matrix")
-        .and_then(|d| d.read_raw())
+    let steps = file
+        .dataset(STEPS)
+        .and_then(|d| d.read_raw::<StepStat>())
         .map_err(bad)?;
-    let steps = (0..[
-        h.len(),
-        iterations.len(),
-        rejected.len(),
-        fresh.len(),
-        at.len(),
-    ]
-    .into_iter()
-    .min()
-    .unwrap_or(0))
-        .map(|k| StepStat {
-            at: at[k],
-            h: h[k],
-            iterations: iterations[k],
-            rejected: rejected[k],
-            fresh_matrix: fresh[k] != 0,
-        })
-        .collect();
     Ok(Results {
         info,
         snapshots,

@@ -39,8 +39,9 @@ pub struct Snapshot {
     pub sensors: Vec<f64>,
 }
 
-/// One accepted step of a dynamic run (a static run has one per converged load step).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+/// One accepted step of a dynamic run (a static run has none).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, hdf5::H5Type)]
+#[repr(C)]
 pub struct StepStat {
     /// Time (load factor) at the end of the step.
     pub at: f64,
