@@ -49,6 +49,12 @@ fn a_run_resumed_from_its_checkpoint_writes_the_files_of_an_uninterrupted_run() 
     for name in ["sensors.csv", "nodes.csv"] {
         assert!(read(&part, name) == read(&whole, name), "{name} differs");
     }
+    // The results file is cut back to the checkpoint and continued too.
+    let results = |d: &Path| flexmb_results::h5::read(d).expect("results.h5 reads");
+    let (a, b) = (results(&whole), results(&part));
+    assert_eq!(a.snapshots.len(), 41);
+    assert_eq!(a.steps.len(), 4000);
+    assert!(a == b, "results.h5 differs");
     let (a, b) = (summary(&whole), summary(&part));
     for key in [
         "status",

@@ -202,8 +202,7 @@ fn a_mesh_that_is_not_a_mesh_is_an_error_with_its_path() {
         let path = d.join("model.toml");
         std::fs::write(&path, text).unwrap();
         let e = read_model_file(&path, &[])
-            .err()
-            .expect("refused")
+            .expect_err("refused")
             .to_string();
         assert!(e.contains(file) && e.contains("display[0].file"), "{e}");
     }
