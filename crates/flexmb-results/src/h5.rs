@@ -79,10 +79,16 @@ fn h5_error<'a>(
     path: &'a Path,
     action: &'static str,
 ) -> impl FnOnce(hdf5::Error) -> OutputError + 'a {
+    // HDF5's messages span lines; one line per cause.
     move |e| OutputError::Io {
         path: path.to_path_buf(),
         action,
-        source: std::io::Error::other(e.to_string()),
+        source: std::io::Error::other(
+            e.to_string()
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" "),
+        ),
     }
 }
 

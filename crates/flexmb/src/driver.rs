@@ -281,10 +281,16 @@ impl<'m> Outputs<'m> {
     fn write(&mut self, sample: &crate::observe::Sample) -> Result<(), OutputError> {
         let t0 = Instant::now();
         let values = self.sensors.evaluate(self.model, sample.data, sample.state);
+        let before = self.files.lengths();
         self.files
             .write_step(sample.at, &values, self.model, sample.state)?;
+        // A step goes to every file or to none: a store that cannot take it takes the CSV
+        // rows back with it.
         for store in &mut self.stores {
-            store.write(sample, &values)?;
+            if let Err(e) = store.write(sample, &values) {
+                self.files.cut_back(&before);
+                return Err(e);
+            }
         }
         self.rows += 1;
         self.seconds += t0.elapsed().as_secs_f64();

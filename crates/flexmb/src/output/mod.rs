@@ -400,6 +400,23 @@ impl ResultFiles {
         out
     }
 
+    /// Cuts every file back to the lengths [`ResultFiles::lengths`] returned (best effort):
+    /// the step written since then is taken back, e.g. when another result file could not
+    /// take it.
+    pub fn cut_back(&mut self, lengths: &[(String, u64)]) {
+        let find = |name: &str| lengths.iter().find(|(n, _)| n == name).map(|&(_, l)| l);
+        let files = [
+            (SENSORS_FILE, Some(&mut self.sensors)),
+            (NODES_FILE, Some(&mut self.nodes)),
+            (BEAMS_FILE, self.beams.as_mut()),
+        ];
+        for (name, file) in files {
+            if let (Some(f), Some(len)) = (file, find(name)) {
+                f.truncate(len);
+            }
+        }
+    }
+
     /// Appends the rows of one output step at `t`: the sensor values, the configuration of
     /// every node and the strains and stress resultants of every beam element.
     pub fn write_step(
