@@ -1,6 +1,6 @@
 //! The results file and what is drawn from it through the CLI: a run killed midway leaves a
-//! results.h5 that other programs (h5py) and flexmb read, with every completed output step
-//! as the run computed it; summary.png, view.html, the Paraview series and plots from a
+//! results.h5 that other programs (h5py) and flexmb read, with every output step completed
+//! a flush interval (50 ms) before, as the run computed it; summary.png, view.html, the Paraview series and plots from a
 //! run's directory; `--results none`.
 
 mod common;
@@ -65,6 +65,8 @@ fn a_killed_run_leaves_a_readable_results_file_with_every_completed_step() {
         wait_until("output steps", || {
             line_count(&out.join("sensors.csv")) > rows
         });
+        // Steps reach the results file at most FLUSH_INTERVAL (50 ms) after the CSV files.
+        std::thread::sleep(4 * flexmb_results::h5::FLUSH_INTERVAL);
         send_signal(&child, "KILL");
         wait_for(&mut child);
         let r = read(&out).expect("the results file of a killed run reads");

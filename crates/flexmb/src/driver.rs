@@ -270,31 +270,31 @@ impl<'m> Outputs<'m> {
         })
     }
 
-    /// The files and their lengths (the marks of the stores too), for a checkpoint.
-    fn lengths(&self) -> Vec<(String, u64)> {
+    /// The files and their lengths (the marks of the stores too, synced), for a checkpoint.
+    fn lengths(&mut self) -> Result<Vec<(String, u64)>, OutputError> {
+        let t0 = Instant::now();
         let mut out = self.files.lengths();
-        out.extend(self.stores.iter().flat_map(|s| s.marks()));
-        out
+        let synced = self.stores.iter_mut().try_for_each(|store| {
+            out.extend(store.sync()?);
+            Ok(())
+        });
+        self.seconds += t0.elapsed().as_secs_f64();
+        synced.map(|()| out)
     }
 
     /// Appends the rows of one output step.
     fn write(&mut self, sample: &crate::observe::Sample) -> Result<(), OutputError> {
         let t0 = Instant::now();
         let values = self.sensors.evaluate(self.model, sample.data, sample.state);
-        let before = self.files.lengths();
         self.files
             .write_step(sample.at, &values, self.model, sample.state)?;
-        // A step goes to every file or to none: a store that cannot take it takes the CSV
-        // rows back with it.
-        for store in &mut self.stores {
-            if let Err(e) = store.write(sample, &values) {
-                self.files.cut_back(&before);
-                return Err(e);
-            }
-        }
         self.rows += 1;
+        let stored = self
+            .stores
+            .iter_mut()
+            .try_for_each(|s| s.write(sample, &values));
         self.seconds += t0.elapsed().as_secs_f64();
-        Ok(())
+        stored
     }
 
     /// Passes an accepted step to the stores (they keep it for their next output step).
@@ -364,6 +364,10 @@ fn observed<'m, R>(
                 error: None,
             };
             let result = run(&mut sink, &mut progress);
+            // Whatever the outcome, the stores hold every step delivered.
+            if let Err(e) = sink.outputs.lengths() {
+                sink.error.get_or_insert(e);
+            }
             (result.map(|_| ()), Some(sink.outputs), sink.error)
         }
         Err(e) => (Ok(()), None, Some(e)),
@@ -471,11 +475,11 @@ fn start_dynamic<'m>(
 fn write_checkpoint(
     out: &OutputDir,
     sim: &Simulation,
-    outputs: &Outputs,
+    outputs: &mut Outputs,
 ) -> Result<(), OutputError> {
     let saved = RunCheckpoint {
         checkpoint: sim.checkpoint(),
-        files: outputs.lengths(),
+        files: outputs.lengths()?,
         outputs: outputs.rows,
         sensors: outputs.sensors.clone(),
     };
@@ -521,7 +525,7 @@ fn run_dynamic(
                 Err(e) => matches!(e, SolveError::Interrupted { .. }),
             };
             if checkpoint && sink.error.is_none() {
-                if let Err(e) = write_checkpoint(out, &sim, &sink.outputs) {
+                if let Err(e) = write_checkpoint(out, &sim, &mut sink.outputs) {
                     sink.error = Some(e);
                 }
             }

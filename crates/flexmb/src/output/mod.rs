@@ -400,23 +400,6 @@ impl ResultFiles {
         out
     }
 
-    /// Cuts every file back to the lengths [`ResultFiles::lengths`] returned (best effort):
-    /// the step written since then is taken back, e.g. when another result file could not
-    /// take it.
-    pub fn cut_back(&mut self, lengths: &[(String, u64)]) {
-        let find = |name: &str| lengths.iter().find(|(n, _)| n == name).map(|&(_, l)| l);
-        let files = [
-            (SENSORS_FILE, Some(&mut self.sensors)),
-            (NODES_FILE, Some(&mut self.nodes)),
-            (BEAMS_FILE, self.beams.as_mut()),
-        ];
-        for (name, file) in files {
-            if let (Some(f), Some(len)) = (file, find(name)) {
-                f.truncate(len);
-            }
-        }
-    }
-
     /// Appends the rows of one output step at `t`: the sensor values, the configuration of
     /// every node and the strains and stress resultants of every beam element.
     pub fn write_step(
@@ -479,9 +462,12 @@ pub trait Store {
     ) -> Result<(), OutputError>;
     /// Records an accepted step of a dynamic run (called before the output of its time).
     fn step(&mut self, info: &crate::solve::StepInfo) -> Result<(), OutputError>;
-    /// Where the file stands, for a checkpoint: names and counts that
-    /// [`StoreFormat::reopen`] gets back to go on from there.
-    fn marks(&self) -> Vec<(String, u64)>;
+    /// Puts every step received so far into the file and makes it durable (a store may keep
+    /// the latest steps in memory between syncs, e.g. to write them in one go), then says
+    /// where the file stands, for a checkpoint: names and counts that
+    /// [`StoreFormat::reopen`] gets back to go on from there. Called at every checkpoint and
+    /// when the run ends, whatever its outcome.
+    fn sync(&mut self) -> Result<Vec<(String, u64)>, OutputError>;
 }
 
 /// How to create (or reopen, for a resumed run) a [`Store`] in an output directory.
