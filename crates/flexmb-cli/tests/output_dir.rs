@@ -20,21 +20,27 @@ fn run(model: &str, dir: &Path, set: &[&str]) -> i32 {
     c.output().expect("runs").status.code().expect("exit code")
 }
 
-/// Every file of a directory by name; `summary.json` without its timings.
-fn snapshot(dir: &Path) -> BTreeMap<String, String> {
+/// Every file of a directory by name; `summary.json` without its timings; `results.h5` by
+/// its content (its bytes depend on when its batches were written, which follows the wall
+/// clock).
+fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     std::fs::read_dir(dir)
         .unwrap()
         .map(|e| {
             let name = e.unwrap().file_name().into_string().unwrap();
-            let mut text = std::fs::read_to_string(dir.join(&name)).unwrap();
+            let mut bytes = std::fs::read(dir.join(&name)).unwrap();
             if name == "summary.json" {
                 let mut s = summary(dir);
                 let fields = s.as_object_mut().unwrap();
                 assert!(fields.remove("wall_seconds").is_some());
                 assert!(fields.remove("solve_seconds").is_some());
-                text = s.to_string();
+                bytes = s.to_string().into_bytes();
             }
-            (name, text)
+            if name == "results.h5" {
+                let r = flexmb_results::h5::read(dir).expect("results.h5 reads");
+                bytes = serde_json::to_vec(&r).unwrap();
+            }
+            (name, bytes)
         })
         .collect()
 }
