@@ -249,23 +249,12 @@ fn shape_info(s: &flexmb::model::display::Shape) -> ShapeInfo {
 /// The size of the model: the diagonal of the box around its initial node positions, at
 /// least 1e-3 m (a model of one node takes its size from its bodies' inertia boxes).
 fn extent(model: &Model) -> f64 {
-    let mut lo = Vec3::repeat(f64::INFINITY);
-    let mut hi = Vec3::repeat(f64::NEG_INFINITY);
-    for n in &model.nodes {
-        lo = lo.inf(&n.frame.x);
-        hi = hi.sup(&n.frame.x);
-    }
     let boxes = model
         .bodies
         .iter()
         .map(|b| inertia_box(b).0.norm())
         .fold(0.0, f64::max);
-    let nodes = if model.nodes.is_empty() {
-        0.0
-    } else {
-        (hi - lo).norm()
-    };
-    nodes.max(boxes).max(1e-3)
+    model.extent().max(boxes).max(1e-3)
 }
 
 /// The sides of the homogeneous box with the body's mass and principal moments

@@ -731,21 +731,20 @@ impl<W: Write> Vtu<W> {
         let mut count = 0;
         match self.encoding {
             Encoding::Binary => {
+                use base64::engine::general_purpose::STANDARD;
                 let bytes = len * std::mem::size_of::<T>();
-                let mut b64 = Base64::new(&mut self.w);
-                b64.push(&(bytes as u64).to_le_bytes())?;
-                let mut result = Ok(());
+                let mut b64 = base64::write::EncoderWriter::new(&mut self.w, &STANDARD);
+                b64.write_all(&(bytes as u64).to_le_bytes())?;
+                let mut buffer = Vec::with_capacity(BINARY_CHUNK + 16);
                 for v in values {
                     count += 1;
-                    v.bytes(|b| b64.buffer(b));
-                    if b64.full() {
-                        result = b64.drain();
-                        if result.is_err() {
-                            break;
-                        }
+                    v.bytes(|b| buffer.extend_from_slice(b));
+                    if buffer.len() >= BINARY_CHUNK {
+                        b64.write_all(&buffer)?;
+                        buffer.clear();
                     }
                 }
-                result?;
+                b64.write_all(&buffer)?;
                 b64.finish()?;
             }
             Encoding::Ascii => {
@@ -797,116 +796,12 @@ impl<W: Write> Vtu<W> {
     }
 }
 
-const BASE64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-
-/// A streaming base64 encoder (RFC 4648, with padding): bytes are buffered, encoded by
-/// groups of three as the buffer fills, and the last one or two padded by `finish`.
-struct Base64<'w, W: Write> {
-    w: &'w mut W,
-    pending: Vec<u8>,
-    out: Vec<u8>,
-}
-
-impl<'w, W: Write> Base64<'w, W> {
-    const CHUNK: usize = 3 * 4096;
-
-    fn new(w: &'w mut W) -> Self {
-        Self {
-            w,
-            pending: Vec::with_capacity(Self::CHUNK + 16),
-            out: Vec::with_capacity(Self::CHUNK / 3 * 4 + 4),
-        }
-    }
-
-    fn buffer(&mut self, bytes: &[u8]) {
-        self.pending.extend_from_slice(bytes);
-    }
-
-    fn full(&self) -> bool {
-        self.pending.len() >= Self::CHUNK
-    }
-
-    fn push(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.buffer(bytes);
-        if self.full() {
-            self.drain()?;
-        }
-        Ok(())
-    }
-
-    /// Encodes and writes the complete groups of three bytes.
-    fn drain(&mut self) -> io::Result<()> {
-        let whole = self.pending.len() / 3 * 3;
-        self.out.clear();
-        for g in self.pending[..whole].chunks_exact(3) {
-            let n = u32::from(g[0]) << 16 | u32::from(g[1]) << 8 | u32::from(g[2]);
-            self.out
-                .extend([18, 12, 6, 0].map(|s| BASE64[(n >> s & 63) as usize]));
-        }
-        self.pending.drain(..whole);
-        self.w.write_all(&self.out)
-    }
-
-    fn finish(mut self) -> io::Result<()> {
-        self.drain()?;
-        let rest = self.pending.len();
-        if rest > 0 {
-            let mut g = [0u8; 3];
-            g[..rest].copy_from_slice(&self.pending);
-            let n = u32::from(g[0]) << 16 | u32::from(g[1]) << 8 | u32::from(g[2]);
-            let mut quad = [18, 12, 6, 0].map(|s| BASE64[(n >> s & 63) as usize]);
-            quad[rest + 1..].fill(b'=');
-            self.w.write_all(&quad)?;
-        }
-        Ok(())
-    }
-}
+/// Bytes of a binary array encoded at a time.
+const BINARY_CHUNK: usize = 3 * 4096;
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn encode(bytes: &[u8]) -> String {
-        let mut out = Vec::new();
-        let mut b = Base64::new(&mut out);
-        b.push(bytes).unwrap();
-        b.finish().unwrap();
-        String::from_utf8(out).unwrap()
-    }
-
-    #[test]
-    fn base64_matches_the_rfc_4648_examples() {
-        let cases = [
-            ("", ""),
-            ("f", "Zg=="),
-            ("fo", "Zm8="),
-            ("foo", "Zm9v"),
-            ("foob", "Zm9vYg=="),
-            ("fooba", "Zm9vYmE="),
-            ("foobar", "Zm9vYmFy"),
-        ];
-        for (plain, coded) in cases {
-            assert_eq!(encode(plain.as_bytes()), coded);
-        }
-    }
-
-    #[test]
-    fn base64_of_a_long_stream_is_the_same_in_pieces_and_at_once() {
-        let bytes: Vec<u8> = (0..100_000u32).map(|i| (i * 7919 % 251) as u8).collect();
-        let mut out = Vec::new();
-        let mut b = Base64::new(&mut out);
-        for piece in bytes.chunks(7) {
-            b.push(piece).unwrap();
-        }
-        b.finish().unwrap();
-        let whole = encode(&bytes);
-        assert_eq!(String::from_utf8(out).unwrap(), whole);
-        assert_eq!(whole.len(), bytes.len().div_ceil(3) * 4);
-        // The whole alphabet shows up, and so the 6-bit groups are in their places.
-        for c in BASE64 {
-            assert!(whole.as_bytes().contains(c));
-        }
-    }
 
     #[test]
     fn floats_are_written_to_read_back_exactly() {

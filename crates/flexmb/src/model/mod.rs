@@ -423,6 +423,20 @@ pub struct ItemRef {
 }
 
 impl Model {
+    /// Length scale of the model: the diagonal of the box around its nodes' initial
+    /// positions (0 without nodes).
+    pub fn extent(&self) -> f64 {
+        let (lo, hi) = self.nodes.iter().fold(
+            (Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY)),
+            |(lo, hi), n| (lo.inf(&n.frame.x), hi.sup(&n.frame.x)),
+        );
+        if self.nodes.is_empty() {
+            0.0
+        } else {
+            (hi - lo).norm()
+        }
+    }
+
     /// An empty model on the given group, without gravity.
     pub fn new(group: Group) -> Self {
         Self {

@@ -219,21 +219,6 @@ impl TimeFunction {
     }
 }
 
-/// Length scale of the model: the diagonal of the box around its nodes' initial positions.
-fn extent(model: &Model) -> f64 {
-    let mut lo = Vec3::repeat(f64::INFINITY);
-    let mut hi = Vec3::repeat(f64::NEG_INFINITY);
-    for n in &model.nodes {
-        lo = lo.inf(&n.frame.x);
-        hi = hi.sup(&n.frame.x);
-    }
-    if model.nodes.is_empty() {
-        0.0
-    } else {
-        (hi - lo).norm()
-    }
-}
-
 /// Index of the first item whose name appeared before.
 fn first_duplicate<'n>(names: impl Iterator<Item = &'n str>) -> Option<(usize, usize)> {
     let mut seen: HashMap<&str, usize> = HashMap::new();
@@ -484,7 +469,7 @@ impl Model {
             }
         }
 
-        let model_extent = extent(self);
+        let model_extent = self.extent();
         for (i, b) in self.beams.iter().enumerate() {
             let fail = |field, m| bad("beam", i, &b.name, field, m);
             for (field, id) in [("node_a", b.nodes[0]), ("node_b", b.nodes[1])] {
