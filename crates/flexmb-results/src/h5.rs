@@ -51,7 +51,8 @@ pub enum ReadError {
 
 /// The per-output-step datasets: name, shape of a row, and the row of a snapshot.
 type Row = fn(&Snapshot) -> &[f64];
-fn series(info: &ModelInfo, joint_rows: usize) -> Vec<(&'static str, Vec<usize>, Row)> {
+fn series(info: &ModelInfo) -> Vec<(&'static str, Vec<usize>, Row)> {
+    let joint_rows = info.joints.iter().map(|j| j.rows).sum();
     let (n, j, b, s) = (
         info.nodes.len(),
         info.joints.len(),
@@ -263,8 +264,7 @@ impl H5Store {
             "sensors/units",
             &names(info.sensors.iter().map(|s| &s.unit).collect()),
         )?;
-        let joint_rows = info.joints.iter().map(|j| j.rows).sum();
-        let columns = series(info, joint_rows)
+        let columns = series(info)
             .into_iter()
             .map(|(name, shape, row)| {
                 Ok((Column::create::<f64>(&file, name, &shape)?, row, Vec::new()))
@@ -292,8 +292,7 @@ impl H5Store {
     pub fn reopen(path: &Path, rows: usize, step_rows: usize) -> hdf5::Result<Self> {
         let file = File::open_rw(path)?;
         let info = read_info(&file)?;
-        let joint_rows = info.joints.iter().map(|j| j.rows).sum();
-        let columns: Vec<(Column, Row, Vec<f64>)> = series(&info, joint_rows)
+        let columns: Vec<(Column, Row, Vec<f64>)> = series(&info)
             .into_iter()
             .map(|(name, _, row)| Ok((Column::open(&file, name)?, row, Vec::new())))
             .collect::<hdf5::Result<_>>()?;
@@ -476,8 +475,7 @@ pub fn read(path: &Path) -> Result<Results, ReadError> {
             ..Default::default()
         })
         .collect();
-    let joint_rows = info.joints.iter().map(|j| j.rows).sum();
-    for (name, shape, _) in series(&info, joint_rows) {
+    for (name, shape, _) in series(&info) {
         let values: Vec<f64> = file.dataset(name).and_then(|d| d.read_raw()).map_err(bad)?;
         let row = shape.iter().product::<usize>();
         if values.len() < n * row {
