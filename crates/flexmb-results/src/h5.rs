@@ -14,8 +14,8 @@
 //!   a dataset whose rows would be empty (no joints, no beams, ...) is not written;
 //! * names beside the data: `nodes/names`, `joints/names`, `beams/names`, `sensors/names`,
 //!   `sensors/units`;
-//! * one row per accepted step: `solver/steps`, a compound of `at`, `h`, `iterations`,
-//!   `rejected` and `fresh_matrix` (a [`StepStat`]).
+//! * one row per accepted step (static: per converged load step): `solver/steps`, a
+//!   compound of `at`, `h`, `iterations`, `rejected` and `fresh_matrix` (a [`StepStat`]).
 //!
 //! Rows are written, `time` (`load_factor`) last, and the file flushed at every output step
 //! that comes [`FLUSH_INTERVAL`] (50 ms of wall time) or more after the last flush; output

@@ -39,7 +39,8 @@ pub struct Snapshot {
     pub sensors: Vec<f64>,
 }
 
-/// One accepted step of a dynamic run (a static run has none).
+/// One accepted step of a dynamic run, or one converged load step of a static run by load
+/// control or arc length (`at` the load factor, `h` the load increment).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, hdf5::H5Type)]
 #[repr(C)]
 pub struct StepStat {

@@ -26,7 +26,8 @@ fn out_dir(name: &str) -> PathBuf {
     dir
 }
 
-/// Runs `file` into `dir` with the HDF5 file and reads it back.
+/// Runs `file` into `dir` with the HDF5 file and reads it back; checks that its solver
+/// steps are those the summary counts, the last one at the last output step.
 fn written(file: &ModelFile, dir: &Path) -> Results {
     let out = OutputDir::prepare(dir).unwrap();
     let report = run_with(
@@ -38,13 +39,21 @@ fn written(file: &ModelFile, dir: &Path) -> Results {
         None,
     );
     assert!(report.unwritten.is_none());
+    let summary = report.summary;
     assert_eq!(
-        report.summary.status,
+        summary.status,
         flexmb::output::Status::Ok,
         "{:?}",
-        report.summary.error
+        summary.error
     );
-    read(dir).expect("the results file reads")
+    let r = read(dir).expect("the results file reads");
+    assert_eq!(r.steps.len(), summary.steps);
+    let iterations: usize = r.steps.iter().map(|s| s.iterations as usize).sum();
+    assert_eq!(iterations, summary.newton_iterations);
+    let rejected: usize = r.steps.iter().map(|s| s.rejected as usize).sum();
+    assert_eq!(rejected, summary.rejected_steps);
+    assert_eq!(r.steps.last().unwrap().at, r.snapshots.last().unwrap().at);
+    r
 }
 
 #[test]
@@ -59,14 +68,19 @@ fn a_dynamic_run_reads_back_as_it_ran() {
 }
 
 #[test]
-fn a_mechanism_with_joints_and_a_static_beam_read_back_as_they_ran() {
-    for (name, end) in [("four_bar.toml", 0.02), ("bend_45.toml", 0.2)] {
+fn a_mechanism_and_static_beams_by_load_control_and_arc_length_read_back_as_they_ran() {
+    for (name, end) in [
+        ("four_bar.toml", 0.02),
+        ("bend_45.toml", 0.2),
+        ("lee_frame.toml", 3.0),
+    ] {
         let file = model(name, end);
         let r = written(&file, &out_dir(&format!("h5_{name}")));
         let (expected, error) = Results::collect(&file);
         assert!(error.is_none());
         assert!(r.snapshots.len() > 1);
         assert_eq!(r.snapshots, expected.snapshots, "{name}");
+        assert_eq!(r.steps, expected.steps, "{name}");
         assert_eq!(r.info, expected.info, "{name}");
     }
 }

@@ -57,8 +57,9 @@ pub trait Observer {
     fn step(&mut self, _record: &StepRecord) -> Result<(), String> {
         Ok(())
     }
-    /// Called after every accepted step of a dynamic run with its statistics (costs the run
-    /// nothing more: no copy of the step is kept).
+    /// Called after every accepted step of a dynamic run, and every converged load step of a
+    /// static run by load control or arc length (the load factor as `t`, the increment as
+    /// `h`), with its statistics (costs the run nothing more: no copy of the step is kept).
     fn accepted(&mut self, _info: &StepInfo) -> Result<(), String> {
         Ok(())
     }

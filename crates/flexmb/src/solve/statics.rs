@@ -601,6 +601,7 @@ impl Statics {
         let mut inc = s.initial_increment.min(s.max_increment);
         let target = s.load_factor;
         let eps = 1e-12 * target.abs().max(1.0);
+        let mut since = self.stats;
         while (target - self.load_factor).abs() > eps {
             self.check_interrupt()?;
             if self.stats.steps >= s.max_steps {
@@ -616,6 +617,7 @@ impl Statics {
             } else {
                 inc * remaining.signum()
             };
+            let before = self.stats;
             match self.solve_at(self.load_factor + step) {
                 Ok(iterations) => {
                     self.load_factor = if step == remaining {
@@ -624,6 +626,7 @@ impl Statics {
                         self.load_factor + step
                     };
                     self.stats.steps += 1;
+                    self.accepted(output, step, &mut since, &before)?;
                     output.output(&self.sample()).map_err(SolveError::Output)?;
                     if s.adaptive {
                         if iterations <= s.target_iterations / 2 {
@@ -737,6 +740,28 @@ impl Statics {
         Ok((info.final_iterations, arc, dq))
     }
 
+    /// Tells the observer of a converged load step: `h` is its load increment, `since` the
+    /// statistics after the previous converged step (its iterations count the failed
+    /// attempts too, as a dynamic step's do), `before` those before its accepted attempt.
+    fn accepted(
+        &self,
+        output: &mut dyn Observer,
+        h: f64,
+        since: &mut StaticStats,
+        before: &StaticStats,
+    ) -> Result<(), SolveError> {
+        let info = super::StepInfo {
+            t: self.load_factor,
+            h,
+            iterations: self.stats.newton_iterations - since.newton_iterations,
+            rejected: self.stats.rejected_steps - since.rejected_steps,
+            reused_matrix: self.stats.factorizations == before.factorizations,
+            regularized: false,
+        };
+        *since = self.stats;
+        output.accepted(&info).map_err(SolveError::Output)
+    }
+
     /// Newton at a fixed load factor (load control). On success the state holds the
     /// converged configuration; returns the iterations.
     fn solve_at(&mut self, lambda: f64) -> Result<usize, NewtonError> {
@@ -753,6 +778,7 @@ impl Statics {
         let dl_max = s.arc_length * 4.0;
         // Direction of the previous converged increment, for the predictor's sign.
         let mut previous: Option<Vec<f64>> = None;
+        let mut since = self.stats;
         while (target - self.load_factor) * target.signum() > 1e-12 * target.abs().max(1.0) {
             self.check_interrupt()?;
             if self.stats.steps >= s.max_steps {
@@ -765,6 +791,7 @@ impl Statics {
             }
             let saved = self.state.clone();
             let lambda0 = self.load_factor;
+            let before = self.stats;
             match self.arc_length_step(dl, previous.as_deref(), target.signum()) {
                 Ok((dq, dlambda, iterations)) => {
                     if (lambda0 + dlambda - target) * target.signum() > 0.0 {
@@ -778,11 +805,13 @@ impl Statics {
                             self.load_factor = lambda0 + dlambda;
                         }
                         self.stats.steps += 1;
+                        self.accepted(output, self.load_factor - lambda0, &mut since, &before)?;
                         output.output(&self.sample()).map_err(SolveError::Output)?;
                         break;
                     }
                     self.stats.steps += 1;
                     self.load_factor = lambda0 + dlambda;
+                    self.accepted(output, dlambda, &mut since, &before)?;
                     output.output(&self.sample()).map_err(SolveError::Output)?;
                     previous = Some(dq);
                     let ratio = (s.target_iterations as f64 / iterations.max(1) as f64).sqrt();
