@@ -206,15 +206,17 @@ impl OutputDir {
 /// plain for zero and magnitudes in `[1e-5, 1e16)`, scientific otherwise; `NaN`, `inf` and
 /// `-inf` for non-finite values.
 pub fn push_number(out: &mut String, x: f64) {
-    let magnitude = x.abs();
-    // `{}` and `{:e}` without a precision both print the shortest round-trip digits.
-    let plain = magnitude == 0.0 || (1e-5..1e16).contains(&magnitude) || !x.is_finite();
-    let result = if plain {
-        write!(out, "{x}")
-    } else {
-        write!(out, "{x:e}")
-    };
-    result.expect("writing into a String cannot fail");
+    if !x.is_finite() {
+        write!(out, "{x}").expect("writing into a String cannot fail");
+        return;
+    }
+    // Ryu prints the shortest round-trip digits, plain for magnitudes in [1e-5, 1e16) and
+    // scientific otherwise, as `{}` and `{:e}` would, several times faster; a whole number
+    // keeps a ".0" that `{}` leaves out, and a value halfway between two shortest decimals
+    // gets the even last digit where std rounds up (both read back to the same bits).
+    let mut buffer = ryu::Buffer::new();
+    let text = buffer.format_finite(x);
+    out.push_str(text.strip_suffix(".0").unwrap_or(text));
 }
 
 /// A CSV file written one output step at a time: the rows of a step are collected in memory
@@ -780,5 +782,94 @@ mod tests {
         assert_eq!(json["status"], "failed");
         assert_eq!(json["error_kind"], "analysis");
         assert_eq!(json["error"], "why");
+    }
+}
+
+#[cfg(test)]
+mod same_as_std {
+    use super::push_number;
+    use std::fmt::Write as _;
+
+    /// The formatting of std, which [`push_number`] reproduces but for ties.
+    fn with_std(x: f64) -> String {
+        let magnitude = x.abs();
+        let plain = magnitude == 0.0 || (1e-5..1e16).contains(&magnitude) || !x.is_finite();
+        let mut out = String::new();
+        if plain {
+            write!(out, "{x}").unwrap();
+        } else {
+            write!(out, "{x:e}").unwrap();
+        }
+        out
+    }
+
+    #[test]
+    fn numbers_are_written_as_std_writes_them_but_for_ties() {
+        let mut cases = vec![
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.1,
+            1e-5,
+            9.999999999999999e-6,
+            1e16,
+            9999999999999998.0,
+            1e15,
+            123456789.0,
+            1e-7,
+            2.5e-7,
+            1.7976931348623157e308,
+            5e-324,
+            -2.2250738585072014e-308,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            12.566370614359172,
+            1e21,
+            1e22,
+            1e23,
+        ];
+        // Bit patterns over the whole range (a fixed linear congruential sequence).
+        let mut bits: u64 = 0x9e37_79b9_7f4a_7c15;
+        for _ in 0..200_000 {
+            bits = bits
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            cases.push(f64::from_bits(bits));
+        }
+        // And numbers of everyday sizes.
+        for k in 0..20_000 {
+            cases.push((k as f64 - 10_000.0) * 0.001_7);
+            cases.push((k as f64).powi(3) * 1e-9);
+        }
+        let mut ties = 0;
+        for x in cases {
+            let mut mine = String::new();
+            push_number(&mut mine, x);
+            let theirs = with_std(x);
+            if mine != theirs {
+                // A value exactly halfway between two shortest decimals: std rounds the last
+                // digit up, Ryu to even; both read back to the same bits.
+                assert_eq!(mine.len(), theirs.len(), "{mine} against {theirs}");
+                assert_eq!(
+                    mine.contains('e'),
+                    theirs.contains('e'),
+                    "{mine} against {theirs}"
+                );
+                ties += 1;
+            }
+            if x.is_finite() {
+                assert_eq!(
+                    mine.parse::<f64>().unwrap().to_bits(),
+                    x.to_bits(),
+                    "{mine}"
+                );
+            }
+        }
+        assert!(
+            ties < 100,
+            "{ties} numbers written otherwise than std writes them"
+        );
     }
 }
