@@ -5,9 +5,10 @@
 //! [`Snapshot`] per output step (time or load factor, node configurations and velocities,
 //! joint points and reactions, beam strains and stress resultants, sensor values) and the
 //! solver's statistics per step ([`StepStat`]). They are written as the run goes into the
-//! HDF5 results file and read back from it; the plots, the Paraview series and the browser
-//! animation are drawn from a [`Results`] ([`plot`]: sensor histories; [`vtk`]: the Paraview
-//! series).
+//! HDF5 results file ([`h5`], docs/results-format.md) and read back from it; the plots, the
+//! Paraview series and the browser animation are drawn from a [`Results`] ([`plot`]: sensor
+//! histories; [`vtk`] with [`geometry`]: the Paraview series; [`view`]: one self-contained
+//! HTML page with three.js).
 
 pub mod geometry;
 pub mod h5;
