@@ -327,21 +327,6 @@ struct Scene<'a> {
     triad: f64,
 }
 
-const BEAM_ARRAYS: [&str; 12] = [
-    "axial_strain",
-    "shear_strain_2",
-    "shear_strain_3",
-    "torsion",
-    "curvature_2",
-    "curvature_3",
-    "axial_force",
-    "shear_force_2",
-    "shear_force_3",
-    "torque",
-    "bending_moment_2",
-    "bending_moment_3",
-];
-
 impl<'a> Scene<'a> {
     fn new(results: &'a Results, sides: usize) -> Self {
         let info = &results.info;
@@ -418,7 +403,7 @@ impl<'a> Scene<'a> {
         let (tris, cells) = (2 * s * n, 2 * s * n + n);
         vtu.begin(block * n, cells)?;
         vtu.open("CellData")?;
-        for (c, name) in BEAM_ARRAYS.iter().enumerate() {
+        for (c, name) in flexmb::output::BEAM_QUANTITIES.iter().enumerate() {
             let value = |e: usize| {
                 if c < 6 {
                     snap.beam_strain[e][c]

@@ -358,7 +358,7 @@ impl ResultFiles {
         } else {
             Some(CsvFile::create(
                 dir.file(BEAMS_FILE),
-                &format!("{first},element,{BEAM_COLUMNS}"),
+                &format!("{first},element,{}", BEAM_QUANTITIES.join(",")),
             )?)
         };
         Ok(Self {
@@ -563,8 +563,23 @@ impl Summary {
     }
 }
 
-/// Column names of `beams.csv` after `time,element`: strains, then stress resultants.
-const BEAM_COLUMNS: &str = "axial_strain,shear_strain_2,shear_strain_3,torsion,curvature_2,curvature_3,axial_force,shear_force_2,shear_force_3,torque,bending_moment_2,bending_moment_3";
+/// The names of a beam element's 6 strains and 6 stress resultants, in the order of
+/// `BeamState::strain` then `BeamState::stress`: the columns of `beams.csv` and the arrays of
+/// the Paraview series.
+pub const BEAM_QUANTITIES: [&str; 12] = [
+    "axial_strain",
+    "shear_strain_2",
+    "shear_strain_3",
+    "torsion",
+    "curvature_2",
+    "curvature_3",
+    "axial_force",
+    "shear_force_2",
+    "shear_force_3",
+    "torque",
+    "bending_moment_2",
+    "bending_moment_3",
+];
 
 #[cfg(test)]
 mod tests {
