@@ -185,6 +185,14 @@ fn visit(
             Wrt::Own(p),
             sink,
         ),
+        ParamKind::Contact(i, p) => {
+            let c = &model.contacts[i];
+            let element = crate::elements::contact::ContactElement {
+                contact: c,
+                effective_mass: crate::elements::contact::effective_mass(model, c.node_a, c.node_b),
+            };
+            element_term(at, (&element, ElementItem::Contact(i)), Wrt::Own(p), sink)
+        }
         ParamKind::Joint(j, p) => {
             let joint = &model.joints[j.0];
             let (rows, start) = (&rows[j.0], starts[j.0]);

@@ -194,6 +194,31 @@ pub fn sensor_value(
             buffers.gather(sp, nodes, (&state.x, &state.xdot, start));
             sp.tension(&ctx, &buffers.local(nodes))
         }
+        SensorKind::Contact { contact, quantity } => {
+            let item = ElementItem::Contact(*contact);
+            let c = &model.contacts[*contact];
+            let element = crate::elements::contact::ContactElement {
+                contact: c,
+                effective_mass: f64::INFINITY,
+            };
+            buffers.gather(
+                &element,
+                nodes,
+                (&state.x, &state.xdot, item.state_start(model)),
+            );
+            let s = element.state(&ctx, &buffers.local(nodes));
+            match quantity {
+                0 => s.normal_force,
+                1 => (-s.gap).max(0.0),
+                2 => s.gap,
+                3 => s.slip_velocity,
+                4 => s.friction_force,
+                _ => {
+                    let stiction = c.friction.map_or(0.0, |f| f.stiction_velocity);
+                    (s.gap < 0.0 && s.slip_velocity < stiction) as u8 as f64
+                }
+            }
+        }
         SensorKind::RopeForce { rope: i } => {
             let rope = &model.ropes[*i];
             let start = ElementItem::Rope(*i).state_start(model);
@@ -270,6 +295,7 @@ pub fn unit(kind: &SensorKind) -> &'static str {
         SensorKind::JointForce { .. }
         | SensorKind::SpringForce { .. }
         | SensorKind::RopeForce { .. } => "N",
+        SensorKind::Contact { quantity, .. } => ["N", "m", "m", "m/s", "N", ""][*quantity],
         SensorKind::JointTorque { .. } => "N m",
         SensorKind::KineticEnergy | SensorKind::PotentialEnergy | SensorKind::TotalEnergy => "J",
         SensorKind::ConstraintViolation => "m or rad",

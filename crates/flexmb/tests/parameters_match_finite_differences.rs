@@ -9,7 +9,7 @@ use flexmb::elements::{
 };
 use flexmb::joints;
 use flexmb::model::parameters::{
-    BodyParam, JointParam, LoadParam, NodeParam, RopeParam, SectionParam, SpringParam,
+    BodyParam, ContactParam, JointParam, LoadParam, NodeParam, RopeParam, SectionParam, SpringParam,
 };
 use flexmb::model::{
     BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, ParamId, ParamKind,
@@ -177,6 +177,13 @@ fn pattern(params: &Parameters, id: ParamId) -> String {
             SpringParam::PointB(_) => "spring.<s>.point_b.<k>",
             SpringParam::RelaxationStiffness => "spring.<s>.relaxation_stiffness",
             SpringParam::RelaxationDamping => "spring.<s>.relaxation_damping",
+        },
+        ParamKind::Contact(_, p) => match p {
+            ContactParam::Stiffness => "contact.<c>.stiffness",
+            ContactParam::Exponent => "contact.<c>.exponent",
+            ContactParam::Restitution => "contact.<c>.restitution",
+            ContactParam::Friction => "contact.<c>.friction.coefficient",
+            ContactParam::ViscousFriction => "contact.<c>.friction.viscous",
         },
         ParamKind::Rope(_, p) => match p {
             RopeParam::Stiffness => "rope.<r>.stiffness",
@@ -482,6 +489,101 @@ fn parameter_derivatives_match_finite_differences_on_a_two_element_beam() {
     println!("worst relative error {:.2e}", seen.worst);
 }
 
+/// Two balls on a plane, one against the other, with friction: every contact is closed
+/// (penetrations of a few mm that the random point's spread of 1 mm keeps).
+fn contacts(group: Group) -> Model {
+    use flexmb::model::contact::{Contact, ContactLaw, ContactShape, Dissipation, Friction};
+    let mut m = Model::new(group);
+    m.gravity = Vec3::new(0.3, -9.81, 1.2);
+    let a = m.add_node(
+        "a",
+        Frame::new(Vec3::new(0.0, 0.0, 0.095), Mat3::identity()),
+    );
+    let b = m.add_node(
+        "b",
+        Frame::new(Vec3::new(0.195, 0.0, 0.096), Mat3::identity()),
+    );
+    for (name, n) in [("a", a), ("b", b)] {
+        m.add_body(name, n, 1.2, Vec3::zeros(), Mat3::identity() * 1e-3);
+    }
+    let law = |dissipation, exponent| ContactLaw {
+        dissipation,
+        stiffness: 3e4,
+        exponent,
+        restitution: 0.7,
+        min_impact_velocity: 1e-3,
+    };
+    let friction = Some(Friction {
+        coefficient: 0.3,
+        stiction_velocity: 0.05,
+        viscous: 20.0,
+    });
+    let sphere = |radius| ContactShape::Sphere {
+        center: Vec3::zeros(),
+        radius,
+        inside: false,
+    };
+    let plane = ContactShape::Plane {
+        point: Vec3::zeros(),
+        normal: Vec3::z(),
+    };
+    let pairs = [
+        (
+            "floor_a",
+            None,
+            a,
+            plane,
+            Dissipation::LankaraniNikravesh,
+            1.5,
+        ),
+        ("floor_b", None, b, plane, Dissipation::Flores, 1.5),
+        (
+            "ab",
+            Some(a),
+            b,
+            sphere(0.1),
+            Dissipation::HuntCrossley,
+            1.0,
+        ),
+    ];
+    for (name, node_a, node_b, shape_a, dissipation, exponent) in pairs {
+        m.contacts.push(Contact {
+            name: name.into(),
+            node_a,
+            node_b: Some(node_b),
+            shape_a,
+            shape_b: sphere(0.1),
+            law: law(dissipation, exponent),
+            friction,
+        });
+    }
+    m
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_contacts() {
+    let mut seen = Seen::default();
+    let mut rng = Lcg(8);
+    for group in [Group::R3xSO3, Group::SE3] {
+        let model = contacts(group);
+        for _ in 0..2 {
+            let mut at = point(&model, &mut rng, 1e-3);
+            for node in at.nodes.iter_mut() {
+                node.v *= 0.05;
+            }
+            // the impact velocities (held states): positive
+            at.x.iter_mut().for_each(|x| *x = 1.0 + x.abs());
+            check_model(&format!("contacts on {group:?}"), &model, &at, &mut seen);
+        }
+    }
+    assert!(
+        seen.kinds.contains("contact.<c>.friction.viscous"),
+        "{:?}",
+        seen.kinds
+    );
+    println!("worst relative error {:.2e}", seen.worst);
+}
+
 #[test]
 fn parameter_kinds_by_finite_differences_are_the_listed_ones() {
     // Every kind of parameter occurs in the test models above, and these, and only these,
@@ -492,6 +594,9 @@ fn parameter_kinds_by_finite_differences_are_the_listed_ones() {
     check_model("mechanism", &mechanism(Group::SE3), &at, &mut seen);
     let at = point(&beam(BeamMass::Lumped), &mut rng, 0.2);
     check_model("beam", &beam(BeamMass::Lumped), &at, &mut seen);
+    let mut at = point(&contacts(Group::SE3), &mut rng, 1e-3);
+    at.x.iter_mut().for_each(|x| *x = 1.0 + x.abs());
+    check_model("contacts", &contacts(Group::SE3), &at, &mut seen);
     let by_differences: Vec<&str> = seen.by_differences.iter().map(String::as_str).collect();
     assert_eq!(
         by_differences,
@@ -502,5 +607,5 @@ fn parameter_kinds_by_finite_differences_are_the_listed_ones() {
             "spring.<s>.point_b.<k>"
         ]
     );
-    assert_eq!(seen.kinds.len(), 29, "kinds checked: {:#?}", seen.kinds);
+    assert_eq!(seen.kinds.len(), 34, "kinds checked: {:#?}", seen.kinds);
 }

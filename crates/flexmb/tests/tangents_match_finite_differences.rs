@@ -3,10 +3,12 @@
 //! gradients B and their derivatives H. One shared checker serves all. Parameter derivatives:
 //! `parameters_match_finite_differences.rs`.
 
+use flexmb::elements::contact::ContactElement;
 use flexmb::elements::{
     evaluate_owned, Coefficients, Context, ElementKernel, Local, Mat12, NodeState, Vec12,
 };
 use flexmb::joints;
+use flexmb::model::contact::{Contact, ContactLaw, ContactShape, Dissipation, Friction};
 use flexmb::model::{
     Beam, BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, RigidBody,
     SpringDamper, TimeFunction,
@@ -82,6 +84,21 @@ fn check_element_with_states(
     x: &[f64],
     xdot: &[f64],
 ) {
+    check_states(name, kernel, model, nodes, (x, xdot), (false, EPS));
+}
+
+/// [`check_element_with_states`] for an element whose states are held values (equation
+/// `xdot = 0`): without a rate term (statics), the iteration matrix reads the equation as
+/// `x = x_start` (diagonal 1) while the residual stays `xdot`, so that diagonal entry is
+/// checked against 1 instead of a difference.
+fn check_states(
+    name: &str,
+    kernel: &dyn ElementKernel,
+    model: &Model,
+    nodes: &[NodeState],
+    (x, xdot): (&[f64], &[f64]),
+    (held, eps): (bool, f64),
+) {
     let group = model.group;
     let ctx = Context::at(model, 0.37, 1.0);
     let nodes = &nodes[..kernel.n_slots()];
@@ -114,8 +131,8 @@ fn check_element_with_states(
                     continue;
                 }
                 (
-                    eval(&perturb(group, nodes, k, EPS, what), x, xdot),
-                    eval(&perturb(group, nodes, k, -EPS, what), x, xdot),
+                    eval(&perturb(group, nodes, k, eps, what), x, xdot),
+                    eval(&perturb(group, nodes, k, -eps, what), x, xdot),
                 )
             } else {
                 let i = k - n6;
@@ -126,17 +143,22 @@ fn check_element_with_states(
                 };
                 match what {
                     'x' => (
-                        eval(nodes, &moved(x, EPS), xdot),
-                        eval(nodes, &moved(x, -EPS), xdot),
+                        eval(nodes, &moved(x, eps), xdot),
+                        eval(nodes, &moved(x, -eps), xdot),
                     ),
                     'd' => (
-                        eval(nodes, x, &moved(xdot, EPS)),
-                        eval(nodes, x, &moved(xdot, -EPS)),
+                        eval(nodes, x, &moved(xdot, eps)),
+                        eval(nodes, x, &moved(xdot, -eps)),
                     ),
                     _ => continue,
                 }
             };
-            fd.set_column(k, &((rp - rm) / (2.0 * EPS)));
+            fd.set_column(k, &((rp - rm) / (2.0 * eps)));
+        }
+        if held && what == 'x' {
+            for i in n6..n {
+                fd[(i, i)] = 1.0;
+            }
         }
         assert_close(
             &s,
@@ -652,5 +674,208 @@ fn consistent_beam_mass_is_the_kinetic_energy_of_the_interpolation() {
             error < 1e-7,
             "d0 {d0:?}: {energy} against {exact} ({error:e})"
         );
+    }
+}
+
+/// A contact whose shapes are placed, in the frames of `nodes`, so that B penetrates A by
+/// `depth` along a random direction: every shape pair, with and without friction.
+fn contacts(nodes: &[NodeState; 2], rng: &mut Lcg, depth: f64) -> Vec<Contact> {
+    let (a, b) = (&nodes[0].q, &nodes[1].q);
+    let unit = |rng: &mut Lcg| rng.v3(1.0).normalize();
+    let n = unit(rng);
+    let on_a = a.x + rng.v3(0.5);
+    let in_a = |p: &Vec3| a.inverse().point(p);
+    let in_b = |p: &Vec3| b.inverse().point(p);
+    let dir_a = |d: &Vec3| a.r.transpose() * d;
+    let (ra, rb) = (0.3, 0.1);
+    // B's centre: touching A's surface at `on_a` with normal n, minus the penetration.
+    let centre = |surface: Vec3| surface + n * (rb - depth);
+    // A cylinder axis normal to n.
+    let axis = n.cross(&unit(rng)).normalize();
+    let law = |dissipation| ContactLaw {
+        dissipation,
+        stiffness: 2e4,
+        exponent: 1.5,
+        restitution: 0.7,
+        min_impact_velocity: 1e-3,
+    };
+    let pairs = vec![
+        (
+            ContactShape::Plane {
+                point: in_a(&on_a),
+                normal: dir_a(&n),
+            },
+            centre(on_a),
+        ),
+        (
+            ContactShape::Sphere {
+                center: in_a(&(on_a - n * ra)),
+                radius: ra,
+                inside: false,
+            },
+            centre(on_a),
+        ),
+        (
+            ContactShape::Sphere {
+                center: in_a(&(on_a + n * ra)),
+                radius: ra,
+                inside: true,
+            },
+            // inside: B's centre towards A's centre, B penetrating A's wall
+            on_a + n * (rb - depth),
+        ),
+        (
+            ContactShape::Cylinder {
+                point: in_a(&(on_a - n * ra)),
+                axis: dir_a(&axis),
+                radius: ra,
+                inside: false,
+            },
+            centre(on_a),
+        ),
+        (
+            ContactShape::Cylinder {
+                point: in_a(&(on_a + n * ra)),
+                axis: dir_a(&axis),
+                radius: ra,
+                inside: true,
+            },
+            on_a + n * (rb - depth),
+        ),
+    ];
+    let mut out = Vec::new();
+    for (k, (shape_a, c_b)) in pairs.into_iter().enumerate() {
+        let dissipation = [
+            Dissipation::LankaraniNikravesh,
+            Dissipation::HuntCrossley,
+            Dissipation::Flores,
+        ][k % 3];
+        for friction in [
+            None,
+            // sliding (Coulomb)
+            Some(Friction {
+                coefficient: 0.4,
+                stiction_velocity: 1e-3,
+                viscous: 0.3,
+            }),
+            // within the stiction velocity
+            Some(Friction {
+                coefficient: 0.4,
+                stiction_velocity: 50.0,
+                viscous: 0.0,
+            }),
+        ] {
+            out.push(Contact {
+                name: format!("{} {}", shape_a.keyword(), k),
+                node_a: Some(NodeId(0)),
+                node_b: Some(NodeId(1)),
+                shape_a,
+                shape_b: ContactShape::Sphere {
+                    center: in_b(&c_b),
+                    radius: rb,
+                    inside: false,
+                },
+                law: law(dissipation),
+                friction,
+            });
+        }
+        // a circle B on a cylinder A (parallel axes): planar cams
+        if let ContactShape::Cylinder { .. } = shape_a {
+            out.push(Contact {
+                name: format!("circles {k}"),
+                node_a: Some(NodeId(0)),
+                node_b: Some(NodeId(1)),
+                shape_a,
+                shape_b: ContactShape::Cylinder {
+                    point: in_b(&c_b),
+                    axis: b.r.transpose() * axis,
+                    radius: rb,
+                    inside: false,
+                },
+                law: law(dissipation),
+                friction: None,
+            });
+        }
+    }
+    out
+}
+
+#[test]
+fn contact_tangents_match_finite_differences() {
+    // Closed contacts (penetration 2 mm) of every shape pair, law and friction regime, with
+    // the impact velocity x as the held state (column dr/dx checked by differences).
+    let mut rng = Lcg(11);
+    for model in models() {
+        for _ in 0..3 {
+            let mut nodes = [rng.node(model.group), rng.node(model.group)];
+            for n in nodes.iter_mut() {
+                n.v *= 0.05; // keep F_n > 0: deltadot small against v_imp
+            }
+            for contact in contacts(&nodes, &mut rng, 2e-3) {
+                let element = ContactElement {
+                    contact: &contact,
+                    effective_mass: 1.0,
+                };
+                let ctx = Context::at(&model, 0.0, 1.0);
+                let local = Local {
+                    nodes: &nodes,
+                    x: &[0.7],
+                    xdot: &[0.0],
+                };
+                let state = element.state(&ctx, &local);
+                assert!(
+                    (state.gap + 2e-3).abs() < 1e-12 && state.normal_force > 0.0,
+                    "{}: placed with penetration 2e-3, gap {} force {}",
+                    contact.name,
+                    state.gap,
+                    state.normal_force
+                );
+                let name = format!(
+                    "contact '{}' (friction {:?})",
+                    contact.name, contact.friction
+                );
+                check_states(
+                    &name,
+                    &element,
+                    &model,
+                    &nodes,
+                    (&[0.7], &[0.0]),
+                    (true, EPS),
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn contact_tangents_match_one_sided_differences_at_the_onset() {
+    // Near the onset the force K delta^(3/2) has a derivative growing like sqrt(delta):
+    // differences are taken on one side of it only (steps well below the distance to the
+    // onset). Open side (gap 1e-6): force and matrix are zero. Closed side (penetration
+    // 1e-6, steps 2e-9): the matrix matches the differences.
+    let mut rng = Lcg(12);
+    for model in models() {
+        let nodes = [rng.node(model.group), rng.node(model.group)];
+        let slow: [NodeState; 2] = nodes.map(|mut n| {
+            n.v *= 1e-3;
+            n
+        });
+        for (depth, eps) in [(-1e-6, 1e-7), (1e-6, 2e-9)] {
+            for contact in contacts(&slow, &mut rng, depth) {
+                let element = ContactElement {
+                    contact: &contact,
+                    effective_mass: 1.0,
+                };
+                let name = format!("contact '{}' at penetration {depth:e}", contact.name);
+                check_states(
+                    &name,
+                    &element,
+                    &model,
+                    &slow,
+                    (&[0.7], &[0.0]),
+                    (true, eps),
+                );
+            }
+        }
     }
 }

@@ -1,6 +1,7 @@
 //! Force elements: rigid bodies (inertia and gravity), geometrically exact beams on SE(3)
 //! (two nodes, [`beam`]), applied loads, spring-dampers (with an optional Maxwell branch,
-//! [`spring`]) and ropes through any number of points ([`rope`]).
+//! [`spring`]), ropes through any number of points ([`rope`]) and unilateral contacts with
+//! impact and friction ([`contact`]).
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
@@ -32,6 +33,7 @@
 //! [`physical`].
 
 pub mod beam;
+pub mod contact;
 pub mod load;
 pub mod physical;
 pub mod rigid_body;
@@ -185,6 +187,8 @@ pub enum ElementRef {
     Load(usize),
     Spring(usize),
     Rope(usize),
+    /// Index in [`Model::contacts`] and the effective mass of its nodes' bodies.
+    Contact(usize, f64),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -250,6 +254,31 @@ pub trait ElementKernel {
     fn potential_energy(&self, _ctx: &Context, _local: &Local) -> f64 {
         0.0
     }
+    /// After an accepted time step from `start` to `end` (kinematics and states): the element
+    /// may set states that are held constant during steps (their equation `xdot = 0`), e.g.
+    /// a contact's impact velocity. `x` holds the end's states on entry.
+    fn update_states(&self, _ctx: &Context, _start: &Local, _end: &Local, _x: &mut [f64]) {}
+    /// Step-size control for elements with events (a contact's onset): what the element
+    /// asks of a step of size `h` whose Newton iteration converged, from `start` to `end`.
+    /// `None`: nothing.
+    fn step_limit(
+        &self,
+        _ctx: &Context,
+        _start: &Local,
+        _end: &Local,
+        _h: f64,
+    ) -> Option<StepLimit> {
+        None
+    }
+}
+
+/// What an element with events asks of a converged step ([`ElementKernel::step_limit`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum StepLimit {
+    /// Reject the step and repeat it with this size.
+    Retry(f64),
+    /// Accept it, and make the following steps at most this long.
+    Next(f64),
 }
 
 /// Reused storage for one element's [`Local`] inputs and its local vector and matrix.
@@ -404,6 +433,10 @@ impl ElementRef {
                 ElementItem::Load(i) => ElementRef::Load(i),
                 ElementItem::Spring(i) => ElementRef::Spring(i),
                 ElementItem::Rope(i) => ElementRef::Rope(i),
+                ElementItem::Contact(i) => {
+                    let c = &model.contacts[i];
+                    ElementRef::Contact(i, contact::effective_mass(model, c.node_a, c.node_b))
+                }
             })
             .collect()
     }
@@ -419,7 +452,18 @@ impl ElementRef {
             ElementRef::Load(i) => Kernel::Load(&model.loads[*i]),
             ElementRef::Spring(i) => Kernel::Spring(&model.springs[*i]),
             ElementRef::Rope(i) => Kernel::Rope(&model.ropes[*i]),
+            ElementRef::Contact(i, m) => Kernel::Contact(contact::ContactElement {
+                contact: &model.contacts[*i],
+                effective_mass: *m,
+            }),
         }
+    }
+
+    /// Whether the element has events: the dynamic step asks it for a step limit
+    /// ([`ElementKernel::step_limit`]) and lets it update its held states between steps
+    /// ([`ElementKernel::update_states`]).
+    pub fn has_events(&self) -> bool {
+        matches!(self, ElementRef::Contact(..))
     }
 
     /// Name for diagnostics, e.g. `body 'crank'`.
@@ -430,6 +474,7 @@ impl ElementRef {
             ElementRef::Load(i) => format!("load '{}'", model.loads[*i].name),
             ElementRef::Spring(i) => format!("spring '{}'", model.springs[*i].name),
             ElementRef::Rope(i) => format!("rope '{}'", model.ropes[*i].name),
+            ElementRef::Contact(i, _) => format!("contact '{}'", model.contacts[*i].name),
         }
     }
 }
@@ -443,10 +488,12 @@ pub enum ElementItem {
     Load(usize),
     Spring(usize),
     Rope(usize),
+    Contact(usize),
 }
 
 impl ElementItem {
-    /// Every force element of `model`: bodies, beam elements, loads, springs, ropes.
+    /// Every force element of `model`: bodies, beam elements, loads, springs, ropes,
+    /// contacts.
     pub fn all(model: &Model) -> impl Iterator<Item = ElementItem> {
         (0..model.bodies.len())
             .map(ElementItem::Body)
@@ -454,6 +501,7 @@ impl ElementItem {
             .chain((0..model.loads.len()).map(ElementItem::Load))
             .chain((0..model.springs.len()).map(ElementItem::Spring))
             .chain((0..model.ropes.len()).map(ElementItem::Rope))
+            .chain((0..model.contacts.len()).map(ElementItem::Contact))
     }
 
     /// The number of states the element owns.
@@ -464,6 +512,7 @@ impl ElementItem {
             ElementItem::Load(i) => model.loads[i].n_states(),
             ElementItem::Spring(i) => model.springs[i].n_states(),
             ElementItem::Rope(i) => model.ropes[i].n_states(),
+            ElementItem::Contact(_) => 1,
         }
     }
 
@@ -488,6 +537,7 @@ pub enum Kernel<'m> {
     Load(&'m crate::model::Load),
     Spring(&'m crate::model::SpringDamper),
     Rope(&'m crate::model::Rope),
+    Contact(contact::ContactElement<'m>),
 }
 
 macro_rules! dispatch {
@@ -498,6 +548,7 @@ macro_rules! dispatch {
             Kernel::Load($k) => $e,
             Kernel::Spring($k) => $e,
             Kernel::Rope($k) => $e,
+            Kernel::Contact($k) => $e,
         }
     };
 }
@@ -533,6 +584,12 @@ impl ElementKernel for Kernel<'_> {
     }
     fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
         dispatch!(self, k => k.potential_energy(ctx, local))
+    }
+    fn update_states(&self, ctx: &Context, start: &Local, end: &Local, x: &mut [f64]) {
+        dispatch!(self, k => k.update_states(ctx, start, end, x))
+    }
+    fn step_limit(&self, ctx: &Context, start: &Local, end: &Local, h: f64) -> Option<StepLimit> {
+        dispatch!(self, k => k.step_limit(ctx, start, end, h))
     }
 }
 

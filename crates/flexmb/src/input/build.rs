@@ -30,6 +30,7 @@ const TOP_KEYS: &[&str] = &[
     "load",
     "spring",
     "rope",
+    "contact",
     "beam",
     "sensor",
     "sensitivity",
@@ -49,6 +50,7 @@ const SENSOR_KEYS: &[&str] = &[
     "beam",
     "spring",
     "rope",
+    "contact",
 ];
 const NODE_STATE_KEYS: &[&str] = &[
     "position",
@@ -116,6 +118,7 @@ pub(super) struct Origins {
     loads: Vec<Origin>,
     springs: Vec<Origin>,
     ropes: Vec<Origin>,
+    pub contacts: Vec<Origin>,
     /// One per element of `Model::beams`.
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
@@ -180,6 +183,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     read_loads(&top, &mut model, &mut origins)?;
     read_springs(&top, &mut model, &mut origins)?;
     read_ropes(&top, &mut model, &mut origins)?;
+    super::contact::read_contacts(&top, &mut model, &mut origins)?;
     read_sensors(&top, &mut model, &mut origins)?;
 
     model
@@ -208,6 +212,7 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
         "load" => &origins.loads,
         "spring" => &origins.springs,
         "rope" => &origins.ropes,
+        "contact" => &origins.contacts,
         "beam" => &origins.beams,
         "sensor" => &origins.sensors,
         _ => &[],
@@ -796,7 +801,7 @@ pub(super) fn require_node(model: &Model, origins: &Origins, f: &Field<'_>) -> R
 }
 
 /// A node name, or "ground" (`None`) when `ground_ok`.
-fn resolve_node(
+pub(super) fn resolve_node(
     model: &Model,
     origins: &Origins,
     f: &Field<'_>,
@@ -1200,7 +1205,7 @@ fn positive_step(f: &Field<'_>) -> Result<f64> {
 }
 
 /// A point given in inertial coordinates at t = 0, in the frame of `node` (inertial for ground).
-fn to_node_frame(model: &Model, node: Option<NodeId>, p: &Vec3) -> Vec3 {
+pub(super) fn to_node_frame(model: &Model, node: Option<NodeId>, p: &Vec3) -> Vec3 {
     match node {
         Some(id) => model.nodes[id.0].frame.inverse().point(p),
         None => *p,
@@ -1373,6 +1378,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "beam_stress",
             "spring_force",
             "rope_force",
+            "contact",
         ])?;
         let why = format!("for a {ty} sensor");
         let uses: &[&str] = match ty {
@@ -1384,6 +1390,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "beam_strain" | "beam_stress" => &["beam", "component"],
             "spring_force" => &["spring"],
             "rope_force" => &["rope"],
+            "contact" => &["contact", "component"],
             _ => &[],
         };
         // The keys after `name` and `type`: each sensor type uses some of them.
@@ -1497,6 +1504,12 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                 let names = || model.springs.iter().map(|s| s.name.as_str());
                 let spring = item_named(&t.req("spring")?, names, "spring", "springs")?;
                 SensorKind::SpringForce { spring }
+            }
+            "contact" => {
+                let names = || model.contacts.iter().map(|c| c.name.as_str());
+                let contact = item_named(&t.req("contact")?, names, "contact", "contacts")?;
+                let quantity = component(&crate::model::CONTACT_QUANTITIES)?;
+                SensorKind::Contact { contact, quantity }
             }
             "rope_force" => {
                 let names = || model.ropes.iter().map(|r| r.name.as_str());

@@ -30,6 +30,7 @@
 
 mod beam;
 mod build;
+mod contact;
 mod display;
 mod error;
 mod overrides;

@@ -9,6 +9,7 @@
 //!
 //! Units are SI throughout (m, kg, s, N, rad) unless a model chooses consistent others.
 
+pub mod contact;
 pub mod display;
 pub mod limits;
 pub mod parameters;
@@ -364,6 +365,11 @@ pub enum SensorKind {
     RopeForce {
         rope: usize,
     },
+    /// A quantity of a contact (index in [`Model::contacts`]; [`CONTACT_QUANTITIES`]).
+    Contact {
+        contact: usize,
+        quantity: usize,
+    },
     KineticEnergy,
     PotentialEnergy,
     TotalEnergy,
@@ -382,6 +388,20 @@ pub enum SensorKind {
         component: usize,
     },
 }
+
+/// The quantities a contact sensor measures, in the order of
+/// [`SensorKind::Contact::quantity`]: the normal force \[N\], the penetration \[m\] (0 when
+/// open), the signed gap \[m\], the slip speed [m/s], the magnitude of the friction force
+/// \[N\], and whether it sticks (1 when closed and slipping slower than the stiction
+/// velocity, else 0).
+pub const CONTACT_QUANTITIES: [&str; 6] = [
+    "normal_force",
+    "penetration",
+    "gap",
+    "slip_velocity",
+    "friction_force",
+    "stick",
+];
 
 /// A named output channel.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -405,6 +425,9 @@ pub struct Model {
     pub springs: Vec<SpringDamper>,
     #[serde(default)]
     pub ropes: Vec<Rope>,
+    /// Unilateral contacts with impact and friction.
+    #[serde(default)]
+    pub contacts: Vec<contact::Contact>,
     pub beams: Vec<Beam>,
     pub sensors: Vec<Sensor>,
     /// What the bodies and beams look like in the results (no effect on the mechanics).
@@ -449,6 +472,7 @@ impl Model {
             loads: Vec::new(),
             springs: Vec::new(),
             ropes: Vec::new(),
+            contacts: Vec::new(),
             beams: Vec::new(),
             sensors: Vec::new(),
             display: display::Display::default(),

@@ -52,6 +52,7 @@
 //! every other parameter enters the residual of the equations of motion or the constraints
 //! ([`ParamRole::Residual`]).
 
+use super::contact::Contact;
 use super::{BeamSection, JointId};
 use super::{Joint, Load, Model, Node, NodeId, RigidBody, Rope, SpringDamper};
 use flexmb_lie::Vec3;
@@ -151,6 +152,59 @@ pub enum SpringParam {
     RelaxationDamping,
 }
 
+/// A parameter of a contact ([`super::contact::Contact`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ContactParam {
+    /// Contact stiffness K [N/m^n].
+    Stiffness,
+    /// Exponent n.
+    Exponent,
+    /// Coefficient of restitution e.
+    Restitution,
+    /// Coulomb friction coefficient mu.
+    Friction,
+    /// Viscous friction coefficient c_v [N s/m].
+    ViscousFriction,
+}
+
+impl ContactParam {
+    /// The value.
+    pub fn get(self, c: &Contact) -> f64 {
+        let friction = |f: fn(&super::contact::Friction) -> f64| c.friction.as_ref().map_or(0.0, f);
+        match self {
+            ContactParam::Stiffness => c.law.stiffness,
+            ContactParam::Exponent => c.law.exponent,
+            ContactParam::Restitution => c.law.restitution,
+            ContactParam::Friction => friction(|f| f.coefficient),
+            ContactParam::ViscousFriction => friction(|f| f.viscous),
+        }
+    }
+
+    /// Sets the value.
+    pub fn set(self, c: &mut Contact, value: f64) {
+        match self {
+            ContactParam::Stiffness => c.law.stiffness = value,
+            ContactParam::Exponent => c.law.exponent = value,
+            ContactParam::Restitution => c.law.restitution = value,
+            ContactParam::Friction => {
+                if let Some(f) = &mut c.friction {
+                    f.coefficient = value;
+                }
+            }
+            ContactParam::ViscousFriction => {
+                if let Some(f) = &mut c.friction {
+                    f.viscous = value;
+                }
+            }
+        }
+    }
+
+    /// A typical magnitude, for finite-difference steps of a parameter at 0.
+    pub fn scale(self) -> f64 {
+        1.0
+    }
+}
+
 /// Parameters of a rope.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RopeParam {
@@ -181,6 +235,8 @@ pub enum ParamKind {
     Spring(usize, SpringParam),
     /// Index in [`Model::ropes`].
     Rope(usize, RopeParam),
+    /// Index in [`Model::contacts`].
+    Contact(usize, ContactParam),
 }
 
 /// A path that names no parameter.
@@ -327,6 +383,19 @@ impl Parameters {
                 }
             }
         }
+        let names = segments(model.contacts.iter().map(|c| c.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            let mut add = |key: &str, p| {
+                reg.push(format!("contact.{name}.{key}"), ParamKind::Contact(i, p));
+            };
+            add("stiffness", ContactParam::Stiffness);
+            add("exponent", ContactParam::Exponent);
+            add("restitution", ContactParam::Restitution);
+            if model.contacts[i].friction.is_some() {
+                add("friction.coefficient", ContactParam::Friction);
+                add("friction.viscous", ContactParam::ViscousFriction);
+            }
+        }
         reg
     }
 
@@ -398,6 +467,7 @@ impl Parameters {
             ParamKind::Load(i, p) => p.get(&model.loads[i]),
             ParamKind::Spring(i, p) => p.get(&model.springs[i], &model.nodes),
             ParamKind::Rope(i, p) => p.get(&model.ropes[i], &model.nodes),
+            ParamKind::Contact(i, p) => p.get(&model.contacts[i]),
         }
     }
 
@@ -419,6 +489,7 @@ impl Parameters {
             ParamKind::Load(i, p) => p.set(&mut model.loads[i], value),
             ParamKind::Spring(i, p) => p.set(&mut model.springs[i], &model.nodes, value),
             ParamKind::Rope(i, p) => p.set(&mut model.ropes[i], &model.nodes, value),
+            ParamKind::Contact(i, p) => p.set(&mut model.contacts[i], value),
         }
     }
 

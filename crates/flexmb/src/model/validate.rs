@@ -4,6 +4,7 @@
 //! Every number is checked finite and within [`super::limits`]; every error names the item
 //! (table, index, name) and the field, which the model-file front end maps back to a line.
 
+use super::contact::{Contact, ContactShape};
 use super::limits::{
     within, MAX_ANGLE, MAX_FUNCTION_DEPTH, MAX_FUNCTION_TERMS, MAX_ITEMS, MAX_KINEMATIC,
     MAX_PHYSICAL, MAX_ROPE_POINTS, MAX_TIME, MIN_PHYSICAL, MIN_RELATIVE_LENGTH, MIN_STEP,
@@ -39,6 +40,86 @@ fn finite3(v: &Vec3, max: f64) -> Check {
         return Err(format!(
             "has length {:e}, beyond {max:e} (see limits)",
             v.norm()
+        ));
+    }
+    Ok(())
+}
+
+/// A contact shape's own data: finite points, unit directions, radii in range.
+fn check_contact_shape(shape: &ContactShape) -> Check {
+    let unit = |v: &Vec3, what: &str| {
+        finite3(v, 2.0)?;
+        if (v.norm() - 1.0).abs() > 1e-9 {
+            return Err(format!(
+                "{what} must be a unit vector, got length {}",
+                v.norm()
+            ));
+        }
+        Ok(())
+    };
+    let radius = |r: f64| in_range(r, 0.0, MAX_KINEMATIC).map_err(|m| format!("radius {m}"));
+    match shape {
+        ContactShape::Plane { point, normal } => {
+            finite3(point, 2.0 * MAX_KINEMATIC)?;
+            unit(normal, "the normal")
+        }
+        ContactShape::Sphere {
+            center, radius: r, ..
+        } => {
+            finite3(center, 2.0 * MAX_KINEMATIC)?;
+            radius(*r)
+        }
+        ContactShape::Cylinder {
+            point,
+            axis,
+            radius: r,
+            ..
+        } => {
+            finite3(point, 2.0 * MAX_KINEMATIC)?;
+            unit(axis, "the axis")?;
+            radius(*r)
+        }
+    }
+}
+
+/// Whether the two shapes of a contact make a pair the element handles.
+fn contact_pair(model: &Model, c: &Contact) -> Check {
+    let (a, b) = (&c.shape_a, &c.shape_b);
+    if b.inside() {
+        return Err("shape B cannot be 'inside': the shape that contains the other is A".into());
+    }
+    match (a, b) {
+        (_, ContactShape::Plane { .. }) => {
+            Err("shape B cannot be a plane: a plane is shape A, against a sphere or point B".into())
+        }
+        (ContactShape::Plane { .. }, ContactShape::Cylinder { .. }) => {
+            Err("a plane touches a sphere or a point, not a cylinder".into())
+        }
+        (ContactShape::Sphere { .. }, ContactShape::Cylinder { .. }) => {
+            Err("a sphere A touches a sphere or a point B, not a cylinder".into())
+        }
+        (ContactShape::Cylinder { axis: ea, .. }, ContactShape::Cylinder { axis: eb, .. }) => {
+            let rotation =
+                |n: Option<NodeId>| n.map_or(Mat3::identity(), |n| model.nodes[n.0].frame.r);
+            let (ea, eb) = (rotation(c.node_a) * ea, rotation(c.node_b) * eb);
+            if ea.cross(&eb).norm() > 1e-6 {
+                return Err(
+                    "two cylinders (planar circles) must have parallel axes at t = 0".into(),
+                );
+            }
+            inside_fits(a, b)
+        }
+        _ => inside_fits(a, b),
+    }
+}
+
+/// A shape B inside A must be smaller than A.
+fn inside_fits(a: &ContactShape, b: &ContactShape) -> Check {
+    if a.inside() && b.radius() >= a.radius() {
+        return Err(format!(
+            "radius {} does not fit inside shape A of radius {}",
+            b.radius(),
+            a.radius()
         ));
     }
     Ok(())
@@ -422,6 +503,53 @@ impl Model {
             }
         }
 
+        for (i, c) in self.contacts.iter().enumerate() {
+            let fail = |field, m| bad("contact", i, &c.name, field, m);
+            check_node("contact", i, &c.name, "node_a", c.node_a)?;
+            check_node("contact", i, &c.name, "node_b", c.node_b)?;
+            match (c.node_a, c.node_b) {
+                (None, None) => {
+                    return Err(fail(
+                        "node_b",
+                        "puts the ground in contact with the ground: give at least one node".into(),
+                    ))
+                }
+                (Some(a), Some(b)) if a == b => {
+                    return Err(fail(
+                        "node_b",
+                        format!(
+                            "puts node '{}' in contact with itself: a contact acts between two different nodes (or a node and the ground)",
+                            clip(&self.nodes[a.0].name, QUOTED)
+                        ),
+                    ))
+                }
+                _ => {}
+            }
+            for (field, shape) in [("a", &c.shape_a), ("b", &c.shape_b)] {
+                check_contact_shape(shape).map_err(|m| fail(field, m))?;
+            }
+            contact_pair(self, c).map_err(|m| fail("b", m))?;
+            let law = &c.law;
+            in_range(law.stiffness, MIN_PHYSICAL, MAX_PHYSICAL)
+                .map_err(|m| fail("stiffness", m))?;
+            in_range(law.exponent, 1.0, 10.0).map_err(|m| fail("exponent", m))?;
+            if !(law.restitution > 0.0 && law.restitution <= 1.0) {
+                return Err(fail(
+                    "restitution",
+                    format!("must be in (0, 1], got {}", law.restitution),
+                ));
+            }
+            in_range(law.min_impact_velocity, MIN_PHYSICAL, MAX_PHYSICAL)
+                .map_err(|m| fail("min_impact_velocity", m))?;
+            if let Some(f) = &c.friction {
+                in_range(f.coefficient, 0.0, 100.0).map_err(|m| fail("friction", m))?;
+                in_range(f.stiction_velocity, MIN_PHYSICAL, MAX_PHYSICAL)
+                    .map_err(|m| fail("friction", format!("stiction_velocity {m}")))?;
+                in_range(f.viscous, 0.0, MAX_PHYSICAL)
+                    .map_err(|m| fail("friction", format!("viscous {m}")))?;
+            }
+        }
+
         for (i, r) in self.ropes.iter().enumerate() {
             let fail = |field, m| bad("rope", i, &r.name, field, m);
             let n_points = r.points.len();
@@ -623,6 +751,15 @@ impl Model {
                         ));
                     }
                     (None, None)
+                }
+                SensorKind::Contact { contact, quantity } => {
+                    if *contact >= self.contacts.len() {
+                        return Err(fail(
+                            "contact",
+                            format!("contact index {contact} does not exist"),
+                        ));
+                    }
+                    (None, Some((*quantity, super::CONTACT_QUANTITIES.len())))
                 }
                 SensorKind::RopeForce { rope } => {
                     if *rope >= self.ropes.len() {

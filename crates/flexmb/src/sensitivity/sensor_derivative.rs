@@ -132,6 +132,11 @@ fn support(model: &Model, layout: &Layout, k: usize) -> (Vec<usize>, Vec<usize>,
             let slot = |i| r.node(i).map(|n| n.0);
             element(ElementItem::Rope(*rope), &slot, r.n_slots())
         }
+        SensorKind::Contact { contact, .. } => {
+            let c = &model.contacts[*contact];
+            let slot = |i: usize| [c.node_a, c.node_b][i].map(|n| n.0);
+            element(ElementItem::Contact(*contact), &slot, 2)
+        }
         SensorKind::BeamStrain { beam, .. } | SensorKind::BeamStress { beam, .. } => {
             let nodes = model.beams[*beam].nodes.iter().map(|n| n.0).collect();
             (nodes, Vec::new(), Vec::new())
@@ -154,6 +159,7 @@ pub fn sensor_parameters(model: &Model, params: &Parameters, k: usize) -> Vec<Pa
             ) => *joint == j,
             (SensorKind::SpringForce { spring }, ParamKind::Spring(i, _)) => *spring == i,
             (SensorKind::RopeForce { rope }, ParamKind::Rope(i, _)) => *rope == i,
+            (SensorKind::Contact { contact, .. }, ParamKind::Contact(i, _)) => *contact == i,
             (SensorKind::BeamStress { beam, .. }, ParamKind::Beam(item, _)) => {
                 params.beam_elements(item).contains(beam)
             }

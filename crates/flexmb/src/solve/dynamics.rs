@@ -47,12 +47,12 @@ use super::newton::{
 use super::step;
 use crate::assembly::{assemble, Iterate};
 use crate::data::{Block, Data, Layout};
-use crate::elements::{NodeState, Vec12};
+use crate::elements::{Context, ElementKernel, LocalBuffers, NodeState, StepLimit, Vec12};
 use crate::error::{SettingsError, SolveError};
 use crate::model::Model;
 use crate::observe::{Observer, Sample, StepRecord};
 use crate::parallel::Threads;
-use crate::sensors::node_states_into;
+use crate::sensors::{node_states, node_states_into};
 use crate::state::State;
 use flexmb_lie::Vec6;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -314,6 +314,10 @@ pub struct Stats {
     pub multiplier_floor_steps: usize,
     /// Largest weighted multiplier correction of those steps (in units of the tolerance).
     pub multiplier_floor: f64,
+    /// Converged steps repeated shorter because an event asked for it (a contact closing
+    /// too deep; counted in `rejected_steps` too).
+    #[serde(default)]
+    pub event_rejections: usize,
 }
 
 /// What one accepted step did ([`Simulation::step`]).
@@ -392,6 +396,8 @@ pub struct Simulation {
     /// Keep each accepted step's unknowns ([`Simulation::last_step`]): set by an observer
     /// that wants steps, or by [`Simulation::keep_last_step`].
     keep_steps: bool,
+    /// The elements with events ([`crate::elements::ElementRef::has_events`]), indices in the layout.
+    events: Vec<usize>,
 }
 
 /// The memory of a simulation at a step boundary: with the model and the settings,
@@ -507,6 +513,15 @@ impl StepControl {
         }
     }
 
+    /// Steps from `t` on are at most `h_max` long (an event's limit); the step size recovers
+    /// as after a reduction.
+    fn limit(&mut self, t: f64, h_max: f64) {
+        if self.clock.h > h_max {
+            self.successes = 0;
+            self.clock.restart(t, h_max);
+        }
+    }
+
     /// A step of size `h_try` from `t` failed: a quarter of it is tried next.
     fn reduce(&mut self, t: f64, h_try: f64) {
         self.successes = 0;
@@ -564,7 +579,18 @@ impl Simulation {
             redundancy: RedundancyWatch::default(),
             started: false,
             keep_steps: false,
-        })
+            events: Vec::new(),
+        }
+        .with_events())
+    }
+
+    /// The simulation with its list of elements with events.
+    fn with_events(mut self) -> Self {
+        let elements = &self.data.layout.elements;
+        self.events = (0..elements.len())
+            .filter(|&e| elements[e].has_events())
+            .collect();
+        self
     }
 
     /// Runs to `t_end`, reporting to `observer` at the start (t = 0; not again when the run
@@ -711,7 +737,9 @@ impl Simulation {
             redundancy: c.redundancy,
             started: true,
             keep_steps: false,
-        })
+            events: Vec::new(),
+        }
+        .with_events())
     }
 
     fn policy(settings: &DynamicSettings) -> NewtonPolicy {
@@ -878,7 +906,21 @@ impl Simulation {
             info.rejected += work.retries;
             match attempt {
                 Ok(newton) => {
+                    let (retry, next) = self.event_limit(h_try);
+                    if let Some(h_event) = retry.filter(|_| h_try > s.h_min) {
+                        // An event (a contact's onset) wants a shorter step: repeat it.
+                        self.stats.rejected_steps += 1;
+                        self.stats.event_rejections += 1;
+                        info.rejected += 1;
+                        self.state.clone_from(&self.integrator.saved);
+                        self.control.limit(self.state.t, h_event.max(s.h_min));
+                        continue;
+                    }
                     self.accepted(&newton, h_try);
+                    if let Some(cap) = next {
+                        self.control.limit(self.state.t, cap.max(s.h_min));
+                    }
+                    self.update_element_states();
                     // The next output time, once this one is reached (t_end, if it is not an
                     // output time, is not one: a run extended past it goes on to it).
                     let output_time = self.control.k_out as f64 * s.output_interval;
@@ -909,6 +951,69 @@ impl Simulation {
                     }
                 }
             }
+        }
+    }
+
+    /// What the elements with events ([`crate::elements::ElementRef::has_events`]) ask of the
+    /// step of size `h` just converged, from the saved state to the current one
+    /// ([`crate::elements::ElementKernel::step_limit`]): the shortest retry (the step is
+    /// rejected), and the shortest limit on the next steps.
+    fn event_limit(&self, h: f64) -> (Option<f64>, Option<f64>) {
+        let (mut retry, mut next) = (None::<f64>, None::<f64>);
+        if self.events.is_empty() {
+            return (retry, next);
+        }
+        let layout = &self.data.layout;
+        let ctx = Context::at(
+            &self.model,
+            self.state.t,
+            self.settings.load_factor_at(self.state.t),
+        );
+        let (start, end) = (&self.integrator.saved, &self.state);
+        let (n0, n1) = (node_states(start), node_states(end));
+        let (mut b0, mut b1) = (LocalBuffers::default(), LocalBuffers::default());
+        for &e in &self.events {
+            let kernel = layout.elements[e].kernel(&self.model);
+            let x0 = layout.state_start[e];
+            b0.gather(&kernel, &n0, (&start.x, &start.xdot, x0));
+            b1.gather(&kernel, &n1, (&end.x, &end.xdot, x0));
+            let shortest = |a: Option<f64>, b: f64| Some(a.map_or(b, |a| a.min(b)));
+            match kernel.step_limit(&ctx, &b0.local(&n0), &b1.local(&n1), h) {
+                Some(StepLimit::Retry(r)) => retry = shortest(retry, r),
+                Some(StepLimit::Next(n)) => next = shortest(next, n),
+                None => {}
+            }
+        }
+        (retry, next)
+    }
+
+    /// After an accepted step: the elements with events set their held states
+    /// ([`crate::elements::ElementKernel::update_states`]).
+    fn update_element_states(&mut self) {
+        if self.events.is_empty() {
+            return;
+        }
+        let layout = &self.data.layout;
+        let ctx = Context::at(
+            &self.model,
+            self.state.t,
+            self.settings.load_factor_at(self.state.t),
+        );
+        let (start, end) = (&self.integrator.saved, &self.state);
+        let (n0, n1) = (node_states(start), node_states(end));
+        let (mut b0, mut b1) = (LocalBuffers::default(), LocalBuffers::default());
+        let mut updates = Vec::with_capacity(self.events.len());
+        for &e in &self.events {
+            let kernel = layout.elements[e].kernel(&self.model);
+            let (x0, n) = (layout.state_start[e], kernel.n_states());
+            b0.gather(&kernel, &n0, (&start.x, &start.xdot, x0));
+            b1.gather(&kernel, &n1, (&end.x, &end.xdot, x0));
+            let mut x = end.x[x0..x0 + n].to_vec();
+            kernel.update_states(&ctx, &b0.local(&n0), &b1.local(&n1), &mut x);
+            updates.push((x0, x));
+        }
+        for (x0, x) in updates {
+            self.state.x[x0..x0 + x.len()].copy_from_slice(&x);
         }
     }
 

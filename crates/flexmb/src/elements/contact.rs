@@ -1,0 +1,547 @@
+//! Unilateral contact with a continuous (compliant) impact law and regularized Coulomb
+//! friction ([`crate::model::Contact`]).
+//!
+//! **Gap.** Shape A is fixed on node A, shape B on node B (either may be the ground). With
+//! `c_B` the centre of B (a sphere's centre, a point, or the reference point of a circle's
+//! axis) and `rho_B` its radius, the signed gap `g` and the unit normal `n` (the direction
+//! the contact pushes B) are
+//!
+//! ```text
+//! plane (point p, normal m) - sphere:   n = R_A m,         g = n . (c_B - x_A - R_A p) - rho_B
+//! sphere (centre c_A) - sphere:          d = c_B - c_A
+//! cylinder (axis e through a) - sphere
+//!   or circle (parallel axis):           d = (I - e e^T)(c_B - a),   e = R_A e_A
+//!   outside:  n = d / |d|,  g = |d| - rho_A - rho_B;     inside:  n = -d / |d|,  g = rho_A - rho_B - |d|
+//! ```
+//!
+//! The penetration is `delta = -g`; both bodies are loaded at the point
+//! `P = c_B - (rho_B - delta / 2) n` halfway between the two surfaces, and the relative
+//! velocity there is `v_rel = v_B(P) - v_A(P)` (material points of the two bodies), so that
+//! `deltadot = -n . v_rel` and the slip velocity is `v_t = (I - n n^T) v_rel`.
+//!
+//! **Normal force** (Lankarani & Nikravesh 1994, Nonlinear Dyn. 5, Eq. (10); Hunt & Crossley
+//! 1975, J. Appl. Mech. 42; Flores, Machado, Silva & Martins 2011, Multibody Syst. Dyn. 25,
+//! Eq. (28)): for `delta > 0`,
+//!
+//! ```text
+//! F_n = max(0, K delta^n (1 + chi(e) deltadot / v_imp)),
+//! chi = 3 (1 - e^2) / 4 (Lankarani-Nikravesh),   3 (1 - e) / 2 (Hunt-Crossley),
+//!       8 (1 - e) / (5 e) (Flores),
+//! ```
+//!
+//! `K` the Hertz stiffness (`4/3 E* sqrt(R*)` for two spheres, `1/E* = (1 - nu_1^2)/E_1 +
+//! (1 - nu_2^2)/E_2`), `n` its exponent (3/2), `e` the coefficient of restitution and `v_imp`
+//! the approach speed at the onset of the contact. The hysteresis loop of Lankarani &
+//! Nikravesh dissipates, along the elastic path, `Delta E = 2/3 chi m* v_imp^2 =
+//! m* v_imp^2 (1 - e^2) / 2`, the kinetic energy an impact of restitution `e` loses; the
+//! approximation holds for `e` near 1 (the law's true restitution is higher for small `e`;
+//! Flores et al. 2011 derive their `chi` for the whole range).
+//!
+//! **Impact velocity.** `v_imp` is the element's one state `x`, a held value: its equation is
+//! `e = xdot = 0` (in statics, where rates are absent, `x` keeps its value), and between
+//! steps ([`ElementKernel::update_states`]) it is set, while the contact is open, to the
+//! approach speed `deltadot` (at least `min_impact_velocity`), and after the step in which
+//! it closes, to the approach speed at the onset (gap and rate interpolated linearly over
+//! that step). The step that closes the contact is damped with the approach speed at its
+//! start; the step control keeps its penetration small.
+//!
+//! **Friction** (regularized Coulomb with a viscous term): on B,
+//!
+//! ```text
+//! F_t = -(mu F_n / max(|v_t|, v_s) + c_v) v_t,
+//! ```
+//!
+//! equal to Coulomb's `mu F_n` above the stiction velocity `v_s` and linear below it: a body
+//! held by friction creeps at most at `v_s F_t / (mu F_n)`.
+//!
+//! **Residual and iteration matrix.** The force `F = F_n n + F_t` acts on B at `P` and `-F`
+//! on A, so in physical coordinates ([`super::physical`])
+//!
+//! ```text
+//! r_X = -s_X [ F ; (R_X^T (P - x_X)) x (R_X^T F) ],    s_B = 1, s_A = -1.
+//! ```
+//!
+//! Its exact derivatives `K_p = dr/dw` (configuration `R -> R exp(tilde(theta))`, `x -> x +
+//! dx`), `C_p = dr/dv` and `dr/dv_imp` are computed by forward automatic differentiation
+//! (`num-dual`) of the same function, exact to round-off (one-sided at the kinks: the onset
+//! `delta = 0`, `F_n = 0`, `|v_t| = v_s`).
+//!
+//! **Step control around impacts** ([`ElementKernel::step_limit`]): with `m*` the effective
+//! mass of the two nodes' bodies, the largest penetration an impact at speed `v` reaches is
+//! `delta* = ((n + 1) m* v^2 / (2 K))^(1 / (n + 1))` (the elastic energy balance), and the
+//! contact lasts about `2.94 delta* / v` (Hertz, `n = 3/2`; Johnson 1985, Sect. 11.4). With
+//! `v` the largest of the impact velocity and the approach speeds at both ends:
+//! - while the contact is closed, steps are at most `h_c = delta* / (12 v)` (about 35 steps
+//!   per impact); a longer one is repeated at `h_c`;
+//! - a step that closes the contact deeper than `delta* / 12` is repeated to the time the
+//!   gap, interpolated linearly, reaches half that much (event location on the gap);
+//! - while it approaches, the next step covers at most half the gap at the approach speed
+//!   (but is not shorter than `h_c`): the steps shrink geometrically to the onset, which a
+//!   step of about `h_c` crosses;
+//! - a step that closes and opens the gap within itself (the cubic Hermite interpolant of
+//!   `g, gdot` at both ends goes negative) is shortened to the first crossing.
+//!
+//! After the contact opens, the step grows back (doubling every 4 accepted steps).
+
+use super::{
+    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
+    LocalMatrix, LocalVector, NodeState, StepLimit, Vec12,
+};
+use crate::model::contact::{Contact, ContactShape};
+use crate::model::parameters::ContactParam;
+use crate::model::{Model, NodeId};
+use flexmb_lie::{Group, Vec3};
+use nalgebra::{Matrix3, RealField, SMatrix, SVector, Vector3};
+
+/// Penetration change per step allowed, as a fraction of the largest penetration of the
+/// impact (`delta* / 12`).
+const STEPS_PER_PENETRATION: f64 = 12.0;
+
+/// A contact pair with the effective mass `m*` of its two nodes' bodies (for the step
+/// control; infinite when neither node carries a body).
+#[derive(Clone, Copy, Debug)]
+pub struct ContactElement<'m> {
+    pub contact: &'m Contact,
+    pub effective_mass: f64,
+}
+
+/// Configuration and physical velocity of one slot: `(x, R, xdot, Omega)`.
+#[derive(Clone, Copy, Debug)]
+struct Pose<T: RealField + Copy> {
+    x: Vector3<T>,
+    r: Matrix3<T>,
+    xdot: Vector3<T>,
+    om: Vector3<T>,
+}
+
+impl<T: RealField + Copy> Pose<T> {
+    fn point(&self, p: &Vec3) -> Vector3<T> {
+        self.x + self.r * p.map(c)
+    }
+    fn direction(&self, d: &Vec3) -> Vector3<T> {
+        self.r * d.map(c)
+    }
+    /// Velocity of the material point at the inertial position `p`.
+    fn velocity_at(&self, p: &Vector3<T>) -> Vector3<T> {
+        self.xdot + (self.r * self.om).cross(&(p - self.x))
+    }
+    /// `[F; (R^T (P - x)) x (R^T F)]` times `sign`: the generalized force of `F` at `P`.
+    fn generalized(&self, f: &Vector3<T>, p: &Vector3<T>, sign: f64) -> [T; 6] {
+        let rt = self.r.transpose();
+        let m = (rt * (p - self.x)).cross(&(rt * f));
+        let s: T = c(sign);
+        [f[0] * s, f[1] * s, f[2] * s, m[0] * s, m[1] * s, m[2] * s]
+    }
+}
+
+fn c<T: RealField + Copy>(v: f64) -> T {
+    nalgebra::convert(v)
+}
+
+/// The parameters of a contact's law that are differentiated ([`ContactParam`], in its
+/// order): stiffness, exponent, restitution, friction coefficient, viscous coefficient.
+#[derive(Clone, Copy, Debug)]
+struct Law<T> {
+    stiffness: T,
+    exponent: T,
+    restitution: T,
+    friction: T,
+    viscous: T,
+}
+
+/// What one evaluation finds, for the residual and the sensors.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ContactState {
+    /// Signed gap g \[m\] (negative: penetration).
+    pub gap: f64,
+    /// Its rate gdot \[m/s\].
+    pub gap_rate: f64,
+    /// Normal force F_n \[N\].
+    pub normal_force: f64,
+    /// Magnitude of the friction force \[N\].
+    pub friction_force: f64,
+    /// Slip speed |v_t| \[m/s\].
+    pub slip_velocity: f64,
+}
+
+impl Contact {
+    /// Gap `g`, normal `n` and centre `c_B` (module documentation).
+    fn gap<T: RealField + Copy>(&self, a: &Pose<T>, b: &Pose<T>) -> (T, Vector3<T>, Vector3<T>) {
+        let rho_b: T = c(self.shape_b.radius());
+        let c_b = match self.shape_b {
+            ContactShape::Sphere { center, .. } => b.point(&center),
+            ContactShape::Cylinder { point, .. } => b.point(&point),
+            ContactShape::Plane { .. } => unreachable!("validated: shape B is not a plane"),
+        };
+        let d = match self.shape_a {
+            ContactShape::Plane { point, normal } => {
+                let n = a.direction(&normal);
+                let g = n.dot(&(c_b - a.point(&point))) - rho_b;
+                return (g, n, c_b);
+            }
+            ContactShape::Sphere { center, .. } => c_b - a.point(&center),
+            ContactShape::Cylinder { point, axis, .. } => {
+                let e = a.direction(&axis);
+                let d0 = c_b - a.point(&point);
+                d0 - e * e.dot(&d0)
+            }
+        };
+        let dist = d.norm().max(c(1e-300));
+        let rho_a: T = c(self.shape_a.radius());
+        if self.shape_a.inside() {
+            (rho_a - rho_b - dist, -d / dist, c_b)
+        } else {
+            (dist - rho_a - rho_b, d / dist, c_b)
+        }
+    }
+
+    /// The physical residual (12: slot A, slot B) at the poses `a`, `b` with impact velocity
+    /// `v_imp` and the law's parameters `law`, and what the evaluation found (gap, its rate,
+    /// normal force, friction force, slip speed).
+    fn residual<T: RealField + Copy>(
+        &self,
+        a: &Pose<T>,
+        b: &Pose<T>,
+        v_imp: T,
+        law: &Law<T>,
+    ) -> ([T; 12], [T; 5]) {
+        let zero = T::zero();
+        let (g, n, c_b) = self.gap(a, b);
+        let delta = -g;
+        let rho_b: T = c(self.shape_b.radius());
+        let p = c_b - n * (rho_b - delta * c(0.5));
+        let v_rel = b.velocity_at(&p) - a.velocity_at(&p);
+        let gdot = n.dot(&v_rel);
+        let mut found = [g, gdot, zero, zero, zero];
+        if delta <= zero {
+            return ([zero; 12], found);
+        }
+        let chi = self.law.dissipation.factor(law.restitution);
+        let elastic = delta.powf(law.exponent) * law.stiffness;
+        let f_n = (elastic * (T::one() - chi * gdot / v_imp)).max(zero);
+        let mut f = n * f_n;
+        found[2] = f_n;
+        if let Some(fr) = &self.friction {
+            let v_t = v_rel - n * gdot;
+            let s = v_t.norm();
+            let vs: T = c(fr.stiction_velocity);
+            let coef = f_n * law.friction / s.max(vs) + law.viscous;
+            let f_t = v_t * (-coef);
+            f += f_t;
+            found[3] = coef * s;
+            found[4] = s;
+        }
+        let ra = a.generalized(&f, &p, 1.0);
+        let rb = b.generalized(&f, &p, -1.0);
+        let mut r = [zero; 12];
+        r[..6].copy_from_slice(&ra);
+        r[6..].copy_from_slice(&rb);
+        (r, found)
+    }
+
+    /// The law's parameters ([`ContactParam`]) as `T`.
+    fn law<T: RealField + Copy>(&self) -> Law<T> {
+        let friction = self.friction.unwrap_or(crate::model::contact::Friction {
+            coefficient: 0.0,
+            stiction_velocity: 1.0,
+            viscous: 0.0,
+        });
+        Law {
+            stiffness: c(self.law.stiffness),
+            exponent: c(self.law.exponent),
+            restitution: c(self.law.restitution),
+            friction: c(friction.coefficient),
+            viscous: c(friction.viscous),
+        }
+    }
+
+    /// Whether slots A and B are nodes.
+    fn active(&self) -> [bool; 2] {
+        [self.node_a.is_some(), self.node_b.is_some()]
+    }
+}
+
+/// The pose of a slot in `f64`.
+fn pose(group: Group, node: &NodeState) -> Pose<f64> {
+    let (xdot, om) = physical::velocity(group, node);
+    Pose {
+        x: node.q.x,
+        r: node.q.r,
+        xdot,
+        om,
+    }
+}
+
+type D25 = num_dual::DualSVec64<25>;
+type D1 = num_dual::Dual64;
+
+/// The pose of a slot perturbed by the variables `w[6 k..6 k + 6]` (configuration:
+/// `x + dx`, `R (I + tilde(theta))`, exact to first order) and `w[12 + 6 k..]` (velocity).
+fn perturbed(group: Group, node: &NodeState, w: &SVector<D25, 25>, k: usize) -> Pose<D25> {
+    let p = pose(group, node);
+    let var = |i: usize| -> Vector3<D25> { Vector3::new(w[i], w[i + 1], w[i + 2]) };
+    let theta = var(6 * k + 3);
+    let r = p.r.map(D25::from_re) * (Matrix3::identity() + theta.cross_matrix());
+    Pose {
+        x: p.x.map(D25::from_re) + var(6 * k),
+        r,
+        xdot: p.xdot.map(D25::from_re) + var(12 + 6 * k),
+        om: p.om.map(D25::from_re) + var(12 + 6 * k + 3),
+    }
+}
+
+impl ContactElement<'_> {
+    /// What the contact finds at the kinematics of `local` (sensors, step control).
+    pub fn state(&self, ctx: &Context, local: &Local) -> ContactState {
+        let (a, b) = (
+            pose(ctx.group, &local.nodes[0]),
+            pose(ctx.group, &local.nodes[1]),
+        );
+        let (_, f) = self
+            .contact
+            .residual(&a, &b, local.x[0], &self.contact.law());
+        ContactState {
+            gap: f[0],
+            gap_rate: f[1],
+            normal_force: f[2],
+            friction_force: f[3],
+            slip_velocity: f[4],
+        }
+    }
+
+    /// The impact velocity a contact that closes from these kinematics is damped with.
+    fn approach_speed(&self, state: &ContactState) -> f64 {
+        (-state.gap_rate).max(self.contact.law.min_impact_velocity)
+    }
+
+    /// `delta*` for an impact at speed `v` (module documentation).
+    fn largest_penetration(&self, v: f64) -> f64 {
+        let law = &self.contact.law;
+        let m1 = law.exponent + 1.0;
+        (m1 * self.effective_mass * v * v / (2.0 * law.stiffness)).powf(1.0 / m1)
+    }
+}
+
+/// The effective mass `m*` of the bodies on nodes `a` and `b` (`1/m* = 1/m_a + 1/m_b`; the
+/// ground and nodes without bodies count as infinite).
+pub fn effective_mass(model: &Model, a: Option<NodeId>, b: Option<NodeId>) -> f64 {
+    let mass = |n: Option<NodeId>| {
+        n.map_or(0.0, |n| {
+            model
+                .bodies
+                .iter()
+                .filter(|body| body.node == n)
+                .map(|body| body.mass)
+                .sum()
+        })
+    };
+    let inverse: f64 = [mass(a), mass(b)]
+        .iter()
+        .filter(|&&m| m > 0.0)
+        .map(|m| 1.0 / m)
+        .sum();
+    if inverse > 0.0 {
+        1.0 / inverse
+    } else {
+        f64::INFINITY
+    }
+}
+
+impl ElementKernel for ContactElement<'_> {
+    fn n_slots(&self) -> usize {
+        2
+    }
+
+    fn node(&self, slot: usize) -> Option<NodeId> {
+        [self.contact.node_a, self.contact.node_b][slot]
+    }
+
+    fn n_states(&self) -> usize {
+        1
+    }
+
+    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+        let local = Local {
+            x: &[1.0],
+            ..*local
+        };
+        x[0] = self.approach_speed(&self.state(ctx, &local));
+    }
+
+    fn update_states(&self, ctx: &Context, start: &Local, end: &Local, x: &mut [f64]) {
+        let s1 = self.state(ctx, end);
+        if s1.gap >= 0.0 {
+            x[0] = self.approach_speed(&s1);
+            return;
+        }
+        let s0 = self.state(ctx, start);
+        if s0.gap >= 0.0 {
+            // Closed in this step: the approach speed at the onset, the gap and its rate
+            // interpolated linearly.
+            let s = s0.gap / (s0.gap - s1.gap);
+            let rate = s0.gap_rate + s * (s1.gap_rate - s0.gap_rate);
+            x[0] = (-rate).max(self.contact.law.min_impact_velocity);
+        }
+    }
+
+    fn step_limit(&self, ctx: &Context, start: &Local, end: &Local, h: f64) -> Option<StepLimit> {
+        if !self.effective_mass.is_finite() {
+            return None;
+        }
+        let (s0, s1) = (self.state(ctx, start), self.state(ctx, end));
+        let v = [start.x[0], -s0.gap_rate, -s1.gap_rate]
+            .into_iter()
+            .fold(self.contact.law.min_impact_velocity, f64::max);
+        let depth = self.largest_penetration(v);
+        let allowed = depth / STEPS_PER_PENETRATION;
+        // The step that resolves the contact: its penetration changes by `allowed` at most.
+        let h_contact = allowed / v;
+        match (s0.gap < 0.0, s1.gap < 0.0) {
+            (false, false) => {
+                if s0.gap_rate < 0.0 && s1.gap_rate > 0.0 {
+                    // Closed and opened again within the step if the cubic Hermite
+                    // interpolant of the gap goes negative: shorten to the first crossing.
+                    let hermite = |t: f64| {
+                        let (t2, t3) = (t * t, t * t * t);
+                        (2.0 * t3 - 3.0 * t2 + 1.0) * s0.gap
+                            + (t3 - 2.0 * t2 + t) * h * s0.gap_rate
+                            + (-2.0 * t3 + 3.0 * t2) * s1.gap
+                            + (t3 - t2) * h * s1.gap_rate
+                    };
+                    if let Some(t) = (1..32).map(|k| k as f64 / 32.0).find(|&t| hermite(t) < 0.0) {
+                        return Some(StepLimit::Retry(0.9 * t * h));
+                    }
+                }
+                // Approaching: the next step covers half the gap at the approach speed, so
+                // that the steps shrink geometrically to the onset.
+                (s1.gap_rate < 0.0)
+                    .then(|| StepLimit::Next((0.5 * s1.gap / -s1.gap_rate).max(h_contact)))
+            }
+            (false, true) => {
+                let depth1 = -s1.gap;
+                if depth1 > allowed {
+                    // Closed too deep: repeat the step to the time the gap, interpolated
+                    // linearly, reaches -allowed / 2 (event location on the gap).
+                    let fraction = (s0.gap + 0.5 * allowed) / (s0.gap + depth1);
+                    Some(StepLimit::Retry(fraction.clamp(0.01, 0.9) * h))
+                } else {
+                    Some(StepLimit::Next(h_contact))
+                }
+            }
+            _ if h > 1.5 * h_contact => Some(StepLimit::Retry(h_contact)),
+            _ => Some(StepLimit::Next(h_contact)),
+        }
+    }
+
+    fn evaluate(
+        &self,
+        ctx: &Context,
+        local: &Local,
+        r: &mut LocalVector,
+        s: Option<(&Coefficients, &mut LocalMatrix)>,
+    ) {
+        let nodes = local.nodes;
+        let group = ctx.group;
+        let active = self.contact.active();
+        r[12] = local.xdot[0];
+        let Some((coef, s)) = s else {
+            let (a, b) = (pose(group, &nodes[0]), pose(group, &nodes[1]));
+            let (rp, _) = self
+                .contact
+                .residual(&a, &b, local.x[0], &self.contact.law());
+            let rp = Vec12::from_column_slice(&rp);
+            physical::to_group(group, nodes, &active, &rp, None, None, r, None);
+            return;
+        };
+        let mut w0 = SVector::<f64, 25>::zeros();
+        w0[24] = local.x[0];
+        let law = self.contact.law();
+        let (rp, jac) = num_dual::jacobian(
+            |w: SVector<D25, 25>| {
+                let a = perturbed(group, &nodes[0], &w, 0);
+                let b = perturbed(group, &nodes[1], &w, 1);
+                SVector::<D25, 12>::from(self.contact.residual(&a, &b, w[24], &law).0)
+            },
+            &w0,
+        );
+        let k_p: SMatrix<f64, 12, 12> = jac.fixed_view::<12, 12>(0, 0).into_owned();
+        let c_p: SMatrix<f64, 12, 12> = jac.fixed_view::<12, 12>(0, 12).into_owned();
+        physical::to_group(
+            group,
+            nodes,
+            &active,
+            &rp,
+            Some(&k_p),
+            Some(&c_p),
+            r,
+            Some((coef, s)),
+        );
+        // The impact-velocity column (group coordinates, like a residual) and the held
+        // state's row.
+        let mut dr = Vec12::from_column_slice(jac.column(24).as_slice());
+        physical::translations_to_group(group, nodes, &active, &mut dr);
+        let mut s = s.view();
+        for i in 0..12 {
+            s[(i, 12)] = dr[i] * coef.x;
+            s[(12, i)] = 0.0;
+        }
+        s[(12, 12)] = if coef.xdot != 0.0 { coef.xdot } else { coef.x };
+    }
+
+    fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
+        let delta = -self.state(ctx, local).gap;
+        if delta <= 0.0 {
+            return 0.0;
+        }
+        let law = &self.contact.law;
+        law.stiffness * delta.powf(law.exponent + 1.0) / (law.exponent + 1.0)
+    }
+}
+
+impl ElementParameters for ContactElement<'_> {
+    type Param = ContactParam;
+
+    fn parameter_derivative(
+        &self,
+        ctx: &Context,
+        p: ContactParam,
+        local: &Local,
+        dr: &mut LocalVector,
+    ) -> DerivativeMethod {
+        // Forward automatic differentiation of the same residual in the law's parameter
+        // (the held state's equation does not depend on it).
+        let nodes = local.nodes;
+        let group = ctx.group;
+        let (a, b) = (pose(group, &nodes[0]), pose(group, &nodes[1]));
+        let lift = |p: &Pose<f64>| Pose {
+            x: p.x.map(D1::from_re),
+            r: p.r.map(D1::from_re),
+            xdot: p.xdot.map(D1::from_re),
+            om: p.om.map(D1::from_re),
+        };
+        let mut law = self.contact.law::<D1>();
+        let parameter = match p {
+            ContactParam::Stiffness => &mut law.stiffness,
+            ContactParam::Exponent => &mut law.exponent,
+            ContactParam::Restitution => &mut law.restitution,
+            ContactParam::Friction => &mut law.friction,
+            ContactParam::ViscousFriction => &mut law.viscous,
+        };
+        parameter.eps = 1.0;
+        let v_imp = D1::from_re(local.x[0]);
+        let (r, _) = self.contact.residual(&lift(&a), &lift(&b), v_imp, &law);
+        let d = Vec12::from_fn(|i, _| r[i].eps);
+        physical::to_group(
+            group,
+            nodes,
+            &self.contact.active(),
+            &d,
+            None,
+            None,
+            dr,
+            None,
+        );
+        dr[12] = 0.0;
+        DerivativeMethod::Analytic
+    }
+}

@@ -1,0 +1,133 @@
+//! Unilateral contact between two shapes fixed on nodes (or the ground): what a model file's
+//! `[[contact]]` declares. The mechanics are in [`crate::elements::contact`].
+
+use super::NodeId;
+use flexmb_lie::Vec3;
+
+/// A contact pair: shape A on node A, shape B on node B (either node may be the ground, whose
+/// shape is then given in the inertial frame), a normal force law and, optionally, friction.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Contact {
+    pub name: String,
+    pub node_a: Option<NodeId>,
+    pub node_b: Option<NodeId>,
+    /// Shape on A, in the frame of node A: a plane, a sphere or a cylinder.
+    pub shape_a: ContactShape,
+    /// Shape on B, in the frame of node B: a sphere (a point if its radius is 0), or a
+    /// cylinder whose axis is parallel to a cylinder A (planar circles).
+    pub shape_b: ContactShape,
+    pub law: ContactLaw,
+    #[serde(default)]
+    pub friction: Option<Friction>,
+}
+
+/// A contact surface in its node's frame.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum ContactShape {
+    /// The plane through `point` with the unit outward `normal` (a half-space behind it).
+    Plane { point: Vec3, normal: Vec3 },
+    /// A sphere (radius 0: a point). `inside`: the other shape is inside this one (a ball in
+    /// a spherical socket), allowed on shape A.
+    Sphere {
+        center: Vec3,
+        radius: f64,
+        inside: bool,
+    },
+    /// An infinite circular cylinder of unit `axis` through `point` (a circle in the plane
+    /// normal to the axis, for planar cams). `inside`: the other shape is inside this one (a
+    /// pin in a hole), allowed on shape A.
+    Cylinder {
+        point: Vec3,
+        axis: Vec3,
+        radius: f64,
+        inside: bool,
+    },
+}
+
+impl ContactShape {
+    /// The shape's radius (0 for a plane).
+    pub fn radius(&self) -> f64 {
+        match *self {
+            ContactShape::Plane { .. } => 0.0,
+            ContactShape::Sphere { radius, .. } | ContactShape::Cylinder { radius, .. } => radius,
+        }
+    }
+
+    /// Whether the other shape is inside this one.
+    pub fn inside(&self) -> bool {
+        match *self {
+            ContactShape::Plane { .. } => false,
+            ContactShape::Sphere { inside, .. } | ContactShape::Cylinder { inside, .. } => inside,
+        }
+    }
+
+    /// The shape's name in the model file.
+    pub fn keyword(&self) -> &'static str {
+        match self {
+            ContactShape::Plane { .. } => "plane",
+            ContactShape::Sphere { .. } => "sphere",
+            ContactShape::Cylinder { .. } => "cylinder",
+        }
+    }
+}
+
+/// How the hysteresis damping of the normal force depends on the restitution coefficient
+/// `e` (module documentation of [`crate::elements::contact`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Dissipation {
+    /// Lankarani & Nikravesh (1990, 1994): `chi = 3 (1 - e^2) / 4`.
+    LankaraniNikravesh,
+    /// Hunt & Crossley (1975): `chi = 3 (1 - e) / 2`.
+    HuntCrossley,
+    /// Flores, Machado, Silva & Martins (2011): `chi = 8 (1 - e) / (5 e)`.
+    Flores,
+}
+
+impl Dissipation {
+    /// The factor `chi(e)` of `F = K delta^n (1 + chi deltadot / v_impact)` (generic: the
+    /// contact differentiates it by forward automatic differentiation).
+    pub fn factor<T: nalgebra::RealField + Copy>(self, e: T) -> T {
+        let k = |v: f64| -> T { nalgebra::convert(v) };
+        match self {
+            Dissipation::LankaraniNikravesh => k(0.75) * (T::one() - e * e),
+            Dissipation::HuntCrossley => k(1.5) * (T::one() - e),
+            Dissipation::Flores => k(1.6) * (T::one() - e) / e,
+        }
+    }
+
+    /// The law's name in the model file.
+    pub fn keyword(self) -> &'static str {
+        match self {
+            Dissipation::LankaraniNikravesh => "lankarani_nikravesh",
+            Dissipation::HuntCrossley => "hunt_crossley",
+            Dissipation::Flores => "flores",
+        }
+    }
+}
+
+/// The normal force law `F = K delta^n (1 + chi(e) deltadot / v_impact)`, `F >= 0`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ContactLaw {
+    pub dissipation: Dissipation,
+    /// Contact stiffness K [N/m^n], > 0 (Hertz: `4/3 E* sqrt(R*)`).
+    pub stiffness: f64,
+    /// Exponent n, >= 1 (Hertz: 3/2).
+    pub exponent: f64,
+    /// Coefficient of restitution e, in (0, 1].
+    pub restitution: f64,
+    /// Smallest impact velocity the damping is scaled by [m/s], > 0: a contact that closes
+    /// slower (a body set down, resting contact) is damped as if it hit at this speed.
+    pub min_impact_velocity: f64,
+}
+
+/// Regularized Coulomb friction with a viscous term: the tangential force opposes the slip
+/// velocity `v_t` at the contact point with magnitude `mu F_n min(|v_t| / v_s, 1) + c_v |v_t|`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Friction {
+    /// Coulomb coefficient mu, >= 0.
+    pub coefficient: f64,
+    /// Stiction velocity v_s [m/s], > 0: below it the force grows linearly with the slip.
+    pub stiction_velocity: f64,
+    /// Viscous coefficient c_v [N s/m], >= 0.
+    pub viscous: f64,
+}
