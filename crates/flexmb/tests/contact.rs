@@ -133,3 +133,152 @@ fn a_dropped_ball_rebounds_with_the_laws_restitution() {
     }
     println!("{}", table.join("\n"));
 }
+
+#[test]
+fn an_impact_dissipates_the_energy_of_the_laws_hysteresis_loop() {
+    // Lankarani & Nikravesh chose chi so that the loop along the elastic path dissipates
+    // m* v^2 (1 - e^2) / 2: close for e near 1, an overestimate for smaller e (the actual
+    // path is not elastic). The ball is the only moving body (m* = m).
+    let mass = 4.11;
+    let mut report = Vec::new();
+    for (e, tolerance) in [(0.95, 0.08), (0.99, 0.02)] {
+        let (v_in, v_out, _, _) = first_impact("lankarani_nikravesh", e);
+        let lost = 0.5 * mass * (v_in * v_in - v_out * v_out);
+        let closed_form = 0.5 * mass * v_in * v_in * (1.0 - e * e);
+        let ratio = lost / closed_form;
+        report.push(format!(
+            "e = {e}: lost {lost:.5} J, closed form {closed_form:.5} J"
+        ));
+        assert!(
+            (ratio - 1.0).abs() < tolerance,
+            "e = {e}: dissipated {lost} J against the closed form {closed_form} J"
+        );
+    }
+    println!("{}", report.join("\n"));
+}
+
+/// The block of `examples/incline.toml` (overrides: `overrides`): its distance down the
+/// slope and its speed over time (every output step).
+fn incline(overrides: &[&str]) -> Vec<(f64, f64, f64)> {
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    let file = read_model_file(&common::example("incline.toml"), &overrides).expect("reads");
+    let Analysis::Dynamic(settings) = file.analysis else {
+        panic!("dynamic")
+    };
+    let theta = 20f64.to_radians();
+    let slope = flexmb_lie::Vec3::new(-theta.cos(), 0.0, -theta.sin());
+    let start = file.model.nodes[0].frame.x;
+    let mut sim = Simulation::new(file.model, settings).expect("starts");
+    let mut out = Vec::new();
+    sim.run(&mut |s: &flexmb::observe::Sample| {
+        let (x, v) = (s.state.q[0].x, s.state.v[0].fixed_rows::<3>(0).into_owned());
+        out.push((s.state.t, (x - start).dot(&slope), v.norm()));
+        Ok(())
+    })
+    .expect("runs");
+    out
+}
+
+#[test]
+fn a_block_on_an_incline_stops_at_the_coulomb_distance_and_sticks() {
+    let (g, theta, mu, v0, v_s) = (9.81, 20f64.to_radians(), 0.5, 1.0, 1e-3);
+    let a = g * (mu * theta.cos() - theta.sin());
+    let distance = v0 * v0 / (2.0 * a);
+    let creep = v_s * theta.tan() / mu;
+    let history = incline(&[]);
+    // where it stopped: the first output with the speed down to the creep
+    let &(t_stop, d_stop, _) = history
+        .iter()
+        .find(|(_, _, v)| *v < 1.5 * creep)
+        .expect("stops");
+    assert!(
+        (d_stop - distance).abs() < 2e-3 * distance,
+        "stopping distance {d_stop} against v0^2 / 2a = {distance}"
+    );
+    assert!(
+        (t_stop - v0 / a).abs() < 0.02,
+        "stopped at t = {t_stop} against v0 / a = {}",
+        v0 / a
+    );
+    // sticking: creeping at the regularization's bound, not faster
+    let &(_, _, v_end) = history.last().expect("outputs");
+    assert!(
+        v_end <= creep * (1.0 + 1e-3) && v_end > 0.9 * creep,
+        "creep {v_end} against the bound v_s tan(theta) / mu = {creep}"
+    );
+
+    // Set down at rest below the friction angle: it never slides, creeping at the bound.
+    let history = incline(&["body.block.velocity=[0.0, 0.0, 0.0]"]);
+    let worst = history
+        .iter()
+        .filter(|(t, _, _)| *t > 0.1)
+        .fold(0.0f64, |m, (_, _, v)| m.max(*v));
+    assert!(
+        worst <= creep * 1.01,
+        "at rest on the incline it creeps at {worst} m/s, above the bound {creep}"
+    );
+}
+
+/// The velocities of the balls of `examples/newtons_cradle.toml` (with `edit` applied to the
+/// file's text) after the impacts, and the momentum and energy before and after.
+fn cradle(edit: impl Fn(String) -> String) -> (Vec<f64>, [f64; 2], [f64; 2]) {
+    let path = common::example("newtons_cradle.toml");
+    let text = edit(std::fs::read_to_string(&path).expect("reads"));
+    let file = flexmb::input::parse_model_str(&text, "newtons_cradle.toml", &[]).expect("parses");
+    let Analysis::Dynamic(settings) = file.analysis else {
+        panic!("dynamic")
+    };
+    let masses: Vec<f64> = file.model.bodies.iter().map(|b| b.mass).collect();
+    let mut sim = Simulation::new(file.model, settings).expect("starts");
+    let totals = |sim: &Simulation| {
+        let v: Vec<f64> = sim.state.v.iter().map(|v| v[0]).collect();
+        let p: f64 = v.iter().zip(&masses).map(|(v, m)| m * v).sum();
+        let e: f64 = v.iter().zip(&masses).map(|(v, m)| 0.5 * m * v * v).sum();
+        (v, p, e)
+    };
+    let (_, p0, e0) = totals(&sim);
+    sim.run(&mut |_: &flexmb::observe::Sample| Ok(()))
+        .expect("runs");
+    let (v, p1, e1) = totals(&sim);
+    (v, [p0, p1], [e0, e1])
+}
+
+#[test]
+fn newtons_cradle_passes_the_momentum_down_the_row() {
+    let (v, p, e) = cradle(|t| t);
+    assert!(
+        (p[1] - p[0]).abs() < 1e-9 * p[0],
+        "momentum {} -> {}",
+        p[0],
+        p[1]
+    );
+    // e = 1: elastic; the scheme's error with ~35 steps per contact is below 1 %
+    assert!(
+        (e[1] - e[0]).abs() < 0.01 * e[0],
+        "energy {} -> {}",
+        e[0],
+        e[1]
+    );
+    assert!(v[4] > 0.95, "the last ball leaves at {} m/s", v[4]);
+    assert!(
+        v[..4].iter().all(|v| v.abs() < 0.15),
+        "the others nearly stop: {v:?}"
+    );
+    // Linear contact springs disperse the pulse more: the last ball gets less.
+    let (linear, p, _) = cradle(|t| {
+        t.replace(
+            "hertz = { young = [210e9, 210e9], poisson = [0.3, 0.3] }",
+            "stiffness = 1e8\nexponent = 1.0",
+        )
+    });
+    assert!((p[1] - p[0]).abs() < 1e-9 * p[0]);
+    println!("Hertz: {v:?}\nlinear: {linear:?}");
+    // the last ball's share of the kinetic energy (equal masses)
+    let share = |v: &[f64]| v[4] * v[4] / v.iter().map(|v| v * v).sum::<f64>();
+    assert!(
+        share(&linear) < share(&v) - 0.05,
+        "the last ball's share of the energy: linear springs {}, Hertz {}",
+        share(&linear),
+        share(&v)
+    );
+}
