@@ -1515,3 +1515,89 @@ fn lie_update_is_read_and_checked_at_its_key() {
         .to_string();
     assert_contains(&e, &["lie_update_sigma"]);
 }
+
+/// Bad `[[contact]]` input in `examples/ball_drop.toml`: located errors.
+#[test]
+fn contact_errors_are_located() {
+    let path: PathBuf = [env!("CARGO_MANIFEST_DIR"), "../../examples/ball_drop.toml"]
+        .iter()
+        .collect();
+    let good = std::fs::read_to_string(&path).expect("example");
+    let edit = |from: &str, to: &str| {
+        assert!(good.contains(from), "{from}");
+        match parse_model_str(&good.replace(from, to), "ball.toml", &[]) {
+            Ok(_) => panic!("accepted: {to}"),
+            Err(e) => e.to_string(),
+        }
+    };
+    let hertz = "hertz = { young = [210e9, 210e9], poisson = [0.3, 0.3] }";
+    for (from, to, parts) in [
+        (
+            "restitution = 0.8",
+            "restitution = 1.5",
+            &["ball.toml:41:", "field 'contact[0].restitution'", "(0, 1]"][..],
+        ),
+        (
+            "restitution = 0.8",
+            "restitution = 0.0",
+            &["field 'contact[0].restitution'", "(0, 1]"],
+        ),
+        (
+            hertz,
+            "stiffness = -3e10",
+            &["ball.toml:40:", "field 'contact[0].stiffness'", "positive"],
+        ),
+        (
+            hertz,
+            "hertz = { young = [210e9, -1.0], poisson = [0.3, 0.3] }",
+            &["field 'contact[0].hertz'", "Young's modulus"],
+        ),
+        (
+            "node_b = \"ball\"",
+            "node_b = \"bal\"",
+            &["field 'contact[0].node_b'", "unknown node 'bal'"],
+        ),
+        (
+            "b = { shape = \"sphere\", center = [0.0, 0.0, 0.15], radius = 0.05 }\nlaw",
+            "b = { shape = \"plane\", point = [0.0, 0.0, 0.15], normal = [0.0, 0.0, 1.0] }\nlaw",
+            &["field 'contact[0].hertz'", "for a sphere B"],
+        ),
+        (
+            "radius = 0.05 }",
+            "radius = nan }",
+            &["field 'contact[0].b.radius'", "finite"],
+        ),
+        (
+            "normal = [0.0, 0.0, 1.0] }",
+            "normal = [0.0, 0.0, 0.0] }",
+            &["field 'contact[0].a.normal'", "non-zero"],
+        ),
+        (
+            "restitution = 0.8",
+            "restitution = 0.8\nfriction = { coefficient = -0.2 }",
+            &["field 'contact[0].friction.coefficient'", ">= 0"],
+        ),
+        (
+            "law = \"lankarani_nikravesh\"",
+            "law = \"hertz\"",
+            &["field 'contact[0].law'", "\"flores\""],
+        ),
+        (
+            "restitution = 0.8",
+            "restitution = 0.8\nstiffnes = 1.0",
+            &["contact[0]", "stiffnes"],
+        ),
+    ] {
+        assert_contains(&edit(from, to), parts);
+    }
+    let good = good.replace(hertz, "stiffness = 3e10");
+    let plane_b = good.replace(
+        "b = { shape = \"sphere\", center = [0.0, 0.0, 0.15], radius = 0.05 }",
+        "b = { shape = \"plane\", point = [0.0, 0.0, 0.15], normal = [0.0, 0.0, 1.0] }",
+    );
+    let e = parse_model_str(&plane_b, "ball.toml", &[]).expect_err("a plane B");
+    assert_contains(
+        &e.to_string(),
+        &["ball.toml:38:", "field 'contact[0].b'", "cannot be a plane"],
+    );
+}
