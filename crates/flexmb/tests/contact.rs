@@ -282,3 +282,73 @@ fn newtons_cradle_passes_the_momentum_down_the_row() {
         share(&v)
     );
 }
+
+/// `examples/incline.toml` with bristle friction (LuGre) at the four corners, launched at
+/// `v0` down the slope: distance down the slope and speed at every output step.
+fn incline_with_bristles(v0: f64) -> Vec<(f64, f64, f64)> {
+    let path = common::example("incline.toml");
+    let text = std::fs::read_to_string(&path).expect("reads").replace(
+        "friction = { coefficient = 0.5, stiction_velocity = 1e-3 }",
+        "friction = { coefficient = 0.5, stiction_velocity = 1e-3, \
+         bristles = { stiffness = 1e4, damping = 30.0, static_coefficient = 0.6 } }",
+    );
+    let velocity = format!(
+        "velocity = [{}, 0.0, {}]",
+        -v0 * 20f64.to_radians().cos(),
+        -v0 * 20f64.to_radians().sin()
+    );
+    let text = text.replace("velocity = [-0.9396926, 0.0, -0.3420201]", &velocity);
+    let file = flexmb::input::parse_model_str(&text, "incline.toml", &[]).expect("parses");
+    assert_eq!(
+        file.model.contacts[0].n_states(),
+        4,
+        "impact velocity and bristles"
+    );
+    let Analysis::Dynamic(settings) = file.analysis else {
+        panic!("dynamic")
+    };
+    let theta = 20f64.to_radians();
+    let slope = flexmb_lie::Vec3::new(-theta.cos(), 0.0, -theta.sin());
+    let start = file.model.nodes[0].frame.x;
+    let mut sim = Simulation::new(file.model, settings).expect("starts");
+    let mut out = Vec::new();
+    sim.run(&mut |s: &flexmb::observe::Sample| {
+        let (x, v) = (s.state.q[0].x, s.state.v[0].fixed_rows::<3>(0).into_owned());
+        out.push((s.state.t, (x - start).dot(&slope), v.norm()));
+        Ok(())
+    })
+    .expect("runs");
+    out
+}
+
+#[test]
+fn bristle_friction_holds_a_block_on_an_incline_without_creep() {
+    // LuGre (Canudas de Wit et al. 1995): at rest the bristles hold the load like a spring,
+    // so the block settles (deflection mu g cos(theta) / (4 sigma_0) ~ 1e-5 m) and does not
+    // creep, where the regularized law creeps at v_s tan(theta) / mu = 0.73 mm/s.
+    let history = incline_with_bristles(0.0);
+    let &(_, d_end, v_end) = history.last().expect("outputs");
+    let d_half = history
+        .iter()
+        .find(|(t, _, _)| *t >= 0.6)
+        .map(|(_, d, _)| *d)
+        .expect("t = 0.6");
+    assert!(v_end < 1e-6, "still moving at {v_end} m/s");
+    assert!(
+        (d_end - d_half).abs() < 1e-7,
+        "crept {} m in the last 0.6 s",
+        d_end - d_half
+    );
+    assert!(d_end.abs() < 1e-4, "settled {d_end} m down the slope");
+    // Sliding: the kinetic coefficient mu decelerates it as Coulomb's law does (the
+    // Stribeck rise to mu_s only acts below v_s = 1 mm/s).
+    let (g, theta, mu, v0) = (9.81, 20f64.to_radians(), 0.5, 1.0);
+    let distance = v0 * v0 / (2.0 * g * (mu * theta.cos() - theta.sin()));
+    let history = incline_with_bristles(v0);
+    let &(_, d_end, v_end) = history.last().expect("outputs");
+    assert!(v_end < 1e-6, "still moving at {v_end} m/s");
+    assert!(
+        (d_end - distance).abs() < 2e-3 * distance,
+        "stopped after {d_end} m against {distance}"
+    );
+}

@@ -517,6 +517,7 @@ fn contacts(group: Group) -> Model {
         coefficient: 0.3,
         stiction_velocity: 0.05,
         viscous: 20.0,
+        bristles: None,
     });
     let sphere = |radius| ContactShape::Sphere {
         center: Vec3::zeros(),
@@ -547,6 +548,12 @@ fn contacts(group: Group) -> Model {
         ),
     ];
     for (name, node_a, node_b, shape_a, dissipation, exponent) in pairs {
+        // the second floor contact with bristles (LuGre)
+        let bristles = (name == "floor_b").then_some(flexmb::model::contact::Bristles {
+            stiffness: 300.0,
+            damping: 2.0,
+            static_coefficient: 0.45,
+        });
         m.contacts.push(Contact {
             name: name.into(),
             node_a,
@@ -554,7 +561,7 @@ fn contacts(group: Group) -> Model {
             shape_a,
             shape_b: sphere(0.1),
             law: law(dissipation, exponent),
-            friction,
+            friction: friction.map(|f| Friction { bristles, ..f }),
         });
     }
     m
@@ -571,8 +578,12 @@ fn parameter_derivatives_match_finite_differences_on_contacts() {
             for node in at.nodes.iter_mut() {
                 node.v *= 0.05;
             }
-            // the impact velocities (held states): positive
+            // the impact velocities (held states): positive; bristle deflections small
             at.x.iter_mut().for_each(|x| *x = 1.0 + x.abs());
+            let start = flexmb::elements::ElementItem::Contact(1).state_start(&model);
+            for k in 1..4 {
+                at.x[start + k] = 1e-3 * (k as f64 - 2.0);
+            }
             check_model(&format!("contacts on {group:?}"), &model, &at, &mut seen);
         }
     }

@@ -8,7 +8,7 @@ use flexmb::elements::{
     evaluate_owned, Coefficients, Context, ElementKernel, Local, Mat12, NodeState, Vec12,
 };
 use flexmb::joints;
-use flexmb::model::contact::{Contact, ContactLaw, ContactShape, Dissipation, Friction};
+use flexmb::model::contact::{Bristles, Contact, ContactLaw, ContactShape, Dissipation, Friction};
 use flexmb::model::{
     Beam, BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, RigidBody,
     SpringDamper, TimeFunction,
@@ -120,7 +120,13 @@ fn check_states(
         ('d', coefficients(0.0, 0.0, 0.0, 0.0, 1.0)),
     ] {
         let local = Local { nodes, x, xdot };
-        let (_, s) = evaluate_owned(kernel, &ctx, &local, Some(&coef));
+        let (r, s) = evaluate_owned(kernel, &ctx, &local, Some(&coef));
+        // the residual written with the matrix is the residual alone
+        let r_alone = eval(nodes, x, xdot);
+        assert!(
+            (&r - &r_alone).amax() <= 1e-13 * (1.0 + r_alone.amax()),
+            "{name}: residual with the matrix {r:?} vs alone {r_alone:?}"
+        );
         let mut fd = DMatrix::zeros(n, n);
         for k in 0..n {
             if !active[k] {
@@ -757,12 +763,25 @@ fn contacts(nodes: &[NodeState; 2], rng: &mut Lcg, depth: f64) -> Vec<Contact> {
                 coefficient: 0.4,
                 stiction_velocity: 1e-3,
                 viscous: 0.3,
+                bristles: None,
             }),
             // within the stiction velocity
             Some(Friction {
                 coefficient: 0.4,
                 stiction_velocity: 50.0,
                 viscous: 0.0,
+                bristles: None,
+            }),
+            // bristles (LuGre): three more states
+            Some(Friction {
+                coefficient: 0.4,
+                stiction_velocity: 0.3,
+                viscous: 0.2,
+                bristles: Some(Bristles {
+                    stiffness: 300.0,
+                    damping: 2.0,
+                    static_coefficient: 0.6,
+                }),
             }),
         ] {
             out.push(Contact {
@@ -800,6 +819,18 @@ fn contacts(nodes: &[NodeState; 2], rng: &mut Lcg, depth: f64) -> Vec<Contact> {
     out
 }
 
+/// A contact's states (impact velocity 0.7, bristle deflections) and rates.
+fn contact_states(contact: &Contact, rng: &mut Lcg) -> (Vec<f64>, Vec<f64>) {
+    let n = contact.n_states();
+    let x = (0..n)
+        .map(|k| if k == 0 { 0.7 } else { 1e-3 * rng.next() })
+        .collect();
+    let xdot = (0..n)
+        .map(|k| if k == 0 { 0.0 } else { 0.05 * rng.next() })
+        .collect();
+    (x, xdot)
+}
+
 #[test]
 fn contact_tangents_match_finite_differences() {
     // Closed contacts (penetration 2 mm) of every shape pair, law and friction regime, with
@@ -817,10 +848,11 @@ fn contact_tangents_match_finite_differences() {
                     effective_mass: 1.0,
                 };
                 let ctx = Context::at(&model, 0.0, 1.0);
+                let (x, xdot) = contact_states(&contact, &mut rng);
                 let local = Local {
                     nodes: &nodes,
-                    x: &[0.7],
-                    xdot: &[0.0],
+                    x: &x,
+                    xdot: &xdot,
                 };
                 let state = element.state(&ctx, &local);
                 assert!(
@@ -834,14 +866,7 @@ fn contact_tangents_match_finite_differences() {
                     "contact '{}' (friction {:?})",
                     contact.name, contact.friction
                 );
-                check_states(
-                    &name,
-                    &element,
-                    &model,
-                    &nodes,
-                    (&[0.7], &[0.0]),
-                    (true, EPS),
-                );
+                check_states(&name, &element, &model, &nodes, (&x, &xdot), (true, EPS));
             }
         }
     }
@@ -867,14 +892,8 @@ fn contact_tangents_match_one_sided_differences_at_the_onset() {
                     effective_mass: 1.0,
                 };
                 let name = format!("contact '{}' at penetration {depth:e}", contact.name);
-                check_states(
-                    &name,
-                    &element,
-                    &model,
-                    &slow,
-                    (&[0.7], &[0.0]),
-                    (true, eps),
-                );
+                let (x, xdot) = contact_states(&contact, &mut rng);
+                check_states(&name, &element, &model, &slow, (&x, &xdot), (true, eps));
             }
         }
     }

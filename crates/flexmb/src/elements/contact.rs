@@ -54,6 +54,20 @@
 //! equal to Coulomb's `mu F_n` above the stiction velocity `v_s` and linear below it: a body
 //! held by friction creeps at most at `v_s F_t / (mu F_n)`.
 //!
+//! **Bristles** (LuGre: Canudas de Wit, Olsson, Åström & Lischinsky 1995, IEEE Trans. Autom.
+//! Control 40(3), Eqs. (1)-(4), per unit normal force): three more element states, the mean
+//! bristle deflection `z` (inertial components), with
+//!
+//! ```text
+//! e_z = zdot - v_t + sigma_0 |v_t| z / g(|v_t|) = 0,    g(v) = mu + (mu_s - mu) exp(-(v/v_s)^2),
+//! F_t = -F_n (I - n n^T)(sigma_0 z + sigma_1 zdot) - c_v v_t,
+//! ```
+//!
+//! in place of the regularization: at rest the bristles hold the load like a spring, without
+//! creep, and break away at `mu_s F_n`. The deflection equation holds whether the contact is
+//! open or closed (continuous across the onset; open, the force is zero), with `|v_t|`
+//! smoothed at `1e-6 v_s` for its derivative.
+//!
 //! **Residual and iteration matrix.** The force `F = F_n n + F_t` acts on B at `P` and `-F`
 //! on A, so in physical coordinates ([`super::physical`])
 //!
@@ -62,9 +76,12 @@
 //! ```
 //!
 //! Its exact derivatives `K_p = dr/dw` (configuration `R -> R exp(tilde(theta))`, `x -> x +
-//! dx`), `C_p = dr/dv` and `dr/dv_imp` are computed by forward automatic differentiation
-//! (`num-dual`) of the same function, exact to round-off (one-sided at the kinks: the onset
-//! `delta = 0`, `F_n = 0`, `|v_t| = v_s`).
+//! dx`), `C_p = dr/dv`, those with respect to the states and their rates, and those of the
+//! bristles' equations, are computed by forward automatic differentiation (`num-dual`) of
+//! the same function, exact to round-off (one-sided at the kinks: the onset `delta = 0`,
+//! `F_n = 0`, `|v_t| = v_s`); so are the parameter derivatives. Without a rate term in the
+//! iteration matrix (statics, where the rates are absent) the states are held: their rows
+//! read `x = x_start` (friction acts in dynamics only).
 //!
 //! **Step control around impacts** ([`ElementKernel::step_limit`]): with `m*` the effective
 //! mass of the two nodes' bodies, the largest penetration an impact at speed `v` reaches is
@@ -195,63 +212,87 @@ impl Contact {
         }
     }
 
-    /// The physical residual (12: slot A, slot B) at the poses `a`, `b` with impact velocity
-    /// `v_imp` and the law's parameters `law`, and what the evaluation found (gap, its rate,
-    /// normal force, friction force, slip speed).
+    /// The physical residual (12: slot A, slot B) and the bristles' equations (3; zero
+    /// without bristles) at the poses `a`, `b` with the states `x` (impact velocity, then
+    /// the bristles' deflection) and their rates `xdot`, with the law's parameters `law`;
+    /// and what the evaluation found (gap, its rate, normal force, friction force, slip
+    /// speed).
     fn residual<T: RealField + Copy>(
         &self,
         a: &Pose<T>,
         b: &Pose<T>,
-        v_imp: T,
+        (x, xdot): (&[T], &[T]),
         law: &Law<T>,
-    ) -> ([T; 12], [T; 5]) {
+    ) -> ([T; 15], [T; 5]) {
         let zero = T::zero();
+        let mut out = [zero; 15];
         let (g, n, c_b) = self.gap(a, b);
         let delta = -g;
         let rho_b: T = c(self.shape_b.radius());
         let p = c_b - n * (rho_b - delta * c(0.5));
         let v_rel = b.velocity_at(&p) - a.velocity_at(&p);
         let gdot = n.dot(&v_rel);
+        let v_t = v_rel - n * gdot;
         let mut found = [g, gdot, zero, zero, zero];
+        let bristles = self.friction.and_then(|f| f.bristles.map(|b| (f, b)));
+        let mut z_and_rate = None;
+        if let Some((f, br)) = bristles {
+            // LuGre's deflection equation, open or closed (continuous across the onset; the
+            // friction force it gives is zero while the contact is open). |v_t| is smoothed
+            // at 0 (1e-6 v_s) for its derivative.
+            let z = Vector3::new(x[1], x[2], x[3]);
+            let zdot = Vector3::new(xdot[1], xdot[2], xdot[3]);
+            let vs: T = c(f.stiction_velocity);
+            let s = (v_t.norm_squared() + vs * vs * c(1e-12)).sqrt();
+            let mu_s: T = c(br.static_coefficient);
+            let stribeck = law.friction + (mu_s - law.friction) * (-(s / vs).powi(2)).exp();
+            let e = zdot - v_t + z * (c::<T>(br.stiffness) * s / stribeck);
+            out[12..].copy_from_slice(e.as_slice());
+            z_and_rate = Some((z, zdot, s));
+        }
         if delta <= zero {
-            return ([zero; 12], found);
+            return (out, found);
         }
         let chi = self.law.dissipation.factor(law.restitution);
         let elastic = delta.powf(law.exponent) * law.stiffness;
-        let f_n = (elastic * (T::one() - chi * gdot / v_imp)).max(zero);
+        let f_n = (elastic * (T::one() - chi * gdot / x[0])).max(zero);
         let mut f = n * f_n;
         found[2] = f_n;
         if let Some(fr) = &self.friction {
-            let v_t = v_rel - n * gdot;
-            let s = v_t.norm();
-            let vs: T = c(fr.stiction_velocity);
-            let coef = f_n * law.friction / s.max(vs) + law.viscous;
-            let f_t = v_t * (-coef);
+            let f_t = match bristles {
+                None => {
+                    let s = v_t.norm();
+                    let vs: T = c(fr.stiction_velocity);
+                    found[4] = s;
+                    v_t * -(f_n * law.friction / s.max(vs) + law.viscous)
+                }
+                Some((_, br)) => {
+                    let (z, zdot, s) = z_and_rate.expect("bristle states");
+                    found[4] = s;
+                    let (sigma0, sigma1): (T, T) = (c(br.stiffness), c(br.damping));
+                    let tangential = |v: Vector3<T>| v - n * n.dot(&v);
+                    -(tangential(z * sigma0 + zdot * sigma1) * f_n) - v_t * law.viscous
+                }
+            };
+            found[3] = f_t.norm();
             f += f_t;
-            found[3] = coef * s;
-            found[4] = s;
         }
         let ra = a.generalized(&f, &p, 1.0);
         let rb = b.generalized(&f, &p, -1.0);
-        let mut r = [zero; 12];
-        r[..6].copy_from_slice(&ra);
-        r[6..].copy_from_slice(&rb);
-        (r, found)
+        out[..6].copy_from_slice(&ra);
+        out[6..12].copy_from_slice(&rb);
+        (out, found)
     }
 
     /// The law's parameters ([`ContactParam`]) as `T`.
     fn law<T: RealField + Copy>(&self) -> Law<T> {
-        let friction = self.friction.unwrap_or(crate::model::contact::Friction {
-            coefficient: 0.0,
-            stiction_velocity: 1.0,
-            viscous: 0.0,
-        });
+        let friction = self.friction.as_ref();
         Law {
             stiffness: c(self.law.stiffness),
             exponent: c(self.law.exponent),
             restitution: c(self.law.restitution),
-            friction: c(friction.coefficient),
-            viscous: c(friction.viscous),
+            friction: c(friction.map_or(0.0, |f| f.coefficient)),
+            viscous: c(friction.map_or(0.0, |f| f.viscous)),
         }
     }
 
@@ -259,6 +300,31 @@ impl Contact {
     fn active(&self) -> [bool; 2] {
         [self.node_a.is_some(), self.node_b.is_some()]
     }
+}
+
+/// A row of the bristles' equations, `(de/dw_p, de/dv_p)` in the physical coordinates of one
+/// node, as the row of the iteration matrix in group coordinates: `k de/dw T + c de/dv`
+/// (on SE(3), `dw_p = P dw`, `v_p = P v` with `P = blockdiag(R, I)`, whose translation
+/// velocity `R U` also turns with the rotation: `dv_p/dtheta = -R tilde(U)`).
+fn row_to_group(
+    group: Group,
+    node: &NodeState,
+    (de_dw, de_dv): (nalgebra::RowVector6<f64>, nalgebra::RowVector6<f64>),
+    coef: &Coefficients,
+) -> nalgebra::RowVector6<f64> {
+    let (mut dw, mut dv) = (de_dw, de_dv);
+    if group == Group::SE3 {
+        let r = node.q.r;
+        let u = node.v.fixed_rows::<3>(0).into_owned();
+        let dv_t = de_dv.fixed_columns::<3>(0).into_owned();
+        dw.fixed_columns_mut::<3>(0)
+            .copy_from(&(de_dw.fixed_columns::<3>(0) * r));
+        let turn = dv_t * (-r * flexmb_lie::so3::hat(&u));
+        let mut rot = dw.fixed_columns_mut::<3>(3);
+        rot += turn;
+        dv.fixed_columns_mut::<3>(0).copy_from(&(dv_t * r));
+    }
+    dw * node.t * coef.k + dv * coef.c
 }
 
 /// The pose of a slot in `f64`.
@@ -272,21 +338,23 @@ fn pose(group: Group, node: &NodeState) -> Pose<f64> {
     }
 }
 
-type D25 = num_dual::DualSVec64<25>;
+/// Variables of the automatic differentiation of [`ElementKernel::evaluate`].
+const N_VARS: usize = 31;
+type Dv = num_dual::DualSVec64<N_VARS>;
 type D1 = num_dual::Dual64;
 
 /// The pose of a slot perturbed by the variables `w[6 k..6 k + 6]` (configuration:
 /// `x + dx`, `R (I + tilde(theta))`, exact to first order) and `w[12 + 6 k..]` (velocity).
-fn perturbed(group: Group, node: &NodeState, w: &SVector<D25, 25>, k: usize) -> Pose<D25> {
+fn perturbed(group: Group, node: &NodeState, w: &SVector<Dv, N_VARS>, k: usize) -> Pose<Dv> {
     let p = pose(group, node);
-    let var = |i: usize| -> Vector3<D25> { Vector3::new(w[i], w[i + 1], w[i + 2]) };
+    let var = |i: usize| -> Vector3<Dv> { Vector3::new(w[i], w[i + 1], w[i + 2]) };
     let theta = var(6 * k + 3);
-    let r = p.r.map(D25::from_re) * (Matrix3::identity() + theta.cross_matrix());
+    let r = p.r.map(Dv::from_re) * (Matrix3::identity() + theta.cross_matrix());
     Pose {
-        x: p.x.map(D25::from_re) + var(6 * k),
+        x: p.x.map(Dv::from_re) + var(6 * k),
         r,
-        xdot: p.xdot.map(D25::from_re) + var(12 + 6 * k),
-        om: p.om.map(D25::from_re) + var(12 + 6 * k + 3),
+        xdot: p.xdot.map(Dv::from_re) + var(12 + 6 * k),
+        om: p.om.map(Dv::from_re) + var(12 + 6 * k + 3),
     }
 }
 
@@ -299,7 +367,7 @@ impl ContactElement<'_> {
         );
         let (_, f) = self
             .contact
-            .residual(&a, &b, local.x[0], &self.contact.law());
+            .residual(&a, &b, (local.x, local.xdot), &self.contact.law());
         ContactState {
             gap: f[0],
             gap_rate: f[1],
@@ -357,12 +425,14 @@ impl ElementKernel for ContactElement<'_> {
     }
 
     fn n_states(&self) -> usize {
-        1
+        self.contact.n_states()
     }
 
     fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+        let held = [1.0, 0.0, 0.0, 0.0];
         let local = Local {
-            x: &[1.0],
+            x: &held[..x.len()],
+            xdot: &[0.0; 4][..x.len()],
             ..*local
         };
         x[0] = self.approach_speed(&self.state(ctx, &local));
@@ -443,27 +513,38 @@ impl ElementKernel for ContactElement<'_> {
         let nodes = local.nodes;
         let group = ctx.group;
         let active = self.contact.active();
+        let ns = self.n_states();
         r[12] = local.xdot[0];
         let Some((coef, s)) = s else {
             let (a, b) = (pose(group, &nodes[0]), pose(group, &nodes[1]));
-            let (rp, _) = self
-                .contact
-                .residual(&a, &b, local.x[0], &self.contact.law());
-            let rp = Vec12::from_column_slice(&rp);
+            let law = self.contact.law();
+            let (out, _) = self.contact.residual(&a, &b, (local.x, local.xdot), &law);
+            let rp = Vec12::from_column_slice(&out[..12]);
             physical::to_group(group, nodes, &active, &rp, None, None, r, None);
+            for i in 1..ns {
+                r[12 + i] = out[11 + i];
+            }
             return;
         };
-        let mut w0 = SVector::<f64, 25>::zeros();
-        w0[24] = local.x[0];
+        // Variables: node variations (12), velocities (12), states (4), bristle rates (3).
+        let mut w0 = SVector::<f64, N_VARS>::zeros();
+        w0.rows_mut(24, ns).copy_from_slice(local.x);
+        w0.rows_mut(28, ns - 1).copy_from_slice(&local.xdot[1..]);
         let law = self.contact.law();
-        let (rp, jac) = num_dual::jacobian(
-            |w: SVector<D25, 25>| {
+        let (out, jac) = num_dual::jacobian(
+            |w: SVector<Dv, N_VARS>| {
                 let a = perturbed(group, &nodes[0], &w, 0);
                 let b = perturbed(group, &nodes[1], &w, 1);
-                SVector::<D25, 12>::from(self.contact.residual(&a, &b, w[24], &law).0)
+                let x = [w[24], w[25], w[26], w[27]];
+                let xdot = [w[24] * 0.0, w[28], w[29], w[30]];
+                SVector::<Dv, 15>::from(self.contact.residual(&a, &b, (&x, &xdot), &law).0)
             },
             &w0,
         );
+        let rp = Vec12::from_column_slice(&out.as_slice()[..12]);
+        for i in 1..ns {
+            r[12 + i] = out[11 + i];
+        }
         let k_p: SMatrix<f64, 12, 12> = jac.fixed_view::<12, 12>(0, 0).into_owned();
         let c_p: SMatrix<f64, 12, 12> = jac.fixed_view::<12, 12>(0, 12).into_owned();
         physical::to_group(
@@ -476,16 +557,50 @@ impl ElementKernel for ContactElement<'_> {
             r,
             Some((coef, s)),
         );
-        // The impact-velocity column (group coordinates, like a residual) and the held
-        // state's row.
-        let mut dr = Vec12::from_column_slice(jac.column(24).as_slice());
-        physical::translations_to_group(group, nodes, &active, &mut dr);
         let mut s = s.view();
-        for i in 0..12 {
-            s[(i, 12)] = dr[i] * coef.x;
-            s[(12, i)] = 0.0;
+        // State columns of the mechanical rows (group coordinates, like a residual):
+        // x dr/dx + xdot dr/dxdot (the impact velocity has no rate in r).
+        for k in 0..ns {
+            let mut col = Vec12::from_column_slice(&jac.column(24 + k).as_slice()[..12]) * coef.x;
+            if k > 0 {
+                col += Vec12::from_column_slice(&jac.column(27 + k).as_slice()[..12]) * coef.xdot;
+            }
+            physical::translations_to_group(group, nodes, &active, &mut col);
+            s.view_mut((0, 12 + k), (12, 1)).copy_from(&col);
         }
-        s[(12, 12)] = if coef.xdot != 0.0 { coef.xdot } else { coef.x };
+        // The held impact velocity's row.
+        s.view_mut((12, 0), (1, 12 + ns)).fill(0.0);
+        // The bristles' rows: node columns in group coordinates, state columns.
+        for i in 1..ns {
+            let row = 11 + i;
+            for a in 0..2 {
+                let block = if active[a] {
+                    let de_dw = jac.fixed_view::<1, 6>(row, 6 * a).into_owned();
+                    let de_dv = jac.fixed_view::<1, 6>(row, 12 + 6 * a).into_owned();
+                    row_to_group(group, &nodes[a], (de_dw, de_dv), coef)
+                } else {
+                    nalgebra::RowVector6::zeros()
+                };
+                s.view_mut((12 + i, 6 * a), (1, 6)).copy_from(&block);
+            }
+            s[(12 + i, 12)] = jac[(row, 24)] * coef.x;
+            for k in 1..ns {
+                s[(12 + i, 12 + k)] = jac[(row, 24 + k)] * coef.x + jac[(row, 27 + k)] * coef.xdot;
+            }
+        }
+        // Without a rate term (statics, where the rates are absent) the states are held:
+        // their equations read x = x_start.
+        for k in 0..ns {
+            s[(12 + k, 12 + k)] = if coef.xdot != 0.0 {
+                if k == 0 {
+                    coef.xdot
+                } else {
+                    s[(12 + k, 12 + k)]
+                }
+            } else {
+                coef.x
+            };
+        }
     }
 
     fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
@@ -528,9 +643,12 @@ impl ElementParameters for ContactElement<'_> {
             ContactParam::ViscousFriction => &mut law.viscous,
         };
         parameter.eps = 1.0;
-        let v_imp = D1::from_re(local.x[0]);
-        let (r, _) = self.contact.residual(&lift(&a), &lift(&b), v_imp, &law);
-        let d = Vec12::from_fn(|i, _| r[i].eps);
+        let x: Vec<D1> = local.x.iter().map(|&v| D1::from_re(v)).collect();
+        let xdot: Vec<D1> = local.xdot.iter().map(|&v| D1::from_re(v)).collect();
+        let (out, _) = self
+            .contact
+            .residual(&lift(&a), &lift(&b), (&x, &xdot), &law);
+        let d = Vec12::from_fn(|i, _| out[i].eps);
         physical::to_group(
             group,
             nodes,
@@ -542,6 +660,9 @@ impl ElementParameters for ContactElement<'_> {
             None,
         );
         dr[12] = 0.0;
+        for i in 1..self.n_states() {
+            dr[12 + i] = out[11 + i].eps;
+        }
         DerivativeMethod::Analytic
     }
 }

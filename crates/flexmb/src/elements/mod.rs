@@ -512,7 +512,7 @@ impl ElementItem {
             ElementItem::Load(i) => model.loads[i].n_states(),
             ElementItem::Spring(i) => model.springs[i].n_states(),
             ElementItem::Rope(i) => model.ropes[i].n_states(),
-            ElementItem::Contact(_) => 1,
+            ElementItem::Contact(i) => model.contacts[i].n_states(),
         }
     }
 

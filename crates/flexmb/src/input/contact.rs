@@ -5,7 +5,7 @@
 use super::build::{physical, physical_or_zero, point, read_name, resolve_node, to_node_frame};
 use super::build::{Origin, Origins};
 use super::reader::{Result, Table};
-use crate::model::contact::{Contact, ContactLaw, ContactShape, Dissipation, Friction};
+use crate::model::contact::{Bristles, Contact, ContactLaw, ContactShape, Dissipation, Friction};
 use crate::model::limits::MAX_KINEMATIC;
 use crate::model::{Model, NodeId};
 use flexmb_lie::Vec3;
@@ -81,7 +81,22 @@ pub(super) fn read_contacts(
         let friction = match t.field("friction") {
             Some(f) => {
                 let ft = f.table()?;
-                ft.check_keys(&["coefficient", "stiction_velocity", "viscous"])?;
+                ft.check_keys(&["coefficient", "stiction_velocity", "viscous", "bristles"])?;
+                let bristles = match ft.field("bristles") {
+                    Some(f) => {
+                        let b = f.table()?;
+                        b.check_keys(&["stiffness", "damping", "static_coefficient"])?;
+                        Some(Bristles {
+                            stiffness: physical(&b.req("stiffness")?)?,
+                            damping: match b.field("damping") {
+                                Some(f) => physical_or_zero(&f)?,
+                                None => 0.0,
+                            },
+                            static_coefficient: physical(&b.req("static_coefficient")?)?,
+                        })
+                    }
+                    None => None,
+                };
                 Some(Friction {
                     coefficient: physical_or_zero(&ft.req("coefficient")?)?,
                     stiction_velocity: match ft.field("stiction_velocity") {
@@ -92,6 +107,7 @@ pub(super) fn read_contacts(
                         Some(f) => physical_or_zero(&f)?,
                         None => 0.0,
                     },
+                    bristles,
                 })
             }
             None => None,

@@ -21,6 +21,13 @@ pub struct Contact {
     pub friction: Option<Friction>,
 }
 
+impl Contact {
+    /// The element's states: the impact velocity, and the bristles' deflection (3) if any.
+    pub fn n_states(&self) -> usize {
+        1 + 3 * self.friction.is_some_and(|f| f.bristles.is_some()) as usize
+    }
+}
+
 /// A contact surface in its node's frame.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum ContactShape {
@@ -130,4 +137,22 @@ pub struct Friction {
     pub stiction_velocity: f64,
     /// Viscous coefficient c_v [N s/m], >= 0.
     pub viscous: f64,
+    /// Bristles (LuGre): stick-slip with an internal state instead of the regularization.
+    #[serde(default)]
+    pub bristles: Option<Bristles>,
+}
+
+/// The LuGre friction model (Canudas de Wit, Olsson, Åström & Lischinsky 1995, IEEE Trans.
+/// Autom. Control 40, Eqs. (1)-(4)), per unit normal force: the mean bristle deflection `z`
+/// (three element states, in the tangent plane), `zdot = v_t - sigma_0 |v_t| z / g(|v_t|)`,
+/// `g(v) = mu + (mu_s - mu) exp(-(v / v_s)^2)`, friction `-F_n (sigma_0 z + sigma_1 zdot) -
+/// c_v v_t` (`mu`, `v_s`, `c_v` those of [`Friction`]).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Bristles {
+    /// Bristle stiffness sigma_0 [1/m] (per unit normal force), > 0.
+    pub stiffness: f64,
+    /// Bristle damping sigma_1 [s/m] (per unit normal force), >= 0.
+    pub damping: f64,
+    /// Static coefficient mu_s >= mu (Stribeck: the friction at rest before it breaks away).
+    pub static_coefficient: f64,
 }

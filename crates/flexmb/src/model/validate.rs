@@ -547,6 +547,21 @@ impl Model {
                     .map_err(|m| fail("friction", format!("stiction_velocity {m}")))?;
                 in_range(f.viscous, 0.0, MAX_PHYSICAL)
                     .map_err(|m| fail("friction", format!("viscous {m}")))?;
+                if let Some(b) = &f.bristles {
+                    in_range(b.stiffness, MIN_PHYSICAL, MAX_PHYSICAL)
+                        .map_err(|m| fail("friction", format!("bristles.stiffness {m}")))?;
+                    in_range(b.damping, 0.0, MAX_PHYSICAL)
+                        .map_err(|m| fail("friction", format!("bristles.damping {m}")))?;
+                    if !(b.static_coefficient >= f.coefficient && b.static_coefficient > 0.0) {
+                        return Err(fail(
+                            "friction",
+                            format!(
+                                "bristles.static_coefficient {} must be positive and at least the coefficient {}",
+                                b.static_coefficient, f.coefficient
+                            ),
+                        ));
+                    }
+                }
             }
         }
 
