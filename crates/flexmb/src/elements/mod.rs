@@ -1,6 +1,6 @@
 //! Force elements: rigid bodies (inertia and gravity), geometrically exact beams on SE(3)
 //! (two nodes, [`beam`]), applied loads, spring-dampers (with an optional Maxwell branch,
-//! [`spring`]) and ropes through any number of points ([`rope`]).
+//! [`spring`]), ropes through any number of points ([`rope`]) and gear pairs ([`gear`]).
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
@@ -32,6 +32,7 @@
 //! [`physical`].
 
 pub mod beam;
+pub mod gear;
 pub mod load;
 pub mod physical;
 pub mod rigid_body;
@@ -185,6 +186,7 @@ pub enum ElementRef {
     Load(usize),
     Spring(usize),
     Rope(usize),
+    Gear(usize),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -404,6 +406,7 @@ impl ElementRef {
                 ElementItem::Load(i) => ElementRef::Load(i),
                 ElementItem::Spring(i) => ElementRef::Spring(i),
                 ElementItem::Rope(i) => ElementRef::Rope(i),
+                ElementItem::Gear(i) => ElementRef::Gear(i),
             })
             .collect()
     }
@@ -419,6 +422,7 @@ impl ElementRef {
             ElementRef::Load(i) => Kernel::Load(&model.loads[*i]),
             ElementRef::Spring(i) => Kernel::Spring(&model.springs[*i]),
             ElementRef::Rope(i) => Kernel::Rope(&model.ropes[*i]),
+            ElementRef::Gear(i) => Kernel::Gear(&model.gears[*i]),
         }
     }
 
@@ -430,6 +434,7 @@ impl ElementRef {
             ElementRef::Load(i) => format!("load '{}'", model.loads[*i].name),
             ElementRef::Spring(i) => format!("spring '{}'", model.springs[*i].name),
             ElementRef::Rope(i) => format!("rope '{}'", model.ropes[*i].name),
+            ElementRef::Gear(i) => format!("gear pair '{}'", model.gears[*i].name),
         }
     }
 }
@@ -443,10 +448,12 @@ pub enum ElementItem {
     Load(usize),
     Spring(usize),
     Rope(usize),
+    Gear(usize),
 }
 
 impl ElementItem {
-    /// Every force element of `model`: bodies, beam elements, loads, springs, ropes.
+    /// Every force element of `model`: bodies, beam elements, loads, springs, ropes, gear
+    /// pairs.
     pub fn all(model: &Model) -> impl Iterator<Item = ElementItem> {
         (0..model.bodies.len())
             .map(ElementItem::Body)
@@ -454,6 +461,7 @@ impl ElementItem {
             .chain((0..model.loads.len()).map(ElementItem::Load))
             .chain((0..model.springs.len()).map(ElementItem::Spring))
             .chain((0..model.ropes.len()).map(ElementItem::Rope))
+            .chain((0..model.gears.len()).map(ElementItem::Gear))
     }
 
     /// The number of states the element owns.
@@ -464,6 +472,7 @@ impl ElementItem {
             ElementItem::Load(i) => model.loads[i].n_states(),
             ElementItem::Spring(i) => model.springs[i].n_states(),
             ElementItem::Rope(i) => model.ropes[i].n_states(),
+            ElementItem::Gear(i) => model.gears[i].n_states(),
         }
     }
 
@@ -488,6 +497,7 @@ pub enum Kernel<'m> {
     Load(&'m crate::model::Load),
     Spring(&'m crate::model::SpringDamper),
     Rope(&'m crate::model::Rope),
+    Gear(&'m crate::model::GearPair),
 }
 
 macro_rules! dispatch {
@@ -498,6 +508,7 @@ macro_rules! dispatch {
             Kernel::Load($k) => $e,
             Kernel::Spring($k) => $e,
             Kernel::Rope($k) => $e,
+            Kernel::Gear($k) => $e,
         }
     };
 }
