@@ -717,7 +717,10 @@ fn gear_nodes(model: &Model, g: usize, turn: f64, rng: &mut Lcg) -> [NodeState; 
         vdot: rng.v6(3.0),
         t: Mat6::identity(),
     });
-    nodes[0].q = group.integrate(&nodes[0].q, &flexmb_lie::join(&Vec3::zeros(), &(axis * turn)));
+    nodes[0].q = group.integrate(
+        &nodes[0].q,
+        &flexmb_lie::join(&Vec3::zeros(), &(axis * turn)),
+    );
     nodes
 }
 
@@ -814,7 +817,10 @@ fn gear_pair_tangent_is_one_sided_at_the_backlash_edge() {
         // on the other side, no force and no stiffness
         let before = turned(lo - 1e-9);
         let (r0, s0) = evaluate_owned(&gear, &ctx, &Local::nodes(&before), Some(&coef));
-        assert!(r0.norm() == 0.0 && s0.norm() == 0.0, "{group:?}: no force in the backlash");
+        assert!(
+            r0.norm() == 0.0 && s0.norm() == 0.0,
+            "{group:?}: no force in the backlash"
+        );
     }
 }
 
@@ -881,10 +887,21 @@ fn gear_joint_gradients_and_their_derivatives_match_finite_differences() {
                     fd_b[c] = (p.phi - m.phi) / (2.0 * EPS);
                     fd_h.set_column(c, &((p.b - m.b) / (2.0 * EPS)));
                 }
-                let what = format!("gear joint (internal {internal}) on {group:?} (ground a {ground_a})");
+                let what =
+                    format!("gear joint (internal {internal}) on {group:?} (ground a {ground_a})");
                 let tol = 1e-7 * (1.0 + fd_b.abs().max());
-                assert!((rv.b - fd_b).abs().max() < tol, "{what}: B {:?} vs {:?}", rv.b, fd_b);
-                assert_close(&dense(&rv.h), &dense(&fd_h), &format!("{what}: H"), &entries(active));
+                assert!(
+                    (rv.b - fd_b).abs().max() < tol,
+                    "{what}: B {:?} vs {:?}",
+                    rv.b,
+                    fd_b
+                );
+                assert_close(
+                    &dense(&rv.h),
+                    &dense(&fd_h),
+                    &format!("{what}: H"),
+                    &entries(active),
+                );
             }
         }
     }

@@ -103,8 +103,8 @@
 //! - F. L. Litvin, A. Fuentes, "Gear Geometry and Applied Theory", 2nd ed., 2004.
 
 use super::{
-    central_difference, physical, spring, Coefficients, Context, DerivativeMethod,
-    ElementKernel, ElementParameters, Local, LocalMatrix, LocalVector, Mat12, NodeState, Vec12,
+    central_difference, physical, spring, Coefficients, Context, DerivativeMethod, ElementKernel,
+    ElementParameters, Local, LocalMatrix, LocalVector, Mat12, NodeState, Vec12,
 };
 use crate::joints::primitives::{dot2, Primitive};
 use crate::model::parameters::GearParam;
@@ -287,12 +287,7 @@ impl GearPair {
         s.v += self.mesh_phase;
         let (e, de, dde) = series(&self.transmission_error, s.v);
         let x = delta_n.lin(1.0, &s.map(e, de, dde), -1.0);
-        let (l, gl, hl) = spring::segment(
-            &nodes[0],
-            &self.frame_a.x,
-            &nodes[1],
-            &self.frame_b.x,
-        );
+        let (l, gl, hl) = spring::segment(&nodes[0], &self.frame_a.x, &nodes[1], &self.frame_b.x);
         let radial = Scalar {
             v: l - self.center_distance,
             g: gl,

@@ -235,7 +235,8 @@ impl GearGeometry {
 
     /// Base radii `r_b = z m_n cos(alpha_t) / (2 cos beta)` of wheels A and B \[m\].
     pub fn base_radii(&self) -> [f64; 2] {
-        let k = self.module * self.transverse_pressure_angle().cos() / (2.0 * self.helix_angle.cos());
+        let k =
+            self.module * self.transverse_pressure_angle().cos() / (2.0 * self.helix_angle.cos());
         [self.teeth_a as f64 * k, self.teeth_b as f64 * k]
     }
 
@@ -771,8 +772,14 @@ impl Model {
             None => g,
         };
         [
-            local(node_a, Frame::new(center_a, frame_from_axis(axis, Some(&d)))),
-            local(node_b, Frame::new(center_b, frame_from_axis(axis, Some(&-d)))),
+            local(
+                node_a,
+                Frame::new(center_a, frame_from_axis(axis, Some(&d))),
+            ),
+            local(
+                node_b,
+                Frame::new(center_b, frame_from_axis(axis, Some(&-d))),
+            ),
         ]
     }
 

@@ -840,7 +840,11 @@ impl Model {
                     ),
                 ));
             }
-            let sum: f64 = g.stiffness_variation.iter().map(|h| h.amplitude.abs()).sum();
+            let sum: f64 = g
+                .stiffness_variation
+                .iter()
+                .map(|h| h.amplitude.abs())
+                .sum();
             let finite = |hs: &[super::Harmonic]| {
                 hs.iter()
                     .all(|h| h.amplitude.is_finite() && within(h.phase, -MAX_ANGLE, MAX_ANGLE))
@@ -859,7 +863,13 @@ impl Model {
                 ));
             }
             if !within(g.mesh_phase, -MAX_ANGLE, MAX_ANGLE) {
-                return Err(fail("mesh_phase", format!("must be finite, at most {MAX_ANGLE:e} in magnitude, got {}", g.mesh_phase)));
+                return Err(fail(
+                    "mesh_phase",
+                    format!(
+                        "must be finite, at most {MAX_ANGLE:e} in magnitude, got {}",
+                        g.mesh_phase
+                    ),
+                ));
             }
         }
         Ok(())
