@@ -50,12 +50,13 @@
 //! `delta_n = cos(beta_b) delta_t + sin(beta_b) u`. The mesh position is `s = z_a alpha_a +
 //! s_0` (one mesh period per `2 pi`).
 //!
-//! **Contact on either flank.** With the static transmission error `e(s) = sum_n e_n cos(n s
-//! + phi_n)` (Özgüven & Houser 1988), the backlash `b` (total clearance along the normal line
-//! of action) and the centre distance `a = |d|` (its change opens the backlash by
-//! `2 (a - a_0) sin(alpha_wt) cos(beta_b)` for an external pair and closes it for an internal
-//! one: the involute relation of ISO/TR 10064-2 between centre distance and backlash), flank `f = +1` (drive: wheel A pushes) and `f = -1` (coast)
-//! have the penetrations
+//! **Contact on either flank.** With the static transmission error
+//! `e(s) = sum_n e_n cos(n s + phi_n)` (Özgüven & Houser 1988), the backlash `b` (total
+//! clearance along the normal line of action) and the centre distance `a = |d|` (its change
+//! opens the backlash by `2 (a - a_0) sin(alpha_wt) cos(beta_b)` for an external pair and
+//! closes it for an internal one: the involute relation of ISO/TR 10064-2 between centre
+//! distance and backlash), flank `f = +1` (drive: wheel A pushes) and `f = -1` (coast) have
+//! the penetrations
 //!
 //! ```text
 //! y_f = f (delta_n - e(s)) - sigma sin(alpha_wt) cos(beta_b) (a - a_0) - b / 2,
@@ -377,7 +378,6 @@ impl ElementKernel for GearPair {
                 c_p += y.g * y.g.transpose() * c;
             }
         }
-        let matrix = s.map(|(coef, m)| (coef, m));
         physical::to_group(
             ctx.group,
             nodes,
@@ -386,7 +386,7 @@ impl ElementKernel for GearPair {
             Some(&k_p),
             Some(&c_p),
             r,
-            matrix,
+            s,
         );
     }
 

@@ -793,7 +793,7 @@ impl Model {
                     ),
                 ));
             }
-            if !(geo.helix_angle.abs() < 1.2) {
+            if geo.helix_angle.is_nan() || geo.helix_angle.abs() >= 1.2 {
                 return Err(fail(
                     "helix_angle_deg",
                     format!(
@@ -815,7 +815,7 @@ impl Model {
                 .map_err(|m| fail("center_b", m))?;
             let [ra, rb] = geo.base_radii();
             let least = (ra + geo.sigma() * rb).abs();
-            if !(g.center_distance > least * (1.0 + 1e-9)) {
+            if g.center_distance.is_nan() || g.center_distance <= least * (1.0 + 1e-9) {
                 return Err(fail(
                     "center_b",
                     format!(
@@ -849,14 +849,14 @@ impl Model {
                 hs.iter()
                     .all(|h| h.amplitude.is_finite() && within(h.phase, -MAX_ANGLE, MAX_ANGLE))
             };
-            if !finite(&g.stiffness_variation) || !(sum < 1.0) {
+            if !finite(&g.stiffness_variation) || sum.is_nan() || sum >= 1.0 {
                 return Err(fail(
                     "stiffness_variation",
                     format!("needs finite harmonics whose relative amplitudes add up to less than 1 (the stiffness stays positive), got {sum}"),
                 ));
             }
             let te: f64 = g.transmission_error.iter().map(|h| h.amplitude.abs()).sum();
-            if !finite(&g.transmission_error) || !(te < 0.25 * pitch) {
+            if !finite(&g.transmission_error) || te.is_nan() || te >= 0.25 * pitch {
                 return Err(fail(
                     "transmission_error",
                     format!("needs finite harmonics whose amplitudes add up to less than a quarter of the base pitch ({:.6e} m), got {te}", 0.25 * pitch),
