@@ -347,3 +347,53 @@ fn single_mesh_parametric_resonance_grows_at_the_mathieu_rate() {
         assert!(rate.abs() < 0.1 * expected, "ratio {ratio}: growth {rate}");
     }
 }
+
+#[test]
+fn stiffness_table_gives_the_quasi_static_transmission_error() {
+    // A slow mesh (f_m = 50 Hz, far below f_n = 3.2 kHz): the transmission error follows
+    // F_0 / k(s) with k = k_m kappa(s), kappa the table (double and single tooth contact
+    // joined by short ramps), s = z_a omega t.
+    let omega = 2.0 * PI * 50.0 / Z_A;
+    let table = [(0.0, 1.2), (0.55, 1.2), (0.6, 0.75), (0.95, 0.75)];
+    let set = format!(
+        "gear.mesh.stiffness_table=[{}]",
+        table
+            .iter()
+            .map(|(u, f)| format!("[{u}, {f}]"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let h = constant_speed(
+        omega,
+        &[
+            set.as_str(),
+            "solver.t_end=0.04",
+            "solver.h=2e-5",
+            "solver.output_interval=2e-5",
+        ],
+    );
+    let (_, rb) = base_radii();
+    let x0 = 2.0 / rb / 4e8;
+    let kappa = |t: f64| {
+        let u = (Z_A * omega * t / (2.0 * PI)).rem_euclid(1.0);
+        let k = table.partition_point(|p| p.0 <= u);
+        let ((u0, f0), (u1, f1)) = if k == table.len() {
+            (table[k - 1], (1.0, table[0].1))
+        } else {
+            (table[k - 1], table[k])
+        };
+        f0 + (f1 - f0) * (u - u0) / (u1 - u0)
+    };
+    let mut worst = 0.0f64;
+    for (t, d) in h.series("dte") {
+        // after the start transient (decay rate zeta omega_n = 450 1/s), in the middle of
+        // the single and double contact zones
+        let u = (Z_A * omega * t / (2.0 * PI)).rem_euclid(1.0);
+        if t > 0.02 && ((0.2..0.4).contains(&u) || (0.7..0.85).contains(&u)) {
+            let expected = x0 / kappa(t);
+            worst = worst.max((d - expected).abs() / expected);
+        }
+    }
+    println!("stiffness table: quasi-static transmission error within {worst:.2e}");
+    assert!(worst < 0.02, "worst relative difference {worst}");
+}

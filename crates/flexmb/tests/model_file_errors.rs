@@ -1624,6 +1624,20 @@ fn gear_errors_name_the_key() {
     );
     let (e, line) = gears_with(
         "backlash = 1e-4",
+        "backlash = 1e-4\nstiffness_table = [[0.0, 1.2], [1.2, 0.8]]",
+        "stiffness_table",
+    );
+    assert_contains(
+        &e,
+        &[
+            &at(line),
+            "field 'gear[0].stiffness_table'",
+            "point 2",
+            "within [0, 1)",
+        ],
+    );
+    let (e, line) = gears_with(
+        "backlash = 1e-4",
         "backlash = 1e-4\ninternal = \"yes\"",
         "internal",
     );

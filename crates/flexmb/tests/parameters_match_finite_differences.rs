@@ -582,6 +582,7 @@ fn gears(group: Group) -> Model {
         amplitude: 1e-5,
         phase: 0.7,
     }];
+    gear.stiffness_table = vec![(0.1, 1.3), (0.3, 0.7), (0.65, 1.25)];
     let cc = m.nodes[c.0].frame.x;
     m.add_gear_joint(
         "ratio",

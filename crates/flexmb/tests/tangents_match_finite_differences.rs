@@ -703,6 +703,7 @@ fn gear_model(group: Group, internal: bool, helical: bool, rng: &mut Lcg) -> (Mo
         phase: 0.7,
     }];
     gear.mesh_phase = 0.4;
+    gear.stiffness_table = vec![(0.0, 1.3), (0.3, 0.7), (0.65, 1.25)];
     (model, g)
 }
 

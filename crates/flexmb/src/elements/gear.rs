@@ -68,10 +68,11 @@
 //!
 //! ```text
 //! F_f = max(0, k(s) y_f + c y_f')  if y_f > 0,  else 0,
-//! k(s) = k_m (1 + sum_n eps_n cos(n s + phi_n))         (ISO 6336-1, Sect. 9: c_gamma, c'),
+//! k(s) = k_m (kappa(s) + sum_n eps_n cos(n s + phi_n))  (ISO 6336-1: c_gamma, c'),
 //! ```
 //!
-//! whose generalized force is `r_p = sum_f F_f grad(y_f)` (physical coordinates, see
+//! (`kappa` the stiffness table over one mesh period, linearly interpolated and periodic; 1
+//! without a table), whose generalized force is `r_p = sum_f F_f grad(y_f)` (physical coordinates, see
 //! [`super::physical`]). Exact iteration matrix, per flank in contact:
 //!
 //! ```text
@@ -100,7 +101,8 @@
 //!   1990, 49-75 (single-mesh torsional model with backlash and a clearance function).
 //! - H. N. Özgüven, D. R. Houser, "Mathematical models used in gear dynamics - a review",
 //!   J. Sound Vib. 121(3), 1988, 383-411 (static transmission error, mesh stiffness).
-//! - ISO 6336-1:2019, Sect. 9 (mesh stiffness c' and c_gamma); ISO/TR 10064-2 (backlash).
+//! - ISO 6336-1:2019 (single stiffness c' and mesh stiffness c_gamma); ISO/TR 10064-2
+//!   (backlash).
 //! - F. L. Litvin, A. Fuentes, "Gear Geometry and Applied Theory", 2nd ed., 2004.
 
 use super::{
@@ -233,6 +235,24 @@ fn series(harmonics: &[Harmonic], s: f64) -> (f64, f64, f64) {
     out
 }
 
+/// `(f(s), df/ds)` of a periodic table of `(s / 2 pi, f)` (linear interpolation; `(1, 0)`
+/// for an empty table).
+fn periodic_table(table: &[(f64, f64)], s: f64) -> (f64, f64) {
+    let (Some(first), Some(last)) = (table.first(), table.last()) else {
+        return (1.0, 0.0);
+    };
+    let u = (s / (2.0 * PI)).rem_euclid(1.0);
+    // the segment [u0, u1] holding u, the last one wrapping round to the first point
+    let k = table.partition_point(|p| p.0 <= u);
+    let ((u0, f0), (u1, f1)) = match k {
+        0 => ((last.0 - 1.0, last.1), *first),
+        k if k == table.len() => (*last, (first.0 + 1.0, first.1)),
+        k => (table[k - 1], table[k]),
+    };
+    let slope = (f1 - f0) / (u1 - u0);
+    (f0 + slope * (u - u0), slope / (2.0 * PI))
+}
+
 /// The mesh state of a gear pair at given node kinematics.
 struct Mesh {
     /// Dynamic transmission error `delta_t` \[m\].
@@ -301,6 +321,7 @@ impl GearPair {
             y
         };
         let (eps, deps, _) = series(&self.stiffness_variation, s.v);
+        let (f, df) = periodic_table(&self.stiffness_table, s.v);
         let mut v_p = Vec12::zeros();
         for (a, node) in nodes.iter().enumerate().take(2) {
             let (xd, om) = physical::velocity(ctx.group, node);
@@ -311,8 +332,8 @@ impl GearPair {
             dte: delta_t.v,
             s,
             k: (
-                self.mesh_stiffness * (1.0 + eps),
-                self.mesh_stiffness * deps,
+                self.mesh_stiffness * (f + eps),
+                self.mesh_stiffness * (df + deps),
             ),
             y: [flank(1.0), flank(-1.0)],
             v_p,

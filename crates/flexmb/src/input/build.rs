@@ -1640,6 +1640,7 @@ fn read_gears(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
             "damping",
             "backlash",
             "stiffness_variation",
+            "stiffness_table",
             "transmission_error",
             "mesh_phase",
         ])?;
@@ -1680,6 +1681,21 @@ fn read_gears(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
         }
         if let Some(f) = t.field("stiffness_variation") {
             gear.stiffness_variation = harmonics(&f, 1.0)?;
+        }
+        if let Some(f) = t.field("stiffness_table") {
+            let list = f.array()?;
+            if list.len() > 1000 {
+                return Err(f.err(format!("holds at most 1000 points, got {}", list.len())));
+            }
+            let mut table = Vec::with_capacity(list.len());
+            for (i, v) in list.iter().enumerate() {
+                let p = f.elem(i, v).numbers(
+                    2,
+                    "a point [position (fraction of the mesh period), factor]",
+                )?;
+                table.push((p[0], p[1]));
+            }
+            gear.stiffness_table = table;
         }
         if let Some(f) = t.field("transmission_error") {
             gear.transmission_error = harmonics(&f, MAX_KINEMATIC)?;

@@ -285,11 +285,20 @@ pub struct GearPair {
     pub geometry: GearGeometry,
     /// Mean mesh stiffness k_m along the line of action [N/m], > 0.
     pub mesh_stiffness: f64,
-    /// Relative fluctuation of the mesh stiffness: `k(s) = k_m (1 + sum_n eps_n cos(n s +
-    /// phi_n))`, one harmonic per entry (amplitudes eps_n dimensionless, `sum |eps_n| < 1`).
+    /// Relative fluctuation of the mesh stiffness: `k(s) = k_m (kappa(s) + sum_n eps_n cos(n s
+    /// + phi_n))`, one harmonic per entry (amplitudes eps_n dimensionless, `sum |eps_n|`
+    /// below the smallest `kappa`, 1 without a table).
     pub stiffness_variation: Vec<Harmonic>,
     /// Mesh damping c along the line of action [N s/m], >= 0 (acts in contact only).
     pub damping: f64,
+    /// The mesh stiffness over one mesh period as a table of `(position, factor)`: position
+    /// `s / 2 pi` in `[0, 1)`, strictly increasing, factor > 0; `k(s) = k_m (kappa(s) +
+    /// sum_n eps_n cos(n s + phi_n))` with `kappa` interpolated linearly and periodically
+    /// (`kappa = 1` for an empty table). E.g. the alternating single and double tooth contact of ISO
+    /// 6336-1 (a stiffness `c'` per tooth pair): a factor near 1 / contact ratio where one
+    /// pair meshes, near twice that where two do.
+    #[serde(default)]
+    pub stiffness_table: Vec<(f64, f64)>,
     /// Backlash b: total clearance along the line of action \[m\], >= 0.
     pub backlash: f64,
     /// Static transmission error `e(s) = sum_n e_n cos(n s + phi_n)` along the line of
@@ -835,6 +844,7 @@ impl Model {
             mesh_stiffness: k,
             stiffness_variation: Vec::new(),
             damping: 0.0,
+            stiffness_table: Vec::new(),
             backlash: 0.0,
             transmission_error: Vec::new(),
             mesh_phase: 0.0,

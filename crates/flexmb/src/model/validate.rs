@@ -840,6 +840,27 @@ impl Model {
                     ),
                 ));
             }
+            let table = &g.stiffness_table;
+            if table.len() == 1 {
+                return Err(fail(
+                    "stiffness_table",
+                    "needs at least 2 points [position, factor] (or none)".into(),
+                ));
+            }
+            for (i, &(u, f)) in table.iter().enumerate() {
+                let increasing = i == 0 || u > table[i - 1].0;
+                if !(within(u, 0.0, 1.0) && u < 1.0 && increasing && within(f, 1e-6, 1e6)) {
+                    return Err(fail(
+                        "stiffness_table",
+                        format!(
+                            "point {}: positions must increase strictly within [0, 1) (fractions of the mesh period) and factors lie in [1e-6, 1e6], got [{u}, {f}]",
+                            i + 1
+                        ),
+                    ));
+                }
+            }
+            let least = table.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+            let least = if table.is_empty() { 1.0 } else { least };
             let sum: f64 = g
                 .stiffness_variation
                 .iter()
@@ -849,10 +870,10 @@ impl Model {
                 hs.iter()
                     .all(|h| h.amplitude.is_finite() && within(h.phase, -MAX_ANGLE, MAX_ANGLE))
             };
-            if !finite(&g.stiffness_variation) || sum.is_nan() || sum >= 1.0 {
+            if !finite(&g.stiffness_variation) || sum.is_nan() || sum >= least {
                 return Err(fail(
                     "stiffness_variation",
-                    format!("needs finite harmonics whose relative amplitudes add up to less than 1 (the stiffness stays positive), got {sum}"),
+                    format!("needs finite harmonics whose relative amplitudes add up to less than {least} (the smallest factor of the stiffness table, 1 without one: the stiffness stays positive), got {sum}"),
                 ));
             }
             let te: f64 = g.transmission_error.iter().map(|h| h.amplitude.abs()).sum();
