@@ -202,6 +202,12 @@ fn visit(
             sink(Piece::Joint(j.0, &d));
             method
         }
+        ParamKind::Gear(i, p) => element_term(
+            at,
+            (&model.gears[i], ElementItem::Gear(i)),
+            Wrt::Own(p),
+            sink,
+        ),
     }
 }
 

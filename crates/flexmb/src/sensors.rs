@@ -246,6 +246,16 @@ pub fn sensor_value(
                 st.stress[*component]
             }
         }
+        kind @ (SensorKind::GearForce { gear } | SensorKind::GearTransmissionError { gear }) => {
+            let g = &model.gears[*gear];
+            buffers.gather(g, nodes, (&state.x, &state.xdot, 0));
+            let local = buffers.local(nodes);
+            if matches!(kind, SensorKind::GearForce { .. }) {
+                g.mesh_force(&ctx, &local)
+            } else {
+                g.transmission_error(&ctx, &local)
+            }
+        }
     }
 }
 
@@ -313,6 +323,8 @@ pub fn unit(kind: &SensorKind) -> &'static str {
                 "N m"
             }
         }
+        SensorKind::GearForce { .. } => "N",
+        SensorKind::GearTransmissionError { .. } => "m",
     }
 }
 

@@ -1601,3 +1601,172 @@ fn contact_errors_are_located() {
         &["ball.toml:38:", "field 'contact[0].b'", "cannot be a plane"],
     );
 }
+
+/// The example gear stage with `from` replaced by `to` (once): the error, and the line of
+/// `line_of` in the edited text (1-based).
+fn gears_with(from: &str, to: &str, line_of: &str) -> (String, usize) {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/gear_rattle.toml");
+    let text = std::fs::read_to_string(path).expect("example");
+    assert!(text.contains(from), "{from:?} not in the example");
+    let edited = text.replacen(from, to, 1);
+    let line = edited
+        .lines()
+        .position(|l| l.contains(line_of))
+        .expect("the key")
+        + 1;
+    match parse_model_str(&edited, "gears.toml", &[]) {
+        Ok(_) => panic!("accepted with {to:?}"),
+        Err(e) => (e.to_string(), line),
+    }
+}
+
+#[test]
+fn gear_errors_name_the_key() {
+    let at = |line: usize| format!("gears.toml:{line}:");
+    for (from, to, key, field, message) in [
+        (
+            "mesh_stiffness = 4e8",
+            "mesh_stiffness = -4e8",
+            "mesh_stiffness =",
+            "gear[0].mesh_stiffness",
+            "must be positive",
+        ),
+        (
+            "backlash = 1e-4",
+            "backlash = -1e-4",
+            "backlash =",
+            "gear[0].backlash",
+            "must be >= 0",
+        ),
+        (
+            "module = 0.003",
+            "module = 0",
+            "module =",
+            "gear[0].module",
+            "must be positive",
+        ),
+        (
+            "teeth_a = 20",
+            "teeth_a = 0",
+            "teeth_a =",
+            "gear[0].teeth_a",
+            "whole number of teeth",
+        ),
+        (
+            "node_b = \"wheel\"\naxis",
+            "node_b = \"whee\"\naxis",
+            "\"whee\"",
+            "gear[0].node_b",
+            "unknown node 'whee'",
+        ),
+        (
+            "damping = 900.0",
+            "damping = -1.0",
+            "damping =",
+            "gear[0].damping",
+            "must be >= 0",
+        ),
+    ] {
+        let (e, line) = gears_with(from, to, key);
+        assert_contains(&e, &[&at(line), &format!("field '{field}'"), message]);
+    }
+    // Found by Model::validate, mapped back to the key.
+    let (e, line) = gears_with("backlash = 1e-4", "backlash = 0.005", "backlash =");
+    assert_contains(
+        &e,
+        &[&at(line), "field 'gear[0].backlash'", "half the base pitch"],
+    );
+    let (e, line) = gears_with(
+        "teeth_b = 40\nmodule",
+        "teeth_b = 40\ncenter_b = [0.08, 0.0, 0.0]\nmodule",
+        "center_b",
+    );
+    assert_contains(
+        &e,
+        &[
+            &at(line),
+            "field 'gear[0].center_b'",
+            "must exceed the sum of the base radii",
+        ],
+    );
+    let (e, line) = gears_with(
+        "backlash = 1e-4",
+        "backlash = 1e-4\nstiffness_variation = [[1.2, 0.0]]",
+        "stiffness_variation",
+    );
+    assert_contains(&e, &[&at(line), "gear[0].stiffness_variation[0][0]"]);
+    let (e, line) = gears_with(
+        "backlash = 1e-4",
+        "backlash = 1e-4\nstiffness_variation = [[0.6, 0.0], [0.5, 1.0]]",
+        "stiffness_variation",
+    );
+    assert_contains(
+        &e,
+        &[
+            &at(line),
+            "field 'gear[0].stiffness_variation'",
+            "less than 1",
+        ],
+    );
+    let (e, line) = gears_with(
+        "backlash = 1e-4",
+        "backlash = 1e-4\nstiffness_table = [[0.0, 1.2], [1.2, 0.8]]",
+        "stiffness_table",
+    );
+    assert_contains(
+        &e,
+        &[
+            &at(line),
+            "field 'gear[0].stiffness_table'",
+            "point 2",
+            "within [0, 1)",
+        ],
+    );
+    let (e, line) = gears_with(
+        "backlash = 1e-4",
+        "backlash = 1e-4\ninternal = \"yes\"",
+        "internal",
+    );
+    assert_contains(&e, &[&at(line), "field 'gear[0].internal'", "boolean"]);
+    let (e, line) = gears_with("gear = \"mesh\"", "gear = \"mash\"", "\"mash\"");
+    assert_contains(&e, &[&at(line), "unknown gear pair 'mash'"]);
+    // The gear joint.
+    let joint = "[[joint]]\nname = \"ratio\"\ntype = \"gear\"\nnode_a = \"pinion\"\nnode_b = \"wheel\"\naxis = [0.0, 0.0, 1.0]\nteeth_a = 20\nteeth_b = 40\n\n[[gear]]";
+    let with_joint =
+        |from: &str, to: &str, key: &str| gears_with("[[gear]]", &joint.replacen(from, to, 1), key);
+    let (e, line) = with_joint("teeth_b = 40", "teeth_b = -3", "teeth_b = -3");
+    assert_contains(
+        &e,
+        &[
+            &at(line),
+            "field 'joint[2].teeth_b'",
+            "whole number of teeth",
+        ],
+    );
+    let (e, _) = with_joint(
+        "node_b = \"wheel\"",
+        "node_b = \"pinion\"",
+        "name = \"ratio\"",
+    );
+    assert_contains(&e, &["field 'joint[2].node_b'", "joins a node to itself"]);
+    let (e, line) = with_joint(
+        "axis = [0.0, 0.0, 1.0]\n",
+        "axis = [0.0, 0.0, 1.0]\nposition = [0.0, 0.0, 0.0]\n",
+        "name = \"ratio\"",
+    );
+    assert!(line > 0);
+    assert_contains(&e, &["joint[2]", "position"]);
+    let (e, line) = with_joint(
+        "node_a = \"pinion\"\n",
+        "node_a = \"ground\"\n",
+        "node_a = \"ground\"",
+    );
+    assert!(line > 0);
+    assert_contains(
+        &e,
+        &[
+            "field 'joint[2].center_a'",
+            "required for a wheel on the ground",
+        ],
+    );
+}

@@ -9,7 +9,8 @@ use flexmb::elements::{
 };
 use flexmb::joints;
 use flexmb::model::parameters::{
-    BodyParam, ContactParam, JointParam, LoadParam, NodeParam, RopeParam, SectionParam, SpringParam,
+    BodyParam, ContactParam, GearParam, JointParam, LoadParam, NodeParam, RopeParam, SectionParam,
+    SpringParam,
 };
 use flexmb::model::{
     BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, ParamId, ParamKind,
@@ -190,6 +191,13 @@ fn pattern(params: &Parameters, id: ParamId) -> String {
             RopeParam::Damping => "rope.<r>.damping",
             RopeParam::RestLength => "rope.<r>.rest_length",
             RopeParam::Point(..) => "rope.<r>.points.<i>.point.<k>",
+        },
+        ParamKind::Gear(_, p) => match p {
+            GearParam::MeshStiffness => "gear.<g>.mesh_stiffness",
+            GearParam::Damping => "gear.<g>.damping",
+            GearParam::Backlash => "gear.<g>.backlash",
+            GearParam::StiffnessVariation(_) => "gear.<g>.stiffness_variation.<n>",
+            GearParam::TransmissionError(_) => "gear.<g>.transmission_error.<n>",
         },
     };
     item.into()
@@ -608,15 +616,136 @@ fn parameter_kinds_by_finite_differences_are_the_listed_ones() {
     let mut at = point(&contacts(Group::SE3), &mut rng, 1e-3);
     at.x.iter_mut().for_each(|x| *x = 1.0 + x.abs());
     check_model("contacts", &contacts(Group::SE3), &at, &mut seen);
+    let model = gears(Group::SE3);
+    check_model(
+        "gears",
+        &model,
+        &gear_point(&model, &mut rng, 0.01),
+        &mut seen,
+    );
     let by_differences: Vec<&str> = seen.by_differences.iter().map(String::as_str).collect();
     assert_eq!(
         by_differences,
         [
+            "gear.<g>.transmission_error.<n>",
             "joint.<j>.position.<k>",
             "rope.<r>.points.<i>.point.<k>",
             "spring.<s>.point_a.<k>",
             "spring.<s>.point_b.<k>"
         ]
     );
-    assert_eq!(seen.kinds.len(), 34, "kinds checked: {:#?}", seen.kinds);
+    assert_eq!(seen.kinds.len(), 39, "kinds checked: {:#?}", seen.kinds);
+}
+
+/// A helical gear pair (stiffness harmonics, transmission error, damping, backlash) between
+/// two wheels on revolute joints to the ground, and a gear joint between the second wheel
+/// and a third.
+fn gears(group: Group) -> Model {
+    use flexmb::model::{GearGeometry, Harmonic};
+    let mut m = Model::new(group);
+    let axis = Vec3::new(0.1, 0.2, 1.0).normalize();
+    let r = flexmb::model::frame_from_axis(&axis, None);
+    let across = r.column(0).into_owned();
+    let centers = [
+        Vec3::new(0.1, 0.2, 0.3),
+        Vec3::new(0.1, 0.2, 0.3) + across * 0.26,
+    ];
+    let a = m.add_node("a", Frame::new(centers[0], r));
+    let b = m.add_node("b", Frame::new(centers[1], r));
+    let c = m.add_node("c", Frame::new(centers[1] + r.column(1) * 0.3, r));
+    for (i, n) in [a, b, c].into_iter().enumerate() {
+        // heavy wheels: the gravity columns stand out of the round-off of the mesh force
+        m.add_body(
+            &format!("w{i}"),
+            n,
+            1e3,
+            Vec3::zeros(),
+            Mat3::identity() * 10.0,
+        );
+        let at = m.nodes[n.0].frame.x;
+        m.add_joint(
+            &format!("bearing{i}"),
+            JointKind::Revolute,
+            None,
+            Some(n),
+            at,
+            r,
+            None,
+        );
+    }
+    let geometry = GearGeometry {
+        teeth_a: 20,
+        teeth_b: 31,
+        module: 0.01,
+        pressure_angle: 20f64.to_radians(),
+        helix_angle: 12f64.to_radians(),
+        internal: false,
+    };
+    let g = m.add_gear_pair("mesh", [Some(a), Some(b)], centers, &axis, geometry, 2e7);
+    let gear = &mut m.gears[g];
+    gear.damping = 3e3;
+    gear.backlash = 2e-4;
+    gear.stiffness_variation = vec![
+        Harmonic {
+            amplitude: 0.2,
+            phase: 0.3,
+        },
+        Harmonic {
+            amplitude: 0.05,
+            phase: -1.0,
+        },
+    ];
+    gear.transmission_error = vec![Harmonic {
+        amplitude: 1e-5,
+        phase: 0.7,
+    }];
+    gear.stiffness_table = vec![(0.1, 1.3), (0.3, 0.7), (0.65, 1.25)];
+    let cc = m.nodes[c.0].frame.x;
+    m.add_gear_joint(
+        "ratio",
+        [Some(b), Some(c)],
+        [centers[1], cc],
+        &axis,
+        (31, 17, false),
+    );
+    m
+}
+
+/// A point near the initial configuration with wheel a turned by `turn` about its axis
+/// (into the drive flank of the mesh).
+fn gear_point(model: &Model, rng: &mut Lcg, turn: f64) -> Point {
+    let mut at = point(model, rng, 1e-4);
+    let axis = model.gears[0].frame_a.r.column(2).into_owned();
+    let turned = flexmb_lie::join(&Vec3::zeros(), &(axis * turn));
+    at.nodes[0].q = model.group.integrate(&at.nodes[0].q, &turned);
+    at
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_gear_pairs() {
+    let mut seen = Seen::default();
+    let mut rng = Lcg(8);
+    for group in [Group::R3xSO3, Group::SE3] {
+        let model = gears(group);
+        for turn in [0.01, -0.01] {
+            let at = gear_point(&model, &mut rng, turn);
+            check_model(
+                &format!("gears on {group:?} (turn {turn})"),
+                &model,
+                &at,
+                &mut seen,
+            );
+        }
+    }
+    let expected = [
+        "gear.<g>.backlash",
+        "gear.<g>.damping",
+        "gear.<g>.mesh_stiffness",
+        "gear.<g>.stiffness_variation.<n>",
+        "gear.<g>.transmission_error.<n>",
+    ];
+    for kind in expected {
+        assert!(seen.kinds.contains(kind), "{kind} checked");
+    }
+    println!("worst relative error {:.2e}", seen.worst);
 }

@@ -872,6 +872,113 @@ fn contact_tangents_match_finite_differences() {
     }
 }
 
+/// Two wheels on nodes at random frames (`group`), wheel A's centre and axis random, wheel
+/// B at a standard centre distance across the axis; external or internal, spur or helical.
+fn gear_model(group: Group, internal: bool, helical: bool, rng: &mut Lcg) -> (Model, usize) {
+    let mut model = Model::new(group);
+    model.add_node("a", group.exp(&rng.v6(1.0)));
+    model.add_node("b", group.exp(&rng.v6(1.0)));
+    let geometry = flexmb::model::GearGeometry {
+        teeth_a: 20,
+        teeth_b: if internal { 57 } else { 31 },
+        module: 0.01,
+        pressure_angle: 20f64.to_radians(),
+        helix_angle: if helical { 15f64.to_radians() } else { 0.0 },
+        internal,
+    };
+    let [ra, rb] = geometry.pitch_radii();
+    let axis = rng.v3(1.0).normalize();
+    let across = axis.cross(&rng.v3(1.0)).normalize();
+    let ca = rng.v3(0.5);
+    let cb = ca + across * ((ra + geometry.sigma() * rb).abs() * 1.02) + axis * 0.01;
+    // the nodes at the wheel centres: a turn of a node is a turn of its wheel
+    model.nodes[0].frame.x = ca;
+    model.nodes[1].frame.x = cb;
+    let g = model.add_gear_pair(
+        "g",
+        [Some(NodeId(0)), Some(NodeId(1))],
+        [ca, cb],
+        &axis,
+        geometry,
+        2e8,
+    );
+    let gear = &mut model.gears[g];
+    gear.damping = 3e3;
+    gear.backlash = 2e-4;
+    gear.stiffness_variation = vec![
+        flexmb::model::Harmonic {
+            amplitude: 0.2,
+            phase: 0.3,
+        },
+        flexmb::model::Harmonic {
+            amplitude: 0.05,
+            phase: -1.0,
+        },
+    ];
+    gear.transmission_error = vec![flexmb::model::Harmonic {
+        amplitude: 1e-5,
+        phase: 0.7,
+    }];
+    gear.mesh_phase = 0.4;
+    gear.stiffness_table = vec![(0.0, 1.3), (0.3, 0.7), (0.65, 1.25)];
+    (model, g)
+}
+
+/// Node kinematics near the initial configuration with wheel A turned by `turn` about its
+/// axis (into the drive flank for `turn > 0`), small random motion and random velocities.
+fn gear_nodes(model: &Model, g: usize, turn: f64, rng: &mut Lcg) -> [NodeState; 2] {
+    let group = model.group;
+    let axis = model.gears[g].frame_a.r.column(2).into_owned();
+    let mut nodes = [0, 1].map(|i| NodeState {
+        q: group.integrate(&model.nodes[i].frame, &rng.v6(2e-4)),
+        v: rng.v6(2.0),
+        vdot: rng.v6(3.0),
+        t: Mat6::identity(),
+    });
+    nodes[0].q = group.integrate(
+        &nodes[0].q,
+        &flexmb_lie::join(&Vec3::zeros(), &(axis * turn)),
+    );
+    nodes
+}
+
+#[test]
+fn gear_pair_tangents_match_finite_differences() {
+    // Both flanks in contact in turn (wheel A turned one way, then the other), external and
+    // internal, spur and helical, a wheel on the ground or not.
+    let mut rng = Lcg(11);
+    for group in [Group::R3xSO3, Group::SE3] {
+        for (internal, helical) in [(false, false), (true, false), (false, true), (true, true)] {
+            let (mut model, g) = gear_model(group, internal, helical, &mut rng);
+            let original = model.gears[g].clone();
+            for turn in [0.01, -0.01] {
+                for ground_a in [false, true] {
+                    model.gears[g] = original.clone();
+                    let mut nodes = gear_nodes(&model, g, turn, &mut rng);
+                    let mut gear = original.clone();
+                    if ground_a {
+                        // wheel A fixed where node A is now
+                        gear.node_a = None;
+                        gear.frame_a = nodes[0].q.compose(&gear.frame_a);
+                        nodes[0] = NodeState::ground(Frame::identity());
+                    }
+                    model.gears[g] = gear.clone();
+                    let ctx = context(&model);
+                    let force = gear.mesh_force(&ctx, &Local::nodes(&nodes));
+                    assert!(
+                        force * turn > 0.0,
+                        "turn {turn}: the flank is in contact (force {force})"
+                    );
+                    let name = format!(
+                        "gear pair (internal {internal}, helical {helical}, turn {turn}, ground a {ground_a})"
+                    );
+                    check_element(&name, &gear, &model, &nodes);
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn contact_tangents_match_one_sided_differences_at_the_onset() {
     // Near the onset the force K delta^(3/2) has a derivative growing like sqrt(delta):
@@ -894,6 +1001,152 @@ fn contact_tangents_match_one_sided_differences_at_the_onset() {
                 let name = format!("contact '{}' at penetration {depth:e}", contact.name);
                 let (x, xdot) = contact_states(&contact, &mut rng);
                 check_states(&name, &element, &model, &slow, (&x, &xdot), (true, eps));
+            }
+        }
+    }
+}
+
+#[test]
+fn gear_pair_tangent_is_one_sided_at_the_backlash_edge() {
+    // At the contact onset (penetration +1e-12 m, no damping) the force is continuous and
+    // its derivative jumps: K matches the difference taken on the contact side only.
+    let mut rng = Lcg(12);
+    for group in [Group::R3xSO3, Group::SE3] {
+        let (mut model, g) = gear_model(group, false, false, &mut rng);
+        let gear = &mut model.gears[g];
+        gear.damping = 0.0;
+        gear.transmission_error.clear();
+        gear.stiffness_variation.clear();
+        let gear = gear.clone();
+        let ctx = context(&model);
+        let [ra, _] = gear.geometry.base_radii();
+        // turn wheel A until the drive flank just touches (bisection on the force)
+        let mut nodes = gear_nodes(&model, g, 0.0, &mut rng);
+        for n in &mut nodes {
+            n.v = Vec6::zeros();
+        }
+        let axis = gear.frame_a.r.column(2).into_owned();
+        let base = nodes[0].q;
+        let turned = |t: f64| {
+            let mut out = nodes;
+            out[0].q = group.integrate(&base, &flexmb_lie::join(&Vec3::zeros(), &(axis * t)));
+            out
+        };
+        let penetration = |t: f64| gear.mesh_force(&ctx, &Local::nodes(&turned(t))) / 2e8;
+        let (mut lo, mut hi) = (-0.01, 0.01);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if penetration(mid) > 0.0 {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        let at = turned(hi + 1e-12 / ra);
+        let coef = coefficients(0.0, 0.0, 1.0, 0.0, 0.0);
+        let (_, s) = evaluate_owned(&gear, &ctx, &Local::nodes(&at), Some(&coef));
+        // one-sided difference along the turn of wheel A (into contact)
+        let h = 1e-8;
+        let r = |t: f64| evaluate_owned(&gear, &ctx, &Local::nodes(&turned(t)), None).0;
+        let t0 = hi + 1e-12 / ra;
+        let fd = (r(t0 + h) - r(t0)) / h;
+        let mut dir = Vec12::zeros();
+        dir.fixed_rows_mut::<3>(3).copy_from(&axis);
+        let analytic = &s * nalgebra::DVector::from_column_slice(dir.as_slice());
+        let scale = fd.abs().max();
+        assert!(scale > 1e3, "the contact carries stiffness ({scale})");
+        assert!(
+            (&analytic - &fd).abs().max() < 1e-5 * scale,
+            "{group:?}: one-sided K {analytic:?} vs {fd:?}"
+        );
+        // on the other side, no force and no stiffness
+        let before = turned(lo - 1e-9);
+        let (r0, s0) = evaluate_owned(&gear, &ctx, &Local::nodes(&before), Some(&coef));
+        assert!(
+            r0.norm() == 0.0 && s0.norm() == 0.0,
+            "{group:?}: no force in the backlash"
+        );
+    }
+}
+
+#[test]
+fn gear_joint_gradients_and_their_derivatives_match_finite_differences() {
+    let mut rng = Lcg(13);
+    for group in [Group::R3xSO3, Group::SE3] {
+        for internal in [false, true] {
+            for ground_a in [false, true] {
+                let (mut model, g) = gear_model(group, internal, false, &mut rng);
+                let geo = model.gears[g].geometry;
+                let nodes = gear_nodes(&model, g, 0.03, &mut rng);
+                let (fa, fb) = (model.gears[g].frame_a, model.gears[g].frame_b);
+                let frame_a = if ground_a {
+                    model.nodes[0].frame.compose(&fa)
+                } else {
+                    fa
+                };
+                model.joints.push(flexmb::model::Joint {
+                    name: "gear".into(),
+                    kind: JointKind::Gear {
+                        teeth_a: geo.teeth_a,
+                        teeth_b: geo.teeth_b,
+                        internal,
+                    },
+                    node_a: (!ground_a).then_some(NodeId(0)),
+                    node_b: Some(NodeId(1)),
+                    frame_a,
+                    frame_b: fb,
+                    drive: None,
+                });
+                let joint = model.joints.last().unwrap();
+                let mut nodes = nodes;
+                if ground_a {
+                    nodes[0] = NodeState::ground(Frame::identity());
+                }
+                let active = [!ground_a, true];
+                let rows = joints::rows(joint);
+                assert_eq!(rows.len(), 1);
+                let lambda = [7.5];
+                let mut k = Mat12::zeros();
+                let jv =
+                    joints::evaluate_joint(group, joint, &rows, &nodes, 0.0, &lambda, Some(&mut k));
+                let rv = joints::evaluate_row(group, joint, rows[0], &nodes, 0.0);
+                assert!((rv.phi - jv.phi[0]).abs() < 1e-14);
+                assert!((rv.b - jv.b[0]).norm() < 1e-13);
+                assert!((k - rv.h * lambda[0]).norm() < 1e-12 * (1.0 + k.norm()));
+                let mut fd_b = Vec12::zeros();
+                let mut fd_h = Mat12::zeros();
+                for c in 0..12 {
+                    if !active[c / 6] {
+                        continue;
+                    }
+                    let at = |e: f64| {
+                        joints::evaluate_row(
+                            group,
+                            joint,
+                            rows[0],
+                            &two(perturb(group, &nodes, c, e, 'q')),
+                            0.0,
+                        )
+                    };
+                    let (p, m) = (at(EPS), at(-EPS));
+                    fd_b[c] = (p.phi - m.phi) / (2.0 * EPS);
+                    fd_h.set_column(c, &((p.b - m.b) / (2.0 * EPS)));
+                }
+                let what =
+                    format!("gear joint (internal {internal}) on {group:?} (ground a {ground_a})");
+                let tol = 1e-7 * (1.0 + fd_b.abs().max());
+                assert!(
+                    (rv.b - fd_b).abs().max() < tol,
+                    "{what}: B {:?} vs {:?}",
+                    rv.b,
+                    fd_b
+                );
+                assert_close(
+                    &dense(&rv.h),
+                    &dense(&fd_h),
+                    &format!("{what}: H"),
+                    &entries(active),
+                );
             }
         }
     }

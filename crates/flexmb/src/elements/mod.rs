@@ -1,7 +1,7 @@
 //! Force elements: rigid bodies (inertia and gravity), geometrically exact beams on SE(3)
 //! (two nodes, [`beam`]), applied loads, spring-dampers (with an optional Maxwell branch,
-//! [`spring`]), ropes through any number of points ([`rope`]) and unilateral contacts with
-//! impact and friction ([`contact`]).
+//! [`spring`]), ropes through any number of points ([`rope`]), unilateral contacts with
+//! impact and friction ([`contact`]) and gear pairs ([`gear`]).
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
@@ -34,6 +34,7 @@
 
 pub mod beam;
 pub mod contact;
+pub mod gear;
 pub mod load;
 pub mod physical;
 pub mod rigid_body;
@@ -189,6 +190,7 @@ pub enum ElementRef {
     Rope(usize),
     /// Index in [`Model::contacts`] and the effective mass of its nodes' bodies.
     Contact(usize, f64),
+    Gear(usize),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -437,6 +439,7 @@ impl ElementRef {
                     let c = &model.contacts[i];
                     ElementRef::Contact(i, contact::effective_mass(model, c.node_a, c.node_b))
                 }
+                ElementItem::Gear(i) => ElementRef::Gear(i),
             })
             .collect()
     }
@@ -456,6 +459,7 @@ impl ElementRef {
                 contact: &model.contacts[*i],
                 effective_mass: *m,
             }),
+            ElementRef::Gear(i) => Kernel::Gear(&model.gears[*i]),
         }
     }
 
@@ -475,6 +479,7 @@ impl ElementRef {
             ElementRef::Spring(i) => format!("spring '{}'", model.springs[*i].name),
             ElementRef::Rope(i) => format!("rope '{}'", model.ropes[*i].name),
             ElementRef::Contact(i, _) => format!("contact '{}'", model.contacts[*i].name),
+            ElementRef::Gear(i) => format!("gear pair '{}'", model.gears[*i].name),
         }
     }
 }
@@ -489,11 +494,12 @@ pub enum ElementItem {
     Spring(usize),
     Rope(usize),
     Contact(usize),
+    Gear(usize),
 }
 
 impl ElementItem {
     /// Every force element of `model`: bodies, beam elements, loads, springs, ropes,
-    /// contacts.
+    /// contacts, gear pairs.
     pub fn all(model: &Model) -> impl Iterator<Item = ElementItem> {
         (0..model.bodies.len())
             .map(ElementItem::Body)
@@ -502,6 +508,7 @@ impl ElementItem {
             .chain((0..model.springs.len()).map(ElementItem::Spring))
             .chain((0..model.ropes.len()).map(ElementItem::Rope))
             .chain((0..model.contacts.len()).map(ElementItem::Contact))
+            .chain((0..model.gears.len()).map(ElementItem::Gear))
     }
 
     /// The number of states the element owns.
@@ -513,6 +520,7 @@ impl ElementItem {
             ElementItem::Spring(i) => model.springs[i].n_states(),
             ElementItem::Rope(i) => model.ropes[i].n_states(),
             ElementItem::Contact(i) => model.contacts[i].n_states(),
+            ElementItem::Gear(i) => model.gears[i].n_states(),
         }
     }
 
@@ -538,6 +546,7 @@ pub enum Kernel<'m> {
     Spring(&'m crate::model::SpringDamper),
     Rope(&'m crate::model::Rope),
     Contact(contact::ContactElement<'m>),
+    Gear(&'m crate::model::GearPair),
 }
 
 macro_rules! dispatch {
@@ -549,6 +558,7 @@ macro_rules! dispatch {
             Kernel::Spring($k) => $e,
             Kernel::Rope($k) => $e,
             Kernel::Contact($k) => $e,
+            Kernel::Gear($k) => $e,
         }
     };
 }

@@ -37,6 +37,7 @@ const TOP_KEYS: &[&str] = &[
     "design_parameter",
     "reference",
     "criterion",
+    "gear",
 ];
 /// The keys of a `[[sensor]]`: `name`, `type`, then those a type may use.
 const SENSOR_KEYS: &[&str] = &[
@@ -51,6 +52,7 @@ const SENSOR_KEYS: &[&str] = &[
     "spring",
     "rope",
     "contact",
+    "gear",
 ];
 const NODE_STATE_KEYS: &[&str] = &[
     "position",
@@ -122,6 +124,7 @@ pub(super) struct Origins {
     /// One per element of `Model::beams`.
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
+    gears: Vec<Origin>,
     /// Node and joint of each name, as they are created (names are unique in a file): look-ups
     /// by hash keep reading linear in the size of the model.
     pub node_ids: HashMap<String, NodeId>,
@@ -184,6 +187,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     read_springs(&top, &mut model, &mut origins)?;
     read_ropes(&top, &mut model, &mut origins)?;
     super::contact::read_contacts(&top, &mut model, &mut origins)?;
+    read_gears(&top, &mut model, &mut origins)?;
     read_sensors(&top, &mut model, &mut origins)?;
 
     model
@@ -215,6 +219,7 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
         "contact" => &origins.contacts,
         "beam" => &origins.beams,
         "sensor" => &origins.sensors,
+        "gear" => &origins.gears,
         _ => &[],
     };
     match list.get(item.index) {
@@ -1020,6 +1025,10 @@ fn read_nested_function(f: &Field<'_>, level: usize, scale: f64) -> Result<TimeF
 fn read_joints(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
     let mut names = HashMap::new();
     for t in top.items("joint")? {
+        if t.has("type") && t.req("type")?.str()? == "gear" {
+            read_gear_joint(&t, &mut names, model, origins)?;
+            continue;
+        }
         t.check_keys(&[
             "name",
             "type",
@@ -1040,6 +1049,7 @@ fn read_joints(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Res
             "cylindrical",
             "universal",
             "planar",
+            "gear",
         ])? {
             "fixed" => JointKind::Fixed,
             "spherical" => JointKind::Spherical,
@@ -1379,6 +1389,8 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "spring_force",
             "rope_force",
             "contact",
+            "gear_force",
+            "gear_transmission_error",
         ])?;
         let why = format!("for a {ty} sensor");
         let uses: &[&str] = match ty {
@@ -1391,6 +1403,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "spring_force" => &["spring"],
             "rope_force" => &["rope"],
             "contact" => &["contact", "component"],
+            "gear_force" | "gear_transmission_error" => &["gear"],
             _ => &[],
         };
         // The keys after `name` and `type`: each sensor type uses some of them.
@@ -1516,6 +1529,15 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                 let rope = item_named(&t.req("rope")?, names, "rope", "ropes")?;
                 SensorKind::RopeForce { rope }
             }
+            "gear_force" | "gear_transmission_error" => {
+                let names = || model.gears.iter().map(|g| g.name.as_str());
+                let gear = item_named(&t.req("gear")?, names, "gear pair", "gear pairs")?;
+                if ty == "gear_force" {
+                    SensorKind::GearForce { gear }
+                } else {
+                    SensorKind::GearTransmissionError { gear }
+                }
+            }
             "kinetic_energy" => SensorKind::KineticEnergy,
             "potential_energy" => SensorKind::PotentialEnergy,
             "total_energy" => SensorKind::TotalEnergy,
@@ -1523,6 +1545,178 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         };
         model.sensors.push(Sensor { name, kind });
         origins.sensors.push(Origin::of(&t));
+    }
+    Ok(())
+}
+
+/// A whole number of teeth, at least 1.
+fn teeth(f: &Field<'_>) -> Result<u32> {
+    let z = f.int()?;
+    match u32::try_from(z) {
+        Ok(z) if (1..=100_000).contains(&z) => Ok(z),
+        _ => Err(f.err(format!(
+            "must be a whole number of teeth from 1 to 100000, got {z}"
+        ))),
+    }
+}
+
+/// The centres of two wheels on `nodes` (inertial, t = 0): `center_a`, `center_b`, each by
+/// default its node's position (required for a wheel on the ground).
+fn wheel_centers(t: &Table<'_>, model: &Model, nodes: [Option<NodeId>; 2]) -> Result<[Vec3; 2]> {
+    let mut out = [Vec3::zeros(); 2];
+    for (i, key) in ["center_a", "center_b"].into_iter().enumerate() {
+        out[i] = match (opt_point(t, key)?, nodes[i]) {
+            (Some(p), _) => p,
+            (None, Some(n)) => model.nodes[n.0].frame.x,
+            (None, None) => {
+                return Err(t.key_err(
+                    key,
+                    format!(
+                        "is required for a wheel on the ground (node_{} = \"ground\")",
+                        ["a", "b"][i]
+                    ),
+                ))
+            }
+        };
+    }
+    Ok(out)
+}
+
+/// A `[[joint]]` of type "gear" (an ideal gear ratio, [`crate::joints::gear`]).
+fn read_gear_joint(
+    t: &Table<'_>,
+    names: &mut HashMap<String, String>,
+    model: &mut Model,
+    origins: &mut Origins,
+) -> Result<()> {
+    t.check_keys(&[
+        "name", "type", "node_a", "node_b", "center_a", "center_b", "axis", "teeth_a", "teeth_b",
+        "internal",
+    ])?;
+    let name = read_name(t, names, "joint")?;
+    let node_a = resolve_node(model, origins, &t.req("node_a")?, true)?;
+    let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
+    let centers = wheel_centers(t, model, [node_a, node_b])?;
+    let axis = nonzero_vec3(&t.req("axis")?)?;
+    let za = teeth(&t.req("teeth_a")?)?;
+    let zb = teeth(&t.req("teeth_b")?)?;
+    let internal = match t.field("internal") {
+        Some(f) => f.bool()?,
+        None => false,
+    };
+    let id = model.add_gear_joint(&name, [node_a, node_b], centers, &axis, (za, zb, internal));
+    origins.joint_ids.insert(name, id);
+    origins.joints.push(Origin::of(t));
+    Ok(())
+}
+
+/// A list of harmonics `[[amplitude, phase], ...]` (phase in rad) whose amplitudes are in
+/// `[-max, max]`.
+fn harmonics(f: &Field<'_>, max: f64) -> Result<Vec<crate::model::Harmonic>> {
+    let list = f.array()?;
+    if list.len() > 64 {
+        return Err(f.err(format!("holds at most 64 harmonics, got {}", list.len())));
+    }
+    let mut out = Vec::with_capacity(list.len());
+    for (i, v) in list.iter().enumerate() {
+        let e = f.elem(i, v);
+        let p = e.numbers(2, "a harmonic [amplitude, phase]")?;
+        if let toml::de::DeValue::Array(a) = v.get_ref() {
+            e.elem(0, &a[0]).f64_in(-max, max)?;
+            e.elem(1, &a[1]).f64_in(-MAX_ANGLE, MAX_ANGLE)?;
+        }
+        out.push(crate::model::Harmonic {
+            amplitude: p[0],
+            phase: p[1],
+        });
+    }
+    Ok(out)
+}
+
+fn read_gears(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+    let mut names = HashMap::new();
+    for t in top.items("gear")? {
+        t.check_keys(&[
+            "name",
+            "node_a",
+            "node_b",
+            "center_a",
+            "center_b",
+            "axis",
+            "teeth_a",
+            "teeth_b",
+            "module",
+            "pressure_angle_deg",
+            "helix_angle_deg",
+            "internal",
+            "mesh_stiffness",
+            "damping",
+            "backlash",
+            "stiffness_variation",
+            "stiffness_table",
+            "transmission_error",
+            "mesh_phase",
+        ])?;
+        let name = read_name(&t, &mut names, "gear")?;
+        let node_a = resolve_node(model, origins, &t.req("node_a")?, true)?;
+        let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
+        let centers = wheel_centers(&t, model, [node_a, node_b])?;
+        let axis = nonzero_vec3(&t.req("axis")?)?;
+        let angle = |key: &str, default: f64| -> Result<f64> {
+            Ok(match t.field(key) {
+                Some(f) => f.f64_in(-90.0, 90.0)?.to_radians(),
+                None => default.to_radians(),
+            })
+        };
+        let geometry = crate::model::GearGeometry {
+            teeth_a: teeth(&t.req("teeth_a")?)?,
+            teeth_b: teeth(&t.req("teeth_b")?)?,
+            module: physical(&t.req("module")?)?,
+            pressure_angle: angle("pressure_angle_deg", 20.0)?,
+            helix_angle: angle("helix_angle_deg", 0.0)?,
+            internal: match t.field("internal") {
+                Some(f) => f.bool()?,
+                None => false,
+            },
+        };
+        let k = physical(&t.req("mesh_stiffness")?)?;
+        let g = model.add_gear_pair(&name, [node_a, node_b], centers, &axis, geometry, k);
+        let gear = &mut model.gears[g];
+        if let Some(f) = t.field("damping") {
+            gear.damping = physical_or_zero(&f)?;
+        }
+        if let Some(f) = t.field("backlash") {
+            let v = f.f64()?;
+            if v < 0.0 {
+                return Err(f.err(format!("must be >= 0, got {v}")));
+            }
+            gear.backlash = f.f64_in(0.0, MAX_KINEMATIC)?;
+        }
+        if let Some(f) = t.field("stiffness_variation") {
+            gear.stiffness_variation = harmonics(&f, 1.0)?;
+        }
+        if let Some(f) = t.field("stiffness_table") {
+            let list = f.array()?;
+            if list.len() > 1000 {
+                return Err(f.err(format!("holds at most 1000 points, got {}", list.len())));
+            }
+            let mut table = Vec::with_capacity(list.len());
+            for (i, v) in list.iter().enumerate() {
+                let p = f.elem(i, v).numbers(
+                    2,
+                    "a point [position (fraction of the mesh period), factor]",
+                )?;
+                table.push((p[0], p[1]));
+            }
+            gear.stiffness_table = table;
+        }
+        if let Some(f) = t.field("transmission_error") {
+            gear.transmission_error = harmonics(&f, MAX_KINEMATIC)?;
+        }
+        if let Some(f) = t.field("mesh_phase") {
+            gear.mesh_phase = f.f64_in(-MAX_ANGLE, MAX_ANGLE)?;
+        }
+        origins.gears.push(Origin::of(&t));
     }
     Ok(())
 }

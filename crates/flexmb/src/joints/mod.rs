@@ -14,12 +14,14 @@
 //! | cylindrical (z) | `x_a.d, y_a.d, z_a.x_b, z_a.y_b` |
 //! | universal (z_a, z_b) | `x_a.d, y_a.d, z_a.d, z_a.z_b` |
 //! | planar (normal z) | `z_a.d, z_a.x_b, z_a.y_b` |
+//! | gear | `sin(z_a phi_a + sigma z_b phi_b) / z_a` ([`gear`]) |
 //!
 //! A driven revolute joint adds `cos(theta_d) y_a.x_b - sin(theta_d) x_a.x_b = sin(theta - theta_d)`,
 //! a driven prismatic joint `z_a.d - s_d(t)`. The rows' gradients with respect to a variation
 //! `q -> q exp(w)` form the constraint matrix `B(q)` of the equations of motion
 //! (Brüls & Cardona 2010, Eq. (37)).
 
+pub mod gear;
 pub mod parameters;
 pub mod primitives;
 
@@ -39,6 +41,8 @@ pub enum Row {
     DriveAngle,
     /// Driven translation along z: `z_a.d - s_d(t) = 0`.
     DriveSlide,
+    /// The ratio of a gear joint ([`gear`]).
+    Gear,
 }
 
 impl Row {
@@ -53,6 +57,7 @@ impl Row {
             Row::Dot1 { a, b } => format!("rotation about the joint's {} axis", AXIS[3 - a - b]),
             Row::DriveAngle => "the driven rotation".into(),
             Row::DriveSlide => "the driven translation".into(),
+            Row::Gear => "the gear ratio".into(),
         }
     }
 }
@@ -110,6 +115,7 @@ pub fn rows(joint: &Joint) -> Vec<Row> {
             Dot1 { a: 2, b: 2 },
         ],
         JointKind::Planar => vec![Dot2 { a: 2 }, Dot1 { a: 2, b: 0 }, Dot1 { a: 2, b: 1 }],
+        JointKind::Gear { .. } => vec![Gear],
     };
     if joint.drive.is_some() {
         match joint.kind {
@@ -209,6 +215,7 @@ fn evaluate_physical(
             p.phi -= s;
             (p, -sd, Vec12::zeros(), -sdd)
         }
+        Row::Gear => (gear::row(joint, fa, fb), 0.0, Vec12::zeros(), 0.0),
     }
 }
 
@@ -368,6 +375,13 @@ pub fn evaluate_joint(
                 out.phi_t[r] = -sdd;
                 let (p, g) = dot2_into(&fa, &axis_a(2), &qa.x, &fb, &qb.x, w, k.as_deref_mut());
                 (p - sd, g)
+            }
+            Row::Gear => {
+                let p = gear::row(joint, &fa, &fb);
+                if let Some(k) = k.as_deref_mut() {
+                    *k += p.h * w;
+                }
+                (p.phi, p.g)
             }
         };
         out.phi[r] = phi;

@@ -183,7 +183,7 @@ impl Joint {
                     out.dphi[r] = -th_a;
                     out.dpsi[r] = -thd_a;
                 }
-                Row::Dot1 { .. } | Row::Dot2 { .. } => {}
+                Row::Dot1 { .. } | Row::Dot2 { .. } | Row::Gear => {}
             }
         }
         out

@@ -76,6 +76,15 @@ pub enum JointKind {
     Universal,
     /// Motion in the plane normal to z: translation along z and rotation about x, y blocked.
     Planar,
+    /// Ideal gear ratio between two wheels (one row, [`crate::joints::gear`]): frame A is
+    /// wheel A's centre and axes on node A (z the wheel axis, x towards wheel B's centre at
+    /// t = 0), frame B likewise on node B (x towards wheel A's centre). `teeth_b / teeth_a`
+    /// is the ratio; an internal pair (B a ring gear) turns both wheels the same way.
+    Gear {
+        teeth_a: u32,
+        teeth_b: u32,
+        internal: bool,
+    },
 }
 
 impl JointKind {
@@ -88,6 +97,7 @@ impl JointKind {
             JointKind::Cylindrical => "cylindrical",
             JointKind::Universal => "universal",
             JointKind::Planar => "planar",
+            JointKind::Gear { .. } => "gear",
         }
     }
 }
@@ -188,6 +198,119 @@ pub struct Rope {
     pub damping: f64,
     /// Unstretched length L0 \[m\], >= 0.
     pub rest_length: f64,
+}
+
+/// One harmonic of a periodic function of the mesh position `s` (one period per tooth
+/// pitch): `amplitude cos(n s + phase)` for the `n`-th entry of a list (`n = 1, 2, ...`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Harmonic {
+    /// Amplitude (unit of the function).
+    pub amplitude: f64,
+    /// Phase \[rad\].
+    pub phase: f64,
+}
+
+/// Involute tooth geometry of a gear pair (ISO 21771 notation: normal module `m_n`, normal
+/// pressure angle `alpha_n`, helix angle `beta`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GearGeometry {
+    /// Teeth of wheel A, >= 1.
+    pub teeth_a: u32,
+    /// Teeth of wheel B, >= 1 (of the ring gear for an internal pair).
+    pub teeth_b: u32,
+    /// Normal module m_n \[m\], > 0.
+    pub module: f64,
+    /// Normal pressure angle alpha_n \[rad\], in (0, pi/2).
+    pub pressure_angle: f64,
+    /// Helix angle beta \[rad\], |beta| < pi/2 (0: spur; its sign is the hand of wheel A).
+    pub helix_angle: f64,
+    /// Wheel B is a ring gear (internal teeth).
+    pub internal: bool,
+}
+
+impl GearGeometry {
+    /// Transverse pressure angle `alpha_t = atan(tan alpha_n / cos beta)` \[rad\].
+    pub fn transverse_pressure_angle(&self) -> f64 {
+        (self.pressure_angle.tan() / self.helix_angle.cos()).atan()
+    }
+
+    /// Base radii `r_b = z m_n cos(alpha_t) / (2 cos beta)` of wheels A and B \[m\].
+    pub fn base_radii(&self) -> [f64; 2] {
+        let k =
+            self.module * self.transverse_pressure_angle().cos() / (2.0 * self.helix_angle.cos());
+        [self.teeth_a as f64 * k, self.teeth_b as f64 * k]
+    }
+
+    /// Pitch radii `r = z m_n / (2 cos beta)` \[m\].
+    pub fn pitch_radii(&self) -> [f64; 2] {
+        let k = self.module / (2.0 * self.helix_angle.cos());
+        [self.teeth_a as f64 * k, self.teeth_b as f64 * k]
+    }
+
+    /// Base helix angle `beta_b`, `tan beta_b = tan beta cos alpha_t` \[rad\] (signed).
+    pub fn base_helix_angle(&self) -> f64 {
+        (self.helix_angle.tan() * self.transverse_pressure_angle().cos()).atan()
+    }
+
+    /// `+1` for an external pair, `-1` for an internal one.
+    pub fn sigma(&self) -> f64 {
+        if self.internal {
+            -1.0
+        } else {
+            1.0
+        }
+    }
+
+    /// Transmission ratio `omega_a / omega_b = -sigma z_b / z_a` (negative: opposite senses).
+    pub fn ratio(&self) -> f64 {
+        -self.sigma() * self.teeth_b as f64 / self.teeth_a as f64
+    }
+}
+
+/// A gear pair: two wheels meshing through a spring and a damper along the line of action,
+/// with a mesh stiffness that varies with the mesh position, backlash, static transmission
+/// error and the effect of the centre distance (see [`crate::elements::gear`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GearPair {
+    pub name: String,
+    /// Node of wheel A (`None`: a wheel fixed to the ground).
+    pub node_a: Option<NodeId>,
+    /// Node of wheel B.
+    pub node_b: Option<NodeId>,
+    /// Wheel A's frame on node A: origin at the wheel centre, z along the wheel axis, x
+    /// towards wheel B's centre at t = 0 (inertial if A is the ground).
+    pub frame_a: Frame,
+    /// Wheel B's frame on node B: origin at its centre, z along its axis (parallel to and in
+    /// the sense of wheel A's), x towards wheel A's centre at t = 0.
+    pub frame_b: Frame,
+    pub geometry: GearGeometry,
+    /// Mean mesh stiffness k_m along the line of action [N/m], > 0.
+    pub mesh_stiffness: f64,
+    /// Relative fluctuation of the mesh stiffness: `k(s) = k_m (kappa(s) + sum_n eps_n cos(n s
+    /// + phi_n))`, one harmonic per entry (amplitudes eps_n dimensionless, `sum |eps_n|`
+    /// below the smallest `kappa`, 1 without a table).
+    pub stiffness_variation: Vec<Harmonic>,
+    /// Mesh damping c along the line of action [N s/m], >= 0 (acts in contact only).
+    pub damping: f64,
+    /// The mesh stiffness over one mesh period as a table of `(position, factor)`: position
+    /// `s / 2 pi` in `[0, 1)`, strictly increasing, factor > 0; `k(s) = k_m (kappa(s) +
+    /// sum_n eps_n cos(n s + phi_n))` with `kappa` interpolated linearly and periodically
+    /// (`kappa = 1` for an empty table). E.g. the alternating single and double tooth contact of ISO
+    /// 6336-1 (a stiffness `c'` per tooth pair): a factor near 1 / contact ratio where one
+    /// pair meshes, near twice that where two do.
+    #[serde(default)]
+    pub stiffness_table: Vec<(f64, f64)>,
+    /// Backlash b: total clearance along the line of action \[m\], >= 0.
+    pub backlash: f64,
+    /// Static transmission error `e(s) = sum_n e_n cos(n s + phi_n)` along the line of
+    /// action \[m\].
+    pub transmission_error: Vec<Harmonic>,
+    /// Mesh position at t = 0 \[rad\] (one mesh period is 2 pi).
+    pub mesh_phase: f64,
+    /// Centre distance at t = 0 \[m\] (derived from the frames).
+    pub center_distance: f64,
+    /// Axial offset `z_a . (C_b - C_a)` at t = 0 \[m\] (derived from the frames).
+    pub axial_offset: f64,
 }
 
 /// Cross-section properties of a beam, in the section frame (x along the beam axis, y and z
@@ -387,6 +510,16 @@ pub enum SensorKind {
         beam: usize,
         component: usize,
     },
+    /// Normal mesh force of a gear pair \[N\] (index in [`Model::gears`]): positive on the
+    /// drive flank (wheel A driving), negative on the coast flank, zero in the backlash.
+    GearForce {
+        gear: usize,
+    },
+    /// Dynamic transmission error of a gear pair along the line of action \[m\] (index in
+    /// [`Model::gears`]): `r_ba alpha_a + sigma r_bb alpha_b`.
+    GearTransmissionError {
+        gear: usize,
+    },
 }
 
 /// The quantities a contact sensor measures, in the order of
@@ -433,6 +566,9 @@ pub struct Model {
     /// What the bodies and beams look like in the results (no effect on the mechanics).
     #[serde(default)]
     pub display: display::Display,
+    /// Gear pairs ([`crate::elements::gear`]).
+    #[serde(default)]
+    pub gears: Vec<GearPair>,
 }
 
 /// Reference to one item of a model and one of its fields, for error messages.
@@ -476,6 +612,7 @@ impl Model {
             beams: Vec::new(),
             sensors: Vec::new(),
             display: display::Display::default(),
+            gears: Vec::new(),
         }
     }
 
@@ -650,6 +787,95 @@ impl Model {
         };
         self.joints.push(joint);
         JointId(self.joints.len() - 1)
+    }
+
+    /// The frames of two meshing wheels on their nodes (inertial for the ground): origins at
+    /// the centres `center_a`, `center_b` (inertial, t = 0), z along `axis`, x of each
+    /// towards the other wheel's centre (projected on the plane normal to the axis). The
+    /// centres must not lie on one line along the axis.
+    pub fn gear_frames(
+        &self,
+        [node_a, node_b]: [Option<NodeId>; 2],
+        [center_a, center_b]: [Vec3; 2],
+        axis: &Vec3,
+    ) -> [Frame; 2] {
+        let d = center_b - center_a;
+        let local = |n: Option<NodeId>, g: Frame| match n {
+            Some(id) => self.nodes[id.0].frame.inverse().compose(&g),
+            None => g,
+        };
+        [
+            local(
+                node_a,
+                Frame::new(center_a, frame_from_axis(axis, Some(&d))),
+            ),
+            local(
+                node_b,
+                Frame::new(center_b, frame_from_axis(axis, Some(&-d))),
+            ),
+        ]
+    }
+
+    /// Adds an ideal gear constraint ([`JointKind::Gear`]) between the wheels on `nodes`
+    /// centred at `centers` (inertial, t = 0) turning about `axis`; returns its id.
+    pub fn add_gear_joint(
+        &mut self,
+        name: &str,
+        nodes: [Option<NodeId>; 2],
+        centers: [Vec3; 2],
+        axis: &Vec3,
+        (teeth_a, teeth_b, internal): (u32, u32, bool),
+    ) -> JointId {
+        let [frame_a, frame_b] = self.gear_frames(nodes, centers, axis);
+        self.joints.push(Joint {
+            name: name.to_string(),
+            kind: JointKind::Gear {
+                teeth_a,
+                teeth_b,
+                internal,
+            },
+            node_a: nodes[0],
+            node_b: nodes[1],
+            frame_a,
+            frame_b,
+            drive: None,
+        });
+        JointId(self.joints.len() - 1)
+    }
+
+    /// Adds a gear pair ([`GearPair`]) between the wheels on `nodes` centred at `centers`
+    /// (inertial, t = 0) turning about `axis`, with mesh stiffness `k` [N/m] and no
+    /// damping, backlash, fluctuation or transmission error (set those fields after);
+    /// returns its index in [`Model::gears`].
+    pub fn add_gear_pair(
+        &mut self,
+        name: &str,
+        nodes: [Option<NodeId>; 2],
+        centers: [Vec3; 2],
+        axis: &Vec3,
+        geometry: GearGeometry,
+        k: f64,
+    ) -> usize {
+        let [frame_a, frame_b] = self.gear_frames(nodes, centers, axis);
+        let d = centers[1] - centers[0];
+        self.gears.push(GearPair {
+            name: name.to_string(),
+            node_a: nodes[0],
+            node_b: nodes[1],
+            frame_a,
+            frame_b,
+            geometry,
+            mesh_stiffness: k,
+            stiffness_variation: Vec::new(),
+            damping: 0.0,
+            stiffness_table: Vec::new(),
+            backlash: 0.0,
+            transmission_error: Vec::new(),
+            mesh_phase: 0.0,
+            center_distance: d.norm(),
+            axial_offset: axis.normalize().dot(&d),
+        });
+        self.gears.len() - 1
     }
 
     /// Adds a fixed joint from the ground to `node` at the node's initial frame (a clamp)

@@ -29,6 +29,9 @@
 //! | spring | `spring.<s>.relaxation_stiffness`, `.relaxation_damping` | Maxwell branch `k_m` [N/m], `c_m` [N s/m] (springs that have one) | same |
 //! | rope | `rope.<r>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `L0` \[m\] | same |
 //! | rope | `rope.<r>.points.<i>.point.<k>` | point `i` at t = 0, inertial \[m\] | same |
+//! | gear | `gear.<g>.mesh_stiffness`, `.damping`, `.backlash` | `k_m` [N/m], `c` [N s/m], `b` \[m\] | same |
+//! | gear | `gear.<g>.stiffness_variation.<n>` | relative amplitude `eps_n` of harmonic `n` (0-based) of the mesh stiffness | the first number of entry `n` |
+//! | gear | `gear.<g>.transmission_error.<n>` | amplitude `e_n` of harmonic `n` (0-based) of the static transmission error \[m\] | the first number of entry `n` |
 //!
 //! Components `<k>` are 0, 1, 2 (x, y, z); matrix indices follow the strain order
 //! `(axial, shear 2, shear 3, torsion, bending 2, bending 3)` for `C` and `(x, y, z)` for `J`.
@@ -54,7 +57,7 @@
 
 use super::contact::Contact;
 use super::{BeamSection, JointId};
-use super::{Joint, Load, Model, Node, NodeId, RigidBody, Rope, SpringDamper};
+use super::{GearPair, Joint, Load, Model, Node, NodeId, RigidBody, Rope, SpringDamper};
 use flexmb_lie::Vec3;
 use std::collections::HashMap;
 
@@ -218,6 +221,45 @@ pub enum RopeParam {
     Point(usize, usize),
 }
 
+/// A parameter of a gear pair.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GearParam {
+    /// Mean mesh stiffness `k_m` [N/m].
+    MeshStiffness,
+    /// Mesh damping `c` [N s/m].
+    Damping,
+    /// Backlash `b` \[m\].
+    Backlash,
+    /// Relative amplitude of harmonic `n` (0-based) of the mesh stiffness.
+    StiffnessVariation(usize),
+    /// Amplitude of harmonic `n` (0-based) of the static transmission error \[m\].
+    TransmissionError(usize),
+}
+
+impl GearParam {
+    /// The value.
+    pub fn get(self, gear: &GearPair) -> f64 {
+        match self {
+            GearParam::MeshStiffness => gear.mesh_stiffness,
+            GearParam::Damping => gear.damping,
+            GearParam::Backlash => gear.backlash,
+            GearParam::StiffnessVariation(n) => gear.stiffness_variation[n].amplitude,
+            GearParam::TransmissionError(n) => gear.transmission_error[n].amplitude,
+        }
+    }
+
+    /// Sets the value.
+    pub fn set(self, gear: &mut GearPair, value: f64) {
+        match self {
+            GearParam::MeshStiffness => gear.mesh_stiffness = value,
+            GearParam::Damping => gear.damping = value,
+            GearParam::Backlash => gear.backlash = value,
+            GearParam::StiffnessVariation(n) => gear.stiffness_variation[n].amplitude = value,
+            GearParam::TransmissionError(n) => gear.transmission_error[n].amplitude = value,
+        }
+    }
+}
+
 /// What a parameter is: its item and which of the item's quantities.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ParamKind {
@@ -237,6 +279,8 @@ pub enum ParamKind {
     Rope(usize, RopeParam),
     /// Index in [`Model::contacts`].
     Contact(usize, ContactParam),
+    /// Index in [`Model::gears`].
+    Gear(usize, GearParam),
 }
 
 /// A path that names no parameter.
@@ -317,7 +361,13 @@ impl Parameters {
         let names = segments(model.joints.iter().map(|j| j.name.as_str()));
         for (i, name) in names.iter().enumerate() {
             let joint = JointId(i);
-            for k in 0..3 {
+            // a gear joint has no continuous parameter (crate::joints::gear)
+            let positions = if matches!(model.joints[i].kind, super::JointKind::Gear { .. }) {
+                0
+            } else {
+                3
+            };
+            for k in 0..positions {
                 let p = JointParam::Position(k);
                 reg.push(
                     format!("joint.{name}.position.{k}"),
@@ -396,6 +446,27 @@ impl Parameters {
                 add("friction.viscous", ContactParam::ViscousFriction);
             }
         }
+        let names = segments(model.gears.iter().map(|g| g.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            let mut add = |key: String, p| {
+                reg.push(format!("gear.{name}.{key}"), ParamKind::Gear(i, p));
+            };
+            add("mesh_stiffness".into(), GearParam::MeshStiffness);
+            add("damping".into(), GearParam::Damping);
+            add("backlash".into(), GearParam::Backlash);
+            for n in 0..model.gears[i].stiffness_variation.len() {
+                add(
+                    format!("stiffness_variation.{n}"),
+                    GearParam::StiffnessVariation(n),
+                );
+            }
+            for n in 0..model.gears[i].transmission_error.len() {
+                add(
+                    format!("transmission_error.{n}"),
+                    GearParam::TransmissionError(n),
+                );
+            }
+        }
         reg
     }
 
@@ -468,6 +539,7 @@ impl Parameters {
             ParamKind::Spring(i, p) => p.get(&model.springs[i], &model.nodes),
             ParamKind::Rope(i, p) => p.get(&model.ropes[i], &model.nodes),
             ParamKind::Contact(i, p) => p.get(&model.contacts[i]),
+            ParamKind::Gear(i, p) => p.get(&model.gears[i]),
         }
     }
 
@@ -490,6 +562,7 @@ impl Parameters {
             ParamKind::Spring(i, p) => p.set(&mut model.springs[i], &model.nodes, value),
             ParamKind::Rope(i, p) => p.set(&mut model.ropes[i], &model.nodes, value),
             ParamKind::Contact(i, p) => p.set(&mut model.contacts[i], value),
+            ParamKind::Gear(i, p) => p.set(&mut model.gears[i], value),
         }
     }
 

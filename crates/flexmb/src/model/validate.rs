@@ -419,6 +419,18 @@ impl Model {
             }
             local_frame(&j.frame_a).map_err(|m| fail("position", format!("frame A {m}")))?;
             local_frame(&j.frame_b).map_err(|m| fail("position", format!("frame B {m}")))?;
+            if let JointKind::Gear {
+                teeth_a, teeth_b, ..
+            } = j.kind
+            {
+                for (field, z) in [("teeth_a", teeth_a), ("teeth_b", teeth_b)] {
+                    if z == 0 {
+                        return Err(fail(field, "must be a whole number of teeth >= 1".into()));
+                    }
+                }
+                self.check_wheels([j.node_a, j.node_b], [&j.frame_a, &j.frame_b])
+                    .map_err(|m| fail("center_b", m))?;
+            }
             if let Some(drive) = &j.drive {
                 if !matches!(j.kind, JointKind::Revolute | JointKind::Prismatic) {
                     return Err(fail(
@@ -612,6 +624,8 @@ impl Model {
             }
         }
 
+        self.validate_gears()?;
+
         let model_extent = self.extent();
         for (i, b) in self.beams.iter().enumerate() {
             let fail = |field, m| bad("beam", i, &b.name, field, m);
@@ -786,6 +800,12 @@ impl Model {
                 | SensorKind::PotentialEnergy
                 | SensorKind::TotalEnergy
                 | SensorKind::ConstraintViolation => (None, None),
+                SensorKind::GearForce { gear } | SensorKind::GearTransmissionError { gear } => {
+                    if *gear >= self.gears.len() {
+                        return Err(fail("gear", format!("gear index {gear} does not exist")));
+                    }
+                    (None, None)
+                }
             };
             check_node("sensor", i, &s.name, "node", node)?;
             if let Some((c, count)) = components {
@@ -832,4 +852,199 @@ fn check_sensor_name(name: &str) -> Check {
         );
     }
     Ok(())
+}
+
+impl Model {
+    /// The two wheel frames of a gear joint or gear pair (on `nodes`, inertial for the
+    /// ground): axes parallel and in the same sense, centres apart and not on one line along
+    /// the axis (the line of centres defines the wheels' angles), each x axis towards the
+    /// other centre.
+    fn check_wheels(&self, nodes: [Option<NodeId>; 2], wheels: [&Frame; 2]) -> Check {
+        for w in wheels {
+            local_frame(w)?;
+        }
+        let world = |n: Option<NodeId>, w: &Frame| match n {
+            Some(id) => self.nodes[id.0].frame.compose(w),
+            None => *w,
+        };
+        let (wa, wb) = (world(nodes[0], wheels[0]), world(nodes[1], wheels[1]));
+        let (ka, kb) = (wa.r.column(2), wb.r.column(2));
+        if ka.dot(&kb) < 1.0 - 1e-9 {
+            return Err(format!(
+                "the wheel axes are not parallel and in the same sense at t = 0 (angle {:.4} deg)",
+                ka.dot(&kb).clamp(-1.0, 1.0).acos().to_degrees()
+            ));
+        }
+        let d = wb.x - wa.x;
+        let radial = (d - ka * ka.dot(&d)).norm();
+        if radial <= 1e-9 * d.norm().max(1.0) {
+            return Err(format!(
+                "the wheel centres are {:.3e} m apart across the axis: the line of centres is undefined",
+                radial
+            ));
+        }
+        Ok(())
+    }
+
+    fn validate_gears(&self) -> Result<(), ModelError> {
+        let bad = |table, index: usize, name: &str, field, message: String| ModelError::Invalid {
+            item: ItemRef {
+                table,
+                index,
+                name: clip(name, QUOTED),
+                field,
+            },
+            message,
+        };
+        let n = self.nodes.len();
+        let check_node = |table, i: usize, name: &str, field, id: Option<NodeId>| match id {
+            Some(NodeId(k)) if k >= n => Err(bad(
+                table,
+                i,
+                name,
+                field,
+                format!("node index {k} does not exist"),
+            )),
+            _ => Ok(()),
+        };
+        for (i, g) in self.gears.iter().enumerate() {
+            let fail = |field, m| bad("gear", i, &g.name, field, m);
+            check_node("gear", i, &g.name, "node_a", g.node_a)?;
+            check_node("gear", i, &g.name, "node_b", g.node_b)?;
+            match (g.node_a, g.node_b) {
+                (None, None) => {
+                    return Err(fail(
+                        "node_b",
+                        "joins the ground to the ground: give at least one node".into(),
+                    ))
+                }
+                (Some(a), Some(b)) if a == b => {
+                    return Err(fail(
+                        "node_b",
+                        format!(
+                            "joins node '{}' to itself: a gear pair meshes two different nodes",
+                            clip(&self.nodes[a.0].name, QUOTED)
+                        ),
+                    ))
+                }
+                _ => {}
+            }
+            let geo = &g.geometry;
+            for (field, z) in [("teeth_a", geo.teeth_a), ("teeth_b", geo.teeth_b)] {
+                if z == 0 {
+                    return Err(fail(field, "must be a whole number of teeth >= 1".into()));
+                }
+            }
+            in_range(geo.module, MIN_PHYSICAL, MAX_KINEMATIC).map_err(|m| fail("module", m))?;
+            if !(geo.pressure_angle > 0.0 && geo.pressure_angle < 1.2) {
+                return Err(fail(
+                    "pressure_angle_deg",
+                    format!(
+                        "must be between 0 and 68.75 deg, got {} deg",
+                        geo.pressure_angle.to_degrees()
+                    ),
+                ));
+            }
+            if geo.helix_angle.is_nan() || geo.helix_angle.abs() >= 1.2 {
+                return Err(fail(
+                    "helix_angle_deg",
+                    format!(
+                        "must be between -68.75 and 68.75 deg, got {} deg",
+                        geo.helix_angle.to_degrees()
+                    ),
+                ));
+            }
+            if geo.internal && geo.teeth_b <= geo.teeth_a {
+                return Err(fail(
+                    "teeth_b",
+                    format!(
+                        "an internal pair needs more teeth on the ring gear B than on the pinion A, got {} and {}",
+                        geo.teeth_b, geo.teeth_a
+                    ),
+                ));
+            }
+            self.check_wheels([g.node_a, g.node_b], [&g.frame_a, &g.frame_b])
+                .map_err(|m| fail("center_b", m))?;
+            let [ra, rb] = geo.base_radii();
+            let least = (ra + geo.sigma() * rb).abs();
+            if g.center_distance.is_nan() || g.center_distance <= least * (1.0 + 1e-9) {
+                return Err(fail(
+                    "center_b",
+                    format!(
+                        "the centre distance {:.6e} m must exceed {} of the base radii, {least:.6e} m (working pressure angle above 0)",
+                        g.center_distance,
+                        if geo.internal { "the difference" } else { "the sum" }
+                    ),
+                ));
+            }
+            in_range(g.mesh_stiffness, MIN_PHYSICAL, MAX_PHYSICAL)
+                .map_err(|m| fail("mesh_stiffness", m))?;
+            in_range(g.damping, 0.0, MAX_PHYSICAL).map_err(|m| fail("damping", m))?;
+            in_range(g.backlash, 0.0, MAX_KINEMATIC).map_err(|m| fail("backlash", m))?;
+            let pitch = 2.0 * std::f64::consts::PI * ra / geo.teeth_a as f64;
+            if g.backlash >= 0.5 * pitch {
+                return Err(fail(
+                    "backlash",
+                    format!(
+                        "is {} m, not below half the base pitch ({:.6e} m): the flanks would not be told apart",
+                        g.backlash,
+                        0.5 * pitch
+                    ),
+                ));
+            }
+            let table = &g.stiffness_table;
+            if table.len() == 1 {
+                return Err(fail(
+                    "stiffness_table",
+                    "needs at least 2 points [position, factor] (or none)".into(),
+                ));
+            }
+            for (i, &(u, f)) in table.iter().enumerate() {
+                let increasing = i == 0 || u > table[i - 1].0;
+                if !(within(u, 0.0, 1.0) && u < 1.0 && increasing && within(f, 1e-6, 1e6)) {
+                    return Err(fail(
+                        "stiffness_table",
+                        format!(
+                            "point {}: positions must increase strictly within [0, 1) (fractions of the mesh period) and factors lie in [1e-6, 1e6], got [{u}, {f}]",
+                            i + 1
+                        ),
+                    ));
+                }
+            }
+            let least = table.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+            let least = if table.is_empty() { 1.0 } else { least };
+            let sum: f64 = g
+                .stiffness_variation
+                .iter()
+                .map(|h| h.amplitude.abs())
+                .sum();
+            let finite = |hs: &[super::Harmonic]| {
+                hs.iter()
+                    .all(|h| h.amplitude.is_finite() && within(h.phase, -MAX_ANGLE, MAX_ANGLE))
+            };
+            if !finite(&g.stiffness_variation) || sum.is_nan() || sum >= least {
+                return Err(fail(
+                    "stiffness_variation",
+                    format!("needs finite harmonics whose relative amplitudes add up to less than {least} (the smallest factor of the stiffness table, 1 without one: the stiffness stays positive), got {sum}"),
+                ));
+            }
+            let te: f64 = g.transmission_error.iter().map(|h| h.amplitude.abs()).sum();
+            if !finite(&g.transmission_error) || te.is_nan() || te >= 0.25 * pitch {
+                return Err(fail(
+                    "transmission_error",
+                    format!("needs finite harmonics whose amplitudes add up to less than a quarter of the base pitch ({:.6e} m), got {te}", 0.25 * pitch),
+                ));
+            }
+            if !within(g.mesh_phase, -MAX_ANGLE, MAX_ANGLE) {
+                return Err(fail(
+                    "mesh_phase",
+                    format!(
+                        "must be finite, at most {MAX_ANGLE:e} in magnitude, got {}",
+                        g.mesh_phase
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
 }

@@ -141,6 +141,11 @@ fn support(model: &Model, layout: &Layout, k: usize) -> (Vec<usize>, Vec<usize>,
             let nodes = model.beams[*beam].nodes.iter().map(|n| n.0).collect();
             (nodes, Vec::new(), Vec::new())
         }
+        SensorKind::GearForce { gear } | SensorKind::GearTransmissionError { gear } => {
+            let g = &model.gears[*gear];
+            let slot = |i| g.node(i).map(|n| n.0);
+            element(ElementItem::Gear(*gear), &slot, g.n_slots())
+        }
         _ => (Vec::new(), Vec::new(), Vec::new()),
     }
 }
@@ -163,6 +168,7 @@ pub fn sensor_parameters(model: &Model, params: &Parameters, k: usize) -> Vec<Pa
             (SensorKind::BeamStress { beam, .. }, ParamKind::Beam(item, _)) => {
                 params.beam_elements(item).contains(beam)
             }
+            (SensorKind::GearForce { gear }, ParamKind::Gear(i, _)) => *gear == i,
             _ => false,
         })
         .collect()
