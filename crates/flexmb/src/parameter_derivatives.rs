@@ -45,6 +45,7 @@
 //! - M. Arnold, O. Brüls, A. Cardona, Error analysis of generalized-alpha Lie group time
 //!   integration methods for constrained mechanical systems, Numer. Math. 129 (2015), Sect. 3.
 
+use crate::elements::spring::{SpringElement, SpringElementParam};
 use crate::elements::{
     Context, DerivativeMethod, ElementItem, ElementParameters, LocalBuffers, NodeState,
 };
@@ -173,6 +174,12 @@ fn visit(
             Wrt::Own(p),
             sink,
         ),
+        ParamKind::Spring(i, p) if model.spring_law(i).is_some() => element_term(
+            at,
+            (&SpringElement::of(model, i), ElementItem::Spring(i)),
+            Wrt::Own(SpringElementParam::Spring(p)),
+            sink,
+        ),
         ParamKind::Spring(i, p) => element_term(
             at,
             (&model.springs[i], ElementItem::Spring(i)),
@@ -194,6 +201,12 @@ fn visit(
             sink(Piece::Joint(j.0, &d));
             method
         }
+        ParamKind::SpringLaw(i, p) => element_term(
+            at,
+            (&SpringElement::of(model, i), ElementItem::Spring(i)),
+            Wrt::Own(SpringElementParam::Law(p)),
+            sink,
+        ),
     }
 }
 

@@ -189,9 +189,9 @@ pub fn sensor_value(
             }
         }
         SensorKind::SpringForce { spring } => {
-            let sp = &model.springs[*spring];
+            let sp = crate::elements::spring::SpringElement::of(model, *spring);
             let start = ElementItem::Spring(*spring).state_start(model);
-            buffers.gather(sp, nodes, (&state.x, &state.xdot, start));
+            buffers.gather(&sp, nodes, (&state.x, &state.xdot, start));
             sp.tension(&ctx, &buffers.local(nodes))
         }
         SensorKind::RopeForce { rope: i } => {

@@ -9,7 +9,8 @@ use flexmb::elements::{
 };
 use flexmb::joints;
 use flexmb::model::parameters::{
-    BodyParam, JointParam, LoadParam, NodeParam, RopeParam, SectionParam, SpringParam,
+    BodyParam, JointParam, LoadParam, NodeParam, RopeParam, SectionParam, SpringLawParam,
+    SpringParam,
 };
 use flexmb::model::{
     BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, ParamId, ParamKind,
@@ -183,6 +184,11 @@ fn pattern(params: &Parameters, id: ParamId) -> String {
             RopeParam::Damping => "rope.<r>.damping",
             RopeParam::RestLength => "rope.<r>.rest_length",
             RopeParam::Point(..) => "rope.<r>.points.<i>.point.<k>",
+        },
+        ParamKind::SpringLaw(_, p) => match p {
+            SpringLawParam::Preload => "spring.<s>.preload",
+            SpringLawParam::Polynomial(..) => "spring.<s>.<side>polynomial.<j>",
+            SpringLawParam::TableForce(..) => "spring.<s>.<side>force_table.<i>",
         },
     };
     item.into()
@@ -503,4 +509,87 @@ fn parameter_kinds_by_finite_differences_are_the_listed_ones() {
         ]
     );
     assert_eq!(seen.kinds.len(), 29, "kinds checked: {:#?}", seen.kinds);
+}
+
+/// Two bodies joined by nonlinear springs: a preloaded table law, separate curves per side
+/// (a polynomial in compression, a table in extension) with a Maxwell branch, a bump stop
+/// that acts (always compressed at these kinematics) and a strap from the ground.
+fn nonlinear_springs(group: Group) -> Model {
+    use flexmb::model::{ForceCurve, SpringLaw, SpringSide};
+    let mut m = Model::new(group);
+    let a = m.add_node("a", Frame::new(Vec3::new(0.1, 0.2, -0.3), Mat3::identity()));
+    let b = m.add_node(
+        "b",
+        flexmb_lie::se3::exp(&Vec6::new(1.0, -0.4, 0.2, 0.3, -0.5, 0.7)),
+    );
+    let inertia = Mat3::new(0.3, 0.01, -0.02, 0.01, 0.4, 0.03, -0.02, 0.03, 0.5);
+    m.add_body("body_a", a, 2.5, Vec3::new(0.3, -0.7, 0.2), inertia);
+    m.add_body("body_b", b, 1.5, Vec3::new(-0.1, 0.2, 0.4), inertia * 2.0);
+    let spring = |name: &str, node_a, rest_length| SpringDamper {
+        name: name.into(),
+        node_a,
+        node_b: Some(b),
+        point_a: Vec3::new(0.2, 0.1, -0.3),
+        point_b: Vec3::new(-0.1, 0.4, 0.2),
+        stiffness: 120.0,
+        damping: 3.5,
+        rest_length,
+        relaxation: None,
+    };
+    let table = ForceCurve::Table(vec![(-3.0, -80.0), (0.1, 5.0), (0.5, 60.0), (4.0, 90.0)]);
+    m.springs.push(spring("table", Some(a), 0.4));
+    let mut law = SpringLaw::new(0);
+    law.preload = 12.0;
+    law.curve = Some(table.clone());
+    m.spring_laws.push(law);
+    let mut sides = spring("sides", Some(a), 1.2);
+    sides.relaxation = Some(flexmb::model::Relaxation {
+        stiffness: 30.0,
+        damping: 4.0,
+    });
+    m.springs.push(sides);
+    let mut law = SpringLaw::new(1);
+    law.preload = -3.0;
+    law.compression = Some(ForceCurve::Polynomial(vec![40.0, -15.0, 30.0]));
+    law.extension = Some(table);
+    m.spring_laws.push(law);
+    m.springs.push(spring("bump", Some(a), 8.0));
+    let mut law = SpringLaw::new(2);
+    law.acts = SpringSide::Compression;
+    law.curve = Some(ForceCurve::Polynomial(vec![0.0, 0.0, 2.0]));
+    m.spring_laws.push(law);
+    let mut strap = spring("strap", None, 0.01);
+    strap.point_a = Vec3::new(-2.0, -3.0, 1.0);
+    m.springs.push(strap);
+    let mut law = SpringLaw::new(3);
+    law.acts = SpringSide::Extension;
+    law.curve = Some(ForceCurve::Polynomial(vec![10.0, 5.0]));
+    m.spring_laws.push(law);
+    m
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_nonlinear_springs() {
+    let mut seen = Seen::default();
+    let mut rng = Lcg(8);
+    for group in [Group::R3xSO3, Group::SE3] {
+        let model = nonlinear_springs(group);
+        model.validate().expect("valid");
+        for _ in 0..3 {
+            let at = point(&model, &mut rng, 0.5);
+            check_model(
+                &format!("nonlinear springs on {group:?}"),
+                &model,
+                &at,
+                &mut seen,
+            );
+        }
+    }
+    let laws: Vec<&String> = seen
+        .kinds
+        .iter()
+        .filter(|k| k.contains("<side>") || k.ends_with("preload"))
+        .collect();
+    assert_eq!(laws.len(), 3, "{laws:?}");
+    println!("worst relative error {:.2e}", seen.worst);
 }

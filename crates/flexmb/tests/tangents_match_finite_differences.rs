@@ -654,3 +654,191 @@ fn consistent_beam_mass_is_the_kinetic_energy_of_the_interpolation() {
         );
     }
 }
+
+/// A spring-damper between a point of node a (or the ground) and a point of node b, with a
+/// nonlinear law.
+fn law_spring(ground_a: bool, rest_length: f64) -> SpringDamper {
+    SpringDamper {
+        name: "s".into(),
+        node_a: (!ground_a).then_some(NodeId(0)),
+        node_b: Some(NodeId(1)),
+        point_a: Vec3::new(0.2, 0.1, -0.3),
+        point_b: Vec3::new(-0.1, 0.4, 0.2),
+        stiffness: 120.0,
+        damping: 3.5,
+        rest_length,
+        relaxation: None,
+    }
+}
+
+/// Length of a spring's segment at `nodes`, computed as the element computes it.
+fn spring_length(spring: &SpringDamper, nodes: &[NodeState]) -> f64 {
+    (nodes[1].q.point(&spring.point_b) - nodes[0].q.point(&spring.point_a)).norm()
+}
+
+#[test]
+fn nonlinear_spring_tangents_match_finite_differences() {
+    // Tables, polynomials, separate curves per side, preload, and stops (one-sided springs)
+    // while they act, at random kinematics (away from a table point or a stop's onset).
+    use flexmb::elements::spring::SpringElement;
+    use flexmb::model::{ForceCurve, SpringLaw, SpringSide};
+    use std::borrow::Cow;
+    let table = ForceCurve::Table(vec![(-0.5, -80.0), (0.1, 5.0), (0.5, 60.0), (1.0, 90.0)]);
+    let cubic = ForceCurve::Polynomial(vec![40.0, -15.0, 30.0]);
+    let mut laws = vec![];
+    for (curve, compression, extension) in [
+        (Some(table.clone()), None, None),
+        (Some(cubic.clone()), None, None),
+        (None, Some(cubic.clone()), Some(table.clone())),
+    ] {
+        let mut law = SpringLaw::new(0);
+        law.preload = 7.5;
+        law.curve = curve;
+        law.compression = compression;
+        law.extension = extension;
+        laws.push((law, 0.4));
+    }
+    // stops that act: a bump stop always compressed, a strap always stretched
+    let mut bump = SpringLaw::new(0);
+    bump.acts = SpringSide::Compression;
+    bump.curve = Some(ForceCurve::Polynomial(vec![40.0, 0.0, 2.0]));
+    laws.push((bump, 5.0));
+    let mut strap = SpringLaw::new(0);
+    strap.acts = SpringSide::Extension;
+    strap.curve = Some(table.clone());
+    laws.push((strap, 0.01));
+    let mut rng = Lcg(8);
+    for model in models() {
+        for (law, rest_length) in &laws {
+            for ground_a in [false, true] {
+                let spring = law_spring(ground_a, *rest_length);
+                let element = SpringElement {
+                    spring: Cow::Borrowed(&spring),
+                    law: Some(law),
+                };
+                let mut nodes = [rng.node(model.group), rng.node(model.group)];
+                if ground_a {
+                    nodes[0] = NodeState::ground(Frame::identity());
+                }
+                let name = format!("nonlinear spring {law:?}");
+                let ctx = Context::at(&model, 0.37, 1.0);
+                let (r, _) = evaluate_owned(&element, &ctx, &Local::nodes(&nodes), None);
+                assert!(r.norm() > 1.0, "{name}: acts");
+                check_element(&name, &element, &model, &nodes);
+            }
+        }
+    }
+}
+
+/// The tangent stiffness of a spring at a point where its law has a kink (elongation `e`
+/// exactly at a table point, or at a stop's onset) against one-sided differences taken on
+/// the side of increasing length (second order: `(-3 r(0) + 4 r(h) - r(2h)) / 2h`, `h` of
+/// the sign that lengthens the spring), the side whose slope the element uses; the damping
+/// columns against central differences.
+fn check_at_kink(
+    name: &str,
+    element: &dyn ElementKernel,
+    spring: &SpringDamper,
+    model: &Model,
+    nodes: &[NodeState],
+) {
+    let group = model.group;
+    let ctx = Context::at(model, 0.37, 1.0);
+    let active: Vec<bool> = (0..12).map(|i| element.node(i / 6).is_some()).collect();
+    let eval = |nodes: &[NodeState]| evaluate_owned(element, &ctx, &Local::nodes(nodes), None).0;
+    let l0 = spring_length(spring, nodes);
+    let r0 = eval(nodes);
+    for (what, coef) in [
+        ('q', coefficients(0.0, 0.0, 1.0, 0.0, 0.0)),
+        ('v', coefficients(0.0, 1.0, 0.0, 0.0, 0.0)),
+    ] {
+        let (_, s) = evaluate_owned(element, &ctx, &Local::nodes(nodes), Some(&coef));
+        let mut fd = DMatrix::zeros(12, 12);
+        for k in (0..12).filter(|&k| active[k]) {
+            let column = if what == 'q' {
+                let lengthens = spring_length(spring, &perturb(group, nodes, k, EPS, 'q')) >= l0;
+                let h = if lengthens { EPS } else { -EPS };
+                let r1 = eval(&perturb(group, nodes, k, h, 'q'));
+                let r2 = eval(&perturb(group, nodes, k, 2.0 * h, 'q'));
+                (&r1 * 4.0 - &r0 * 3.0 - r2) / (2.0 * h)
+            } else {
+                let rp = eval(&perturb(group, nodes, k, EPS, 'v'));
+                let rm = eval(&perturb(group, nodes, k, -EPS, 'v'));
+                (rp - rm) / (2.0 * EPS)
+            };
+            fd.set_column(k, &column);
+        }
+        assert_close(
+            &s,
+            &fd,
+            &format!("{name} on {group:?}, derivative wrt {what}"),
+            &active,
+        );
+    }
+}
+
+#[test]
+fn nonlinear_spring_tangents_at_a_table_point_and_a_stop_onset_are_one_sided() {
+    use flexmb::elements::spring::SpringElement;
+    use flexmb::model::{ForceCurve, SpringLaw, SpringSide};
+    use std::borrow::Cow;
+    let mut rng = Lcg(9);
+    for model in models() {
+        for ground_a in [false, true] {
+            let mut nodes = [rng.node(model.group), rng.node(model.group)];
+            if ground_a {
+                nodes[0] = NodeState::ground(Frame::identity());
+            }
+            // the slope jumps from 50 to 400 N/m at the table point e_1 = l - l0 (exactly the
+            // elongation the element computes)
+            let spring = law_spring(ground_a, 0.3);
+            let e1 = spring_length(&spring, &nodes) - spring.rest_length;
+            let mut law = SpringLaw::new(0);
+            law.curve = Some(ForceCurve::Table(vec![
+                (e1 - 1.0, -50.0),
+                (e1, 0.0),
+                (e1 + 1.0, 400.0),
+            ]));
+            let element = SpringElement {
+                spring: Cow::Borrowed(&spring),
+                law: Some(&law),
+            };
+            check_at_kink("table point", &element, &spring, &model, &nodes);
+            // stops at their onset (l = l0): a compression stop is off there (its slope from
+            // the side of longer length is zero), an extension stop is on
+            for acts in [SpringSide::Compression, SpringSide::Extension] {
+                let mut nodes = nodes;
+                let mut spring = law_spring(ground_a, 0.0);
+                spring.rest_length = spring_length(&spring, &nodes);
+                let mut law = SpringLaw::new(0);
+                law.acts = acts;
+                law.curve = Some(ForceCurve::Polynomial(vec![300.0, 0.0, 5e3]));
+                let element = SpringElement {
+                    spring: Cow::Borrowed(&spring),
+                    law: Some(&law),
+                };
+                // the spring lengthening (ldot > 0: T = c ldot > 0), so that the extension
+                // stop acts at its onset
+                let ctx = Context::at(&model, 0.37, 1.0);
+                if element.tension(&ctx, &Local::nodes(&nodes)) == 0.0 {
+                    for n in &mut nodes {
+                        n.v = -n.v;
+                    }
+                }
+                let tension = element.tension(&ctx, &Local::nodes(&nodes));
+                assert_eq!(
+                    tension > 0.0,
+                    acts == SpringSide::Extension,
+                    "{acts:?}: {tension}"
+                );
+                check_at_kink(
+                    &format!("{acts:?} stop at its onset"),
+                    &element,
+                    &spring,
+                    &model,
+                    &nodes,
+                );
+            }
+        }
+    }
+}

@@ -185,6 +185,9 @@ pub enum ElementRef {
     Load(usize),
     Spring(usize),
     Rope(usize),
+    /// A spring-damper with a nonlinear law (index in [`Model::springs`]; its place in
+    /// [`ElementItem::all`] is that of [`ElementItem::Spring`]).
+    NonlinearSpring(usize),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -402,6 +405,9 @@ impl ElementRef {
                     ElementRef::Beam(i, Arc::new(beam::mass_matrix(&model.beams[i])))
                 }
                 ElementItem::Load(i) => ElementRef::Load(i),
+                ElementItem::Spring(i) if model.spring_law(i).is_some() => {
+                    ElementRef::NonlinearSpring(i)
+                }
                 ElementItem::Spring(i) => ElementRef::Spring(i),
                 ElementItem::Rope(i) => ElementRef::Rope(i),
             })
@@ -419,6 +425,9 @@ impl ElementRef {
             ElementRef::Load(i) => Kernel::Load(&model.loads[*i]),
             ElementRef::Spring(i) => Kernel::Spring(&model.springs[*i]),
             ElementRef::Rope(i) => Kernel::Rope(&model.ropes[*i]),
+            ElementRef::NonlinearSpring(i) => {
+                Kernel::NonlinearSpring(spring::SpringElement::of(model, *i))
+            }
         }
     }
 
@@ -430,6 +439,7 @@ impl ElementRef {
             ElementRef::Load(i) => format!("load '{}'", model.loads[*i].name),
             ElementRef::Spring(i) => format!("spring '{}'", model.springs[*i].name),
             ElementRef::Rope(i) => format!("rope '{}'", model.ropes[*i].name),
+            ElementRef::NonlinearSpring(i) => format!("spring '{}'", model.springs[*i].name),
         }
     }
 }
@@ -488,6 +498,7 @@ pub enum Kernel<'m> {
     Load(&'m crate::model::Load),
     Spring(&'m crate::model::SpringDamper),
     Rope(&'m crate::model::Rope),
+    NonlinearSpring(spring::SpringElement<'m>),
 }
 
 macro_rules! dispatch {
@@ -498,6 +509,7 @@ macro_rules! dispatch {
             Kernel::Load($k) => $e,
             Kernel::Spring($k) => $e,
             Kernel::Rope($k) => $e,
+            Kernel::NonlinearSpring($k) => $e,
         }
     };
 }

@@ -10,9 +10,9 @@ use crate::model::limits::{
     MAX_TIME, MIN_PHYSICAL, MIN_STEP,
 };
 use crate::model::{
-    box_inertia, clip, frame_from_axis, rotation_from_vector, JointKind, Load, LoadFrame, Model,
-    NodeId, Relaxation, Rope, RopePoint, Sensor, SensorFrame, SensorKind, SpringDamper,
-    TimeFunction,
+    box_inertia, clip, frame_from_axis, rotation_from_vector, ForceCurve, JointKind, Load,
+    LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint, Sensor, SensorFrame, SensorKind,
+    SpringDamper, SpringLaw, SpringSide, TimeFunction,
 };
 use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
 use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
@@ -1221,6 +1221,12 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "rest_length",
             "relaxation_stiffness",
             "relaxation_damping",
+            "preload",
+            "acts",
+            "force_table",
+            "polynomial",
+            "compression",
+            "extension",
         ])?;
         let name = read_name(&t, &mut names, "spring")?;
         let node_a = match t.field("node_a") {
@@ -1230,7 +1236,13 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
         let pa = point(&t.req("point_a")?)?;
         let pb = point(&t.req("point_b")?)?;
-        let stiffness = physical_or_zero(&t.req("stiffness")?)?;
+        let law = read_spring_law(&t, model.springs.len())?;
+        // a nonlinear law may stand without a linear part
+        let stiffness = match (t.field("stiffness"), &law) {
+            (Some(f), _) => physical_or_zero(&f)?,
+            (None, Some(law)) if law.has_curve() => 0.0,
+            (None, _) => physical_or_zero(&t.req("stiffness")?)?,
+        };
         let damping = match t.field("damping") {
             Some(f) => physical_or_zero(&f)?,
             None => 0.0,
@@ -1271,9 +1283,93 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             rest_length,
             relaxation,
         });
+        model.spring_laws.extend(law);
         origins.springs.push(Origin::of(&t));
     }
     Ok(())
+}
+
+/// The nonlinear law of a `[[spring]]` (index `spring` in `Model::springs`), if it has any
+/// of `preload`, `acts`, `force_table`, `polynomial`, `compression`, `extension`.
+fn read_spring_law(t: &Table<'_>, spring: usize) -> Result<Option<SpringLaw>> {
+    const KEYS: [&str; 6] = [
+        "preload",
+        "acts",
+        "force_table",
+        "polynomial",
+        "compression",
+        "extension",
+    ];
+    if !KEYS.iter().any(|k| t.has(k)) {
+        return Ok(None);
+    }
+    let mut law = SpringLaw::new(spring);
+    if let Some(f) = t.field("preload") {
+        law.preload = f.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?;
+    }
+    if let Some(f) = t.field("acts") {
+        law.acts = match f.choice(&["both", "compression", "extension"])? {
+            "compression" => SpringSide::Compression,
+            "extension" => SpringSide::Extension,
+            _ => SpringSide::Both,
+        };
+    }
+    law.curve = read_force_curve(t)?;
+    for (key, side) in [
+        ("compression", &mut law.compression),
+        ("extension", &mut law.extension),
+    ] {
+        if let Some(f) = t.field(key) {
+            let sub = f.table()?;
+            sub.check_keys(&["force_table", "polynomial"])?;
+            *side = read_force_curve(&sub)?;
+            if side.is_none() {
+                return Err(f.err("give the side's curve: force_table = [[e, F], ...] or polynomial = [a1, a2, ...]"));
+            }
+        }
+    }
+    Ok(Some(law))
+}
+
+/// `force_table` or `polynomial` of a table (at most one).
+fn read_force_curve(t: &Table<'_>) -> Result<Option<ForceCurve>> {
+    match (t.field("force_table"), t.field("polynomial")) {
+        (Some(_), Some(p)) => Err(p.err("give force_table or polynomial, not both")),
+        (Some(f), None) => {
+            let mut points: Vec<(f64, f64)> = Vec::new();
+            let list = f.array()?;
+            for (i, v) in list.iter().enumerate() {
+                let pt = f.elem(i, v);
+                let ef = pt.numbers(2, "a point [elongation (m), force (N)]")?;
+                if let Some(&(previous, _)) = points.last() {
+                    if ef[0] <= previous {
+                        return Err(pt.err(format!(
+                            "is not sorted in elongation: e = {} does not come after e = {previous}; the elongations must increase strictly",
+                            ef[0]
+                        )));
+                    }
+                }
+                points.push((ef[0], ef[1]));
+            }
+            if points.len() < 2 {
+                return Err(f.err(format!(
+                    "has {} point(s): a force table needs at least 2",
+                    points.len()
+                )));
+            }
+            Ok(Some(ForceCurve::Table(points)))
+        }
+        (None, Some(p)) => {
+            let list = p.array()?;
+            let a = list
+                .iter()
+                .enumerate()
+                .map(|(j, v)| p.elem(j, v).f64_in(-MAX_PHYSICAL, MAX_PHYSICAL))
+                .collect::<Result<Vec<f64>>>()?;
+            Ok(Some(ForceCurve::Polynomial(a)))
+        }
+        (None, None) => Ok(None),
+    }
 }
 
 fn read_ropes(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
@@ -1300,7 +1396,13 @@ fn read_ropes(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
                 point: to_node_frame(model, node, &p),
             });
         }
-        let stiffness = physical_or_zero(&t.req("stiffness")?)?;
+        let law = read_spring_law(&t, model.springs.len())?;
+        // a nonlinear law may stand without a linear part
+        let stiffness = match (t.field("stiffness"), &law) {
+            (Some(f), _) => physical_or_zero(&f)?,
+            (None, Some(law)) if law.has_curve() => 0.0,
+            (None, _) => physical_or_zero(&t.req("stiffness")?)?,
+        };
         let damping = match t.field("damping") {
             Some(f) => physical_or_zero(&f)?,
             None => 0.0,

@@ -165,6 +165,88 @@ pub struct Relaxation {
     pub damping: f64,
 }
 
+/// A force-elongation curve `F(e)` \[N\] of a nonlinear spring, `e = l - l0` the elongation
+/// \[m\] (tension positive). See [`crate::elements::spring`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum ForceCurve {
+    /// Piecewise linear through the points `(e_i, F_i)` (at least two, `e_i` strictly
+    /// increasing), continued beyond the first and the last point with the slopes of the end
+    /// segments. At a point `e_i` the slope is that of the segment to its right.
+    Table(Vec<(f64, f64)>),
+    /// `F = a_1 e + a_2 e^2 + ...`: the coefficients `[a_1, a_2, ...]` (no constant term: that
+    /// is the preload).
+    Polynomial(Vec<f64>),
+}
+
+/// On which side of its free length a spring acts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum SpringSide {
+    /// Always (an ordinary spring).
+    #[default]
+    Both,
+    /// Only while compressed (`e < 0`) and pushing (`T < 0`): a bump stop, engaged when the
+    /// points come closer than the free length.
+    Compression,
+    /// Only while extended (`e >= 0`) and pulling (`T >= 0`): a rebound stop, a strap.
+    Extension,
+}
+
+/// The nonlinear law of the spring-damper `Model::springs[spring]`: tension
+///
+/// ```text
+/// T = P + k e + F(e) + c ldot  (+ the Maxwell branch),   e = l - l0,
+/// ```
+///
+/// `k`, `c`, `l0` (free length) those of the spring-damper, `P` the preload (the force at the
+/// free length), `F` the curve of the side of `e` (`compression` for `e < 0`, `extension` for
+/// `e >= 0`, each falling back to `curve`, none = 0); with `acts` a one-sided spring (a stop)
+/// whose force is zero off its side. Kept apart from [`SpringDamper`] so that the linear
+/// spring-damper, which users and tests build field by field, keeps its fields.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SpringLaw {
+    /// Index of the spring-damper in [`Model::springs`] (at most one law per spring).
+    pub spring: usize,
+    /// Preload `P` \[N\], the tension at the free length (negative: pushing).
+    pub preload: f64,
+    /// Curve for both sides (unless a side has its own).
+    pub curve: Option<ForceCurve>,
+    /// Curve for `e < 0`.
+    pub compression: Option<ForceCurve>,
+    /// Curve for `e >= 0`.
+    pub extension: Option<ForceCurve>,
+    pub acts: SpringSide,
+}
+
+impl SpringLaw {
+    /// A law with no curve, no preload, acting on both sides (the linear spring) for
+    /// `Model::springs[spring]`.
+    pub fn new(spring: usize) -> Self {
+        Self {
+            spring,
+            preload: 0.0,
+            curve: None,
+            compression: None,
+            extension: None,
+            acts: SpringSide::Both,
+        }
+    }
+
+    /// Whether the law has a force curve (on either side).
+    pub fn has_curve(&self) -> bool {
+        self.curve.is_some() || self.compression.is_some() || self.extension.is_some()
+    }
+
+    /// The curve that acts at elongation `e`, if any.
+    pub fn curve_at(&self, e: f64) -> Option<&ForceCurve> {
+        let side = if e < 0.0 {
+            &self.compression
+        } else {
+            &self.extension
+        };
+        side.as_ref().or(self.curve.as_ref())
+    }
+}
+
 /// A point a rope passes through: fixed on a node (node frame) or on the ground (inertial).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RopePoint {
@@ -410,6 +492,10 @@ pub struct Model {
     /// What the bodies and beams look like in the results (no effect on the mechanics).
     #[serde(default)]
     pub display: display::Display,
+    /// Nonlinear laws of spring-dampers (at most one per spring; a spring without one is
+    /// linear).
+    #[serde(default)]
+    pub spring_laws: Vec<SpringLaw>,
 }
 
 /// Reference to one item of a model and one of its fields, for error messages.
@@ -452,6 +538,7 @@ impl Model {
             beams: Vec::new(),
             sensors: Vec::new(),
             display: display::Display::default(),
+            spring_laws: Vec::new(),
         }
     }
 
@@ -638,6 +725,16 @@ impl Model {
     /// Finds a node by name (the first of that name).
     pub fn node_id(&self, name: &str) -> Option<NodeId> {
         self.nodes.iter().position(|n| n.name == name).map(NodeId)
+    }
+
+    /// The nonlinear law of spring `spring` (index in [`Model::springs`]), if it has one.
+    pub fn spring_law(&self, spring: usize) -> Option<&SpringLaw> {
+        self.spring_laws.iter().find(|l| l.spring == spring)
+    }
+
+    /// The nonlinear law of spring `spring`, to change it.
+    pub fn spring_law_mut(&mut self, spring: usize) -> Option<&mut SpringLaw> {
+        self.spring_laws.iter_mut().find(|l| l.spring == spring)
     }
 
     /// Finds a joint by name (the first of that name).

@@ -27,6 +27,9 @@
 //! | spring | `spring.<s>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `l0` \[m\] | same |
 //! | spring | `spring.<s>.point_a.<k>`, `spring.<s>.point_b.<k>` | attachment point at t = 0, inertial \[m\] | same |
 //! | spring | `spring.<s>.relaxation_stiffness`, `.relaxation_damping` | Maxwell branch `k_m` [N/m], `c_m` [N s/m] (springs that have one) | same |
+//! | spring | `spring.<s>.preload` | preload `P` \[N\] (springs with a nonlinear law) | same |
+//! | spring | `spring.<s>.polynomial.<j>`, `spring.<s>.force_table.<i>` | coefficient `a_{j+1}` of a polynomial curve, force `F_i` of point `i` of a table curve \[N\] | same (the table's elongations are not parameters) |
+//! | spring | `spring.<s>.{compression, extension}.{polynomial.<j>, force_table.<i>}` | the same for a side's own curve | same |
 //! | rope | `rope.<r>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `L0` \[m\] | same |
 //! | rope | `rope.<r>.points.<i>.point.<k>` | point `i` at t = 0, inertial \[m\] | same |
 //!
@@ -151,6 +154,107 @@ pub enum SpringParam {
     RelaxationDamping,
 }
 
+/// Which curve of a spring's nonlinear law ([`super::SpringLaw`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CurveKey {
+    /// `curve`, both sides.
+    Both,
+    /// `compression`.
+    Compression,
+    /// `extension`.
+    Extension,
+}
+
+impl CurveKey {
+    /// The path segment (empty for `Both`: the curve's keys sit on the spring itself).
+    pub fn key(self) -> &'static str {
+        match self {
+            CurveKey::Both => "",
+            CurveKey::Compression => "compression.",
+            CurveKey::Extension => "extension.",
+        }
+    }
+
+    /// The curve of `law` this key names.
+    pub fn curve(self, law: &super::SpringLaw) -> Option<&super::ForceCurve> {
+        match self {
+            CurveKey::Both => law.curve.as_ref(),
+            CurveKey::Compression => law.compression.as_ref(),
+            CurveKey::Extension => law.extension.as_ref(),
+        }
+    }
+
+    fn curve_mut(self, law: &mut super::SpringLaw) -> Option<&mut super::ForceCurve> {
+        match self {
+            CurveKey::Both => law.curve.as_mut(),
+            CurveKey::Compression => law.compression.as_mut(),
+            CurveKey::Extension => law.extension.as_mut(),
+        }
+    }
+}
+
+/// A parameter of a spring-damper's nonlinear law ([`super::SpringLaw`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpringLawParam {
+    /// Preload \[N\].
+    Preload,
+    /// Coefficient `a_{j+1}` (of `e^{j+1}`) of a polynomial curve [N/m^(j+1)].
+    Polynomial(CurveKey, usize),
+    /// Force `F_i` of point `i` of a table curve \[N\].
+    TableForce(CurveKey, usize),
+}
+
+impl SpringLawParam {
+    /// Every parameter of `law`, in registry order, with the path after the spring's name.
+    pub fn all(law: &super::SpringLaw) -> Vec<(String, SpringLawParam)> {
+        let mut out = vec![("preload".to_string(), SpringLawParam::Preload)];
+        for key in [CurveKey::Both, CurveKey::Compression, CurveKey::Extension] {
+            match key.curve(law) {
+                Some(super::ForceCurve::Polynomial(a)) => out.extend((0..a.len()).map(|j| {
+                    let path = format!("{}polynomial.{j}", key.key());
+                    (path, SpringLawParam::Polynomial(key, j))
+                })),
+                Some(super::ForceCurve::Table(points)) => out.extend((0..points.len()).map(|i| {
+                    let path = format!("{}force_table.{i}", key.key());
+                    (path, SpringLawParam::TableForce(key, i))
+                })),
+                None => {}
+            }
+        }
+        out
+    }
+
+    pub fn get(self, law: &super::SpringLaw) -> f64 {
+        match self {
+            SpringLawParam::Preload => law.preload,
+            SpringLawParam::Polynomial(key, j) => match key.curve(law) {
+                Some(super::ForceCurve::Polynomial(a)) => a[j],
+                _ => 0.0,
+            },
+            SpringLawParam::TableForce(key, i) => match key.curve(law) {
+                Some(super::ForceCurve::Table(p)) => p[i].1,
+                _ => 0.0,
+            },
+        }
+    }
+
+    pub fn set(self, law: &mut super::SpringLaw, value: f64) {
+        match self {
+            SpringLawParam::Preload => law.preload = value,
+            SpringLawParam::Polynomial(key, j) => {
+                if let Some(super::ForceCurve::Polynomial(a)) = key.curve_mut(law) {
+                    a[j] = value;
+                }
+            }
+            SpringLawParam::TableForce(key, i) => {
+                if let Some(super::ForceCurve::Table(p)) = key.curve_mut(law) {
+                    p[i].1 = value;
+                }
+            }
+        }
+    }
+}
+
 /// Parameters of a rope.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RopeParam {
@@ -181,6 +285,8 @@ pub enum ParamKind {
     Spring(usize, SpringParam),
     /// Index in [`Model::ropes`].
     Rope(usize, RopeParam),
+    /// The nonlinear law of a spring-damper (index in [`Model::springs`]).
+    SpringLaw(usize, SpringLawParam),
 }
 
 /// A path that names no parameter.
@@ -312,6 +418,11 @@ impl Parameters {
                 );
                 add("relaxation_damping".into(), SpringParam::RelaxationDamping);
             }
+            if let Some(law) = model.spring_law(i) {
+                for (key, p) in SpringLawParam::all(law) {
+                    reg.push(format!("spring.{name}.{key}"), ParamKind::SpringLaw(i, p));
+                }
+            }
         }
         let names = segments(model.ropes.iter().map(|r| r.name.as_str()));
         for (i, name) in names.iter().enumerate() {
@@ -398,6 +509,7 @@ impl Parameters {
             ParamKind::Load(i, p) => p.get(&model.loads[i]),
             ParamKind::Spring(i, p) => p.get(&model.springs[i], &model.nodes),
             ParamKind::Rope(i, p) => p.get(&model.ropes[i], &model.nodes),
+            ParamKind::SpringLaw(i, p) => model.spring_law(i).map_or(0.0, |law| p.get(law)),
         }
     }
 
@@ -419,6 +531,11 @@ impl Parameters {
             ParamKind::Load(i, p) => p.set(&mut model.loads[i], value),
             ParamKind::Spring(i, p) => p.set(&mut model.springs[i], &model.nodes, value),
             ParamKind::Rope(i, p) => p.set(&mut model.ropes[i], &model.nodes, value),
+            ParamKind::SpringLaw(i, p) => {
+                if let Some(law) = model.spring_law_mut(i) {
+                    p.set(law, value);
+                }
+            }
         }
     }
 

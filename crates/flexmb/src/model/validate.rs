@@ -422,6 +422,85 @@ impl Model {
             }
         }
 
+        let mut with_law = vec![false; self.springs.len()];
+        for law in &self.spring_laws {
+            let Some(s) = self.springs.get(law.spring) else {
+                return Err(bad(
+                    "spring",
+                    law.spring,
+                    "",
+                    "spring",
+                    format!(
+                        "a nonlinear law names spring index {} but the model has {} springs",
+                        law.spring,
+                        self.springs.len()
+                    ),
+                ));
+            };
+            let fail = |field, m| bad("spring", law.spring, &s.name, field, m);
+            if std::mem::replace(&mut with_law[law.spring], true) {
+                return Err(fail("stiffness", "has two nonlinear laws".into()));
+            }
+            in_range(law.preload, -MAX_PHYSICAL, MAX_PHYSICAL).map_err(|m| fail("preload", m))?;
+            for (curve, side) in [
+                (&law.curve, None),
+                (&law.compression, Some("compression")),
+                (&law.extension, Some("extension")),
+            ] {
+                let Some(curve) = curve else { continue };
+                let field = |own: &'static str| side.unwrap_or(own);
+                match curve {
+                    super::ForceCurve::Table(points) => {
+                        let field = field("force_table");
+                        if points.len() < 2 {
+                            return Err(fail(
+                                field,
+                                format!(
+                                    "has {} point(s): a force table needs at least 2",
+                                    points.len()
+                                ),
+                            ));
+                        }
+                        for (k, (e, f)) in points.iter().enumerate() {
+                            in_range(*e, -2.0 * MAX_KINEMATIC, 2.0 * MAX_KINEMATIC)
+                                .and_then(|()| in_range(*f, -MAX_PHYSICAL, MAX_PHYSICAL))
+                                .map_err(|m| fail(field, format!("point {k}: {m}")))?;
+                        }
+                        if let Some(k) = points.windows(2).position(|w| w[1].0 <= w[0].0) {
+                            return Err(fail(
+                                field,
+                                format!(
+                                    "is not sorted in elongation: point {} (e = {}) does not come after point {k} (e = {}); the elongations must increase strictly",
+                                    k + 1,
+                                    points[k + 1].0,
+                                    points[k].0
+                                ),
+                            ));
+                        }
+                    }
+                    super::ForceCurve::Polynomial(a) => {
+                        let field = field("polynomial");
+                        if a.is_empty() || a.len() > 16 {
+                            return Err(fail(
+                                field,
+                                format!("has {} coefficients: give 1 to 16 ([a1, a2, ...] of a1 e + a2 e^2 + ...)", a.len()),
+                            ));
+                        }
+                        for (j, aj) in a.iter().enumerate() {
+                            in_range(*aj, -MAX_PHYSICAL, MAX_PHYSICAL)
+                                .map_err(|m| fail(field, format!("coefficient {j}: {m}")))?;
+                        }
+                    }
+                }
+            }
+            if law.acts != super::SpringSide::Both && s.relaxation.is_some() {
+                return Err(fail(
+                    "acts",
+                    "a one-sided spring (a stop) cannot have a Maxwell branch: its branch would hold a force while the stop is off".into(),
+                ));
+            }
+        }
+
         for (i, r) in self.ropes.iter().enumerate() {
             let fail = |field, m| bad("rope", i, &r.name, field, m);
             let n_points = r.points.len();

@@ -154,6 +154,7 @@ pub fn sensor_parameters(model: &Model, params: &Parameters, k: usize) -> Vec<Pa
             ) => *joint == j,
             (SensorKind::SpringForce { spring }, ParamKind::Spring(i, _)) => *spring == i,
             (SensorKind::RopeForce { rope }, ParamKind::Rope(i, _)) => *rope == i,
+            (SensorKind::SpringForce { spring }, ParamKind::SpringLaw(i, _)) => *spring == i,
             (SensorKind::BeamStress { beam, .. }, ParamKind::Beam(item, _)) => {
                 params.beam_elements(item).contains(beam)
             }
