@@ -1515,3 +1515,162 @@ fn lie_update_is_read_and_checked_at_its_key() {
         .to_string();
     assert_contains(&e, &["lie_update_sigma"]);
 }
+
+/// `GOOD` with `extra` lines after the spring's `stiffness = 100` (replaced by `stiffness`
+/// when given), and the line of the first extra line.
+fn spring_with(stiffness: Option<&str>, extra: &str) -> (String, usize) {
+    let line = GOOD
+        .lines()
+        .position(|l| l == "stiffness = 100")
+        .expect("the spring's stiffness")
+        + 1;
+    let head = stiffness.map_or(String::new(), |s| format!("{s}\n"));
+    let text = GOOD.replacen("stiffness = 100\n", &format!("{head}{extra}\n"), 1);
+    (text, line + usize::from(stiffness.is_some()))
+}
+
+#[test]
+fn spring_laws_are_read_with_their_parameters() {
+    use flexmb::model::{ForceCurve, SpringSide};
+    let (text, _) = spring_with(
+        Some("stiffness = 100"),
+        "rest_length = 0.8\npreload = -10\nacts = \"compression\"\nforce_table = [[-0.1, -50], [0, 0]]",
+    );
+    let file = parse_model_str(&text, "law.toml", &[]).expect("reads");
+    let law = &file.model.spring_laws[0];
+    assert_eq!(law.spring, 0);
+    assert_eq!(law.preload, -10.0);
+    assert_eq!(law.acts, SpringSide::Compression);
+    assert_eq!(
+        law.curve,
+        Some(ForceCurve::Table(vec![(-0.1, -50.0), (0.0, 0.0)]))
+    );
+    assert_eq!(file.model.springs[0].stiffness, 100.0);
+    let params = flexmb::model::Parameters::new(&file.model);
+    for path in ["spring.s.preload", "spring.s.force_table.1"] {
+        assert!(params.id(path).is_ok(), "{path}");
+    }
+    // per side, without a linear part; overrides reach the curves
+    let (text, _) = spring_with(
+        None,
+        "compression = { polynomial = [100, 0, 1e4] }\nextension = { force_table = [[0, 0], [0.1, 20]] }",
+    );
+    let file = parse_model_str(&text, "sides.toml", &["spring.s.compression.polynomial.2=2e4".to_string()])
+        .expect("reads");
+    let law = &file.model.spring_laws[0];
+    assert_eq!(file.model.springs[0].stiffness, 0.0);
+    assert_eq!(law.acts, SpringSide::Both);
+    assert_eq!(
+        law.compression,
+        Some(ForceCurve::Polynomial(vec![100.0, 0.0, 2e4]))
+    );
+    let params = flexmb::model::Parameters::new(&file.model);
+    for path in [
+        "spring.s.compression.polynomial.2",
+        "spring.s.extension.force_table.0",
+    ] {
+        assert!(params.id(path).is_ok(), "{path}");
+    }
+    // a linear spring has no law
+    let file = good(&[]).expect("reads");
+    assert!(file.model.spring_laws.is_empty());
+}
+
+#[test]
+fn bad_spring_laws_name_their_field() {
+    let cases: [(Option<&str>, &str, usize, &str, &str); 10] = [
+        (Some("stiffness = -100"), "", 0, "spring[0].stiffness", ">= 0"),
+        (
+            None,
+            "force_table = [[0, 0], [0.2, 10], [0.1, 20]]",
+            0,
+            "spring[0].force_table[2]",
+            "not sorted in elongation",
+        ),
+        (
+            None,
+            "force_table = [[0, 0]]",
+            0,
+            "spring[0].force_table",
+            "at least 2",
+        ),
+        (
+            None,
+            "force_table = [[0, 0], [1, 1]]\npolynomial = [1]",
+            1,
+            "spring[0].polynomial",
+            "not both",
+        ),
+        (
+            None,
+            "polynomial = []",
+            0,
+            "spring[0].polynomial",
+            "1 to 16",
+        ),
+        (
+            Some("stiffness = 100"),
+            "acts = \"both_sides\"",
+            0,
+            "spring[0].acts",
+            "must be one of",
+        ),
+        (
+            None,
+            "compression = { force_table = [[0, 0], [0, 1]] }",
+            0,
+            "spring[0].compression.force_table[1]",
+            "not sorted",
+        ),
+        (
+            None,
+            "extension = { }",
+            0,
+            "spring[0].extension",
+            "the side's curve",
+        ),
+        (
+            Some("stiffness = 100"),
+            "acts = \"extension\"\nrelaxation_stiffness = 5\nrelaxation_damping = 1",
+            0,
+            "spring[0].acts",
+            "Maxwell branch",
+        ),
+        (
+            Some("stiffness = 100"),
+            "preload = 1e40",
+            0,
+            "spring[0].preload",
+            "",
+        ),
+    ];
+    for (stiffness, extra, offset, field, says) in cases {
+        let (text, line) = spring_with(stiffness, extra);
+        let line = if stiffness.is_some() && extra.is_empty() {
+            line - 1
+        } else {
+            line
+        } + offset;
+        let e = parse_model_str(&text, "law.toml", &[])
+            .map(|_| ())
+            .expect_err(extra)
+            .to_string();
+        println!("{e}");
+        assert_contains(
+            &e,
+            &[&format!("law.toml:{line}:"), &format!("field '{field}'"), says],
+        );
+    }
+    // an unknown node and a law-less spring without stiffness, as before
+    let e = parse_model_str(&GOOD.replace("node_b = \"top\"\npoint_a", "node_b = \"nowhere\"\npoint_a"), "law.toml", &[])
+        .map(|_| ())
+        .expect_err("unknown node")
+        .to_string();
+    assert_contains(&e, &["field 'spring[0].node_b'", "nowhere"]);
+    let (text, _) = spring_with(None, "damping = 1");
+    let e = parse_model_str(&text, "law.toml", &[])
+        .map(|_| ())
+        .expect_err("no stiffness")
+        .to_string();
+    assert_contains(&e, &["spring[0]", "stiffness"]);
+}
