@@ -1,6 +1,7 @@
 //! Force elements with nonlinear laws against analytic solutions: a mass bouncing on a bump
 //! stop (the period of a piecewise-linear oscillator), the static deflection of a mass
-//! under a load on a table and on a polynomial spring (the inverse of the law).
+//! under a load on a table and on a polynomial spring (the inverse of the law); the example
+//! `bump_stop.toml`.
 
 use flexmb::model::{
     ForceCurve, Load, LoadFrame, Model, NodeId, SpringDamper, SpringLaw, SpringSide, TimeFunction,
@@ -9,6 +10,8 @@ use flexmb::solve::{StaticSettings, Statics};
 use flexmb::{DynamicSettings, Simulation};
 use flexmb_lie::{Frame, Group, Mat3, Vec3};
 use std::f64::consts::PI;
+
+mod common;
 
 /// A spring from the ground point `(-1, 0, 0)` to the origin of node `n`, along x.
 fn spring_along_x(name: &str, n: NodeId, stiffness: f64, rest_length: f64) -> SpringDamper {
@@ -165,4 +168,50 @@ fn static_elongation_inverts_the_table_and_the_polynomial_law() {
         (e + 0.1).abs() < 1e-10,
         "polynomial in compression: e = {e}"
     );
+}
+
+#[test]
+fn bump_stop_example_contacts_within_the_energy_bound_and_settles_at_the_free_length() {
+    let h = common::run("bump_stop.toml", &[]);
+    let (z, bump) = (h.series("z"), h.series("bump_force"));
+    // The stop pushes only while the points are closer than its free length, 0.25 m.
+    for (&(t, zi), &(_, f)) in z.iter().zip(&bump) {
+        assert!(f <= 0.0, "t = {t}: the stop pulls ({f} N)");
+        if zi > 0.25 {
+            assert_eq!(f, 0.0, "t = {t}: force {f} N off contact (z = {zi})");
+        }
+    }
+    let lowest = z.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+    assert!(lowest < 0.25, "the stop is reached: lowest z {lowest}");
+    // Without damping the lowest point would be at the depth d where the kinetic energy
+    // 0.5 * 300 * 1.5^2 = 337.5 J is stored: the coil's preload cancels the weight's work, so
+    // 1.5e4 d^2 + 1e4 s^2 + 1.25e7 s^4 = 337.5 with s = d - 0.05 (the stop's
+    // integral_0^e F for F = 2e4 e + 5e7 e^3). With damping the mass stops higher.
+    let energy = |d: f64| {
+        let s = (d - 0.05).max(0.0);
+        1.5e4 * d * d + 1e4 * s * s + 1.25e7 * s.powi(4) - 337.5
+    };
+    let (mut lo, mut hi) = (0.0, 0.15);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if energy(mid) > 0.0 {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    println!(
+        "lowest z {lowest:.4} m, above the undamped bound {:.4} m",
+        0.3 - lo
+    );
+    assert!(
+        lowest > 0.3 - lo,
+        "lowest z {lowest} below the energy bound {}",
+        0.3 - lo
+    );
+    // Settled at the free length, the coil holding the weight.
+    let (z_end, coil) = (h.last("z"), h.last("coil_force"));
+    println!("end: z {z_end:.6} m, coil force {coil:.2} N");
+    assert!((z_end - 0.3).abs() < 1e-4, "z {z_end}");
+    assert!((coil + 2943.0).abs() < 5.0, "coil force {coil}");
 }

@@ -1555,8 +1555,12 @@ fn spring_laws_are_read_with_their_parameters() {
         None,
         "compression = { polynomial = [100, 0, 1e4] }\nextension = { force_table = [[0, 0], [0.1, 20]] }",
     );
-    let file = parse_model_str(&text, "sides.toml", &["spring.s.compression.polynomial.2=2e4".to_string()])
-        .expect("reads");
+    let file = parse_model_str(
+        &text,
+        "sides.toml",
+        &["spring.s.compression.polynomial.2=2e4".to_string()],
+    )
+    .expect("reads");
     let law = &file.model.spring_laws[0];
     assert_eq!(file.model.springs[0].stiffness, 0.0);
     assert_eq!(law.acts, SpringSide::Both);
@@ -1579,7 +1583,13 @@ fn spring_laws_are_read_with_their_parameters() {
 #[test]
 fn bad_spring_laws_name_their_field() {
     let cases: [(Option<&str>, &str, usize, &str, &str); 10] = [
-        (Some("stiffness = -100"), "", 0, "spring[0].stiffness", ">= 0"),
+        (
+            Some("stiffness = -100"),
+            "",
+            0,
+            "spring[0].stiffness",
+            ">= 0",
+        ),
         (
             None,
             "force_table = [[0, 0], [0.2, 10], [0.1, 20]]",
@@ -1658,14 +1668,22 @@ fn bad_spring_laws_name_their_field() {
         println!("{e}");
         assert_contains(
             &e,
-            &[&format!("law.toml:{line}:"), &format!("field '{field}'"), says],
+            &[
+                &format!("law.toml:{line}:"),
+                &format!("field '{field}'"),
+                says,
+            ],
         );
     }
     // an unknown node and a law-less spring without stiffness, as before
-    let e = parse_model_str(&GOOD.replace("node_b = \"top\"\npoint_a", "node_b = \"nowhere\"\npoint_a"), "law.toml", &[])
-        .map(|_| ())
-        .expect_err("unknown node")
-        .to_string();
+    let e = parse_model_str(
+        &GOOD.replace("node_b = \"top\"\npoint_a", "node_b = \"nowhere\"\npoint_a"),
+        "law.toml",
+        &[],
+    )
+    .map(|_| ())
+    .expect_err("unknown node")
+    .to_string();
     assert_contains(&e, &["field 'spring[0].node_b'", "nowhere"]);
     let (text, _) = spring_with(None, "damping = 1");
     let e = parse_model_str(&text, "law.toml", &[])
