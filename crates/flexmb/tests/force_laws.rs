@@ -66,7 +66,7 @@ fn mass_on_a_bump_stop_has_the_piecewise_linear_period() {
             .springs
             .push(spring_along_x("bump", n, k2, 1.0 - delta));
         let mut law = SpringLaw::new(1);
-        law.acts = SpringSide::Compression;
+        law.law.acts = SpringSide::Compression;
         model.spring_laws.push(law);
         let mut s = DynamicSettings::new(4.0 * period, 2e-4);
         s.newton.rtol = 1e-12;
@@ -143,8 +143,8 @@ fn static_elongation_inverts_the_table_and_the_polynomial_law() {
     // under 620 N, 620 - 20 = 600 N lies on the second segment (slope 5e4 N/m):
     // e = 0.01 + (600 - 100) / 5e4 = 0.02 m.
     let mut law = SpringLaw::new(0);
-    law.preload = 20.0;
-    law.curve = Some(ForceCurve::Table(vec![
+    law.law.preload = 20.0;
+    law.law.curve = Some(ForceCurve::Table(vec![
         (0.0, 0.0),
         (0.01, 100.0),
         (0.03, 1100.0),
@@ -156,8 +156,8 @@ fn static_elongation_inverts_the_table_and_the_polynomial_law() {
     // 500 N/m in compression: under 300 N, e = 0.1 m (1000 * 0.1 + 2e5 * 0.1^3 = 300, the
     // only real root: T is increasing).
     let mut law = SpringLaw::new(0);
-    law.extension = Some(ForceCurve::Polynomial(vec![1000.0, 0.0, 2e5]));
-    law.compression = Some(ForceCurve::Polynomial(vec![500.0]));
+    law.law.extension = Some(ForceCurve::Polynomial(vec![1000.0, 0.0, 2e5]));
+    law.law.compression = Some(ForceCurve::Polynomial(vec![500.0]));
     let e = static_elongation(law.clone(), 300.0);
     println!("polynomial, extension: e = {e:.12} (0.1)");
     assert!((e - 0.1).abs() < 1e-10, "polynomial: e = {e}");

@@ -1539,10 +1539,10 @@ fn spring_laws_are_read_with_their_parameters() {
     let file = parse_model_str(&text, "law.toml", &[]).expect("reads");
     let law = &file.model.spring_laws[0];
     assert_eq!(law.spring, 0);
-    assert_eq!(law.preload, -10.0);
-    assert_eq!(law.acts, SpringSide::Compression);
+    assert_eq!(law.law.preload, -10.0);
+    assert_eq!(law.law.acts, SpringSide::Compression);
     assert_eq!(
-        law.curve,
+        law.law.curve,
         Some(ForceCurve::Table(vec![(-0.1, -50.0), (0.0, 0.0)]))
     );
     assert_eq!(file.model.springs[0].stiffness, 100.0);
@@ -1563,9 +1563,9 @@ fn spring_laws_are_read_with_their_parameters() {
     .expect("reads");
     let law = &file.model.spring_laws[0];
     assert_eq!(file.model.springs[0].stiffness, 0.0);
-    assert_eq!(law.acts, SpringSide::Both);
+    assert_eq!(law.law.acts, SpringSide::Both);
     assert_eq!(
-        law.compression,
+        law.law.compression,
         Some(ForceCurve::Polynomial(vec![100.0, 0.0, 2e4]))
     );
     let params = flexmb::model::Parameters::new(&file.model);

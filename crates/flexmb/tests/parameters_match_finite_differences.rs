@@ -539,8 +539,8 @@ fn nonlinear_springs(group: Group) -> Model {
     let table = ForceCurve::Table(vec![(-3.0, -80.0), (0.1, 5.0), (0.5, 60.0), (4.0, 90.0)]);
     m.springs.push(spring("table", Some(a), 0.4));
     let mut law = SpringLaw::new(0);
-    law.preload = 12.0;
-    law.curve = Some(table.clone());
+    law.law.preload = 12.0;
+    law.law.curve = Some(table.clone());
     m.spring_laws.push(law);
     let mut sides = spring("sides", Some(a), 1.2);
     sides.relaxation = Some(flexmb::model::Relaxation {
@@ -549,21 +549,21 @@ fn nonlinear_springs(group: Group) -> Model {
     });
     m.springs.push(sides);
     let mut law = SpringLaw::new(1);
-    law.preload = -3.0;
-    law.compression = Some(ForceCurve::Polynomial(vec![40.0, -15.0, 30.0]));
-    law.extension = Some(table);
+    law.law.preload = -3.0;
+    law.law.compression = Some(ForceCurve::Polynomial(vec![40.0, -15.0, 30.0]));
+    law.law.extension = Some(table);
     m.spring_laws.push(law);
     m.springs.push(spring("bump", Some(a), 8.0));
     let mut law = SpringLaw::new(2);
-    law.acts = SpringSide::Compression;
-    law.curve = Some(ForceCurve::Polynomial(vec![0.0, 0.0, 2.0]));
+    law.law.acts = SpringSide::Compression;
+    law.law.curve = Some(ForceCurve::Polynomial(vec![0.0, 0.0, 2.0]));
     m.spring_laws.push(law);
     let mut strap = spring("strap", None, 0.01);
     strap.point_a = Vec3::new(-2.0, -3.0, 1.0);
     m.springs.push(strap);
     let mut law = SpringLaw::new(3);
-    law.acts = SpringSide::Extension;
-    law.curve = Some(ForceCurve::Polynomial(vec![10.0, 5.0]));
+    law.law.acts = SpringSide::Extension;
+    law.law.curve = Some(ForceCurve::Polynomial(vec![10.0, 5.0]));
     m.spring_laws.push(law);
     m
 }

@@ -681,7 +681,7 @@ fn nonlinear_spring_tangents_match_finite_differences() {
     // Tables, polynomials, separate curves per side, preload, and stops (one-sided springs)
     // while they act, at random kinematics (away from a table point or a stop's onset).
     use flexmb::elements::spring::SpringElement;
-    use flexmb::model::{ForceCurve, SpringLaw, SpringSide};
+    use flexmb::model::{ForceCurve, ForceLaw, SpringSide};
     use std::borrow::Cow;
     let table = ForceCurve::Table(vec![(-0.5, -80.0), (0.1, 5.0), (0.5, 60.0), (1.0, 90.0)]);
     let cubic = ForceCurve::Polynomial(vec![40.0, -15.0, 30.0]);
@@ -691,7 +691,7 @@ fn nonlinear_spring_tangents_match_finite_differences() {
         (Some(cubic.clone()), None, None),
         (None, Some(cubic.clone()), Some(table.clone())),
     ] {
-        let mut law = SpringLaw::new(0);
+        let mut law = ForceLaw::default();
         law.preload = 7.5;
         law.curve = curve;
         law.compression = compression;
@@ -699,11 +699,11 @@ fn nonlinear_spring_tangents_match_finite_differences() {
         laws.push((law, 0.4));
     }
     // stops that act: a bump stop always compressed, a strap always stretched
-    let mut bump = SpringLaw::new(0);
+    let mut bump = ForceLaw::default();
     bump.acts = SpringSide::Compression;
     bump.curve = Some(ForceCurve::Polynomial(vec![40.0, 0.0, 2.0]));
     laws.push((bump, 5.0));
-    let mut strap = SpringLaw::new(0);
+    let mut strap = ForceLaw::default();
     strap.acts = SpringSide::Extension;
     strap.curve = Some(table.clone());
     laws.push((strap, 0.01));
@@ -780,7 +780,7 @@ fn check_at_kink(
 #[test]
 fn nonlinear_spring_tangents_at_a_table_point_and_a_stop_onset_are_one_sided() {
     use flexmb::elements::spring::SpringElement;
-    use flexmb::model::{ForceCurve, SpringLaw, SpringSide};
+    use flexmb::model::{ForceCurve, ForceLaw, SpringSide};
     use std::borrow::Cow;
     let mut rng = Lcg(9);
     for model in models() {
@@ -793,7 +793,7 @@ fn nonlinear_spring_tangents_at_a_table_point_and_a_stop_onset_are_one_sided() {
             // elongation the element computes)
             let spring = law_spring(ground_a, 0.3);
             let e1 = spring_length(&spring, &nodes) - spring.rest_length;
-            let mut law = SpringLaw::new(0);
+            let mut law = ForceLaw::default();
             law.curve = Some(ForceCurve::Table(vec![
                 (e1 - 1.0, -50.0),
                 (e1, 0.0),
@@ -810,7 +810,7 @@ fn nonlinear_spring_tangents_at_a_table_point_and_a_stop_onset_are_one_sided() {
                 let mut nodes = nodes;
                 let mut spring = law_spring(ground_a, 0.0);
                 spring.rest_length = spring_length(&spring, &nodes);
-                let mut law = SpringLaw::new(0);
+                let mut law = ForceLaw::default();
                 law.acts = acts;
                 law.curve = Some(ForceCurve::Polynomial(vec![300.0, 0.0, 5e3]));
                 let element = SpringElement {

@@ -1,5 +1,5 @@
 //! Spring-damper between two points `P_a = x_a + R_a p_a`, `P_b = x_b + R_b p_b`, linear or
-//! with a nonlinear law ([`SpringLaw`]).
+//! with a nonlinear law ([`crate::model::SpringLaw`], [`ForceLaw`]).
 //!
 //! With `d = P_b - P_a`, `l = |d|`, `n = d / l`, tension `T(l, ldot)` (linear:
 //! `T = k (l - l0) + c ldot`), `k_t = dT/dl`, `c_t = dT/dldot`:
@@ -12,7 +12,7 @@
 //! (physical coordinates, see [`super::physical`]). Géradin & Cardona 2001, Sect. 6.3: the
 //! element is written there for any force law `T(l, ldot)`; only `k_t` and `c_t` change.
 //!
-//! **Nonlinear law** ([`SpringLaw`]): with the elongation `e = l - l0` (`l0` the free
+//! **Nonlinear law** ([`ForceLaw`]): with the elongation `e = l - l0` (`l0` the free
 //! length) and the preload `P` (the tension at the free length),
 //!
 //! ```text
@@ -55,7 +55,7 @@ use super::{
     ElementParameters, Local, LocalMatrix, LocalVector, Mat12, NodeState, Vec12,
 };
 use crate::model::parameters::{SpringLawParam, SpringParam};
-use crate::model::{ForceCurve, Model, NodeId, SpringDamper, SpringLaw, SpringSide};
+use crate::model::{ForceCurve, ForceLaw, Model, NodeId, SpringDamper, SpringSide};
 use flexmb_lie::{so3::hat, Mat3, Vec3};
 use nalgebra::SMatrix;
 use std::borrow::Cow;
@@ -103,6 +103,75 @@ struct Force {
     kt: f64,
     ct: f64,
     active: bool,
+}
+
+impl Force {
+    /// `T`, `k_t`, `c_t` if the element acts, else zeros.
+    pub(super) fn of(active: bool, t: f64, kt: f64, ct: f64) -> Self {
+        if active {
+            Force { t, kt, ct, active }
+        } else {
+            Force {
+                t: 0.0,
+                kt: 0.0,
+                ct: 0.0,
+                active,
+            }
+        }
+    }
+}
+
+impl ForceLaw {
+    /// The law's part of the force beyond `k e + c edot` at `e`, `P + F(e)`, and its
+    /// derivative `F'(e)` (from the side of larger `e` at a table point).
+    pub fn elastic(&self, e: f64) -> (f64, f64) {
+        match self.curve_at(e) {
+            Some(curve) => {
+                let (f, df) = curve.eval(e);
+                (self.preload + f, df)
+            }
+            None => (self.preload, 0.0),
+        }
+    }
+
+    /// Whether `e` is on the side where the law acts (always for a two-sided law).
+    pub fn on_side(&self, e: f64) -> bool {
+        match self.acts {
+            SpringSide::Both => true,
+            SpringSide::Compression => e < 0.0,
+            SpringSide::Extension => e >= 0.0,
+        }
+    }
+
+    /// Whether the total force `t` at `e` acts: a stop acts on its side and while its force
+    /// pushes (compression) or pulls (extension).
+    pub fn acts_at(&self, e: f64, t: f64) -> bool {
+        self.on_side(e)
+            && match self.acts {
+                SpringSide::Both => true,
+                SpringSide::Compression => t < 0.0,
+                SpringSide::Extension => t >= 0.0,
+            }
+    }
+
+    /// The energy of the law's part, `P e + integral_0^e F` \[J\] (on its side).
+    pub fn energy(&self, e: f64) -> f64 {
+        self.preload * e + self.curve_at(e).map_or(0.0, |c| c.integral(e))
+    }
+
+    /// `d(P + F(e))/dp` for a parameter of the law at `e`.
+    pub fn parameter_derivative(&self, p: SpringLawParam, e: f64) -> f64 {
+        match p {
+            SpringLawParam::Preload => 1.0,
+            SpringLawParam::Polynomial(key, j) | SpringLawParam::TableForce(key, j) => {
+                // the parameter's curve acts at e only if it is the side's curve
+                match (key.curve(self), self.curve_at(e)) {
+                    (Some(c), Some(used)) if std::ptr::eq(c, used) => c.weight(j, e),
+                    _ => 0.0,
+                }
+            }
+        }
+    }
 }
 
 impl ForceCurve {
@@ -189,7 +258,7 @@ fn table_segment(points: &[(f64, f64)], e: f64) -> usize {
 #[derive(Clone, Debug)]
 pub struct SpringElement<'m> {
     pub spring: Cow<'m, SpringDamper>,
-    pub law: Option<&'m SpringLaw>,
+    pub law: Option<&'m ForceLaw>,
 }
 
 /// A parameter of a [`SpringElement`].
@@ -204,7 +273,7 @@ impl<'m> SpringElement<'m> {
     pub fn of(model: &'m Model, i: usize) -> Self {
         Self {
             spring: Cow::Borrowed(&model.springs[i]),
-            law: model.spring_law(i),
+            law: model.spring_law(i).map(|l| &l.law),
         }
     }
 
@@ -246,37 +315,16 @@ impl<'m> SpringElement<'m> {
         let mut t = s.stiffness * e + s.damping * geo.ldot;
         let mut kt = s.stiffness;
         if let Some(law) = self.law {
-            t += law.preload;
-            if let Some(curve) = law.curve_at(e) {
-                let (f, df) = curve.eval(e);
-                t += f;
-                kt += df;
-            }
+            let (f, df) = law.elastic(e);
+            t += f;
+            kt += df;
         }
         if let Some((km, _, stretch)) = branch {
             t += km * stretch;
             kt += km;
         }
-        let active = match self.law.map_or(SpringSide::Both, |l| l.acts) {
-            SpringSide::Both => true,
-            SpringSide::Compression => e < 0.0 && t < 0.0,
-            SpringSide::Extension => e >= 0.0 && t >= 0.0,
-        };
-        if active {
-            Force {
-                t,
-                kt,
-                ct: s.damping,
-                active,
-            }
-        } else {
-            Force {
-                t: 0.0,
-                kt: 0.0,
-                ct: 0.0,
-                active,
-            }
-        }
+        let active = self.law.is_none_or(|law| law.acts_at(e, t));
+        Force::of(active, t, kt, s.damping)
     }
 
     /// `(k_m, c_m, l - l0 - z)` of the Maxwell branch, if any.
@@ -384,16 +432,10 @@ impl ElementKernel for SpringElement<'_> {
         let Some(law) = self.law else {
             return 0.5 * sp.stiffness * e * e + branch;
         };
-        let on_side = match law.acts {
-            SpringSide::Both => true,
-            SpringSide::Compression => e < 0.0,
-            SpringSide::Extension => e >= 0.0,
-        };
-        if !on_side {
+        if !law.on_side(e) {
             return 0.0;
         }
-        let curve = law.curve_at(e).map_or(0.0, |c| c.integral(e));
-        law.preload * e + 0.5 * sp.stiffness * e * e + curve + branch
+        law.energy(e) + 0.5 * sp.stiffness * e * e + branch
     }
 }
 
@@ -469,17 +511,7 @@ impl ElementParameters for SpringElement<'_> {
             },
             SpringElementParam::Law(q) => {
                 let law = self.law.expect("a law parameter of a spring with a law");
-                let dt = match q {
-                    SpringLawParam::Preload => 1.0,
-                    SpringLawParam::Polynomial(key, j) | SpringLawParam::TableForce(key, j) => {
-                        // the parameter's curve acts at e only if it is the side's curve
-                        match (key.curve(law), law.curve_at(e)) {
-                            (Some(c), Some(used)) if std::ptr::eq(c, used) => c.weight(j, e),
-                            _ => 0.0,
-                        }
-                    }
-                };
-                (dt * on, 0.0)
+                (law.parameter_derivative(q, e) * on, 0.0)
             }
         };
         let r_p = geo.g * dt;

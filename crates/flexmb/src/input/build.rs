@@ -1240,7 +1240,7 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         // a nonlinear law may stand without a linear part
         let stiffness = match (t.field("stiffness"), &law) {
             (Some(f), _) => physical_or_zero(&f)?,
-            (None, Some(law)) if law.has_curve() => 0.0,
+            (None, Some(law)) if law.law.has_curve() => 0.0,
             (None, _) => physical_or_zero(&t.req("stiffness")?)?,
         };
         let damping = match t.field("damping") {
@@ -1305,19 +1305,19 @@ fn read_spring_law(t: &Table<'_>, spring: usize) -> Result<Option<SpringLaw>> {
     }
     let mut law = SpringLaw::new(spring);
     if let Some(f) = t.field("preload") {
-        law.preload = f.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?;
+        law.law.preload = f.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?;
     }
     if let Some(f) = t.field("acts") {
-        law.acts = match f.choice(&["both", "compression", "extension"])? {
+        law.law.acts = match f.choice(&["both", "compression", "extension"])? {
             "compression" => SpringSide::Compression,
             "extension" => SpringSide::Extension,
             _ => SpringSide::Both,
         };
     }
-    law.curve = read_force_curve(t)?;
+    law.law.curve = read_force_curve(t)?;
     for (key, side) in [
-        ("compression", &mut law.compression),
-        ("extension", &mut law.extension),
+        ("compression", &mut law.law.compression),
+        ("extension", &mut law.law.extension),
     ] {
         if let Some(f) = t.field(key) {
             let sub = f.table()?;
@@ -1400,7 +1400,7 @@ fn read_ropes(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
         // a nonlinear law may stand without a linear part
         let stiffness = match (t.field("stiffness"), &law) {
             (Some(f), _) => physical_or_zero(&f)?,
-            (None, Some(law)) if law.has_curve() => 0.0,
+            (None, Some(law)) if law.law.has_curve() => 0.0,
             (None, _) => physical_or_zero(&t.req("stiffness")?)?,
         };
         let damping = match t.field("damping") {

@@ -191,22 +191,20 @@ pub enum SpringSide {
     Extension,
 }
 
-/// The nonlinear law of the spring-damper `Model::springs[spring]`: tension
+/// A nonlinear force law, of a spring-damper ([`SpringLaw`]) or of a rotational spring
+/// ([`RotarySpring`]): with `e` the elongation (or the rotation angle from the neutral one),
 ///
 /// ```text
-/// T = P + k e + F(e) + c ldot  (+ the Maxwell branch),   e = l - l0,
+/// T = P + k e + F(e) + c edot,
 /// ```
 ///
-/// `k`, `c`, `l0` (free length) those of the spring-damper, `P` the preload (the force at the
-/// free length), `F` the curve of the side of `e` (`compression` for `e < 0`, `extension` for
+/// `k`, `c` the element's linear stiffness and damping, `P` the preload (the force at
+/// `e = 0`), `F` the curve of the side of `e` (`compression` for `e < 0`, `extension` for
 /// `e >= 0`, each falling back to `curve`, none = 0); with `acts` a one-sided spring (a stop)
-/// whose force is zero off its side. Kept apart from [`SpringDamper`] so that the linear
-/// spring-damper, which users and tests build field by field, keeps its fields.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct SpringLaw {
-    /// Index of the spring-damper in [`Model::springs`] (at most one law per spring).
-    pub spring: usize,
-    /// Preload `P` \[N\], the tension at the free length (negative: pushing).
+/// whose force is zero off its side.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ForceLaw {
+    /// Preload `P` \[N or N m\], the force at `e = 0` (negative: pushing).
     pub preload: f64,
     /// Curve for both sides (unless a side has its own).
     pub curve: Option<ForceCurve>,
@@ -217,26 +215,13 @@ pub struct SpringLaw {
     pub acts: SpringSide,
 }
 
-impl SpringLaw {
-    /// A law with no curve, no preload, acting on both sides (the linear spring) for
-    /// `Model::springs[spring]`.
-    pub fn new(spring: usize) -> Self {
-        Self {
-            spring,
-            preload: 0.0,
-            curve: None,
-            compression: None,
-            extension: None,
-            acts: SpringSide::Both,
-        }
-    }
-
+impl ForceLaw {
     /// Whether the law has a force curve (on either side).
     pub fn has_curve(&self) -> bool {
         self.curve.is_some() || self.compression.is_some() || self.extension.is_some()
     }
 
-    /// The curve that acts at elongation `e`, if any.
+    /// The curve that acts at `e`, if any.
     pub fn curve_at(&self, e: f64) -> Option<&ForceCurve> {
         let side = if e < 0.0 {
             &self.compression
@@ -244,6 +229,29 @@ impl SpringLaw {
             &self.extension
         };
         side.as_ref().or(self.curve.as_ref())
+    }
+}
+
+/// The nonlinear law of the spring-damper `Model::springs[spring]`: tension
+/// `T = P + k e + F(e) + c ldot` (plus the Maxwell branch), `e = l - l0`, `k`, `c`, `l0` (free
+/// length) those of the spring-damper ([`ForceLaw`]). Kept apart from [`SpringDamper`] so
+/// that the linear spring-damper, which users and tests build field by field, keeps its
+/// fields.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SpringLaw {
+    /// Index of the spring-damper in [`Model::springs`] (at most one law per spring).
+    pub spring: usize,
+    pub law: ForceLaw,
+}
+
+impl SpringLaw {
+    /// A law with no curve, no preload, acting on both sides (the linear spring) for
+    /// `Model::springs[spring]`.
+    pub fn new(spring: usize) -> Self {
+        Self {
+            spring,
+            law: ForceLaw::default(),
+        }
     }
 }
 

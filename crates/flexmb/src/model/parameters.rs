@@ -154,7 +154,7 @@ pub enum SpringParam {
     RelaxationDamping,
 }
 
-/// Which curve of a spring's nonlinear law ([`super::SpringLaw`]).
+/// Which curve of a nonlinear force law ([`super::ForceLaw`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CurveKey {
     /// `curve`, both sides.
@@ -176,7 +176,7 @@ impl CurveKey {
     }
 
     /// The curve of `law` this key names.
-    pub fn curve(self, law: &super::SpringLaw) -> Option<&super::ForceCurve> {
+    pub fn curve(self, law: &super::ForceLaw) -> Option<&super::ForceCurve> {
         match self {
             CurveKey::Both => law.curve.as_ref(),
             CurveKey::Compression => law.compression.as_ref(),
@@ -184,7 +184,7 @@ impl CurveKey {
         }
     }
 
-    fn curve_mut(self, law: &mut super::SpringLaw) -> Option<&mut super::ForceCurve> {
+    fn curve_mut(self, law: &mut super::ForceLaw) -> Option<&mut super::ForceCurve> {
         match self {
             CurveKey::Both => law.curve.as_mut(),
             CurveKey::Compression => law.compression.as_mut(),
@@ -193,7 +193,7 @@ impl CurveKey {
     }
 }
 
-/// A parameter of a spring-damper's nonlinear law ([`super::SpringLaw`]).
+/// A parameter of a nonlinear force law ([`super::ForceLaw`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SpringLawParam {
     /// Preload \[N\].
@@ -206,7 +206,7 @@ pub enum SpringLawParam {
 
 impl SpringLawParam {
     /// Every parameter of `law`, in registry order, with the path after the spring's name.
-    pub fn all(law: &super::SpringLaw) -> Vec<(String, SpringLawParam)> {
+    pub fn all(law: &super::ForceLaw) -> Vec<(String, SpringLawParam)> {
         let mut out = vec![("preload".to_string(), SpringLawParam::Preload)];
         for key in [CurveKey::Both, CurveKey::Compression, CurveKey::Extension] {
             match key.curve(law) {
@@ -224,7 +224,7 @@ impl SpringLawParam {
         out
     }
 
-    pub fn get(self, law: &super::SpringLaw) -> f64 {
+    pub fn get(self, law: &super::ForceLaw) -> f64 {
         match self {
             SpringLawParam::Preload => law.preload,
             SpringLawParam::Polynomial(key, j) => match key.curve(law) {
@@ -238,7 +238,7 @@ impl SpringLawParam {
         }
     }
 
-    pub fn set(self, law: &mut super::SpringLaw, value: f64) {
+    pub fn set(self, law: &mut super::ForceLaw, value: f64) {
         match self {
             SpringLawParam::Preload => law.preload = value,
             SpringLawParam::Polynomial(key, j) => {
@@ -419,7 +419,7 @@ impl Parameters {
                 add("relaxation_damping".into(), SpringParam::RelaxationDamping);
             }
             if let Some(law) = model.spring_law(i) {
-                for (key, p) in SpringLawParam::all(law) {
+                for (key, p) in SpringLawParam::all(&law.law) {
                     reg.push(format!("spring.{name}.{key}"), ParamKind::SpringLaw(i, p));
                 }
             }
@@ -509,7 +509,7 @@ impl Parameters {
             ParamKind::Load(i, p) => p.get(&model.loads[i]),
             ParamKind::Spring(i, p) => p.get(&model.springs[i], &model.nodes),
             ParamKind::Rope(i, p) => p.get(&model.ropes[i], &model.nodes),
-            ParamKind::SpringLaw(i, p) => model.spring_law(i).map_or(0.0, |law| p.get(law)),
+            ParamKind::SpringLaw(i, p) => model.spring_law(i).map_or(0.0, |law| p.get(&law.law)),
         }
     }
 
@@ -533,7 +533,7 @@ impl Parameters {
             ParamKind::Rope(i, p) => p.set(&mut model.ropes[i], &model.nodes, value),
             ParamKind::SpringLaw(i, p) => {
                 if let Some(law) = model.spring_law_mut(i) {
-                    p.set(law, value);
+                    p.set(&mut law.law, value);
                 }
             }
         }

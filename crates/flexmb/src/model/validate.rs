@@ -441,11 +441,12 @@ impl Model {
             if std::mem::replace(&mut with_law[law.spring], true) {
                 return Err(fail("stiffness", "has two nonlinear laws".into()));
             }
-            in_range(law.preload, -MAX_PHYSICAL, MAX_PHYSICAL).map_err(|m| fail("preload", m))?;
+            in_range(law.law.preload, -MAX_PHYSICAL, MAX_PHYSICAL)
+                .map_err(|m| fail("preload", m))?;
             for (curve, side) in [
-                (&law.curve, None),
-                (&law.compression, Some("compression")),
-                (&law.extension, Some("extension")),
+                (&law.law.curve, None),
+                (&law.law.compression, Some("compression")),
+                (&law.law.extension, Some("extension")),
             ] {
                 let Some(curve) = curve else { continue };
                 let field = |own: &'static str| side.unwrap_or(own);
@@ -493,7 +494,7 @@ impl Model {
                     }
                 }
             }
-            if law.acts != super::SpringSide::Both && s.relaxation.is_some() {
+            if law.law.acts != super::SpringSide::Both && s.relaxation.is_some() {
                 return Err(fail(
                     "acts",
                     "a one-sided spring (a stop) cannot have a Maxwell branch: its branch would hold a force while the stop is off".into(),
