@@ -49,13 +49,13 @@ fn mass_on_a_bump_stop_has_the_piecewise_linear_period() {
     // x_e = -k2 delta/(k1+k2), entering at y0 = -delta - x_e with amplitude
     // B = sqrt(y0^2 + (v/w2)^2) and leaving after (2 pi - 2 acos(y0/B))/w2. So
     //   T = 2 acos(-delta/A)/w1 + 2 (pi - acos(y0/B))/w2.
-    let (m, k1, k2, delta, a) = (1.0, 100.0, 900.0, 0.05, 0.1);
-    let (w1, w2) = ((k1 / m as f64).sqrt(), ((k1 + k2) / m as f64).sqrt());
-    let v = w1 * (a * a - delta * delta as f64).sqrt();
+    let (m, k1, k2, delta, a): (f64, f64, f64, f64, f64) = (1.0, 100.0, 900.0, 0.05, 0.1);
+    let (w1, w2) = ((k1 / m).sqrt(), ((k1 + k2) / m).sqrt());
+    let v = w1 * (a * a - delta * delta).sqrt();
     let xe = -k2 * delta / (k1 + k2);
     let y0 = -delta - xe;
     let b = (y0 * y0 + (v / w2) * (v / w2)).sqrt();
-    let period = 2.0 * (-delta / a as f64).acos() / w1 + 2.0 * (PI - (y0 / b).acos()) / w2;
+    let period = 2.0 * (-delta / a).acos() / w1 + 2.0 * (PI - (y0 / b).acos()) / w2;
 
     for group in [Group::SE3, Group::R3xSO3] {
         let mut model = Model::new(group);

@@ -691,21 +691,27 @@ fn nonlinear_spring_tangents_match_finite_differences() {
         (Some(cubic.clone()), None, None),
         (None, Some(cubic.clone()), Some(table.clone())),
     ] {
-        let mut law = ForceLaw::default();
-        law.preload = 7.5;
-        law.curve = curve;
-        law.compression = compression;
-        law.extension = extension;
+        let law = ForceLaw {
+            preload: 7.5,
+            curve,
+            compression,
+            extension,
+            acts: SpringSide::Both,
+        };
         laws.push((law, 0.4));
     }
     // stops that act: a bump stop always compressed, a strap always stretched
-    let mut bump = ForceLaw::default();
-    bump.acts = SpringSide::Compression;
-    bump.curve = Some(ForceCurve::Polynomial(vec![40.0, 0.0, 2.0]));
+    let bump = ForceLaw {
+        acts: SpringSide::Compression,
+        curve: Some(ForceCurve::Polynomial(vec![40.0, 0.0, 2.0])),
+        ..ForceLaw::default()
+    };
     laws.push((bump, 5.0));
-    let mut strap = ForceLaw::default();
-    strap.acts = SpringSide::Extension;
-    strap.curve = Some(table.clone());
+    let strap = ForceLaw {
+        acts: SpringSide::Extension,
+        curve: Some(table.clone()),
+        ..ForceLaw::default()
+    };
     laws.push((strap, 0.01));
     let mut rng = Lcg(8);
     for model in models() {
@@ -793,12 +799,14 @@ fn nonlinear_spring_tangents_at_a_table_point_and_a_stop_onset_are_one_sided() {
             // elongation the element computes)
             let spring = law_spring(ground_a, 0.3);
             let e1 = spring_length(&spring, &nodes) - spring.rest_length;
-            let mut law = ForceLaw::default();
-            law.curve = Some(ForceCurve::Table(vec![
-                (e1 - 1.0, -50.0),
-                (e1, 0.0),
-                (e1 + 1.0, 400.0),
-            ]));
+            let law = ForceLaw {
+                curve: Some(ForceCurve::Table(vec![
+                    (e1 - 1.0, -50.0),
+                    (e1, 0.0),
+                    (e1 + 1.0, 400.0),
+                ])),
+                ..ForceLaw::default()
+            };
             let element = SpringElement {
                 spring: Cow::Borrowed(&spring),
                 law: Some(&law),
@@ -810,9 +818,11 @@ fn nonlinear_spring_tangents_at_a_table_point_and_a_stop_onset_are_one_sided() {
                 let mut nodes = nodes;
                 let mut spring = law_spring(ground_a, 0.0);
                 spring.rest_length = spring_length(&spring, &nodes);
-                let mut law = ForceLaw::default();
-                law.acts = acts;
-                law.curve = Some(ForceCurve::Polynomial(vec![300.0, 0.0, 5e3]));
+                let law = ForceLaw {
+                    acts,
+                    curve: Some(ForceCurve::Polynomial(vec![300.0, 0.0, 5e3])),
+                    ..ForceLaw::default()
+                };
                 let element = SpringElement {
                     spring: Cow::Borrowed(&spring),
                     law: Some(&law),
