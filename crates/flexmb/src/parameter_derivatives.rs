@@ -45,6 +45,7 @@
 //! - M. Arnold, O. Brüls, A. Cardona, Error analysis of generalized-alpha Lie group time
 //!   integration methods for constrained mechanical systems, Numer. Math. 129 (2015), Sect. 3.
 
+use crate::elements::rotational_spring::RotationalSpringElement;
 use crate::elements::spring::{SpringElement, SpringElementParam};
 use crate::elements::{
     Context, DerivativeMethod, ElementItem, ElementParameters, LocalBuffers, NodeState,
@@ -205,6 +206,15 @@ fn visit(
             at,
             (&SpringElement::of(model, i), ElementItem::Spring(i)),
             Wrt::Own(SpringElementParam::Law(p)),
+            sink,
+        ),
+        ParamKind::RotationalSpring(i, p) => element_term(
+            at,
+            (
+                &RotationalSpringElement::of(model, i),
+                ElementItem::RotationalSpring(i),
+            ),
+            Wrt::Own(p),
             sink,
         ),
     }

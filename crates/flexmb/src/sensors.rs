@@ -200,6 +200,12 @@ pub fn sensor_value(
             buffers.gather(rope, nodes, (&state.x, &state.xdot, start));
             rope.force(&ctx, &buffers.local(nodes))
         }
+        SensorKind::RotationalSpringTorque { spring: i } => {
+            let sp = crate::elements::rotational_spring::RotationalSpringElement::of(model, *i);
+            let start = ElementItem::RotationalSpring(*i).state_start(model);
+            buffers.gather(&sp, nodes, (&state.x, &state.xdot, start));
+            sp.torque(&ctx, &buffers.local(nodes))
+        }
         kind @ (SensorKind::KineticEnergy
         | SensorKind::PotentialEnergy
         | SensorKind::TotalEnergy) => {
@@ -270,7 +276,7 @@ pub fn unit(kind: &SensorKind) -> &'static str {
         SensorKind::JointForce { .. }
         | SensorKind::SpringForce { .. }
         | SensorKind::RopeForce { .. } => "N",
-        SensorKind::JointTorque { .. } => "N m",
+        SensorKind::JointTorque { .. } | SensorKind::RotationalSpringTorque { .. } => "N m",
         SensorKind::KineticEnergy | SensorKind::PotentialEnergy | SensorKind::TotalEnergy => "J",
         SensorKind::ConstraintViolation => "m or rad",
         SensorKind::BeamStrain { component, .. } => {

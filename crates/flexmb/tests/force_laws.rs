@@ -215,3 +215,86 @@ fn bump_stop_example_contacts_within_the_energy_bound_and_settles_at_the_free_le
     assert!((z_end - 0.3).abs() < 1e-4, "z {z_end}");
     assert!((coil + 2943.0).abs() < 5.0, "coil force {coil}");
 }
+
+/// The angle of a node's x axis about the inertial z axis, unwrapped along a history.
+fn unwrapped_angles(history: &[(f64, Mat3)]) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    for (t, r) in history {
+        let raw = r[(1, 0)].atan2(r[(0, 0)]);
+        let angle = match out.last() {
+            Some(&(_, last)) => last + (raw - last + PI).rem_euclid(2.0 * PI) - PI,
+            None => raw,
+        };
+        out.push((*t, angle));
+    }
+    out
+}
+
+#[test]
+fn torsional_pendulum_wound_over_turns_has_frequency_sqrt_k_over_j() {
+    // A disk of polar moment J on a revolute joint to the ground with a rotational spring k
+    // about its axis: J theta'' + k theta = 0, omega = sqrt(k / J) at any amplitude (the
+    // torsional pendulum, e.g. S. S. Rao, Mechanical Vibrations, the torsional system of one
+    // degree of freedom). Started at theta = 0 with theta' = 20 rad/s, it swings to
+    // +-theta' / omega = +-10 rad, more than a turn and a half each way: the spring must
+    // follow the angle over the turns (the element's state), not its value in (-pi, pi].
+    use flexmb::model::{frame_from_axis, ForceLaw, JointKind, RotationalSpring};
+    let (k, j, spin) = (2.0, 0.5, 20.0);
+    let omega = (k / j as f64).sqrt();
+    for group in [Group::SE3, Group::R3xSO3] {
+        let mut model = Model::new(group);
+        let n = model.add_node("disk", Frame::identity());
+        model.nodes[n.0].angular_velocity = Vec3::new(0.0, 0.0, spin);
+        let inertia = Mat3::from_diagonal(&Vec3::new(0.3, 0.3, j));
+        model.add_body("disk", n, 2.0, Vec3::zeros(), inertia);
+        let axis = frame_from_axis(&Vec3::z(), None);
+        let hinge = model.add_joint(
+            "hinge",
+            JointKind::Revolute,
+            None,
+            Some(n),
+            Vec3::zeros(),
+            axis,
+            None,
+        );
+        model.rotational_springs.push(RotationalSpring {
+            name: "torsion".into(),
+            joint: hinge,
+            stiffness: k,
+            damping: 0.0,
+            angle: 0.0,
+            law: ForceLaw::default(),
+        });
+        let period = 2.0 * PI / omega;
+        let mut s = DynamicSettings::new(5.0 * period, 1e-3);
+        s.newton.rtol = 1e-12;
+        s.newton.atol = 1e-14;
+        let mut sim = Simulation::new(&model, s).expect("starts");
+        let mut history = vec![];
+        sim.run(&mut |s: &flexmb::observe::Sample| {
+            history.push((s.state.t, s.state.q[0].r));
+            Ok(())
+        })
+        .expect("runs");
+        let theta = unwrapped_angles(&history);
+        let c = upward_crossings(&theta);
+        let measured = (c[c.len() - 1] - c[0]) / (c.len() - 1) as f64;
+        let highest = theta.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+        let lowest = theta.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+        println!(
+            "{group:?}: period {measured:.7} s vs 2 pi sqrt(J/k) = {period:.7} s (error {:.2e}); swing {lowest:.5} .. {highest:.5} rad vs +-{:.5}",
+            measured / period - 1.0,
+            spin / omega
+        );
+        assert!(
+            (measured / period - 1.0).abs() < 1e-5,
+            "period {measured} vs {period}"
+        );
+        for extreme in [highest, -lowest] {
+            assert!(
+                (extreme - spin / omega).abs() < 1e-4 * spin / omega,
+                "amplitude {extreme}"
+            );
+        }
+    }
+}

@@ -9,8 +9,8 @@ use flexmb::elements::{
 };
 use flexmb::joints;
 use flexmb::model::parameters::{
-    BodyParam, JointParam, LoadParam, NodeParam, RopeParam, SectionParam, SpringLawParam,
-    SpringParam,
+    BodyParam, JointParam, LoadParam, NodeParam, RopeParam, RotationalSpringParam, SectionParam,
+    SpringLawParam, SpringParam,
 };
 use flexmb::model::{
     BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, ParamId, ParamKind,
@@ -189,6 +189,13 @@ fn pattern(params: &Parameters, id: ParamId) -> String {
             SpringLawParam::Preload => "spring.<s>.preload",
             SpringLawParam::Polynomial(..) => "spring.<s>.<side>polynomial.<j>",
             SpringLawParam::TableForce(..) => "spring.<s>.<side>force_table.<i>",
+        },
+        ParamKind::RotationalSpring(_, p) => match p {
+            RotationalSpringParam::Stiffness => "rotational_spring.<s>.stiffness",
+            RotationalSpringParam::Damping => "rotational_spring.<s>.damping",
+            RotationalSpringParam::Angle => "rotational_spring.<s>.angle",
+            RotationalSpringParam::Law(SpringLawParam::Preload) => "rotational_spring.<s>.preload",
+            RotationalSpringParam::Law(_) => "rotational_spring.<s>.<side><curve>.<i>",
         },
     };
     item.into()
@@ -591,5 +598,104 @@ fn parameter_derivatives_match_finite_differences_on_nonlinear_springs() {
         .filter(|k| k.contains("<side>") || k.ends_with("preload"))
         .collect();
     assert_eq!(laws.len(), 3, "{laws:?}");
+    println!("worst relative error {:.2e}", seen.worst);
+}
+
+/// Two bodies on a revolute joint (one also on a cylindrical joint to the ground), with
+/// rotational springs about both axes: a linear one and one with a preloaded table law.
+fn rotational_springs(group: Group) -> Model {
+    use flexmb::model::{ForceCurve, ForceLaw, RotationalSpring};
+    let mut m = Model::new(group);
+    m.gravity = Vec3::new(0.3, -9.81, 1.2);
+    let a = m.add_node("a", Frame::new(Vec3::new(0.1, 0.2, -0.3), Mat3::identity()));
+    let b = m.add_node(
+        "b",
+        flexmb_lie::se3::exp(&Vec6::new(1.0, -0.4, 0.2, 0.3, -0.5, 0.7)),
+    );
+    let inertia = Mat3::new(0.3, 0.01, -0.02, 0.01, 0.4, 0.03, -0.02, 0.03, 0.5);
+    m.add_body("body_a", a, 2.5, Vec3::new(0.3, -0.7, 0.2), inertia);
+    m.add_body("body_b", b, 1.5, Vec3::new(-0.1, 0.2, 0.4), inertia * 2.0);
+    let axis = flexmb_lie::so3::exp(&Vec3::new(0.3, 0.2, -0.4));
+    let hinge = m.add_joint(
+        "hinge",
+        JointKind::Revolute,
+        Some(a),
+        Some(b),
+        Vec3::new(0.4, -0.2, 0.3),
+        axis,
+        None,
+    );
+    let shaft = m.add_joint(
+        "shaft",
+        JointKind::Cylindrical,
+        None,
+        Some(a),
+        Vec3::new(0.1, 0.2, -0.3),
+        Mat3::identity(),
+        None,
+    );
+    m.rotational_springs.push(RotationalSpring {
+        name: "coil".into(),
+        joint: hinge,
+        stiffness: 35.0,
+        damping: 1.5,
+        angle: 0.3,
+        law: ForceLaw::default(),
+    });
+    m.rotational_springs.push(RotationalSpring {
+        name: "clock".into(),
+        joint: shaft,
+        stiffness: 5.0,
+        damping: 0.5,
+        angle: -0.2,
+        law: ForceLaw {
+            preload: 2.0,
+            curve: Some(ForceCurve::Table(vec![
+                (-4.0, -30.0),
+                (0.0, 0.0),
+                (4.0, 80.0),
+            ])),
+            ..ForceLaw::default()
+        },
+    });
+    m
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_rotational_springs() {
+    let mut seen = Seen::default();
+    let mut rng = Lcg(9);
+    for group in [Group::R3xSO3, Group::SE3] {
+        let model = rotational_springs(group);
+        model.validate().expect("valid");
+        for _ in 0..3 {
+            let mut at = point(&model, &mut rng, 0.5);
+            // the tracked angles (element states) on the branch of the geometric angle
+            for (i, s) in model.rotational_springs.iter().enumerate() {
+                let joint = &model.joints[s.joint.0];
+                let slot = |n: Option<NodeId>| {
+                    n.map_or(NodeState::ground(Frame::identity()), |n| at.nodes[n.0])
+                };
+                let nodes = [slot(joint.node_a), slot(joint.node_b)];
+                at.x[i] = flexmb::elements::rotational_spring::joint_angle(joint, &nodes).0 + 0.2;
+            }
+            check_model(
+                &format!("rotational springs on {group:?}"),
+                &model,
+                &at,
+                &mut seen,
+            );
+        }
+    }
+    let kinds: Vec<&String> = seen
+        .kinds
+        .iter()
+        .filter(|k| k.starts_with("rotational_spring"))
+        .collect();
+    assert_eq!(kinds.len(), 5, "{kinds:?}");
+    assert!(seen
+        .by_differences
+        .iter()
+        .all(|k| !k.starts_with("rotational")));
     println!("worst relative error {:.2e}", seen.worst);
 }

@@ -852,3 +852,78 @@ fn nonlinear_spring_tangents_at_a_table_point_and_a_stop_onset_are_one_sided() {
         }
     }
 }
+
+#[test]
+fn rotational_spring_tangents_match_finite_differences() {
+    // About the axis of a revolute (and a cylindrical) joint between random frames, to the
+    // ground or between two nodes, linear and with a nonlinear law; with the element state
+    // (the tracked angle) several turns away from the geometric angle's branch. Its state
+    // row (xdot - thetadot) and the columns of the state are checked too.
+    use flexmb::elements::rotational_spring::RotationalSpringElement;
+    use flexmb::model::{ForceCurve, ForceLaw, JointKind, RotationalSpring};
+    let mut rng = Lcg(10);
+    let laws = [
+        ForceLaw::default(),
+        ForceLaw {
+            preload: 3.0,
+            curve: Some(ForceCurve::Polynomial(vec![5.0, 0.0, 0.02])),
+            ..ForceLaw::default()
+        },
+    ];
+    for base in models() {
+        let group = base.group;
+        for (kind, ground_a) in [
+            (JointKind::Revolute, false),
+            (JointKind::Revolute, true),
+            (JointKind::Cylindrical, false),
+        ] {
+            for law in &laws {
+                let mut model = base.clone();
+                model.nodes[0].frame = group.exp(&rng.v6(1.0));
+                model.nodes[1].frame = group.exp(&rng.v6(1.0));
+                let joint = model.add_joint(
+                    "hinge",
+                    kind,
+                    (!ground_a).then_some(NodeId(0)),
+                    Some(NodeId(1)),
+                    rng.v3(1.0),
+                    flexmb_lie::so3::exp(&rng.v3(1.0)),
+                    None,
+                );
+                let spring = RotationalSpring {
+                    name: "torsion".into(),
+                    joint,
+                    stiffness: 35.0,
+                    damping: 1.5,
+                    angle: 0.3,
+                    law: law.clone(),
+                };
+                let element = RotationalSpringElement {
+                    spring: &spring,
+                    joint: &model.joints[joint.0],
+                };
+                let mut nodes = [rng.node(group), rng.node(group)];
+                if ground_a {
+                    nodes[0] = NodeState::ground(Frame::identity());
+                }
+                // the state: the geometric angle plus four turns, nudged
+                let (theta_g, ..) =
+                    flexmb::elements::rotational_spring::joint_angle(element.joint, &nodes);
+                let x = [theta_g + 8.0 * std::f64::consts::PI + 0.1];
+                let name = format!("rotational spring on a {kind:?} joint, law {law:?}");
+                check_element_with_states(&name, &element, &model, &nodes, &x, &[0.7]);
+                let ctx = Context::at(&model, 0.37, 1.0);
+                let local = Local {
+                    nodes: &nodes,
+                    x: &x,
+                    xdot: &[0.7],
+                };
+                let theta = element.angle(&ctx, &local);
+                assert!(
+                    (theta - theta_g - 8.0 * std::f64::consts::PI).abs() < 1e-12,
+                    "{name}: the angle is on the state's turn: {theta} vs {theta_g} + 8 pi"
+                );
+            }
+        }
+    }
+}

@@ -36,6 +36,7 @@ pub mod load;
 pub mod physical;
 pub mod rigid_body;
 pub mod rope;
+pub mod rotational_spring;
 pub mod spring;
 
 use crate::model::{Model, NodeId};
@@ -188,6 +189,8 @@ pub enum ElementRef {
     /// A spring-damper with a nonlinear law (index in [`Model::springs`]; its place in
     /// [`ElementItem::all`] is that of [`ElementItem::Spring`]).
     NonlinearSpring(usize),
+    /// Index in [`Model::rotational_springs`].
+    RotationalSpring(usize),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -410,6 +413,7 @@ impl ElementRef {
                 }
                 ElementItem::Spring(i) => ElementRef::Spring(i),
                 ElementItem::Rope(i) => ElementRef::Rope(i),
+                ElementItem::RotationalSpring(i) => ElementRef::RotationalSpring(i),
             })
             .collect()
     }
@@ -428,6 +432,9 @@ impl ElementRef {
             ElementRef::NonlinearSpring(i) => {
                 Kernel::NonlinearSpring(spring::SpringElement::of(model, *i))
             }
+            ElementRef::RotationalSpring(i) => {
+                Kernel::RotationalSpring(rotational_spring::RotationalSpringElement::of(model, *i))
+            }
         }
     }
 
@@ -440,6 +447,9 @@ impl ElementRef {
             ElementRef::Spring(i) => format!("spring '{}'", model.springs[*i].name),
             ElementRef::Rope(i) => format!("rope '{}'", model.ropes[*i].name),
             ElementRef::NonlinearSpring(i) => format!("spring '{}'", model.springs[*i].name),
+            ElementRef::RotationalSpring(i) => {
+                format!("rotational spring '{}'", model.rotational_springs[*i].name)
+            }
         }
     }
 }
@@ -453,10 +463,12 @@ pub enum ElementItem {
     Load(usize),
     Spring(usize),
     Rope(usize),
+    RotationalSpring(usize),
 }
 
 impl ElementItem {
-    /// Every force element of `model`: bodies, beam elements, loads, springs, ropes.
+    /// Every force element of `model`: bodies, beam elements, loads, springs, ropes,
+    /// rotational springs.
     pub fn all(model: &Model) -> impl Iterator<Item = ElementItem> {
         (0..model.bodies.len())
             .map(ElementItem::Body)
@@ -464,6 +476,7 @@ impl ElementItem {
             .chain((0..model.loads.len()).map(ElementItem::Load))
             .chain((0..model.springs.len()).map(ElementItem::Spring))
             .chain((0..model.ropes.len()).map(ElementItem::Rope))
+            .chain((0..model.rotational_springs.len()).map(ElementItem::RotationalSpring))
     }
 
     /// The number of states the element owns.
@@ -474,6 +487,7 @@ impl ElementItem {
             ElementItem::Load(i) => model.loads[i].n_states(),
             ElementItem::Spring(i) => model.springs[i].n_states(),
             ElementItem::Rope(i) => model.ropes[i].n_states(),
+            ElementItem::RotationalSpring(_) => 1,
         }
     }
 
@@ -499,6 +513,7 @@ pub enum Kernel<'m> {
     Spring(&'m crate::model::SpringDamper),
     Rope(&'m crate::model::Rope),
     NonlinearSpring(spring::SpringElement<'m>),
+    RotationalSpring(rotational_spring::RotationalSpringElement<'m>),
 }
 
 macro_rules! dispatch {
@@ -510,6 +525,7 @@ macro_rules! dispatch {
             Kernel::Spring($k) => $e,
             Kernel::Rope($k) => $e,
             Kernel::NonlinearSpring($k) => $e,
+            Kernel::RotationalSpring($k) => $e,
         }
     };
 }

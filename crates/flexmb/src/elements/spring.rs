@@ -98,11 +98,11 @@ pub(super) fn segment(na: &NodeState, pa: &Vec3, nb: &NodeState, pb: &Vec3) -> (
 /// The force of the element and its derivatives: tension `T`, `k_t = dT/dl`,
 /// `c_t = dT/dldot` (all zero where a stop is off), and whether the element acts.
 #[derive(Clone, Copy, Debug)]
-struct Force {
-    t: f64,
-    kt: f64,
-    ct: f64,
-    active: bool,
+pub(super) struct Force {
+    pub(super) t: f64,
+    pub(super) kt: f64,
+    pub(super) ct: f64,
+    pub(super) active: bool,
 }
 
 impl Force {

@@ -10,9 +10,9 @@ use crate::model::limits::{
     MAX_TIME, MIN_PHYSICAL, MIN_STEP,
 };
 use crate::model::{
-    box_inertia, clip, frame_from_axis, rotation_from_vector, ForceCurve, JointKind, Load,
-    LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint, Sensor, SensorFrame, SensorKind,
-    SpringDamper, SpringLaw, SpringSide, TimeFunction,
+    box_inertia, clip, frame_from_axis, rotation_from_vector, ForceCurve, ForceLaw, JointKind,
+    Load, LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint, RotationalSpring, Sensor,
+    SensorFrame, SensorKind, SpringDamper, SpringLaw, SpringSide, TimeFunction,
 };
 use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
 use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
@@ -36,6 +36,7 @@ const TOP_KEYS: &[&str] = &[
     "design_parameter",
     "reference",
     "criterion",
+    "rotational_spring",
 ];
 /// The keys of a `[[sensor]]`: `name`, `type`, then those a type may use.
 const SENSOR_KEYS: &[&str] = &[
@@ -116,6 +117,7 @@ pub(super) struct Origins {
     loads: Vec<Origin>,
     springs: Vec<Origin>,
     ropes: Vec<Origin>,
+    rotational_springs: Vec<Origin>,
     /// One per element of `Model::beams`.
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
@@ -180,6 +182,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     read_loads(&top, &mut model, &mut origins)?;
     read_springs(&top, &mut model, &mut origins)?;
     read_ropes(&top, &mut model, &mut origins)?;
+    read_rotational_springs(&top, &mut model, &mut origins)?;
     read_sensors(&top, &mut model, &mut origins)?;
 
     model
@@ -208,6 +211,7 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
         "load" => &origins.loads,
         "spring" => &origins.springs,
         "rope" => &origins.ropes,
+        "rotational_spring" => &origins.rotational_springs,
         "beam" => &origins.beams,
         "sensor" => &origins.sensors,
         _ => &[],
@@ -1236,13 +1240,9 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
         let pa = point(&t.req("point_a")?)?;
         let pb = point(&t.req("point_b")?)?;
-        let law = read_spring_law(&t, model.springs.len())?;
+        let law = read_force_law(&t)?;
         // a nonlinear law may stand without a linear part
-        let stiffness = match (t.field("stiffness"), &law) {
-            (Some(f), _) => physical_or_zero(&f)?,
-            (None, Some(law)) if law.law.has_curve() => 0.0,
-            (None, _) => physical_or_zero(&t.req("stiffness")?)?,
-        };
+        let stiffness = stiffness_or_curve(&t, law.as_ref())?;
         let damping = match t.field("damping") {
             Some(f) => physical_or_zero(&f)?,
             None => 0.0,
@@ -1283,41 +1283,46 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             rest_length,
             relaxation,
         });
-        model.spring_laws.extend(law);
+        let spring = model.springs.len() - 1;
+        model
+            .spring_laws
+            .extend(law.map(|law| SpringLaw { spring, law }));
         origins.springs.push(Origin::of(&t));
     }
     Ok(())
 }
 
-/// The nonlinear law of a `[[spring]]` (index `spring` in `Model::springs`), if it has any
-/// of `preload`, `acts`, `force_table`, `polynomial`, `compression`, `extension`.
-fn read_spring_law(t: &Table<'_>, spring: usize) -> Result<Option<SpringLaw>> {
-    const KEYS: [&str; 6] = [
-        "preload",
-        "acts",
-        "force_table",
-        "polynomial",
-        "compression",
-        "extension",
-    ];
-    if !KEYS.iter().any(|k| t.has(k)) {
+/// The keys of a nonlinear force law ([`read_force_law`]).
+const LAW_KEYS: [&str; 6] = [
+    "preload",
+    "acts",
+    "force_table",
+    "polynomial",
+    "compression",
+    "extension",
+];
+
+/// The nonlinear force law of a `[[spring]]` or `[[rotational_spring]]`, if it has any of
+/// [`LAW_KEYS`].
+fn read_force_law(t: &Table<'_>) -> Result<Option<ForceLaw>> {
+    if !LAW_KEYS.iter().any(|k| t.has(k)) {
         return Ok(None);
     }
-    let mut law = SpringLaw::new(spring);
+    let mut law = ForceLaw::default();
     if let Some(f) = t.field("preload") {
-        law.law.preload = f.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?;
+        law.preload = f.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?;
     }
     if let Some(f) = t.field("acts") {
-        law.law.acts = match f.choice(&["both", "compression", "extension"])? {
+        law.acts = match f.choice(&["both", "compression", "extension"])? {
             "compression" => SpringSide::Compression,
             "extension" => SpringSide::Extension,
             _ => SpringSide::Both,
         };
     }
-    law.law.curve = read_force_curve(t)?;
+    law.curve = read_force_curve(t)?;
     for (key, side) in [
-        ("compression", &mut law.law.compression),
-        ("extension", &mut law.law.extension),
+        ("compression", &mut law.compression),
+        ("extension", &mut law.extension),
     ] {
         if let Some(f) = t.field(key) {
             let sub = f.table()?;
@@ -1329,6 +1334,69 @@ fn read_spring_law(t: &Table<'_>, spring: usize) -> Result<Option<SpringLaw>> {
         }
     }
     Ok(Some(law))
+}
+
+/// `stiffness`: required, or 0 when absent from a table with a force curve (`law`).
+fn stiffness_or_curve(t: &Table<'_>, law: Option<&ForceLaw>) -> Result<f64> {
+    match (t.field("stiffness"), law) {
+        (Some(f), _) => physical_or_zero(&f),
+        (None, Some(law)) if law.has_curve() => Ok(0.0),
+        (None, _) => physical_or_zero(&t.req("stiffness")?),
+    }
+}
+
+fn read_rotational_springs(
+    top: &Table<'_>,
+    model: &mut Model,
+    origins: &mut Origins,
+) -> Result<()> {
+    let mut names = HashMap::new();
+    for t in top.items("rotational_spring")? {
+        let mut keys = vec![
+            "name",
+            "joint",
+            "stiffness",
+            "damping",
+            "angle",
+            "angle_deg",
+        ];
+        keys.extend(LAW_KEYS);
+        t.check_keys(&keys)?;
+        let name = read_name(&t, &mut names, "rotational spring")?;
+        let f = t.req("joint")?;
+        let jname = f.str()?;
+        let joint = origins.joint_ids.get(jname).copied().ok_or_else(|| {
+            let names = || model.joints.iter().map(|j| j.name.as_str());
+            f.err(format!(
+                "unknown joint '{}'{} (joints: {})",
+                clip(jname, QUOTED),
+                suggestion(jname, names()),
+                name_list(names(), 12)
+            ))
+        })?;
+        let law = read_force_law(&t)?;
+        let stiffness = stiffness_or_curve(&t, law.as_ref())?;
+        let damping = match t.field("damping") {
+            Some(f) => physical_or_zero(&f)?,
+            None => 0.0,
+        };
+        let angle = match (t.field("angle"), t.field("angle_deg")) {
+            (Some(_), Some(f)) => return Err(f.err("give angle or angle_deg, not both")),
+            (Some(f), None) => f.f64_in(-MAX_ANGLE, MAX_ANGLE)?,
+            (None, Some(f)) => f.f64_in(-MAX_ANGLE, MAX_ANGLE)?.to_radians(),
+            (None, None) => 0.0,
+        };
+        model.rotational_springs.push(RotationalSpring {
+            name,
+            joint,
+            stiffness,
+            damping,
+            angle,
+            law: law.unwrap_or_default(),
+        });
+        origins.rotational_springs.push(Origin::of(&t));
+    }
+    Ok(())
 }
 
 /// `force_table` or `polynomial` of a table (at most one).
@@ -1396,13 +1464,9 @@ fn read_ropes(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
                 point: to_node_frame(model, node, &p),
             });
         }
-        let law = read_spring_law(&t, model.springs.len())?;
+        let law = read_force_law(&t)?;
         // a nonlinear law may stand without a linear part
-        let stiffness = match (t.field("stiffness"), &law) {
-            (Some(f), _) => physical_or_zero(&f)?,
-            (None, Some(law)) if law.law.has_curve() => 0.0,
-            (None, _) => physical_or_zero(&t.req("stiffness")?)?,
-        };
+        let stiffness = stiffness_or_curve(&t, law.as_ref())?;
         let damping = match t.field("damping") {
             Some(f) => physical_or_zero(&f)?,
             None => 0.0,
@@ -1475,6 +1539,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "beam_stress",
             "spring_force",
             "rope_force",
+            "rotational_spring_torque",
         ])?;
         let why = format!("for a {ty} sensor");
         let uses: &[&str] = match ty {
@@ -1486,6 +1551,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "beam_strain" | "beam_stress" => &["beam", "component"],
             "spring_force" => &["spring"],
             "rope_force" => &["rope"],
+            "rotational_spring_torque" => &["spring"],
             _ => &[],
         };
         // The keys after `name` and `type`: each sensor type uses some of them.
@@ -1604,6 +1670,12 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                 let names = || model.ropes.iter().map(|r| r.name.as_str());
                 let rope = item_named(&t.req("rope")?, names, "rope", "ropes")?;
                 SensorKind::RopeForce { rope }
+            }
+            "rotational_spring_torque" => {
+                let names = || model.rotational_springs.iter().map(|s| s.name.as_str());
+                let plural = "rotational springs";
+                let spring = item_named(&t.req("spring")?, names, "rotational spring", plural)?;
+                SensorKind::RotationalSpringTorque { spring }
             }
             "kinetic_energy" => SensorKind::KineticEnergy,
             "potential_energy" => SensorKind::PotentialEnergy,

@@ -192,7 +192,7 @@ pub enum SpringSide {
 }
 
 /// A nonlinear force law, of a spring-damper ([`SpringLaw`]) or of a rotational spring
-/// ([`RotarySpring`]): with `e` the elongation (or the rotation angle from the neutral one),
+/// ([`RotationalSpring`]): with `e` the elongation (or the rotation angle from the neutral one),
 ///
 /// ```text
 /// T = P + k e + F(e) + c edot,
@@ -253,6 +253,28 @@ impl SpringLaw {
             law: ForceLaw::default(),
         }
     }
+}
+
+/// A rotational spring-damper about the axis of a revolute or cylindrical joint, between the
+/// joint's two nodes: with `theta` the relative rotation angle about the joint's z axis
+/// (frame B's x axis in frame A, measured from the initial configuration, continuous over
+/// any number of turns) and `e = theta - theta0`, the spring's torque
+/// `T = P + k e + F(e) + c edot` (the law of [`ForceLaw`], `P` its preload) acts on node B
+/// as the moment `-T` about the axis and on node A as `+T`. See
+/// [`crate::elements::rotational_spring`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RotationalSpring {
+    pub name: String,
+    /// The revolute or cylindrical joint whose axis and nodes the spring uses.
+    pub joint: JointId,
+    /// Stiffness k [N m/rad], >= 0.
+    pub stiffness: f64,
+    /// Damping c [N m s/rad], >= 0.
+    pub damping: f64,
+    /// Neutral angle theta0 \[rad\], from the initial configuration.
+    pub angle: f64,
+    /// Nonlinear part of the law, preload and stops (none: linear).
+    pub law: ForceLaw,
 }
 
 /// A point a rope passes through: fixed on a node (node frame) or on the ground (inertial).
@@ -471,6 +493,12 @@ pub enum SensorKind {
         beam: usize,
         component: usize,
     },
+    /// Torque `T` of a rotational spring-damper, positive when it resists a positive
+    /// rotation (the moment on the joint's node B about the axis is `-T`) [N m] (index in
+    /// [`Model::rotational_springs`]).
+    RotationalSpringTorque {
+        spring: usize,
+    },
 }
 
 /// A named output channel.
@@ -504,6 +532,9 @@ pub struct Model {
     /// linear).
     #[serde(default)]
     pub spring_laws: Vec<SpringLaw>,
+    /// Rotational spring-dampers about joint axes.
+    #[serde(default)]
+    pub rotational_springs: Vec<RotationalSpring>,
 }
 
 /// Reference to one item of a model and one of its fields, for error messages.
@@ -547,6 +578,7 @@ impl Model {
             sensors: Vec::new(),
             display: display::Display::default(),
             spring_laws: Vec::new(),
+            rotational_springs: Vec::new(),
         }
     }
 

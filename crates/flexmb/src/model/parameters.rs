@@ -30,6 +30,8 @@
 //! | spring | `spring.<s>.preload` | preload `P` \[N\] (springs with a nonlinear law) | same |
 //! | spring | `spring.<s>.polynomial.<j>`, `spring.<s>.force_table.<i>` | coefficient `a_{j+1}` of a polynomial curve, force `F_i` of point `i` of a table curve \[N\] | same (the table's elongations are not parameters) |
 //! | spring | `spring.<s>.{compression, extension}.{polynomial.<j>, force_table.<i>}` | the same for a side's own curve | same |
+//! | rotational spring | `rotational_spring.<s>.stiffness`, `.damping`, `.angle` | `k` [N m/rad], `c` [N m s/rad], `theta0` \[rad\] | same |
+//! | rotational spring | `rotational_spring.<s>.preload`, `.polynomial.<j>`, `.force_table.<i>`, `.{compression, extension}.{...}` | its law, as for a spring [N m] | same |
 //! | rope | `rope.<r>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `L0` \[m\] | same |
 //! | rope | `rope.<r>.points.<i>.point.<k>` | point `i` at t = 0, inertial \[m\] | same |
 //!
@@ -255,6 +257,39 @@ impl SpringLawParam {
     }
 }
 
+/// A parameter of a rotational spring-damper.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RotationalSpringParam {
+    /// Stiffness [N m/rad].
+    Stiffness,
+    /// Damping [N m s/rad].
+    Damping,
+    /// Neutral angle \[rad\].
+    Angle,
+    /// A parameter of its law (preload [N m], curves).
+    Law(SpringLawParam),
+}
+
+impl RotationalSpringParam {
+    pub fn get(self, s: &super::RotationalSpring) -> f64 {
+        match self {
+            RotationalSpringParam::Stiffness => s.stiffness,
+            RotationalSpringParam::Damping => s.damping,
+            RotationalSpringParam::Angle => s.angle,
+            RotationalSpringParam::Law(p) => p.get(&s.law),
+        }
+    }
+
+    pub fn set(self, s: &mut super::RotationalSpring, value: f64) {
+        match self {
+            RotationalSpringParam::Stiffness => s.stiffness = value,
+            RotationalSpringParam::Damping => s.damping = value,
+            RotationalSpringParam::Angle => s.angle = value,
+            RotationalSpringParam::Law(p) => p.set(&mut s.law, value),
+        }
+    }
+}
+
 /// Parameters of a rope.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RopeParam {
@@ -287,6 +322,8 @@ pub enum ParamKind {
     Rope(usize, RopeParam),
     /// The nonlinear law of a spring-damper (index in [`Model::springs`]).
     SpringLaw(usize, SpringLawParam),
+    /// Index in [`Model::rotational_springs`].
+    RotationalSpring(usize, RotationalSpringParam),
 }
 
 /// A path that names no parameter.
@@ -438,6 +475,19 @@ impl Parameters {
                 }
             }
         }
+        let names = segments(model.rotational_springs.iter().map(|s| s.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            let mut add = |key: &str, p| {
+                let kind = ParamKind::RotationalSpring(i, p);
+                reg.push(format!("rotational_spring.{name}.{key}"), kind);
+            };
+            add("stiffness", RotationalSpringParam::Stiffness);
+            add("damping", RotationalSpringParam::Damping);
+            add("angle", RotationalSpringParam::Angle);
+            for (key, p) in SpringLawParam::all(&model.rotational_springs[i].law) {
+                add(&key, RotationalSpringParam::Law(p));
+            }
+        }
         reg
     }
 
@@ -510,6 +560,7 @@ impl Parameters {
             ParamKind::Spring(i, p) => p.get(&model.springs[i], &model.nodes),
             ParamKind::Rope(i, p) => p.get(&model.ropes[i], &model.nodes),
             ParamKind::SpringLaw(i, p) => model.spring_law(i).map_or(0.0, |law| p.get(&law.law)),
+            ParamKind::RotationalSpring(i, p) => p.get(&model.rotational_springs[i]),
         }
     }
 
@@ -536,6 +587,7 @@ impl Parameters {
                     p.set(&mut law.law, value);
                 }
             }
+            ParamKind::RotationalSpring(i, p) => p.set(&mut model.rotational_springs[i], value),
         }
     }
 

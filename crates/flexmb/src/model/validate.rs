@@ -70,6 +70,63 @@ fn local_frame(f: &Frame) -> Check {
     finite3(&f.x, 2.0 * MAX_KINEMATIC)
 }
 
+/// A force law: preload in range; tables of at least 2 points, finite, strictly increasing
+/// in `e`; polynomials of 1 to 16 finite coefficients. An error names the model-file key.
+fn check_force_law(law: &super::ForceLaw) -> Result<(), (&'static str, String)> {
+    in_range(law.preload, -MAX_PHYSICAL, MAX_PHYSICAL).map_err(|m| ("preload", m))?;
+    for (curve, side) in [
+        (&law.curve, None),
+        (&law.compression, Some("compression")),
+        (&law.extension, Some("extension")),
+    ] {
+        let Some(curve) = curve else { continue };
+        let field = |own: &'static str| side.unwrap_or(own);
+        match curve {
+            super::ForceCurve::Table(points) => {
+                let field = field("force_table");
+                if points.len() < 2 {
+                    let n = points.len();
+                    let m = format!("has {n} point(s): a force table needs at least 2");
+                    return Err((field, m));
+                }
+                for (k, (e, f)) in points.iter().enumerate() {
+                    in_range(*e, -2.0 * MAX_KINEMATIC, 2.0 * MAX_KINEMATIC)
+                        .and_then(|()| in_range(*f, -MAX_PHYSICAL, MAX_PHYSICAL))
+                        .map_err(|m| (field, format!("point {k}: {m}")))?;
+                }
+                if let Some(k) = points.windows(2).position(|w| w[1].0 <= w[0].0) {
+                    return Err((
+                        field,
+                        format!(
+                            "is not sorted in elongation: point {} (e = {}) does not come after point {k} (e = {}); the elongations must increase strictly",
+                            k + 1,
+                            points[k + 1].0,
+                            points[k].0
+                        ),
+                    ));
+                }
+            }
+            super::ForceCurve::Polynomial(a) => {
+                let field = field("polynomial");
+                if a.is_empty() || a.len() > 16 {
+                    return Err((
+                        field,
+                        format!(
+                            "has {} coefficients: give 1 to 16 ([a1, a2, ...] of a1 e + a2 e^2 + ...)",
+                            a.len()
+                        ),
+                    ));
+                }
+                for (j, aj) in a.iter().enumerate() {
+                    in_range(*aj, -MAX_PHYSICAL, MAX_PHYSICAL)
+                        .map_err(|m| (field, format!("coefficient {j}: {m}")))?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 impl TimeFunction {
     /// Finite parameters within the ranges, increasing times, and intervals of at least
     /// [`MIN_STEP`] (so slopes stay finite); functions of functions at most
@@ -441,65 +498,37 @@ impl Model {
             if std::mem::replace(&mut with_law[law.spring], true) {
                 return Err(fail("stiffness", "has two nonlinear laws".into()));
             }
-            in_range(law.law.preload, -MAX_PHYSICAL, MAX_PHYSICAL)
-                .map_err(|m| fail("preload", m))?;
-            for (curve, side) in [
-                (&law.law.curve, None),
-                (&law.law.compression, Some("compression")),
-                (&law.law.extension, Some("extension")),
-            ] {
-                let Some(curve) = curve else { continue };
-                let field = |own: &'static str| side.unwrap_or(own);
-                match curve {
-                    super::ForceCurve::Table(points) => {
-                        let field = field("force_table");
-                        if points.len() < 2 {
-                            return Err(fail(
-                                field,
-                                format!(
-                                    "has {} point(s): a force table needs at least 2",
-                                    points.len()
-                                ),
-                            ));
-                        }
-                        for (k, (e, f)) in points.iter().enumerate() {
-                            in_range(*e, -2.0 * MAX_KINEMATIC, 2.0 * MAX_KINEMATIC)
-                                .and_then(|()| in_range(*f, -MAX_PHYSICAL, MAX_PHYSICAL))
-                                .map_err(|m| fail(field, format!("point {k}: {m}")))?;
-                        }
-                        if let Some(k) = points.windows(2).position(|w| w[1].0 <= w[0].0) {
-                            return Err(fail(
-                                field,
-                                format!(
-                                    "is not sorted in elongation: point {} (e = {}) does not come after point {k} (e = {}); the elongations must increase strictly",
-                                    k + 1,
-                                    points[k + 1].0,
-                                    points[k].0
-                                ),
-                            ));
-                        }
-                    }
-                    super::ForceCurve::Polynomial(a) => {
-                        let field = field("polynomial");
-                        if a.is_empty() || a.len() > 16 {
-                            return Err(fail(
-                                field,
-                                format!("has {} coefficients: give 1 to 16 ([a1, a2, ...] of a1 e + a2 e^2 + ...)", a.len()),
-                            ));
-                        }
-                        for (j, aj) in a.iter().enumerate() {
-                            in_range(*aj, -MAX_PHYSICAL, MAX_PHYSICAL)
-                                .map_err(|m| fail(field, format!("coefficient {j}: {m}")))?;
-                        }
-                    }
-                }
-            }
+            check_force_law(&law.law).map_err(|(field, m)| fail(field, m))?;
             if law.law.acts != super::SpringSide::Both && s.relaxation.is_some() {
                 return Err(fail(
                     "acts",
                     "a one-sided spring (a stop) cannot have a Maxwell branch: its branch would hold a force while the stop is off".into(),
                 ));
             }
+        }
+
+        for (i, s) in self.rotational_springs.iter().enumerate() {
+            let fail = |field, m| bad("rotational_spring", i, &s.name, field, m);
+            let Some(joint) = self.joints.get(s.joint.0) else {
+                return Err(fail(
+                    "joint",
+                    format!("joint index {} does not exist", s.joint.0),
+                ));
+            };
+            if !matches!(joint.kind, JointKind::Revolute | JointKind::Cylindrical) {
+                return Err(fail(
+                    "joint",
+                    format!(
+                        "joint '{}' is {}: a rotational spring acts about the axis of a revolute or cylindrical joint",
+                        clip(&joint.name, QUOTED),
+                        joint.kind.name()
+                    ),
+                ));
+            }
+            in_range(s.stiffness, 0.0, MAX_PHYSICAL).map_err(|m| fail("stiffness", m))?;
+            in_range(s.damping, 0.0, MAX_PHYSICAL).map_err(|m| fail("damping", m))?;
+            in_range(s.angle, -MAX_ANGLE, MAX_ANGLE).map_err(|m| fail("angle", m))?;
+            check_force_law(&s.law).map_err(|(field, m)| fail(field, m))?;
         }
 
         for (i, r) in self.ropes.iter().enumerate() {
@@ -707,6 +736,15 @@ impl Model {
                 SensorKind::RopeForce { rope } => {
                     if *rope >= self.ropes.len() {
                         return Err(fail("rope", format!("rope index {rope} does not exist")));
+                    }
+                    (None, None)
+                }
+                SensorKind::RotationalSpringTorque { spring } => {
+                    if *spring >= self.rotational_springs.len() {
+                        return Err(fail(
+                            "spring",
+                            format!("rotational spring index {spring} does not exist"),
+                        ));
                     }
                     (None, None)
                 }

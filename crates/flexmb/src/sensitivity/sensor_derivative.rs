@@ -18,6 +18,7 @@
 //! differentiable sensors here (a criterion cannot use them).
 
 use crate::data::Layout;
+use crate::elements::rotational_spring::RotationalSpringElement;
 use crate::elements::{ElementItem, ElementKernel, LocalBuffers, NodeState};
 use crate::model::{Model, ParamId, ParamKind, Parameters, SensorKind};
 use crate::solve::step::StateTangent;
@@ -132,6 +133,11 @@ fn support(model: &Model, layout: &Layout, k: usize) -> (Vec<usize>, Vec<usize>,
             let slot = |i| r.node(i).map(|n| n.0);
             element(ElementItem::Rope(*rope), &slot, r.n_slots())
         }
+        SensorKind::RotationalSpringTorque { spring } => {
+            let r = RotationalSpringElement::of(model, *spring);
+            let slot = |i| r.node(i).map(|n| n.0);
+            element(ElementItem::RotationalSpring(*spring), &slot, r.n_slots())
+        }
         SensorKind::BeamStrain { beam, .. } | SensorKind::BeamStress { beam, .. } => {
             let nodes = model.beams[*beam].nodes.iter().map(|n| n.0).collect();
             (nodes, Vec::new(), Vec::new())
@@ -155,6 +161,9 @@ pub fn sensor_parameters(model: &Model, params: &Parameters, k: usize) -> Vec<Pa
             (SensorKind::SpringForce { spring }, ParamKind::Spring(i, _)) => *spring == i,
             (SensorKind::RopeForce { rope }, ParamKind::Rope(i, _)) => *rope == i,
             (SensorKind::SpringForce { spring }, ParamKind::SpringLaw(i, _)) => *spring == i,
+            (SensorKind::RotationalSpringTorque { spring }, ParamKind::RotationalSpring(i, _)) => {
+                *spring == i
+            }
             (SensorKind::BeamStress { beam, .. }, ParamKind::Beam(item, _)) => {
                 params.beam_elements(item).contains(beam)
             }
