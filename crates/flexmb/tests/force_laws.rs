@@ -239,8 +239,8 @@ fn torsional_pendulum_wound_over_turns_has_frequency_sqrt_k_over_j() {
     // +-theta' / omega = +-10 rad, more than a turn and a half each way: the spring must
     // follow the angle over the turns (the element's state), not its value in (-pi, pi].
     use flexmb::model::{frame_from_axis, ForceLaw, JointKind, RotationalSpring};
-    let (k, j, spin) = (2.0, 0.5, 20.0);
-    let omega = (k / j as f64).sqrt();
+    let (k, j, spin): (f64, f64, f64) = (2.0, 0.5, 20.0);
+    let omega = (k / j).sqrt();
     for group in [Group::SE3, Group::R3xSO3] {
         let mut model = Model::new(group);
         let n = model.add_node("disk", Frame::identity());
