@@ -1692,3 +1692,117 @@ fn bad_spring_laws_name_their_field() {
         .to_string();
     assert_contains(&e, &["spring[0]", "stiffness"]);
 }
+
+/// `GOOD` with a revolute joint "hinge" between the hub and the top, and `extra` appended
+/// (a `[[rotational_spring]]`); the line of the first line of `extra`.
+fn with_rotational_spring(extra: &str) -> (String, usize) {
+    let joint = "\n[[joint]]\nname = \"hinge\"\ntype = \"cylindrical\"\nnode_a = \"hub\"\nnode_b = \"top\"\nposition = [1, 0, 0]\naxis = [0, 0, 1]\n";
+    let text = GOOD.replacen("\n[[joint]]\nname = \"pin\"\ntype = \"spherical\"\nnode_a = \"hub\"\nnode_b = \"top\"\nposition = [1, 0, 0]\n", joint, 1);
+    assert_ne!(text, GOOD, "the pin joint replaced");
+    let line = text.lines().count() + 1;
+    (format!("{text}{extra}\n"), line)
+}
+
+#[test]
+fn rotational_springs_are_read_with_their_sensor_and_parameters() {
+    let (text, _) = with_rotational_spring(
+        "[[rotational_spring]]\nname = \"clock\"\njoint = \"hinge\"\nstiffness = 0.8\ndamping = 0.01\nangle_deg = -720\npreload = 0.1\n\n[[sensor]]\nname = \"T\"\ntype = \"rotational_spring_torque\"\nspring = \"clock\"\n",
+    );
+    let file = parse_model_str(&text, "clock.toml", &[]).expect("reads");
+    let s = &file.model.rotational_springs[0];
+    assert_eq!(s.joint, file.model.joint_id("hinge").unwrap());
+    assert_eq!((s.stiffness, s.damping), (0.8, 0.01));
+    assert!((s.angle + 4.0 * std::f64::consts::PI).abs() < 1e-12);
+    assert_eq!(s.law.preload, 0.1);
+    assert_eq!(
+        file.model.sensors.last().unwrap().kind,
+        SensorKind::RotationalSpringTorque { spring: 0 }
+    );
+    let params = flexmb::model::Parameters::new(&file.model);
+    for path in [
+        "rotational_spring.clock.angle",
+        "rotational_spring.clock.preload",
+    ] {
+        assert!(params.id(path).is_ok(), "{path}");
+    }
+}
+
+#[test]
+fn bad_rotational_springs_name_their_field() {
+    let head = "[[rotational_spring]]\nname = \"clock\"\n";
+    let cases = [
+        (
+            "joint = \"hinge\"\nstiffness = -1",
+            3,
+            "rotational_spring[0].stiffness",
+            ">= 0",
+        ),
+        (
+            "joint = \"hinj\"\nstiffness = 1",
+            2,
+            "rotational_spring[0].joint",
+            "unknown joint 'hinj'",
+        ),
+        (
+            "joint = \"pin2\"\nstiffness = 1",
+            2,
+            "rotational_spring[0].joint",
+            "unknown joint",
+        ),
+        (
+            "joint = \"crank\"\nstiffness = 1\nangle = 1\nangle_deg = 5",
+            5,
+            "rotational_spring[0].angle_deg",
+            "not both",
+        ),
+        (
+            "joint = \"hinge\"\nforce_table = [[1, 0], [0, 1]]",
+            3,
+            "rotational_spring[0].force_table[1]",
+            "not sorted",
+        ),
+        (
+            "joint = \"hinge\"\nstiffness = 1\nacts = \"sideways\"",
+            4,
+            "rotational_spring[0].acts",
+            "must be one of",
+        ),
+        (
+            "joint = \"hinge\"",
+            0,
+            "rotational_spring[0].stiffness",
+            "missing",
+        ),
+    ];
+    for (body, offset, field, says) in cases {
+        let (text, line) = with_rotational_spring(&format!("{head}{body}"));
+        let e = parse_model_str(&text, "rot.toml", &[])
+            .map(|_| ())
+            .expect_err(body)
+            .to_string();
+        println!("{e}");
+        assert_contains(
+            &e,
+            &[
+                &format!("rot.toml:{}:", line + offset),
+                &format!("field '{field}'"),
+                says,
+            ],
+        );
+    }
+    // a joint that is neither revolute nor cylindrical: the spherical pin of GOOD
+    let text = format!("{GOOD}\n{head}joint = \"pin\"\nstiffness = 1\n");
+    let e = parse_model_str(&text, "rot.toml", &[])
+        .map(|_| ())
+        .expect_err("spherical")
+        .to_string();
+    println!("{e}");
+    assert_contains(
+        &e,
+        &[
+            "field 'rotational_spring[0].joint'",
+            "spherical",
+            "revolute or cylindrical",
+        ],
+    );
+}
