@@ -217,6 +217,12 @@ fn visit(
             Wrt::Own(p),
             sink,
         ),
+        ParamKind::Bushing(i, p) => element_term(
+            at,
+            (&model.bushings[i], ElementItem::Bushing(i)),
+            Wrt::Own(p),
+            sink,
+        ),
     }
 }
 

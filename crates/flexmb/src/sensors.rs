@@ -206,6 +206,11 @@ pub fn sensor_value(
             buffers.gather(&sp, nodes, (&state.x, &state.xdot, start));
             sp.torque(&ctx, &buffers.local(nodes))
         }
+        SensorKind::BushingForce { bushing, component } => {
+            let b = &model.bushings[*bushing];
+            buffers.gather(b, nodes, (&state.x, &state.xdot, 0));
+            b.state(buffers.local(nodes).nodes).sigma[*component]
+        }
         kind @ (SensorKind::KineticEnergy
         | SensorKind::PotentialEnergy
         | SensorKind::TotalEnergy) => {
@@ -286,7 +291,7 @@ pub fn unit(kind: &SensorKind) -> &'static str {
                 "1/m"
             }
         }
-        SensorKind::BeamStress { component, .. } => {
+        SensorKind::BeamStress { component, .. } | SensorKind::BushingForce { component, .. } => {
             if *component < 3 {
                 "N"
             } else {

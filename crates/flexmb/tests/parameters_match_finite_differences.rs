@@ -9,8 +9,8 @@ use flexmb::elements::{
 };
 use flexmb::joints;
 use flexmb::model::parameters::{
-    BodyParam, JointParam, LoadParam, NodeParam, RopeParam, RotationalSpringParam, SectionParam,
-    SpringLawParam, SpringParam,
+    BodyParam, BushingParam, JointParam, LoadParam, NodeParam, RopeParam, RotationalSpringParam,
+    SectionParam, SpringLawParam, SpringParam,
 };
 use flexmb::model::{
     BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, ParamId, ParamKind,
@@ -196,6 +196,10 @@ fn pattern(params: &Parameters, id: ParamId) -> String {
             RotationalSpringParam::Angle => "rotational_spring.<s>.angle",
             RotationalSpringParam::Law(SpringLawParam::Preload) => "rotational_spring.<s>.preload",
             RotationalSpringParam::Law(_) => "rotational_spring.<s>.<side><curve>.<i>",
+        },
+        ParamKind::Bushing(_, p) => match p {
+            BushingParam::Stiffness(..) => "bushing.<b>.stiffness.<i>.<j>",
+            BushingParam::Damping(..) => "bushing.<b>.damping.<i>.<j>",
         },
     };
     item.into()
@@ -697,5 +701,74 @@ fn parameter_derivatives_match_finite_differences_on_rotational_springs() {
         .by_differences
         .iter()
         .all(|k| !k.starts_with("rotational")));
+    println!("worst relative error {:.2e}", seen.worst);
+}
+
+/// Two bodies on bushings: one between them with frame offsets and full matrices, one from
+/// the ground (SE(3)).
+fn bushings() -> Model {
+    use flexmb::model::Bushing;
+    let mut m = Model::new(Group::SE3);
+    let a = m.add_node("a", Frame::new(Vec3::new(0.1, 0.2, -0.3), Mat3::identity()));
+    let b = m.add_node(
+        "b",
+        flexmb_lie::se3::exp(&Vec6::new(1.0, -0.4, 0.2, 0.3, -0.5, 0.7)),
+    );
+    let inertia = Mat3::new(0.3, 0.01, -0.02, 0.01, 0.4, 0.03, -0.02, 0.03, 0.5);
+    m.add_body("body_a", a, 2.5, Vec3::new(0.3, -0.7, 0.2), inertia);
+    m.add_body("body_b", b, 1.5, Vec3::new(-0.1, 0.2, 0.4), inertia * 2.0);
+    let full = |d: [f64; 6], c: f64| {
+        let mut k = Mat6::from_diagonal(&Vec6::from_column_slice(&d));
+        for (i, j) in [(0, 4), (1, 5), (2, 3), (3, 5)] {
+            k[(i, j)] = c;
+            k[(j, i)] = c;
+        }
+        k
+    };
+    let at = Frame::new(
+        Vec3::new(0.5, 0.0, -0.1),
+        flexmb_lie::so3::exp(&Vec3::new(0.2, -0.3, 0.1)),
+    );
+    m.bushings.push(Bushing {
+        name: "link".into(),
+        node_a: Some(a),
+        node_b: Some(b),
+        frame_a: m.nodes[a.0].frame.inverse().compose(&at),
+        frame_b: m.nodes[b.0].frame.inverse().compose(&at),
+        stiffness: full([300.0, 200.0, 250.0, 40.0, 30.0, 50.0], 5.0),
+        damping: full([3.0, 2.0, 2.5, 0.4, 0.3, 0.5], 0.05),
+    });
+    m.bushings.push(Bushing {
+        name: "mount".into(),
+        node_a: None,
+        node_b: Some(a),
+        frame_a: m.nodes[a.0].frame,
+        frame_b: Frame::identity(),
+        stiffness: full([100.0, 120.0, 140.0, 10.0, 12.0, 14.0], 2.0),
+        damping: full([1.0, 1.2, 1.4, 0.1, 0.12, 0.14], 0.02),
+    });
+    m
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_bushings() {
+    let mut seen = Seen::default();
+    let mut rng = Lcg(10);
+    let model = bushings();
+    model.validate().expect("valid");
+    for _ in 0..3 {
+        let at = point(&model, &mut rng, 0.8);
+        check_model("bushings", &model, &at, &mut seen);
+    }
+    let kinds: Vec<&String> = seen
+        .kinds
+        .iter()
+        .filter(|k| k.starts_with("bushing"))
+        .collect();
+    assert_eq!(kinds.len(), 2, "{kinds:?}");
+    assert!(seen
+        .by_differences
+        .iter()
+        .all(|k| !k.starts_with("bushing")));
     println!("worst relative error {:.2e}", seen.worst);
 }

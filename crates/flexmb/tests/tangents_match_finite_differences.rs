@@ -927,3 +927,35 @@ fn rotational_spring_tangents_match_finite_differences() {
         }
     }
 }
+
+/// A symmetric positive definite 6 x 6 matrix with couplings.
+fn spd6(rng: &mut Lcg, diagonal: [f64; 6]) -> Mat6 {
+    let a = Mat6::from_fn(|_, _| rng.next());
+    Mat6::from_diagonal(&Vec6::from_column_slice(&diagonal)) + a * a.transpose()
+}
+
+#[test]
+fn bushing_tangents_match_finite_differences() {
+    // Between two nodes and from the ground, frame offsets on both sides, relative rotations
+    // up to about 2 rad, coupled stiffness and damping.
+    use flexmb::model::Bushing;
+    let mut rng = Lcg(11);
+    let model = models().pop().expect("the SE(3) model");
+    assert_eq!(model.group, Group::SE3);
+    for ground_a in [false, true, false] {
+        let bushing = Bushing {
+            name: "mount".into(),
+            node_a: (!ground_a).then_some(NodeId(0)),
+            node_b: Some(NodeId(1)),
+            frame_a: Group::SE3.exp(&rng.v6(1.0)),
+            frame_b: Group::SE3.exp(&rng.v6(1.0)),
+            stiffness: spd6(&mut rng, [300.0, 200.0, 250.0, 40.0, 30.0, 50.0]),
+            damping: spd6(&mut rng, [3.0, 2.0, 2.5, 0.4, 0.3, 0.5]),
+        };
+        let mut nodes = [rng.node(model.group), rng.node(model.group)];
+        if ground_a {
+            nodes[0] = NodeState::ground(Frame::identity());
+        }
+        check_element("bushing", &bushing, &model, &nodes);
+    }
+}

@@ -1,6 +1,8 @@
 //! Force elements: rigid bodies (inertia and gravity), geometrically exact beams on SE(3)
 //! (two nodes, [`beam`]), applied loads, spring-dampers (with an optional Maxwell branch,
-//! [`spring`]) and ropes through any number of points ([`rope`]).
+//! [`spring`], nonlinear laws and stops included), rotational spring-dampers about a joint's
+//! axis ([`rotational_spring`]), 6-DOF bushings ([`bushing`]) and ropes through any number
+//! of points ([`rope`]).
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
@@ -32,6 +34,7 @@
 //! [`physical`].
 
 pub mod beam;
+pub mod bushing;
 pub mod load;
 pub mod physical;
 pub mod rigid_body;
@@ -191,6 +194,8 @@ pub enum ElementRef {
     NonlinearSpring(usize),
     /// Index in [`Model::rotational_springs`].
     RotationalSpring(usize),
+    /// Index in [`Model::bushings`].
+    Bushing(usize),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -414,6 +419,7 @@ impl ElementRef {
                 ElementItem::Spring(i) => ElementRef::Spring(i),
                 ElementItem::Rope(i) => ElementRef::Rope(i),
                 ElementItem::RotationalSpring(i) => ElementRef::RotationalSpring(i),
+                ElementItem::Bushing(i) => ElementRef::Bushing(i),
             })
             .collect()
     }
@@ -435,6 +441,7 @@ impl ElementRef {
             ElementRef::RotationalSpring(i) => {
                 Kernel::RotationalSpring(rotational_spring::RotationalSpringElement::of(model, *i))
             }
+            ElementRef::Bushing(i) => Kernel::Bushing(&model.bushings[*i]),
         }
     }
 
@@ -450,6 +457,7 @@ impl ElementRef {
             ElementRef::RotationalSpring(i) => {
                 format!("rotational spring '{}'", model.rotational_springs[*i].name)
             }
+            ElementRef::Bushing(i) => format!("bushing '{}'", model.bushings[*i].name),
         }
     }
 }
@@ -464,11 +472,12 @@ pub enum ElementItem {
     Spring(usize),
     Rope(usize),
     RotationalSpring(usize),
+    Bushing(usize),
 }
 
 impl ElementItem {
     /// Every force element of `model`: bodies, beam elements, loads, springs, ropes,
-    /// rotational springs.
+    /// rotational springs, bushings.
     pub fn all(model: &Model) -> impl Iterator<Item = ElementItem> {
         (0..model.bodies.len())
             .map(ElementItem::Body)
@@ -477,6 +486,7 @@ impl ElementItem {
             .chain((0..model.springs.len()).map(ElementItem::Spring))
             .chain((0..model.ropes.len()).map(ElementItem::Rope))
             .chain((0..model.rotational_springs.len()).map(ElementItem::RotationalSpring))
+            .chain((0..model.bushings.len()).map(ElementItem::Bushing))
     }
 
     /// The number of states the element owns.
@@ -488,6 +498,7 @@ impl ElementItem {
             ElementItem::Spring(i) => model.springs[i].n_states(),
             ElementItem::Rope(i) => model.ropes[i].n_states(),
             ElementItem::RotationalSpring(_) => 1,
+            ElementItem::Bushing(i) => model.bushings[i].n_states(),
         }
     }
 
@@ -514,6 +525,7 @@ pub enum Kernel<'m> {
     Rope(&'m crate::model::Rope),
     NonlinearSpring(spring::SpringElement<'m>),
     RotationalSpring(rotational_spring::RotationalSpringElement<'m>),
+    Bushing(&'m crate::model::Bushing),
 }
 
 macro_rules! dispatch {
@@ -526,6 +538,7 @@ macro_rules! dispatch {
             Kernel::Rope($k) => $e,
             Kernel::NonlinearSpring($k) => $e,
             Kernel::RotationalSpring($k) => $e,
+            Kernel::Bushing($k) => $e,
         }
     };
 }

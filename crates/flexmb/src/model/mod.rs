@@ -277,6 +277,28 @@ pub struct RotationalSpring {
     pub law: ForceLaw,
 }
 
+/// A 6-DOF bushing between a frame on node A and a frame on node B (either may be the
+/// ground): with `d = log(H_A^-1 H_B)` the relative configuration of the two frames on SE(3)
+/// (translation, then rotation; 0 where the frames coincide), the bushing's stress
+/// resultants are `sigma = K d + C ddot` in the bushing frame (a linear law in `d`, exact
+/// for large relative rotations). See [`crate::elements::bushing`]. SE(3) models only.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Bushing {
+    pub name: String,
+    /// `None` is the ground.
+    pub node_a: Option<NodeId>,
+    pub node_b: Option<NodeId>,
+    /// Bushing frame A in the frame of node A (in the inertial frame if A is the ground).
+    pub frame_a: Frame,
+    /// Bushing frame B in the frame of node B (in the inertial frame if B is the ground).
+    pub frame_b: Frame,
+    /// Stiffness K (6 x 6, symmetric positive semidefinite): blocks [N/m, N/rad; N m/m,
+    /// N m/rad], ordered (translation x, y, z, rotation x, y, z) of the bushing frame.
+    pub stiffness: flexmb_lie::Mat6,
+    /// Damping C (6 x 6, symmetric positive semidefinite), the same order [N s/m ...].
+    pub damping: flexmb_lie::Mat6,
+}
+
 /// A point a rope passes through: fixed on a node (node frame) or on the ground (inertial).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RopePoint {
@@ -499,6 +521,12 @@ pub enum SensorKind {
     RotationalSpringTorque {
         spring: usize,
     },
+    /// Component of the stress resultants `sigma = K d + C ddot` of a bushing (0..3: forces
+    /// \[N\], 3..6: moments [N m], bushing frame) (index in [`Model::bushings`]).
+    BushingForce {
+        bushing: usize,
+        component: usize,
+    },
 }
 
 /// A named output channel.
@@ -535,6 +563,9 @@ pub struct Model {
     /// Rotational spring-dampers about joint axes.
     #[serde(default)]
     pub rotational_springs: Vec<RotationalSpring>,
+    /// 6-DOF bushings.
+    #[serde(default)]
+    pub bushings: Vec<Bushing>,
 }
 
 /// Reference to one item of a model and one of its fields, for error messages.
@@ -579,6 +610,7 @@ impl Model {
             display: display::Display::default(),
             spring_laws: Vec::new(),
             rotational_springs: Vec::new(),
+            bushings: Vec::new(),
         }
     }
 

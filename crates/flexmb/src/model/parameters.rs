@@ -32,6 +32,7 @@
 //! | spring | `spring.<s>.{compression, extension}.{polynomial.<j>, force_table.<i>}` | the same for a side's own curve | same |
 //! | rotational spring | `rotational_spring.<s>.stiffness`, `.damping`, `.angle` | `k` [N m/rad], `c` [N m s/rad], `theta0` \[rad\] | same |
 //! | rotational spring | `rotational_spring.<s>.preload`, `.polynomial.<j>`, `.force_table.<i>`, `.{compression, extension}.{...}` | its law, as for a spring [N m] | same |
+//! | bushing | `bushing.<b>.stiffness.<i>.<j>`, `bushing.<b>.damping.<i>.<j>`, `i <= j` | entry `K_ij = K_ji`, `C_ij = C_ji` (order: translation x, y, z, rotation x, y, z) | the matrix form (sets one entry there) |
 //! | rope | `rope.<r>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `L0` \[m\] | same |
 //! | rope | `rope.<r>.points.<i>.point.<k>` | point `i` at t = 0, inertial \[m\] | same |
 //!
@@ -290,6 +291,52 @@ impl RotationalSpringParam {
     }
 }
 
+/// A parameter of a bushing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BushingParam {
+    /// Stiffness entry `(i, j)`, `i <= j` (both symmetric entries).
+    Stiffness(usize, usize),
+    /// Damping entry `(i, j)`, `i <= j` (both symmetric entries).
+    Damping(usize, usize),
+}
+
+impl BushingParam {
+    /// Every parameter of a bushing, in registry order, with its path after the name.
+    pub fn all() -> Vec<(String, BushingParam)> {
+        let mut out = Vec::new();
+        for (key, make) in [
+            (
+                "stiffness",
+                BushingParam::Stiffness as fn(usize, usize) -> BushingParam,
+            ),
+            ("damping", BushingParam::Damping),
+        ] {
+            for i in 0..6 {
+                for j in i..6 {
+                    out.push((format!("{key}.{i}.{j}"), make(i, j)));
+                }
+            }
+        }
+        out
+    }
+
+    pub fn get(self, b: &super::Bushing) -> f64 {
+        match self {
+            BushingParam::Stiffness(i, j) => b.stiffness[(i, j)],
+            BushingParam::Damping(i, j) => b.damping[(i, j)],
+        }
+    }
+
+    pub fn set(self, b: &mut super::Bushing, value: f64) {
+        let (m, i, j) = match self {
+            BushingParam::Stiffness(i, j) => (&mut b.stiffness, i, j),
+            BushingParam::Damping(i, j) => (&mut b.damping, i, j),
+        };
+        m[(i, j)] = value;
+        m[(j, i)] = value;
+    }
+}
+
 /// Parameters of a rope.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RopeParam {
@@ -324,6 +371,8 @@ pub enum ParamKind {
     SpringLaw(usize, SpringLawParam),
     /// Index in [`Model::rotational_springs`].
     RotationalSpring(usize, RotationalSpringParam),
+    /// Index in [`Model::bushings`].
+    Bushing(usize, BushingParam),
 }
 
 /// A path that names no parameter.
@@ -488,6 +537,12 @@ impl Parameters {
                 add(&key, RotationalSpringParam::Law(p));
             }
         }
+        let names = segments(model.bushings.iter().map(|b| b.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            for (key, p) in BushingParam::all() {
+                reg.push(format!("bushing.{name}.{key}"), ParamKind::Bushing(i, p));
+            }
+        }
         reg
     }
 
@@ -561,6 +616,7 @@ impl Parameters {
             ParamKind::Rope(i, p) => p.get(&model.ropes[i], &model.nodes),
             ParamKind::SpringLaw(i, p) => model.spring_law(i).map_or(0.0, |law| p.get(&law.law)),
             ParamKind::RotationalSpring(i, p) => p.get(&model.rotational_springs[i]),
+            ParamKind::Bushing(i, p) => p.get(&model.bushings[i]),
         }
     }
 
@@ -588,6 +644,7 @@ impl Parameters {
                 }
             }
             ParamKind::RotationalSpring(i, p) => p.set(&mut model.rotational_springs[i], value),
+            ParamKind::Bushing(i, p) => p.set(&mut model.bushings[i], value),
         }
     }
 

@@ -70,6 +70,30 @@ fn local_frame(f: &Frame) -> Check {
     finite3(&f.x, 2.0 * MAX_KINEMATIC)
 }
 
+/// A symmetric positive semidefinite 6 x 6 matrix with finite entries within the physical
+/// range (a bushing's stiffness or damping).
+fn symmetric_psd(m: &flexmb_lie::Mat6) -> Check {
+    if let Some(v) = m.iter().find(|v| !v.is_finite() || v.abs() > MAX_PHYSICAL) {
+        return Err(format!(
+            "has the entry {v}: entries must be finite and at most {MAX_PHYSICAL:e} in magnitude"
+        ));
+    }
+    let scale = m.abs().max();
+    let asym = (m - m.transpose()).abs().max();
+    if asym > 1e-12 * scale {
+        return Err(format!(
+            "is not symmetric (largest |M_ij - M_ji| = {asym:.3e})"
+        ));
+    }
+    let smallest = m.symmetric_eigenvalues().min();
+    if smallest < -1e-12 * scale {
+        return Err(format!(
+            "is not positive semidefinite (smallest eigenvalue {smallest:.6e})"
+        ));
+    }
+    Ok(())
+}
+
 /// A force law: preload in range; tables of at least 2 points, finite, strictly increasing
 /// in `e`; polynomials of 1 to 16 finite coefficients. An error names the model-file key.
 fn check_force_law(law: &super::ForceLaw) -> Result<(), (&'static str, String)> {
@@ -531,6 +555,41 @@ impl Model {
             check_force_law(&s.law).map_err(|(field, m)| fail(field, m))?;
         }
 
+        for (i, b) in self.bushings.iter().enumerate() {
+            let fail = |field, m| bad("bushing", i, &b.name, field, m);
+            check_node("bushing", i, &b.name, "node_a", b.node_a)?;
+            check_node("bushing", i, &b.name, "node_b", b.node_b)?;
+            match (b.node_a, b.node_b) {
+                (None, None) => {
+                    return Err(fail(
+                        "node_b",
+                        "joins the ground to the ground: give at least one node".into(),
+                    ))
+                }
+                (Some(a), Some(c)) if a == c => {
+                    return Err(fail(
+                        "node_b",
+                        format!(
+                            "joins node '{}' to itself: a bushing acts between two different nodes (or a node and the ground)",
+                            clip(&self.nodes[a.0].name, QUOTED)
+                        ),
+                    ))
+                }
+                _ => {}
+            }
+            if self.group != Group::SE3 {
+                return Err(fail(
+                    "name",
+                    "bushings are formulated on SE(3): set the model's group to \"SE3\"".into(),
+                ));
+            }
+            local_frame(&b.frame_a).map_err(|m| fail("frame_a", m))?;
+            local_frame(&b.frame_b).map_err(|m| fail("frame_b", m))?;
+            for (m, field) in [(&b.stiffness, "stiffness"), (&b.damping, "damping")] {
+                symmetric_psd(m).map_err(|msg| fail(field, msg))?;
+            }
+        }
+
         for (i, r) in self.ropes.iter().enumerate() {
             let fail = |field, m| bad("rope", i, &r.name, field, m);
             let n_points = r.points.len();
@@ -747,6 +806,15 @@ impl Model {
                         ));
                     }
                     (None, None)
+                }
+                SensorKind::BushingForce { bushing, component } => {
+                    if *bushing >= self.bushings.len() {
+                        return Err(fail(
+                            "bushing",
+                            format!("bushing index {bushing} does not exist"),
+                        ));
+                    }
+                    (None, Some((*component, 6)))
                 }
                 SensorKind::KineticEnergy
                 | SensorKind::PotentialEnergy

@@ -138,6 +138,11 @@ fn support(model: &Model, layout: &Layout, k: usize) -> (Vec<usize>, Vec<usize>,
             let slot = |i| r.node(i).map(|n| n.0);
             element(ElementItem::RotationalSpring(*spring), &slot, r.n_slots())
         }
+        SensorKind::BushingForce { bushing, .. } => {
+            let b = &model.bushings[*bushing];
+            let slot = |i| b.node(i).map(|n| n.0);
+            element(ElementItem::Bushing(*bushing), &slot, b.n_slots())
+        }
         SensorKind::BeamStrain { beam, .. } | SensorKind::BeamStress { beam, .. } => {
             let nodes = model.beams[*beam].nodes.iter().map(|n| n.0).collect();
             (nodes, Vec::new(), Vec::new())
