@@ -2,13 +2,15 @@
 //! body under a force (`u = K^-1 F`) and under a large torque about a principal axis
 //! (`phi = M / k`, exact for the SE(3)-logarithm law at any angle below pi), and the six
 //! natural frequencies of a rigid body on a bushing with a diagonal stiffness at its centre
-//! of mass (`sqrt(k_i / m)`, `sqrt(k_(3+i) / J_i)`).
+//! of mass (`sqrt(k_i / m)`, `sqrt(k_(3+i) / J_i)`); the example `engine_mount.toml`.
 
 use flexmb::model::{Bushing, Load, LoadFrame, Model, TimeFunction};
 use flexmb::solve::{StaticSettings, Statics};
 use flexmb::{DynamicSettings, Simulation};
 use flexmb_lie::{so3, Frame, Group, Mat3, Mat6, Vec3, Vec6};
 use std::f64::consts::PI;
+
+mod common;
 
 const K: [f64; 6] = [2e4, 3e4, 5e4, 800.0, 1500.0, 2800.0];
 
@@ -160,4 +162,23 @@ fn bushing_mounted_body_has_the_six_natural_frequencies() {
         );
         assert!((measured / expected - 1.0).abs() < 1e-5, "mode {mode}");
     }
+}
+
+#[test]
+fn engine_on_four_mounts_settles_at_the_static_sag() {
+    // examples/engine_mount.toml: by symmetry each mount deflects in pure vertical
+    // translation, where the law is exactly K d: sag m g / (4 k_z), mount force -m g / 4.
+    let h = common::run("engine_mount.toml", &[]);
+    let sag = 0.5 - h.last("z");
+    let expected = 150.0 * 9.81 / (4.0 * 3e5);
+    let force = h.last("mount_fz");
+    println!(
+        "sag {sag:.7e} m vs {expected:.7e}; mount force {force:.3} N vs {:.3}",
+        -150.0 * 9.81 / 4.0
+    );
+    assert!((sag / expected - 1.0).abs() < 1e-4, "sag {sag}");
+    assert!(
+        (force / (-150.0 * 9.81 / 4.0) - 1.0).abs() < 1e-4,
+        "force {force}"
+    );
 }

@@ -1806,3 +1806,88 @@ fn bad_rotational_springs_name_their_field() {
         ],
     );
 }
+
+#[test]
+fn bushings_are_read_and_bad_matrices_are_located() {
+    let base = "\n[[bushing]]\nname = \"mount\"\nnode_b = \"top\"\nposition = [1, 0, 0]\n";
+    let text = format!(
+        "{GOOD}{base}stiffness = [1e4, 1e4, 2e4, 100, 100, 200]\ndamping = [[10, 1, 0, 0, 0, 0], [1, 10, 0, 0, 0, 0], [0, 0, 10, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]]\n\n[[sensor]]\nname = \"mz\"\ntype = \"bushing_force\"\nbushing = \"mount\"\ncomponent = \"mz\"\n"
+    );
+    let file = parse_model_str(&text, "mount.toml", &[]).expect("reads");
+    let b = &file.model.bushings[0];
+    assert_eq!(b.node_a, None);
+    assert_eq!(b.stiffness[(2, 2)], 2e4);
+    assert_eq!(b.damping[(0, 1)], 1.0);
+    // the two frames coincide at t = 0, at the given point
+    let top = &file.model.nodes[b.node_b.unwrap().0].frame;
+    let (fa, fb) = (b.frame_a, top.compose(&b.frame_b));
+    assert!((fa.x - Vec3::new(1.0, 0.0, 0.0)).norm() < 1e-12);
+    assert!((fb.x - fa.x).norm() < 1e-12 && (fb.r - fa.r).norm() < 1e-12);
+    assert_eq!(
+        file.model.sensors.last().unwrap().kind,
+        SensorKind::BushingForce {
+            bushing: 0,
+            component: 5
+        }
+    );
+    let params = flexmb::model::Parameters::new(&file.model);
+    assert!(params.id("bushing.mount.stiffness.2.5").is_ok());
+    let line = GOOD.lines().count() + 6;
+    let cases = [
+        (
+            "stiffness = [[1, 2, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0], [0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]]",
+            "bushing[0].stiffness",
+            "not symmetric",
+        ),
+        (
+            "stiffness = [1, 1, -1, 1, 1, 1]",
+            "bushing[0].stiffness",
+            "not positive semidefinite",
+        ),
+        (
+            "stiffness = [1, 1, 1, 1, 1, 1]\ndamping = [[1, 2, 0, 0, 0, 0], [2, 1, 0, 0, 0, 0], [0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]]",
+            "bushing[0].damping",
+            "not positive semidefinite",
+        ),
+        (
+            "stiffness = [1, 1, 1]",
+            "bushing[0].stiffness",
+            "6 numbers",
+        ),
+    ];
+    for (extra, field, says) in cases {
+        let text = format!("{GOOD}{base}{extra}\n");
+        let e = parse_model_str(&text, "mount.toml", &[])
+            .map(|_| ())
+            .expect_err(extra)
+            .to_string();
+        println!("{e}");
+        let at = line + usize::from(field.ends_with("damping"));
+        assert_contains(
+            &e,
+            &[
+                &format!("mount.toml:{at}:"),
+                &format!("field '{field}'"),
+                says,
+            ],
+        );
+    }
+    // an unknown node, and the R3xSO(3) group
+    let text = format!(
+        "{GOOD}{}stiffness = [1, 1, 1, 1, 1, 1]\n",
+        base.replace("\"top\"", "\"tpo\"")
+    );
+    let e = parse_model_str(&text, "mount.toml", &[])
+        .map(|_| ())
+        .expect_err("node")
+        .to_string();
+    assert_contains(&e, &["field 'bushing[0].node_b'", "unknown node 'tpo'"]);
+    let text = format!("{GOOD}{base}stiffness = [1, 1, 1, 1, 1, 1]\n")
+        .replace("group = \"SE3\"", "group = \"R3xSO3\"");
+    let e = parse_model_str(&text, "mount.toml", &[])
+        .map(|_| ())
+        .expect_err("group")
+        .to_string();
+    println!("{e}");
+    assert_contains(&e, &["field 'bushing[0].name'", "SE(3)"]);
+}

@@ -10,12 +10,12 @@ use crate::model::limits::{
     MAX_TIME, MIN_PHYSICAL, MIN_STEP,
 };
 use crate::model::{
-    box_inertia, clip, frame_from_axis, rotation_from_vector, ForceCurve, ForceLaw, JointKind,
-    Load, LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint, RotationalSpring, Sensor,
-    SensorFrame, SensorKind, SpringDamper, SpringLaw, SpringSide, TimeFunction,
+    box_inertia, clip, frame_from_axis, rotation_from_vector, Bushing, ForceCurve, ForceLaw,
+    JointKind, Load, LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint, RotationalSpring,
+    Sensor, SensorFrame, SensorKind, SpringDamper, SpringLaw, SpringSide, TimeFunction,
 };
 use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
-use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
+use flexmb_lie::{so3, Frame, Group, Mat3, Mat6, Vec3};
 use std::collections::HashMap;
 
 const TOP_KEYS: &[&str] = &[
@@ -37,6 +37,7 @@ const TOP_KEYS: &[&str] = &[
     "reference",
     "criterion",
     "rotational_spring",
+    "bushing",
 ];
 /// The keys of a `[[sensor]]`: `name`, `type`, then those a type may use.
 const SENSOR_KEYS: &[&str] = &[
@@ -50,6 +51,7 @@ const SENSOR_KEYS: &[&str] = &[
     "beam",
     "spring",
     "rope",
+    "bushing",
 ];
 const NODE_STATE_KEYS: &[&str] = &[
     "position",
@@ -118,6 +120,7 @@ pub(super) struct Origins {
     springs: Vec<Origin>,
     ropes: Vec<Origin>,
     rotational_springs: Vec<Origin>,
+    bushings: Vec<Origin>,
     /// One per element of `Model::beams`.
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
@@ -183,6 +186,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     read_springs(&top, &mut model, &mut origins)?;
     read_ropes(&top, &mut model, &mut origins)?;
     read_rotational_springs(&top, &mut model, &mut origins)?;
+    read_bushings(&top, &mut model, &mut origins)?;
     read_sensors(&top, &mut model, &mut origins)?;
 
     model
@@ -212,6 +216,7 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
         "spring" => &origins.springs,
         "rope" => &origins.ropes,
         "rotational_spring" => &origins.rotational_springs,
+        "bushing" => &origins.bushings,
         "beam" => &origins.beams,
         "sensor" => &origins.sensors,
         _ => &[],
@@ -1345,6 +1350,88 @@ fn stiffness_or_curve(t: &Table<'_>, law: Option<&ForceLaw>) -> Result<f64> {
     }
 }
 
+/// A 6 x 6 matrix: `[k1, ..., k6]` (diagonal) or six rows of six numbers. Symmetry and
+/// definiteness are checked by `Model::validate`.
+fn read_matrix6(f: &Field<'_>) -> Result<Mat6> {
+    let rows = f.array()?;
+    if rows.len() == 6 && rows.iter().all(|v| !v.get_ref().is_array()) {
+        let d = f.numbers(6, "6 numbers (the diagonal) or 6 rows of 6 numbers")?;
+        return Ok(Mat6::from_diagonal(&flexmb_lie::Vec6::from_column_slice(
+            &d,
+        )));
+    }
+    if rows.len() != 6 {
+        return Err(f.err(format!(
+            "expected 6 numbers (the diagonal) or 6 rows of 6 numbers, got an array of {}",
+            rows.len()
+        )));
+    }
+    let mut m = Mat6::zeros();
+    for (i, v) in rows.iter().enumerate() {
+        let row = f.elem(i, v).numbers(6, "a row of 6 numbers")?;
+        for (j, x) in row.into_iter().enumerate() {
+            m[(i, j)] = x;
+        }
+    }
+    Ok(m)
+}
+
+fn read_bushings(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+    let mut names = HashMap::new();
+    for t in top.items("bushing")? {
+        t.check_keys(&[
+            "name",
+            "node_a",
+            "node_b",
+            "position",
+            "orientation",
+            "stiffness",
+            "damping",
+        ])?;
+        let name = read_name(&t, &mut names, "bushing")?;
+        let node_a = match t.field("node_a") {
+            Some(f) => resolve_node(model, origins, &f, true)?,
+            None => None,
+        };
+        let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
+        let position = match opt_point(&t, "position")? {
+            Some(p) => p,
+            None => node_b
+                .or(node_a)
+                .map_or(Vec3::zeros(), |n| model.nodes[n.0].frame.x),
+        };
+        let orientation = match t.field("orientation") {
+            Some(f) => read_orientation(&f)?,
+            None => Mat3::identity(),
+        };
+        let stiffness = read_matrix6(&t.req("stiffness")?)?;
+        let damping = match t.field("damping") {
+            Some(f) => read_matrix6(&f)?,
+            None => Mat6::zeros(),
+        };
+        let at = Frame::new(position, orientation);
+        let local = |n: Option<NodeId>| match n {
+            Some(id) => model.nodes[id.0].frame.inverse().compose(&at),
+            None => at,
+        };
+        model.bushings.push(Bushing {
+            name,
+            node_a,
+            node_b,
+            frame_a: local(node_a),
+            frame_b: local(node_b),
+            stiffness,
+            damping,
+        });
+        origins.bushings.push(
+            Origin::of(&t)
+                .alias("frame_a", "position")
+                .alias("frame_b", "position"),
+        );
+    }
+    Ok(())
+}
+
 fn read_rotational_springs(
     top: &Table<'_>,
     model: &mut Model,
@@ -1540,6 +1627,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "spring_force",
             "rope_force",
             "rotational_spring_torque",
+            "bushing_force",
         ])?;
         let why = format!("for a {ty} sensor");
         let uses: &[&str] = match ty {
@@ -1552,6 +1640,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "spring_force" => &["spring"],
             "rope_force" => &["rope"],
             "rotational_spring_torque" => &["spring"],
+            "bushing_force" => &["bushing", "component"],
             _ => &[],
         };
         // The keys after `name` and `type`: each sensor type uses some of them.
@@ -1676,6 +1765,12 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                 let plural = "rotational springs";
                 let spring = item_named(&t.req("spring")?, names, "rotational spring", plural)?;
                 SensorKind::RotationalSpringTorque { spring }
+            }
+            "bushing_force" => {
+                let names = || model.bushings.iter().map(|b| b.name.as_str());
+                let bushing = item_named(&t.req("bushing")?, names, "bushing", "bushings")?;
+                let component = component(&["fx", "fy", "fz", "mx", "my", "mz"])?;
+                SensorKind::BushingForce { bushing, component }
             }
             "kinetic_energy" => SensorKind::KineticEnergy,
             "potential_energy" => SensorKind::PotentialEnergy,
