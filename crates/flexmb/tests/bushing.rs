@@ -4,7 +4,7 @@
 //! natural frequencies of a rigid body on a bushing with a diagonal stiffness at its centre
 //! of mass (`sqrt(k_i / m)`, `sqrt(k_(3+i) / J_i)`); the example `engine_mount.toml`.
 
-use flexmb::model::{Bushing, Load, LoadFrame, Model, TimeFunction};
+use flexmb::model::{Bushing, BushingForm, Load, LoadFrame, Model, TimeFunction};
 use flexmb::solve::{StaticSettings, Statics};
 use flexmb::{DynamicSettings, Simulation};
 use flexmb_lie::{so3, Frame, Group, Mat3, Mat6, Vec3, Vec6};
@@ -14,10 +14,10 @@ mod common;
 
 const K: [f64; 6] = [2e4, 3e4, 5e4, 800.0, 1500.0, 2800.0];
 
-/// A body of mass 10 kg and inertia diag(0.2, 0.3, 0.5) kg m^2 at `position`, on a bushing
-/// from the ground at its centre of mass (frames aligned with the body), loaded at its
-/// centre by `force` and `torque` (in `frame`), without gravity.
-fn mounted(force: Vec3, torque: Vec3, frame: LoadFrame) -> Model {
+/// A body of mass 10 kg and inertia diag(0.2, 0.3, 0.5) kg m^2 on a bushing (`form`) from
+/// the ground at its centre of mass (frames aligned with the body), loaded at its centre by
+/// `force` and `torque` (in `frame`), without gravity.
+fn mounted(form: BushingForm, force: Vec3, torque: Vec3, frame: LoadFrame) -> Model {
     let mut m = Model::new(Group::SE3);
     let at = Frame::new(
         Vec3::new(0.3, -0.2, 1.0),
@@ -34,6 +34,7 @@ fn mounted(force: Vec3, torque: Vec3, frame: LoadFrame) -> Model {
         frame_b: Frame::identity(),
         stiffness: Mat6::from_diagonal(&Vec6::from_column_slice(&K)),
         damping: Mat6::zeros(),
+        form,
     });
     m.loads.push(Load {
         name: "load".into(),
@@ -71,8 +72,16 @@ fn static_deflection_under_a_force_is_k_inverse_f() {
     let f = Vec3::new(400.0, -900.0, 2500.0);
     let expected = Vec3::new(f.x / K[0], f.y / K[1], f.z / K[2]);
     let moment = -expected.cross(&f) * 0.5;
-    let rel = static_deflection(&mounted(f, moment, LoadFrame::Body));
+    let large = BushingForm::LargeRotation;
+    let rel = static_deflection(&mounted(large, f, moment, LoadFrame::Body));
     println!("translation {:?} vs K^-1 F {:?}", rel.x, expected);
+    assert!((rel.x - expected).norm() < 1e-10 * expected.norm());
+    assert!(so3::log(&rel.r).norm() < 1e-12);
+    // The small-rotation form's elastic centre is frame B's origin: the force alone holds
+    // u = K^-1 F (its delta u = R_rel U_B, and R_rel = I).
+    let small = BushingForm::SmallRotation;
+    let rel = static_deflection(&mounted(small, f, Vec3::zeros(), LoadFrame::Body));
+    println!("small-rotation form: translation {:?}", rel.x);
     assert!((rel.x - expected).norm() < 1e-10 * expected.norm());
     assert!(so3::log(&rel.r).norm() < 1e-12);
 }
@@ -83,10 +92,15 @@ fn static_rotation_under_a_large_torque_is_m_over_k() {
     // deformation is d = (0, phi e_z) and T^-1(d)^T K d = K d (T(theta) theta = theta), so
     // phi = M / k_rz exactly, here 2 rad (115 degrees). The same about x (1.2 rad) and y
     // (2.8 rad, 160 degrees).
-    for (axis, k, phi) in [(2, K[5], 2.0), (0, K[3], 1.2), (1, K[4], 2.8)] {
+    // The small-rotation form gives the same (T^-1(phi)^T phi = phi on SO(3) as well).
+    let forms = [BushingForm::LargeRotation, BushingForm::SmallRotation];
+    for (form, (axis, k, phi)) in forms
+        .into_iter()
+        .flat_map(|f| [(2, K[5], 2.0), (0, K[3], 1.2), (1, K[4], 2.8)].map(|c| (f, c)))
+    {
         let mut torque = Vec3::zeros();
         torque[axis] = k * phi;
-        let rel = static_deflection(&mounted(Vec3::zeros(), torque, LoadFrame::Body));
+        let rel = static_deflection(&mounted(form, Vec3::zeros(), torque, LoadFrame::Body));
         let rotation = so3::log(&rel.r);
         let mut expected = Vec3::zeros();
         expected[axis] = phi;
@@ -121,9 +135,10 @@ fn bushing_mounted_body_has_the_six_natural_frequencies() {
     // rotations is far below the tolerance) and its period measured from the response.
     let (m, j) = (10.0, [0.2, 0.3, 0.5]);
     let mass = [m, m, m, j[0], j[1], j[2]];
-    for mode in 0..6 {
+    let forms = [BushingForm::LargeRotation, BushingForm::SmallRotation];
+    for (form, mode) in forms.into_iter().flat_map(|f| (0..6).map(move |m| (f, m))) {
         let omega = (K[mode] / mass[mode]).sqrt();
-        let mut model = mounted(Vec3::zeros(), Vec3::zeros(), LoadFrame::Body);
+        let mut model = mounted(form, Vec3::zeros(), Vec3::zeros(), LoadFrame::Body);
         let r = model.nodes[0].frame.r;
         if mode < 3 {
             model.nodes[0].velocity = r.column(mode) * (1e-5 * omega);
@@ -157,10 +172,13 @@ fn bushing_mounted_body_has_the_six_natural_frequencies() {
         // (omega h)^2 / 12 (Chung & Hulbert 1993)
         let expected = period * (1.0 + (omega * h).powi(2) / 12.0);
         println!(
-            "mode {mode}: period {measured:.8} s vs {expected:.8} s (2 pi / omega = {period:.8}), error {:.2e}",
+            "{form:?}, mode {mode}: period {measured:.8} s vs {expected:.8} s (2 pi / omega = {period:.8}), error {:.2e}",
             measured / expected - 1.0
         );
-        assert!((measured / expected - 1.0).abs() < 1e-5, "mode {mode}");
+        assert!(
+            (measured / expected - 1.0).abs() < 1e-5,
+            "{form:?}, mode {mode}"
+        );
     }
 }
 

@@ -936,13 +936,20 @@ fn spd6(rng: &mut Lcg, diagonal: [f64; 6]) -> Mat6 {
 
 #[test]
 fn bushing_tangents_match_finite_differences() {
-    // Between two nodes and from the ground, frame offsets on both sides, relative rotations
-    // up to about 2 rad, coupled stiffness and damping.
-    use flexmb::model::Bushing;
+    // Both forms, between two nodes and from the ground, frame offsets on both sides,
+    // relative rotations up to about 2 rad, coupled stiffness and damping.
+    use flexmb::model::{Bushing, BushingForm};
     let mut rng = Lcg(11);
     let model = models().pop().expect("the SE(3) model");
     assert_eq!(model.group, Group::SE3);
-    for ground_a in [false, true, false] {
+    for (form, ground_a) in [
+        (BushingForm::LargeRotation, false),
+        (BushingForm::LargeRotation, true),
+        (BushingForm::LargeRotation, false),
+        (BushingForm::SmallRotation, false),
+        (BushingForm::SmallRotation, true),
+        (BushingForm::SmallRotation, false),
+    ] {
         let bushing = Bushing {
             name: "mount".into(),
             node_a: (!ground_a).then_some(NodeId(0)),
@@ -951,11 +958,12 @@ fn bushing_tangents_match_finite_differences() {
             frame_b: Group::SE3.exp(&rng.v6(1.0)),
             stiffness: spd6(&mut rng, [300.0, 200.0, 250.0, 40.0, 30.0, 50.0]),
             damping: spd6(&mut rng, [3.0, 2.0, 2.5, 0.4, 0.3, 0.5]),
+            form,
         };
         let mut nodes = [rng.node(model.group), rng.node(model.group)];
         if ground_a {
             nodes[0] = NodeState::ground(Frame::identity());
         }
-        check_element("bushing", &bushing, &model, &nodes);
+        check_element(&format!("bushing, {form:?}"), &bushing, &model, &nodes);
     }
 }

@@ -10,9 +10,10 @@ use crate::model::limits::{
     MAX_TIME, MIN_PHYSICAL, MIN_STEP,
 };
 use crate::model::{
-    box_inertia, clip, frame_from_axis, rotation_from_vector, Bushing, ForceCurve, ForceLaw,
-    JointKind, Load, LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint, RotationalSpring,
-    Sensor, SensorFrame, SensorKind, SpringDamper, SpringLaw, SpringSide, TimeFunction,
+    box_inertia, clip, frame_from_axis, rotation_from_vector, Bushing, BushingForm, ForceCurve,
+    ForceLaw, JointKind, Load, LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint,
+    RotationalSpring, Sensor, SensorFrame, SensorKind, SpringDamper, SpringLaw, SpringSide,
+    TimeFunction,
 };
 use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
 use flexmb_lie::{so3, Frame, Group, Mat3, Mat6, Vec3};
@@ -1387,6 +1388,7 @@ fn read_bushings(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> R
             "orientation",
             "stiffness",
             "damping",
+            "form",
         ])?;
         let name = read_name(&t, &mut names, "bushing")?;
         let node_a = match t.field("node_a") {
@@ -1422,6 +1424,10 @@ fn read_bushings(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> R
             frame_b: local(node_b),
             stiffness,
             damping,
+            form: match t.opt_choice("form", &["large_rotation", "small_rotation"])? {
+                Some("small_rotation") => BushingForm::SmallRotation,
+                _ => BushingForm::LargeRotation,
+            },
         });
         origins.bushings.push(
             Origin::of(&t)

@@ -278,10 +278,11 @@ pub struct RotationalSpring {
 }
 
 /// A 6-DOF bushing between a frame on node A and a frame on node B (either may be the
-/// ground): with `d = log(H_A^-1 H_B)` the relative configuration of the two frames on SE(3)
-/// (translation, then rotation; 0 where the frames coincide), the bushing's stress
-/// resultants are `sigma = K d + C ddot` in the bushing frame (a linear law in `d`, exact
-/// for large relative rotations). See [`crate::elements::bushing`]. SE(3) models only.
+/// ground): with `d` the relative configuration of the two frames ([`BushingForm`]: the SE(3)
+/// logarithm `log(H_A^-1 H_B)`, or the position and rotation vector of B in A; translation,
+/// then rotation; 0 where the frames coincide), the bushing's stress resultants are
+/// `sigma = K d + C ddot` in the bushing frame. See [`crate::elements::bushing`]. SE(3)
+/// models only.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Bushing {
     pub name: String,
@@ -297,6 +298,21 @@ pub struct Bushing {
     pub stiffness: flexmb_lie::Mat6,
     /// Damping C (6 x 6, symmetric positive semidefinite), the same order [N s/m ...].
     pub damping: flexmb_lie::Mat6,
+    /// The deformation measure.
+    pub form: BushingForm,
+}
+
+/// The deformation measure `d` of a [`Bushing`] (both coincide to first order).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum BushingForm {
+    /// The SE(3) logarithm of the relative configuration `log(H_A^-1 H_B)`: objective for
+    /// large relative rotations, the elastic centre midway between the frames.
+    #[default]
+    LargeRotation,
+    /// The R3 x SO(3) logarithm: the position of frame B in frame A and the rotation vector
+    /// of the relative rotation, `(R_A^T (x_B - x_A), log(R_A^T R_B))`: the usual bushing,
+    /// the elastic centre at frame B's origin; for small relative rotations.
+    SmallRotation,
 }
 
 /// A point a rope passes through: fixed on a node (node frame) or on the ground (inertial).
