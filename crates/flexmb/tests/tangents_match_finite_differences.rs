@@ -967,3 +967,149 @@ fn bushing_tangents_match_finite_differences() {
         check_element(&format!("bushing, {form:?}"), &bushing, &model, &nodes);
     }
 }
+
+/// The elastic residual is the gradient of the potential energy: at rest (no damping
+/// force), `r . e_k = dV/dw_k` by central differences on the manifold, for every node
+/// direction `k` of an element with a potential.
+fn check_energy_gradient(
+    name: &str,
+    kernel: &dyn ElementKernel,
+    model: &Model,
+    nodes: &[NodeState],
+    x: &[f64],
+) {
+    let group = model.group;
+    let ctx = Context::at(model, 0.37, 1.0);
+    let mut rest = nodes.to_vec();
+    for n in &mut rest {
+        n.v = Vec6::zeros();
+        n.vdot = Vec6::zeros();
+    }
+    let xdot = vec![0.0; x.len()];
+    let local = Local {
+        nodes: &rest,
+        x,
+        xdot: &xdot,
+    };
+    let (r, _) = evaluate_owned(kernel, &ctx, &local, None);
+    let energy = |nodes: &[NodeState]| {
+        kernel.potential_energy(
+            &ctx,
+            &Local {
+                nodes,
+                x,
+                xdot: &xdot,
+            },
+        )
+    };
+    let scale = 1.0 + r.abs().max();
+    for k in (0..6 * rest.len()).filter(|&k| kernel.node(k / 6).is_some()) {
+        let dv = (energy(&perturb(group, &rest, k, EPS, 'q'))
+            - energy(&perturb(group, &rest, k, -EPS, 'q')))
+            / (2.0 * EPS);
+        assert!(
+            (dv - r[k]).abs() < 1e-6 * scale,
+            "{name}: dV/dw_{k} = {dv:.9e} vs residual {:.9e}",
+            r[k]
+        );
+    }
+}
+
+#[test]
+fn elastic_forces_are_the_gradients_of_the_potential_energies() {
+    use flexmb::elements::rotational_spring::{joint_angle, RotationalSpringElement};
+    use flexmb::elements::spring::SpringElement;
+    use flexmb::model::{Bushing, BushingForm, ForceCurve, ForceLaw, RotationalSpring, SpringSide};
+    use std::borrow::Cow;
+    let mut rng = Lcg(12);
+    let table = ForceCurve::Table(vec![(-0.5, -80.0), (0.1, 5.0), (0.5, 60.0), (1.0, 90.0)]);
+    let cubic = ForceCurve::Polynomial(vec![40.0, 0.0, 2.0]);
+    for model in models() {
+        let group = model.group;
+        // nonlinear springs: preloaded two-sided table, per-side curves, an acting bump stop
+        for (law, rest_length) in [
+            (
+                ForceLaw {
+                    preload: 7.5,
+                    curve: Some(table.clone()),
+                    ..ForceLaw::default()
+                },
+                0.4,
+            ),
+            (
+                ForceLaw {
+                    compression: Some(cubic.clone()),
+                    extension: Some(table.clone()),
+                    ..ForceLaw::default()
+                },
+                0.8,
+            ),
+            (
+                ForceLaw {
+                    acts: SpringSide::Compression,
+                    curve: Some(cubic.clone()),
+                    ..ForceLaw::default()
+                },
+                5.0,
+            ),
+        ] {
+            let mut spring = law_spring(false, rest_length);
+            spring.damping = 0.0;
+            let element = SpringElement {
+                spring: Cow::Borrowed(&spring),
+                law: Some(&law),
+            };
+            let nodes = [rng.node(group), rng.node(group)];
+            check_energy_gradient(&format!("spring {law:?}"), &element, &model, &nodes, &[]);
+        }
+        // a rotational spring with a law, wound four turns
+        let mut m = model.clone();
+        m.nodes[0].frame = group.exp(&rng.v6(1.0));
+        m.nodes[1].frame = group.exp(&rng.v6(1.0));
+        let joint = m.add_joint(
+            "hinge",
+            flexmb::model::JointKind::Revolute,
+            Some(NodeId(0)),
+            Some(NodeId(1)),
+            rng.v3(1.0),
+            flexmb_lie::so3::exp(&rng.v3(1.0)),
+            None,
+        );
+        let spring = RotationalSpring {
+            name: "torsion".into(),
+            joint,
+            stiffness: 35.0,
+            damping: 0.0,
+            angle: 0.3,
+            law: ForceLaw {
+                preload: 3.0,
+                curve: Some(ForceCurve::Polynomial(vec![5.0, 0.0, 0.02])),
+                ..ForceLaw::default()
+            },
+        };
+        let element = RotationalSpringElement {
+            spring: &spring,
+            joint: &m.joints[joint.0],
+        };
+        let nodes = [rng.node(group), rng.node(group)];
+        let x = [joint_angle(element.joint, &nodes).0 + 8.0 * std::f64::consts::PI];
+        check_energy_gradient("rotational spring", &element, &m, &nodes, &x);
+        // bushings (SE(3))
+        if group == Group::SE3 {
+            for form in [BushingForm::LargeRotation, BushingForm::SmallRotation] {
+                let bushing = Bushing {
+                    name: "mount".into(),
+                    node_a: Some(NodeId(0)),
+                    node_b: Some(NodeId(1)),
+                    frame_a: Group::SE3.exp(&rng.v6(1.0)),
+                    frame_b: Group::SE3.exp(&rng.v6(1.0)),
+                    stiffness: spd6(&mut rng, [300.0, 200.0, 250.0, 40.0, 30.0, 50.0]),
+                    damping: Mat6::zeros(),
+                    form,
+                };
+                let nodes = [rng.node(group), rng.node(group)];
+                check_energy_gradient(&format!("bushing {form:?}"), &bushing, &model, &nodes, &[]);
+            }
+        }
+    }
+}
