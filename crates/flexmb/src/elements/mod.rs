@@ -189,9 +189,10 @@ pub enum ElementRef {
     Load(usize),
     Spring(usize),
     Rope(usize),
-    /// A spring-damper with a nonlinear law (index in [`Model::springs`]; its place in
-    /// [`ElementItem::all`] is that of [`ElementItem::Spring`]).
-    NonlinearSpring(usize),
+    /// A spring-damper with a nonlinear law: indices in [`Model::springs`] and
+    /// [`Model::spring_laws`] (its place in [`ElementItem::all`] is that of
+    /// [`ElementItem::Spring`]).
+    NonlinearSpring(usize, usize),
     /// Index in [`Model::rotational_springs`].
     RotationalSpring(usize),
     /// Index in [`Model::bushings`].
@@ -406,6 +407,13 @@ impl ElementRef {
     /// All force elements of a model (beam mass matrices computed here), in the order of
     /// [`ElementItem::all`].
     pub fn all(model: &Model) -> Vec<ElementRef> {
+        let mut laws = vec![None; model.springs.len()];
+        // (the first law of a spring, like `Model::spring_law`; validation allows one)
+        for (k, law) in model.spring_laws.iter().enumerate().rev() {
+            if let Some(slot) = laws.get_mut(law.spring) {
+                *slot = Some(k);
+            }
+        }
         ElementItem::all(model)
             .map(|item| match item {
                 ElementItem::Body(i) => ElementRef::Body(i),
@@ -413,10 +421,10 @@ impl ElementRef {
                     ElementRef::Beam(i, Arc::new(beam::mass_matrix(&model.beams[i])))
                 }
                 ElementItem::Load(i) => ElementRef::Load(i),
-                ElementItem::Spring(i) if model.spring_law(i).is_some() => {
-                    ElementRef::NonlinearSpring(i)
-                }
-                ElementItem::Spring(i) => ElementRef::Spring(i),
+                ElementItem::Spring(i) => match laws[i] {
+                    Some(k) => ElementRef::NonlinearSpring(i, k),
+                    None => ElementRef::Spring(i),
+                },
                 ElementItem::Rope(i) => ElementRef::Rope(i),
                 ElementItem::RotationalSpring(i) => ElementRef::RotationalSpring(i),
                 ElementItem::Bushing(i) => ElementRef::Bushing(i),
@@ -435,9 +443,10 @@ impl ElementRef {
             ElementRef::Load(i) => Kernel::Load(&model.loads[*i]),
             ElementRef::Spring(i) => Kernel::Spring(&model.springs[*i]),
             ElementRef::Rope(i) => Kernel::Rope(&model.ropes[*i]),
-            ElementRef::NonlinearSpring(i) => {
-                Kernel::NonlinearSpring(spring::SpringElement::of(model, *i))
-            }
+            ElementRef::NonlinearSpring(i, k) => Kernel::NonlinearSpring(spring::SpringElement {
+                spring: std::borrow::Cow::Borrowed(&model.springs[*i]),
+                law: Some(&model.spring_laws[*k].law),
+            }),
             ElementRef::RotationalSpring(i) => {
                 Kernel::RotationalSpring(rotational_spring::RotationalSpringElement::of(model, *i))
             }
@@ -453,7 +462,7 @@ impl ElementRef {
             ElementRef::Load(i) => format!("load '{}'", model.loads[*i].name),
             ElementRef::Spring(i) => format!("spring '{}'", model.springs[*i].name),
             ElementRef::Rope(i) => format!("rope '{}'", model.ropes[*i].name),
-            ElementRef::NonlinearSpring(i) => format!("spring '{}'", model.springs[*i].name),
+            ElementRef::NonlinearSpring(i, _) => format!("spring '{}'", model.springs[*i].name),
             ElementRef::RotationalSpring(i) => {
                 format!("rotational spring '{}'", model.rotational_springs[*i].name)
             }
