@@ -209,7 +209,7 @@ pub fn sensor_value(
         SensorKind::BushingForce { bushing, component } => {
             let b = &model.bushings[*bushing];
             buffers.gather(b, nodes, (&state.x, &state.xdot, 0));
-            b.state(buffers.local(nodes).nodes).sigma[*component]
+            b.state(model.group, buffers.local(nodes).nodes).sigma[*component]
         }
         kind @ (SensorKind::KineticEnergy
         | SensorKind::PotentialEnergy

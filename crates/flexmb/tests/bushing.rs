@@ -18,7 +18,18 @@ const K: [f64; 6] = [2e4, 3e4, 5e4, 800.0, 1500.0, 2800.0];
 /// the ground at its centre of mass (frames aligned with the body), loaded at its centre by
 /// `force` and `torque` (in `frame`), without gravity.
 fn mounted(form: BushingForm, force: Vec3, torque: Vec3, frame: LoadFrame) -> Model {
-    let mut m = Model::new(Group::SE3);
+    mounted_on(Group::SE3, form, force, torque, frame)
+}
+
+/// [`mounted`] on `group`.
+fn mounted_on(
+    group: Group,
+    form: BushingForm,
+    force: Vec3,
+    torque: Vec3,
+    frame: LoadFrame,
+) -> Model {
+    let mut m = Model::new(group);
     let at = Frame::new(
         Vec3::new(0.3, -0.2, 1.0),
         so3::exp(&Vec3::new(0.2, 0.5, -0.4)),
@@ -135,10 +146,16 @@ fn bushing_mounted_body_has_the_six_natural_frequencies() {
     // rotations is far below the tolerance) and its period measured from the response.
     let (m, j) = (10.0, [0.2, 0.3, 0.5]);
     let mass = [m, m, m, j[0], j[1], j[2]];
-    let forms = [BushingForm::LargeRotation, BushingForm::SmallRotation];
-    for (form, mode) in forms.into_iter().flat_map(|f| (0..6).map(move |m| (f, m))) {
+    let cases = [
+        (Group::SE3, BushingForm::LargeRotation),
+        (Group::SE3, BushingForm::SmallRotation),
+        (Group::R3xSO3, BushingForm::LargeRotation),
+        (Group::R3xSO3, BushingForm::SmallRotation),
+    ];
+    for ((group, form), mode) in cases.into_iter().flat_map(|c| (0..6).map(move |m| (c, m))) {
         let omega = (K[mode] / mass[mode]).sqrt();
-        let mut model = mounted(form, Vec3::zeros(), Vec3::zeros(), LoadFrame::Body);
+        let zero = Vec3::zeros();
+        let mut model = mounted_on(group, form, zero, zero, LoadFrame::Body);
         let r = model.nodes[0].frame.r;
         if mode < 3 {
             model.nodes[0].velocity = r.column(mode) * (1e-5 * omega);
@@ -172,12 +189,12 @@ fn bushing_mounted_body_has_the_six_natural_frequencies() {
         // (omega h)^2 / 12 (Chung & Hulbert 1993)
         let expected = period * (1.0 + (omega * h).powi(2) / 12.0);
         println!(
-            "{form:?}, mode {mode}: period {measured:.8} s vs {expected:.8} s (2 pi / omega = {period:.8}), error {:.2e}",
+            "{group:?}, {form:?}, mode {mode}: period {measured:.8} s vs {expected:.8} s (2 pi / omega = {period:.8}), error {:.2e}",
             measured / expected - 1.0
         );
         assert!(
             (measured / expected - 1.0).abs() < 1e-5,
-            "{form:?}, mode {mode}"
+            "{group:?} {form:?}, mode {mode}"
         );
     }
 }

@@ -705,10 +705,10 @@ fn parameter_derivatives_match_finite_differences_on_rotational_springs() {
 }
 
 /// Two bodies on bushings: one between them with frame offsets and full matrices
-/// (large-rotation form), one from the ground (small-rotation form) (SE(3)).
-fn bushings() -> Model {
+/// (large-rotation form), one from the ground (small-rotation form).
+fn bushings(group: Group) -> Model {
     use flexmb::model::Bushing;
-    let mut m = Model::new(Group::SE3);
+    let mut m = Model::new(group);
     let a = m.add_node("a", Frame::new(Vec3::new(0.1, 0.2, -0.3), Mat3::identity()));
     let b = m.add_node(
         "b",
@@ -758,11 +758,13 @@ fn parameter_derivatives_match_finite_differences_on_bushings() {
     // (a seed at which no rate of the deformation is near zero: the relative error of a
     // column is measured against its own size)
     let mut rng = Lcg(12);
-    let model = bushings();
-    model.validate().expect("valid");
-    for _ in 0..3 {
-        let at = point(&model, &mut rng, 0.8);
-        check_model("bushings", &model, &at, &mut seen);
+    for group in [Group::SE3, Group::R3xSO3] {
+        let model = bushings(group);
+        model.validate().expect("valid");
+        for _ in 0..3 {
+            let at = point(&model, &mut rng, 0.8);
+            check_model(&format!("bushings on {group:?}"), &model, &at, &mut seen);
+        }
     }
     let kinds: Vec<&String> = seen
         .kinds

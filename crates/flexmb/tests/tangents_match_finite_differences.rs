@@ -940,31 +940,31 @@ fn bushing_tangents_match_finite_differences() {
     // relative rotations up to about 2 rad, coupled stiffness and damping.
     use flexmb::model::{Bushing, BushingForm};
     let mut rng = Lcg(11);
-    let model = models().pop().expect("the SE(3) model");
-    assert_eq!(model.group, Group::SE3);
-    for (form, ground_a) in [
-        (BushingForm::LargeRotation, false),
-        (BushingForm::LargeRotation, true),
-        (BushingForm::LargeRotation, false),
-        (BushingForm::SmallRotation, false),
-        (BushingForm::SmallRotation, true),
-        (BushingForm::SmallRotation, false),
-    ] {
-        let bushing = Bushing {
-            name: "mount".into(),
-            node_a: (!ground_a).then_some(NodeId(0)),
-            node_b: Some(NodeId(1)),
-            frame_a: Group::SE3.exp(&rng.v6(1.0)),
-            frame_b: Group::SE3.exp(&rng.v6(1.0)),
-            stiffness: spd6(&mut rng, [300.0, 200.0, 250.0, 40.0, 30.0, 50.0]),
-            damping: spd6(&mut rng, [3.0, 2.0, 2.5, 0.4, 0.3, 0.5]),
-            form,
-        };
-        let mut nodes = [rng.node(model.group), rng.node(model.group)];
-        if ground_a {
-            nodes[0] = NodeState::ground(Frame::identity());
+    for model in models() {
+        for (form, ground_a) in [
+            (BushingForm::LargeRotation, false),
+            (BushingForm::LargeRotation, true),
+            (BushingForm::LargeRotation, false),
+            (BushingForm::SmallRotation, false),
+            (BushingForm::SmallRotation, true),
+            (BushingForm::SmallRotation, false),
+        ] {
+            let bushing = Bushing {
+                name: "mount".into(),
+                node_a: (!ground_a).then_some(NodeId(0)),
+                node_b: Some(NodeId(1)),
+                frame_a: Group::SE3.exp(&rng.v6(1.0)),
+                frame_b: Group::SE3.exp(&rng.v6(1.0)),
+                stiffness: spd6(&mut rng, [300.0, 200.0, 250.0, 40.0, 30.0, 50.0]),
+                damping: spd6(&mut rng, [3.0, 2.0, 2.5, 0.4, 0.3, 0.5]),
+                form,
+            };
+            let mut nodes = [rng.node(model.group), rng.node(model.group)];
+            if ground_a {
+                nodes[0] = NodeState::ground(Frame::identity());
+            }
+            check_element(&format!("bushing, {form:?}"), &bushing, &model, &nodes);
         }
-        check_element(&format!("bushing, {form:?}"), &bushing, &model, &nodes);
     }
 }
 
@@ -1094,8 +1094,8 @@ fn elastic_forces_are_the_gradients_of_the_potential_energies() {
         let nodes = [rng.node(group), rng.node(group)];
         let x = [joint_angle(element.joint, &nodes).0 + 8.0 * std::f64::consts::PI];
         check_energy_gradient("rotational spring", &element, &m, &nodes, &x);
-        // bushings (SE(3))
-        if group == Group::SE3 {
+        // bushings
+        {
             for form in [BushingForm::LargeRotation, BushingForm::SmallRotation] {
                 let bushing = Bushing {
                     name: "mount".into(),

@@ -74,8 +74,14 @@
 //! law depends on which node is A: the usual small-rotation bushing, for relative rotations
 //! of a few degrees; the large-rotation form for more.
 //!
-//! The element needs SE(3) nodes (the variations and velocities above are SE(3)'s); on
-//! R3xSO(3) the model is rejected, like a beam.
+//! The variations and velocities above are SE(3)'s. On R3xSO(3), whose node variations and
+//! velocities are `(dx, theta)` and `(xdot, Omega)` (inertial translation), the element is
+//! evaluated in the nodes' SE(3) body coordinates `w_s = P^T w`, `v_s = P^T v`,
+//! `P = blockdiag(R, I)` per node, and converted: `r = P r_s`,
+//! `K = P K_s P^T - [R tilde(f_u)] + P C_s [tilde(U)]`, `C = P C_s P^T`, the second term the
+//! derivative of `R` at fixed `r_s` (translation rows, rotation columns; `f_u` the
+//! translation part of `r_s`), the third that of `v_s = (R^T xdot, Omega)` at fixed `xdot`
+//! (`U = R^T xdot`).
 //!
 //! **Parameter derivatives** ([`BushingParam`]): with `E` the unit symmetric matrix of the
 //! entry `(i, j)`, `dr/dK_ij = P^T E d`, `dr/dC_ij = P^T E ddot`.
@@ -93,7 +99,7 @@ use super::{
 use crate::model::parameters::BushingParam;
 use crate::model::{Bushing, BushingForm, NodeId};
 use flexmb_lie::so3::{self, hat};
-use flexmb_lie::{se3, Frame, Mat3, Mat6, Vec3, Vec6};
+use flexmb_lie::{se3, Frame, Group, Mat3, Mat6, Vec3, Vec6};
 use nalgebra::SMatrix;
 
 /// The deformation of a bushing and what it derives from it.
@@ -115,8 +121,9 @@ pub struct BushingState {
 }
 
 impl Bushing {
-    /// The deformation at the slots' kinematics (a ground slot at rest at the identity).
-    pub fn state(&self, nodes: &[NodeState]) -> BushingState {
+    /// The deformation at the slots' kinematics (a ground slot at rest at the identity) on
+    /// the model's `group`.
+    pub fn state(&self, group: Group, nodes: &[NodeState]) -> BushingState {
         let ha = nodes[0].q.compose(&self.frame_a);
         let hb = nodes[1].q.compose(&self.frame_b);
         let rel = ha.inverse().compose(&hb);
@@ -149,7 +156,7 @@ impl Bushing {
             let cols = pf.fixed_columns::<6>(6 * a) * map;
             p.fixed_columns_mut::<6>(6 * a).copy_from(&cols);
         }
-        let ddot = p * velocities(nodes);
+        let ddot = p * velocities(group, nodes);
         BushingState {
             d,
             ddot,
@@ -255,13 +262,44 @@ fn offset(f: &Frame) -> Mat6 {
     se3::big_ad(&f.inverse())
 }
 
-/// `[v_a; v_b]`.
-fn velocities(nodes: &[NodeState]) -> Vec12 {
+/// `[v_a; v_b]`, the nodes' SE(3) body velocities (`(R^T xdot, Omega)` on R3xSO(3)).
+fn velocities(group: Group, nodes: &[NodeState]) -> Vec12 {
     let mut v = Vec12::zeros();
     for (a, n) in nodes.iter().enumerate() {
         v.fixed_rows_mut::<6>(6 * a).copy_from(&n.v);
+        if group == Group::R3xSO3 {
+            let u = n.q.r.transpose() * n.v.fixed_rows::<3>(0);
+            v.fixed_rows_mut::<3>(6 * a).copy_from(&u);
+        }
     }
     v
+}
+
+/// On R3xSO(3), the residual, tangent stiffness and damping in the nodes' SE(3) body
+/// coordinates `(r_s, K_s, C_s)` to the group's (physical) coordinates (module
+/// documentation): `r = P r_s`, `K = P K_s P^T - [R tilde(f_u)] + P C_s [tilde(U)]`,
+/// `C = P C_s P^T`, `P = blockdiag(R, I)` per node.
+fn se3_to_r3so3(nodes: &[NodeState], r: &mut Vec12, k: &mut Mat12, c: &mut Mat12) {
+    let mut p = Mat12::identity();
+    for (a, n) in nodes.iter().enumerate() {
+        p.fixed_view_mut::<3, 3>(6 * a, 6 * a).copy_from(&n.q.r);
+    }
+    // the body velocity (R^T xdot, Omega) turns with R at fixed xdot: d(R^T xdot)/dtheta
+    let mut dv = Mat12::zeros();
+    for (a, n) in nodes.iter().enumerate() {
+        let u = n.q.r.transpose() * n.v.fixed_rows::<3>(0);
+        dv.fixed_view_mut::<3, 3>(6 * a, 6 * a + 3)
+            .copy_from(&hat(&u));
+    }
+    let mut kp = p * *k * p.transpose() + p * *c * dv;
+    for (a, n) in nodes.iter().enumerate() {
+        let f = r.fixed_rows::<3>(6 * a).into_owned();
+        let mut blk = kp.fixed_view_mut::<3, 3>(6 * a, 6 * a + 3);
+        blk -= n.q.r * hat(&f);
+    }
+    *k = kp;
+    *c = p * *c * p.transpose();
+    *r = p * *r;
 }
 
 impl ElementKernel for Bushing {
@@ -275,31 +313,44 @@ impl ElementKernel for Bushing {
 
     fn evaluate(
         &self,
-        _ctx: &Context,
+        ctx: &Context,
         local: &Local,
-        r: &mut LocalVector,
+        r_out: &mut LocalVector,
         s: Option<(&Coefficients, &mut LocalMatrix)>,
     ) {
         let nodes = local.nodes;
-        let st = self.state(nodes);
+        let st = self.state(ctx.group, nodes);
         let p = &st.p;
-        r.fixed_rows_mut::<12>(0)
-            .copy_from(&(p.transpose() * st.sigma));
+        let mut r: Vec12 = p.transpose() * st.sigma;
+        if s.is_none() {
+            if ctx.group == Group::R3xSO3 {
+                for (a, n) in nodes.iter().enumerate() {
+                    let f = n.q.r * r.fixed_rows::<3>(6 * a);
+                    r.fixed_rows_mut::<3>(6 * a).copy_from(&f);
+                }
+            }
+            r_out.fixed_rows_mut::<12>(0).copy_from(&r);
+            return;
+        }
         let Some((coef, s)) = s else {
             return;
         };
-        let v = velocities(nodes);
+        let v = velocities(ctx.group, nodes);
         let (geometric, rate) = self.derivatives(&st, &v);
         let pt = p.transpose();
-        let k: Mat12 = pt * self.stiffness * p + geometric + pt * self.damping * rate;
-        let c: Mat12 = pt * self.damping * p;
+        let mut k: Mat12 = pt * self.stiffness * p + geometric + pt * self.damping * rate;
+        let mut c: Mat12 = pt * self.damping * p;
+        if ctx.group == Group::R3xSO3 {
+            se3_to_r3so3(nodes, &mut r, &mut k, &mut c);
+        }
+        r_out.fixed_rows_mut::<12>(0).copy_from(&r);
         let mut s = s.fixed::<12>();
         s.copy_from(&(c * coef.c + k * coef.k));
         physical::apply_tangent_full(nodes, &self.active(), &mut s, coef, &k);
     }
 
-    fn potential_energy(&self, _ctx: &Context, local: &Local) -> f64 {
-        let d = self.state(local.nodes).d;
+    fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {
+        let d = self.state(ctx.group, local.nodes).d;
         0.5 * d.dot(&(self.stiffness * d))
     }
 }
@@ -309,18 +360,24 @@ impl ElementParameters for Bushing {
 
     fn parameter_derivative(
         &self,
-        _ctx: &Context,
+        ctx: &Context,
         p: BushingParam,
         local: &Local,
         dr: &mut LocalVector,
     ) -> DerivativeMethod {
-        let st = self.state(local.nodes);
+        let st = self.state(ctx.group, local.nodes);
         let dsigma = match p {
             BushingParam::Stiffness(i, j) => unit_symmetric::<6>(i, j) * st.d,
             BushingParam::Damping(i, j) => unit_symmetric::<6>(i, j) * st.ddot,
         };
-        dr.fixed_rows_mut::<12>(0)
-            .copy_from(&(st.p.transpose() * dsigma));
+        let mut d: Vec12 = st.p.transpose() * dsigma;
+        if ctx.group == Group::R3xSO3 {
+            for (a, n) in local.nodes.iter().enumerate() {
+                let f = n.q.r * d.fixed_rows::<3>(6 * a);
+                d.fixed_rows_mut::<3>(6 * a).copy_from(&f);
+            }
+        }
+        dr.fixed_rows_mut::<12>(0).copy_from(&d);
         DerivativeMethod::Analytic
     }
 }

@@ -281,8 +281,7 @@ pub struct RotationalSpring {
 /// ground): with `d` the relative configuration of the two frames ([`BushingForm`]: the SE(3)
 /// logarithm `log(H_A^-1 H_B)`, or the position and rotation vector of B in A; translation,
 /// then rotation; 0 where the frames coincide), the bushing's stress resultants are
-/// `sigma = K d + C ddot` in the bushing frame. See [`crate::elements::bushing`]. SE(3)
-/// models only.
+/// `sigma = K d + C ddot` in the bushing frame. See [`crate::elements::bushing`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Bushing {
     pub name: String,

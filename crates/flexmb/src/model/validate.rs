@@ -577,12 +577,6 @@ impl Model {
                 }
                 _ => {}
             }
-            if self.group != Group::SE3 {
-                return Err(fail(
-                    "name",
-                    "bushings are formulated on SE(3): set the model's group to \"SE3\"".into(),
-                ));
-            }
             local_frame(&b.frame_a).map_err(|m| fail("frame_a", m))?;
             local_frame(&b.frame_b).map_err(|m| fail("frame_b", m))?;
             for (m, field) in [(&b.stiffness, "stiffness"), (&b.damping, "damping")] {
