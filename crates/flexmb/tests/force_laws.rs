@@ -298,3 +298,31 @@ fn torsional_pendulum_wound_over_turns_has_frequency_sqrt_k_over_j() {
         }
     }
 }
+
+#[test]
+fn torsion_pendulum_example_follows_the_turns_and_conserves_energy() {
+    // examples/torsion_pendulum.toml: k = 2 N m/rad, J = 0.5 kg m^2, theta'(0) = 20 rad/s:
+    // amplitude 10 rad, energy 1/2 J theta'^2 = 100 J; the torque sensor is k theta over the
+    // turns (the joint_coordinate sensor unwraps the angle on its own, independently of the
+    // element's state).
+    let h = common::run("torsion_pendulum.toml", &[]);
+    let (angle, torque, energy) = (h.series("angle"), h.series("torque"), h.series("energy"));
+    let highest = angle.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+    let lowest = angle.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+    println!("swing {lowest:.6} .. {highest:.6} rad");
+    // the outputs every 0.01 s sample the turning points within 1 - cos(0.01) = 5e-5
+    assert!((highest - 10.0).abs() < 1e-3 && (lowest + 10.0).abs() < 1e-3);
+    for (&(t, a), &(_, m)) in angle.iter().zip(&torque) {
+        assert!(
+            (m - 2.0 * a).abs() < 1e-9,
+            "t = {t}: torque {m} vs k theta {}",
+            2.0 * a
+        );
+    }
+    let drift = energy
+        .iter()
+        .map(|p| (p.1 - 100.0).abs())
+        .fold(0.0, f64::max);
+    println!("largest energy error {drift:.3e} J");
+    assert!(drift < 1e-5, "energy drift {drift}");
+}
