@@ -45,6 +45,8 @@
 //! - M. Arnold, O. Brüls, A. Cardona, Error analysis of generalized-alpha Lie group time
 //!   integration methods for constrained mechanical systems, Numer. Math. 129 (2015), Sect. 3.
 
+use crate::elements::rotational_spring::RotationalSpringElement;
+use crate::elements::spring::{SpringElement, SpringElementParam};
 use crate::elements::{
     Context, DerivativeMethod, ElementItem, ElementParameters, LocalBuffers, NodeState,
 };
@@ -173,6 +175,12 @@ fn visit(
             Wrt::Own(p),
             sink,
         ),
+        ParamKind::Spring(i, p) if model.spring_law(i).is_some() => element_term(
+            at,
+            (&SpringElement::of(model, i), ElementItem::Spring(i)),
+            Wrt::Own(SpringElementParam::Spring(p)),
+            sink,
+        ),
         ParamKind::Spring(i, p) => element_term(
             at,
             (&model.springs[i], ElementItem::Spring(i)),
@@ -205,6 +213,27 @@ fn visit(
         ParamKind::Gear(i, p) => element_term(
             at,
             (&model.gears[i], ElementItem::Gear(i)),
+            Wrt::Own(p),
+            sink,
+        ),
+        ParamKind::SpringLaw(i, p) => element_term(
+            at,
+            (&SpringElement::of(model, i), ElementItem::Spring(i)),
+            Wrt::Own(SpringElementParam::Law(p)),
+            sink,
+        ),
+        ParamKind::RotationalSpring(i, p) => element_term(
+            at,
+            (
+                &RotationalSpringElement::of(model, i),
+                ElementItem::RotationalSpring(i),
+            ),
+            Wrt::Own(p),
+            sink,
+        ),
+        ParamKind::Bushing(i, p) => element_term(
+            at,
+            (&model.bushings[i], ElementItem::Bushing(i)),
             Wrt::Own(p),
             sink,
         ),

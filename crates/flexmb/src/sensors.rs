@@ -189,9 +189,9 @@ pub fn sensor_value(
             }
         }
         SensorKind::SpringForce { spring } => {
-            let sp = &model.springs[*spring];
+            let sp = crate::elements::spring::SpringElement::of(model, *spring);
             let start = ElementItem::Spring(*spring).state_start(model);
-            buffers.gather(sp, nodes, (&state.x, &state.xdot, start));
+            buffers.gather(&sp, nodes, (&state.x, &state.xdot, start));
             sp.tension(&ctx, &buffers.local(nodes))
         }
         SensorKind::Contact { contact, quantity } => {
@@ -224,6 +224,17 @@ pub fn sensor_value(
             let start = ElementItem::Rope(*i).state_start(model);
             buffers.gather(rope, nodes, (&state.x, &state.xdot, start));
             rope.force(&ctx, &buffers.local(nodes))
+        }
+        SensorKind::RotationalSpringTorque { spring: i } => {
+            let sp = crate::elements::rotational_spring::RotationalSpringElement::of(model, *i);
+            let start = ElementItem::RotationalSpring(*i).state_start(model);
+            buffers.gather(&sp, nodes, (&state.x, &state.xdot, start));
+            sp.torque(&ctx, &buffers.local(nodes))
+        }
+        SensorKind::BushingForce { bushing, component } => {
+            let b = &model.bushings[*bushing];
+            buffers.gather(b, nodes, (&state.x, &state.xdot, 0));
+            b.state(model.group, buffers.local(nodes).nodes).sigma[*component]
         }
         kind @ (SensorKind::KineticEnergy
         | SensorKind::PotentialEnergy
@@ -306,7 +317,7 @@ pub fn unit(kind: &SensorKind) -> &'static str {
         | SensorKind::SpringForce { .. }
         | SensorKind::RopeForce { .. } => "N",
         SensorKind::Contact { quantity, .. } => ["N", "m", "m", "m/s", "N", ""][*quantity],
-        SensorKind::JointTorque { .. } => "N m",
+        SensorKind::JointTorque { .. } | SensorKind::RotationalSpringTorque { .. } => "N m",
         SensorKind::KineticEnergy | SensorKind::PotentialEnergy | SensorKind::TotalEnergy => "J",
         SensorKind::ConstraintViolation => "m or rad",
         SensorKind::BeamStrain { component, .. } => {
@@ -316,7 +327,7 @@ pub fn unit(kind: &SensorKind) -> &'static str {
                 "1/m"
             }
         }
-        SensorKind::BeamStress { component, .. } => {
+        SensorKind::BeamStress { component, .. } | SensorKind::BushingForce { component, .. } => {
             if *component < 3 {
                 "N"
             } else {

@@ -1619,6 +1619,216 @@ fn gears_with(from: &str, to: &str, line_of: &str) -> (String, usize) {
         Err(e) => (e.to_string(), line),
     }
 }
+/// `GOOD` with `extra` lines after the spring's `stiffness = 100` (replaced by `stiffness`
+/// when given), and the line of the first extra line.
+fn spring_with(stiffness: Option<&str>, extra: &str) -> (String, usize) {
+    let line = GOOD
+        .lines()
+        .position(|l| l == "stiffness = 100")
+        .expect("the spring's stiffness")
+        + 1;
+    let head = stiffness.map_or(String::new(), |s| format!("{s}\n"));
+    let text = GOOD.replacen("stiffness = 100\n", &format!("{head}{extra}\n"), 1);
+    (text, line + usize::from(stiffness.is_some()))
+}
+
+#[test]
+fn spring_laws_are_read_with_their_parameters() {
+    use flexmb::model::{ForceCurve, SpringSide};
+    let (text, _) = spring_with(
+        Some("stiffness = 100"),
+        "rest_length = 0.8\npreload = -10\nacts = \"compression\"\nforce_table = [[-0.1, -50], [0, 0]]",
+    );
+    let file = parse_model_str(&text, "law.toml", &[]).expect("reads");
+    let law = &file.model.spring_laws[0];
+    assert_eq!(law.spring, 0);
+    assert_eq!(law.law.preload, -10.0);
+    assert_eq!(law.law.acts, SpringSide::Compression);
+    assert_eq!(
+        law.law.curve,
+        Some(ForceCurve::Table(vec![(-0.1, -50.0), (0.0, 0.0)]))
+    );
+    assert_eq!(file.model.springs[0].stiffness, 100.0);
+    let params = flexmb::model::Parameters::new(&file.model);
+    for path in ["spring.s.preload", "spring.s.force_table.1"] {
+        assert!(params.id(path).is_ok(), "{path}");
+    }
+    // per side, without a linear part; overrides reach the curves
+    let (text, _) = spring_with(
+        None,
+        "compression = { polynomial = [100, 0, 1e4] }\nextension = { force_table = [[0, 0], [0.1, 20]] }",
+    );
+    let file = parse_model_str(
+        &text,
+        "sides.toml",
+        &["spring.s.compression.polynomial.2=2e4".to_string()],
+    )
+    .expect("reads");
+    let law = &file.model.spring_laws[0];
+    assert_eq!(file.model.springs[0].stiffness, 0.0);
+    assert_eq!(law.law.acts, SpringSide::Both);
+    assert_eq!(
+        law.law.compression,
+        Some(ForceCurve::Polynomial(vec![100.0, 0.0, 2e4]))
+    );
+    let params = flexmb::model::Parameters::new(&file.model);
+    for path in [
+        "spring.s.compression.polynomial.2",
+        "spring.s.extension.force_table.0",
+    ] {
+        assert!(params.id(path).is_ok(), "{path}");
+    }
+    // a linear spring has no law
+    let file = good(&[]).expect("reads");
+    assert!(file.model.spring_laws.is_empty());
+}
+
+#[test]
+fn bad_spring_laws_name_their_field() {
+    let cases: [(Option<&str>, &str, usize, &str, &str); 10] = [
+        (
+            Some("stiffness = -100"),
+            "",
+            0,
+            "spring[0].stiffness",
+            ">= 0",
+        ),
+        (
+            None,
+            "force_table = [[0, 0], [0.2, 10], [0.1, 20]]",
+            0,
+            "spring[0].force_table[2]",
+            "not sorted in elongation",
+        ),
+        (
+            None,
+            "force_table = [[0, 0]]",
+            0,
+            "spring[0].force_table",
+            "at least 2",
+        ),
+        (
+            None,
+            "force_table = [[0, 0], [1, 1]]\npolynomial = [1]",
+            1,
+            "spring[0].polynomial",
+            "not both",
+        ),
+        (
+            None,
+            "polynomial = []",
+            0,
+            "spring[0].polynomial",
+            "1 to 16",
+        ),
+        (
+            Some("stiffness = 100"),
+            "acts = \"both_sides\"",
+            0,
+            "spring[0].acts",
+            "must be one of",
+        ),
+        (
+            None,
+            "compression = { force_table = [[0, 0], [0, 1]] }",
+            0,
+            "spring[0].compression.force_table[1]",
+            "not sorted",
+        ),
+        (
+            None,
+            "extension = { }",
+            0,
+            "spring[0].extension",
+            "the side's curve",
+        ),
+        (
+            Some("stiffness = 100"),
+            "acts = \"extension\"\nrelaxation_stiffness = 5\nrelaxation_damping = 1",
+            0,
+            "spring[0].acts",
+            "Maxwell branch",
+        ),
+        (
+            Some("stiffness = 100"),
+            "preload = 1e40",
+            0,
+            "spring[0].preload",
+            "",
+        ),
+    ];
+    for (stiffness, extra, offset, field, says) in cases {
+        let (text, line) = spring_with(stiffness, extra);
+        let line = if stiffness.is_some() && extra.is_empty() {
+            line - 1
+        } else {
+            line
+        } + offset;
+        let e = parse_model_str(&text, "law.toml", &[])
+            .map(|_| ())
+            .expect_err(extra)
+            .to_string();
+        println!("{e}");
+        assert_contains(
+            &e,
+            &[
+                &format!("law.toml:{line}:"),
+                &format!("field '{field}'"),
+                says,
+            ],
+        );
+    }
+    // an unknown node and a law-less spring without stiffness, as before
+    let e = parse_model_str(
+        &GOOD.replace("node_b = \"top\"\npoint_a", "node_b = \"nowhere\"\npoint_a"),
+        "law.toml",
+        &[],
+    )
+    .map(|_| ())
+    .expect_err("unknown node")
+    .to_string();
+    assert_contains(&e, &["field 'spring[0].node_b'", "nowhere"]);
+    let (text, _) = spring_with(None, "damping = 1");
+    let e = parse_model_str(&text, "law.toml", &[])
+        .map(|_| ())
+        .expect_err("no stiffness")
+        .to_string();
+    assert_contains(&e, &["spring[0]", "stiffness"]);
+}
+
+/// `GOOD` with a revolute joint "hinge" between the hub and the top, and `extra` appended
+/// (a `[[rotational_spring]]`); the line of the first line of `extra`.
+fn with_rotational_spring(extra: &str) -> (String, usize) {
+    let joint = "\n[[joint]]\nname = \"hinge\"\ntype = \"cylindrical\"\nnode_a = \"hub\"\nnode_b = \"top\"\nposition = [1, 0, 0]\naxis = [0, 0, 1]\n";
+    let text = GOOD.replacen("\n[[joint]]\nname = \"pin\"\ntype = \"spherical\"\nnode_a = \"hub\"\nnode_b = \"top\"\nposition = [1, 0, 0]\n", joint, 1);
+    assert_ne!(text, GOOD, "the pin joint replaced");
+    let line = text.lines().count() + 1;
+    (format!("{text}{extra}\n"), line)
+}
+
+#[test]
+fn rotational_springs_are_read_with_their_sensor_and_parameters() {
+    let (text, _) = with_rotational_spring(
+        "[[rotational_spring]]\nname = \"clock\"\njoint = \"hinge\"\nstiffness = 0.8\ndamping = 0.01\nangle_deg = -720\npreload = 0.1\n\n[[sensor]]\nname = \"T\"\ntype = \"rotational_spring_torque\"\nspring = \"clock\"\n",
+    );
+    let file = parse_model_str(&text, "clock.toml", &[]).expect("reads");
+    let s = &file.model.rotational_springs[0];
+    assert_eq!(s.joint, file.model.joint_id("hinge").unwrap());
+    assert_eq!((s.stiffness, s.damping), (0.8, 0.01));
+    assert!((s.angle + 4.0 * std::f64::consts::PI).abs() < 1e-12);
+    assert_eq!(s.law.preload, 0.1);
+    assert_eq!(
+        file.model.sensors.last().unwrap().kind,
+        SensorKind::RotationalSpringTorque { spring: 0 }
+    );
+    let params = flexmb::model::Parameters::new(&file.model);
+    for path in [
+        "rotational_spring.clock.angle",
+        "rotational_spring.clock.preload",
+    ] {
+        assert!(params.id(path).is_ok(), "{path}");
+    }
+}
 
 #[test]
 fn gear_errors_name_the_key() {
@@ -1769,4 +1979,163 @@ fn gear_errors_name_the_key() {
             "required for a wheel on the ground",
         ],
     );
+}
+fn bad_rotational_springs_name_their_field() {
+    let head = "[[rotational_spring]]\nname = \"clock\"\n";
+    let cases = [
+        (
+            "joint = \"hinge\"\nstiffness = -1",
+            3,
+            "rotational_spring[0].stiffness",
+            ">= 0",
+        ),
+        (
+            "joint = \"hinj\"\nstiffness = 1",
+            2,
+            "rotational_spring[0].joint",
+            "unknown joint 'hinj'",
+        ),
+        (
+            "joint = \"pin2\"\nstiffness = 1",
+            2,
+            "rotational_spring[0].joint",
+            "unknown joint",
+        ),
+        (
+            "joint = \"crank\"\nstiffness = 1\nangle = 1\nangle_deg = 5",
+            5,
+            "rotational_spring[0].angle_deg",
+            "not both",
+        ),
+        (
+            "joint = \"hinge\"\nforce_table = [[1, 0], [0, 1]]",
+            3,
+            "rotational_spring[0].force_table[1]",
+            "not sorted",
+        ),
+        (
+            "joint = \"hinge\"\nstiffness = 1\nacts = \"sideways\"",
+            4,
+            "rotational_spring[0].acts",
+            "must be one of",
+        ),
+        (
+            "joint = \"hinge\"",
+            0,
+            "rotational_spring[0].stiffness",
+            "missing",
+        ),
+    ];
+    for (body, offset, field, says) in cases {
+        let (text, line) = with_rotational_spring(&format!("{head}{body}"));
+        let e = parse_model_str(&text, "rot.toml", &[])
+            .map(|_| ())
+            .expect_err(body)
+            .to_string();
+        println!("{e}");
+        assert_contains(
+            &e,
+            &[
+                &format!("rot.toml:{}:", line + offset),
+                &format!("field '{field}'"),
+                says,
+            ],
+        );
+    }
+    // a joint that is neither revolute nor cylindrical: the spherical pin of GOOD
+    let text = format!("{GOOD}\n{head}joint = \"pin\"\nstiffness = 1\n");
+    let e = parse_model_str(&text, "rot.toml", &[])
+        .map(|_| ())
+        .expect_err("spherical")
+        .to_string();
+    println!("{e}");
+    assert_contains(
+        &e,
+        &[
+            "field 'rotational_spring[0].joint'",
+            "spherical",
+            "revolute or cylindrical",
+        ],
+    );
+}
+
+#[test]
+fn bushings_are_read_and_bad_matrices_are_located() {
+    let base = "\n[[bushing]]\nname = \"mount\"\nnode_b = \"top\"\nposition = [1, 0, 0]\n";
+    let text = format!(
+        "{GOOD}{base}stiffness = [1e4, 1e4, 2e4, 100, 100, 200]\ndamping = [[10, 1, 0, 0, 0, 0], [1, 10, 0, 0, 0, 0], [0, 0, 10, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]]\n\n[[sensor]]\nname = \"mz\"\ntype = \"bushing_force\"\nbushing = \"mount\"\ncomponent = \"mz\"\n"
+    );
+    let file = parse_model_str(&text, "mount.toml", &[]).expect("reads");
+    let b = &file.model.bushings[0];
+    assert_eq!(b.node_a, None);
+    assert_eq!(b.stiffness[(2, 2)], 2e4);
+    assert_eq!(b.damping[(0, 1)], 1.0);
+    // the two frames coincide at t = 0, at the given point
+    let top = &file.model.nodes[b.node_b.unwrap().0].frame;
+    let (fa, fb) = (b.frame_a, top.compose(&b.frame_b));
+    assert!((fa.x - Vec3::new(1.0, 0.0, 0.0)).norm() < 1e-12);
+    assert!((fb.x - fa.x).norm() < 1e-12 && (fb.r - fa.r).norm() < 1e-12);
+    assert_eq!(
+        file.model.sensors.last().unwrap().kind,
+        SensorKind::BushingForce {
+            bushing: 0,
+            component: 5
+        }
+    );
+    let params = flexmb::model::Parameters::new(&file.model);
+    assert!(params.id("bushing.mount.stiffness.2.5").is_ok());
+    let line = GOOD.lines().count() + 6;
+    let cases = [
+        (
+            "stiffness = [[1, 2, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0], [0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]]",
+            "bushing[0].stiffness",
+            "not symmetric",
+        ),
+        (
+            "stiffness = [1, 1, -1, 1, 1, 1]",
+            "bushing[0].stiffness",
+            "not positive semidefinite",
+        ),
+        (
+            "stiffness = [1, 1, 1, 1, 1, 1]\ndamping = [[1, 2, 0, 0, 0, 0], [2, 1, 0, 0, 0, 0], [0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]]",
+            "bushing[0].damping",
+            "not positive semidefinite",
+        ),
+        (
+            "stiffness = [1, 1, 1]",
+            "bushing[0].stiffness",
+            "6 numbers",
+        ),
+    ];
+    for (extra, field, says) in cases {
+        let text = format!("{GOOD}{base}{extra}\n");
+        let e = parse_model_str(&text, "mount.toml", &[])
+            .map(|_| ())
+            .expect_err(extra)
+            .to_string();
+        println!("{e}");
+        let at = line + usize::from(field.ends_with("damping"));
+        assert_contains(
+            &e,
+            &[
+                &format!("mount.toml:{at}:"),
+                &format!("field '{field}'"),
+                says,
+            ],
+        );
+    }
+    // an unknown node; the R3xSO(3) group reads (the element converts its coordinates)
+    let text = format!(
+        "{GOOD}{}stiffness = [1, 1, 1, 1, 1, 1]\n",
+        base.replace("\"top\"", "\"tpo\"")
+    );
+    let e = parse_model_str(&text, "mount.toml", &[])
+        .map(|_| ())
+        .expect_err("node")
+        .to_string();
+    assert_contains(&e, &["field 'bushing[0].node_b'", "unknown node 'tpo'"]);
+    let text = format!("{GOOD}{base}stiffness = [1, 1, 1, 1, 1, 1]\n")
+        .replace("group = \"SE3\"", "group = \"R3xSO3\"");
+    let file = parse_model_str(&text, "mount.toml", &[]).expect("reads on R3xSO(3)");
+    assert_eq!(file.model.group, Group::R3xSO3);
 }

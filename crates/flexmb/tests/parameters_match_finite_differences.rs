@@ -9,8 +9,8 @@ use flexmb::elements::{
 };
 use flexmb::joints;
 use flexmb::model::parameters::{
-    BodyParam, ContactParam, GearParam, JointParam, LoadParam, NodeParam, RopeParam, SectionParam,
-    SpringParam,
+    BodyParam, BushingParam, ContactParam, GearParam, JointParam, LoadParam, NodeParam, RopeParam,
+    RotationalSpringParam, SectionParam, SpringLawParam, SpringParam,
 };
 use flexmb::model::{
     BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, ParamId, ParamKind,
@@ -198,6 +198,22 @@ fn pattern(params: &Parameters, id: ParamId) -> String {
             GearParam::Backlash => "gear.<g>.backlash",
             GearParam::StiffnessVariation(_) => "gear.<g>.stiffness_variation.<n>",
             GearParam::TransmissionError(_) => "gear.<g>.transmission_error.<n>",
+        },
+        ParamKind::SpringLaw(_, p) => match p {
+            SpringLawParam::Preload => "spring.<s>.preload",
+            SpringLawParam::Polynomial(..) => "spring.<s>.<side>polynomial.<j>",
+            SpringLawParam::TableForce(..) => "spring.<s>.<side>force_table.<i>",
+        },
+        ParamKind::RotationalSpring(_, p) => match p {
+            RotationalSpringParam::Stiffness => "rotational_spring.<s>.stiffness",
+            RotationalSpringParam::Damping => "rotational_spring.<s>.damping",
+            RotationalSpringParam::Angle => "rotational_spring.<s>.angle",
+            RotationalSpringParam::Law(SpringLawParam::Preload) => "rotational_spring.<s>.preload",
+            RotationalSpringParam::Law(_) => "rotational_spring.<s>.<side><curve>.<i>",
+        },
+        ParamKind::Bushing(_, p) => match p {
+            BushingParam::Stiffness(..) => "bushing.<b>.stiffness.<i>.<j>",
+            BushingParam::Damping(..) => "bushing.<b>.damping.<i>.<j>",
         },
     };
     item.into()
@@ -747,5 +763,262 @@ fn parameter_derivatives_match_finite_differences_on_gear_pairs() {
     for kind in expected {
         assert!(seen.kinds.contains(kind), "{kind} checked");
     }
+    println!("worst relative error {:.2e}", seen.worst);
+}
+
+/// Two bodies joined by nonlinear springs: a preloaded table law, separate curves per side
+/// (a polynomial in compression, a table in extension) with a Maxwell branch, a bump stop
+/// that acts (always compressed at these kinematics) and a strap from the ground.
+fn nonlinear_springs(group: Group) -> Model {
+    use flexmb::model::{ForceCurve, SpringLaw, SpringSide};
+    let mut m = Model::new(group);
+    let a = m.add_node("a", Frame::new(Vec3::new(0.1, 0.2, -0.3), Mat3::identity()));
+    let b = m.add_node(
+        "b",
+        flexmb_lie::se3::exp(&Vec6::new(1.0, -0.4, 0.2, 0.3, -0.5, 0.7)),
+    );
+    let inertia = Mat3::new(0.3, 0.01, -0.02, 0.01, 0.4, 0.03, -0.02, 0.03, 0.5);
+    m.add_body("body_a", a, 2.5, Vec3::new(0.3, -0.7, 0.2), inertia);
+    m.add_body("body_b", b, 1.5, Vec3::new(-0.1, 0.2, 0.4), inertia * 2.0);
+    let spring = |name: &str, node_a, rest_length| SpringDamper {
+        name: name.into(),
+        node_a,
+        node_b: Some(b),
+        point_a: Vec3::new(0.2, 0.1, -0.3),
+        point_b: Vec3::new(-0.1, 0.4, 0.2),
+        stiffness: 120.0,
+        damping: 3.5,
+        rest_length,
+        relaxation: None,
+    };
+    let table = ForceCurve::Table(vec![(-3.0, -80.0), (0.1, 5.0), (0.5, 60.0), (4.0, 90.0)]);
+    m.springs.push(spring("table", Some(a), 0.4));
+    let mut law = SpringLaw::new(0);
+    law.law.preload = 12.0;
+    law.law.curve = Some(table.clone());
+    m.spring_laws.push(law);
+    let mut sides = spring("sides", Some(a), 1.2);
+    sides.relaxation = Some(flexmb::model::Relaxation {
+        stiffness: 30.0,
+        damping: 4.0,
+    });
+    m.springs.push(sides);
+    let mut law = SpringLaw::new(1);
+    law.law.preload = -3.0;
+    law.law.compression = Some(ForceCurve::Polynomial(vec![40.0, -15.0, 30.0]));
+    law.law.extension = Some(table);
+    m.spring_laws.push(law);
+    m.springs.push(spring("bump", Some(a), 8.0));
+    let mut law = SpringLaw::new(2);
+    law.law.acts = SpringSide::Compression;
+    law.law.curve = Some(ForceCurve::Polynomial(vec![0.0, 0.0, 2.0]));
+    m.spring_laws.push(law);
+    let mut strap = spring("strap", None, 0.01);
+    strap.point_a = Vec3::new(-2.0, -3.0, 1.0);
+    m.springs.push(strap);
+    let mut law = SpringLaw::new(3);
+    law.law.acts = SpringSide::Extension;
+    law.law.curve = Some(ForceCurve::Polynomial(vec![10.0, 5.0]));
+    m.spring_laws.push(law);
+    m
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_nonlinear_springs() {
+    let mut seen = Seen::default();
+    let mut rng = Lcg(8);
+    for group in [Group::R3xSO3, Group::SE3] {
+        let model = nonlinear_springs(group);
+        model.validate().expect("valid");
+        for _ in 0..3 {
+            let at = point(&model, &mut rng, 0.5);
+            check_model(
+                &format!("nonlinear springs on {group:?}"),
+                &model,
+                &at,
+                &mut seen,
+            );
+        }
+    }
+    let laws: Vec<&String> = seen
+        .kinds
+        .iter()
+        .filter(|k| k.contains("<side>") || k.ends_with("preload"))
+        .collect();
+    assert_eq!(laws.len(), 3, "{laws:?}");
+    println!("worst relative error {:.2e}", seen.worst);
+}
+
+/// Two bodies on a revolute joint (one also on a cylindrical joint to the ground), with
+/// rotational springs about both axes: a linear one and one with a preloaded table law.
+fn rotational_springs(group: Group) -> Model {
+    use flexmb::model::{ForceCurve, ForceLaw, RotationalSpring};
+    let mut m = Model::new(group);
+    m.gravity = Vec3::new(0.3, -9.81, 1.2);
+    let a = m.add_node("a", Frame::new(Vec3::new(0.1, 0.2, -0.3), Mat3::identity()));
+    let b = m.add_node(
+        "b",
+        flexmb_lie::se3::exp(&Vec6::new(1.0, -0.4, 0.2, 0.3, -0.5, 0.7)),
+    );
+    let inertia = Mat3::new(0.3, 0.01, -0.02, 0.01, 0.4, 0.03, -0.02, 0.03, 0.5);
+    m.add_body("body_a", a, 2.5, Vec3::new(0.3, -0.7, 0.2), inertia);
+    m.add_body("body_b", b, 1.5, Vec3::new(-0.1, 0.2, 0.4), inertia * 2.0);
+    let axis = flexmb_lie::so3::exp(&Vec3::new(0.3, 0.2, -0.4));
+    let hinge = m.add_joint(
+        "hinge",
+        JointKind::Revolute,
+        Some(a),
+        Some(b),
+        Vec3::new(0.4, -0.2, 0.3),
+        axis,
+        None,
+    );
+    let shaft = m.add_joint(
+        "shaft",
+        JointKind::Cylindrical,
+        None,
+        Some(a),
+        Vec3::new(0.1, 0.2, -0.3),
+        Mat3::identity(),
+        None,
+    );
+    m.rotational_springs.push(RotationalSpring {
+        name: "coil".into(),
+        joint: hinge,
+        stiffness: 35.0,
+        damping: 1.5,
+        angle: 0.3,
+        law: ForceLaw::default(),
+    });
+    m.rotational_springs.push(RotationalSpring {
+        name: "clock".into(),
+        joint: shaft,
+        stiffness: 5.0,
+        damping: 0.5,
+        angle: -0.2,
+        law: ForceLaw {
+            preload: 2.0,
+            curve: Some(ForceCurve::Table(vec![
+                (-4.0, -30.0),
+                (0.0, 0.0),
+                (4.0, 80.0),
+            ])),
+            ..ForceLaw::default()
+        },
+    });
+    m
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_rotational_springs() {
+    let mut seen = Seen::default();
+    let mut rng = Lcg(9);
+    for group in [Group::R3xSO3, Group::SE3] {
+        let model = rotational_springs(group);
+        model.validate().expect("valid");
+        for _ in 0..3 {
+            let mut at = point(&model, &mut rng, 0.5);
+            // the tracked angles (element states) on the branch of the geometric angle
+            for (i, s) in model.rotational_springs.iter().enumerate() {
+                let joint = &model.joints[s.joint.0];
+                let slot = |n: Option<NodeId>| {
+                    n.map_or(NodeState::ground(Frame::identity()), |n| at.nodes[n.0])
+                };
+                let nodes = [slot(joint.node_a), slot(joint.node_b)];
+                at.x[i] = flexmb::elements::rotational_spring::joint_angle(joint, &nodes).0 + 0.2;
+            }
+            check_model(
+                &format!("rotational springs on {group:?}"),
+                &model,
+                &at,
+                &mut seen,
+            );
+        }
+    }
+    let kinds: Vec<&String> = seen
+        .kinds
+        .iter()
+        .filter(|k| k.starts_with("rotational_spring"))
+        .collect();
+    assert_eq!(kinds.len(), 5, "{kinds:?}");
+    assert!(seen
+        .by_differences
+        .iter()
+        .all(|k| !k.starts_with("rotational")));
+    println!("worst relative error {:.2e}", seen.worst);
+}
+
+/// Two bodies on bushings: one between them with frame offsets and full matrices
+/// (large-rotation form), one from the ground (small-rotation form).
+fn bushings(group: Group) -> Model {
+    use flexmb::model::Bushing;
+    let mut m = Model::new(group);
+    let a = m.add_node("a", Frame::new(Vec3::new(0.1, 0.2, -0.3), Mat3::identity()));
+    let b = m.add_node(
+        "b",
+        flexmb_lie::se3::exp(&Vec6::new(1.0, -0.4, 0.2, 0.3, -0.5, 0.7)),
+    );
+    let inertia = Mat3::new(0.3, 0.01, -0.02, 0.01, 0.4, 0.03, -0.02, 0.03, 0.5);
+    m.add_body("body_a", a, 2.5, Vec3::new(0.3, -0.7, 0.2), inertia);
+    m.add_body("body_b", b, 1.5, Vec3::new(-0.1, 0.2, 0.4), inertia * 2.0);
+    let full = |d: [f64; 6], c: f64| {
+        let mut k = Mat6::from_diagonal(&Vec6::from_column_slice(&d));
+        for (i, j) in [(0, 4), (1, 5), (2, 3), (3, 5)] {
+            k[(i, j)] = c;
+            k[(j, i)] = c;
+        }
+        k
+    };
+    let at = Frame::new(
+        Vec3::new(0.5, 0.0, -0.1),
+        flexmb_lie::so3::exp(&Vec3::new(0.2, -0.3, 0.1)),
+    );
+    m.bushings.push(Bushing {
+        name: "link".into(),
+        node_a: Some(a),
+        node_b: Some(b),
+        frame_a: m.nodes[a.0].frame.inverse().compose(&at),
+        frame_b: m.nodes[b.0].frame.inverse().compose(&at),
+        stiffness: full([300.0, 200.0, 250.0, 40.0, 30.0, 50.0], 5.0),
+        damping: full([3.0, 2.0, 2.5, 0.4, 0.3, 0.5], 0.05),
+        form: flexmb::model::BushingForm::LargeRotation,
+    });
+    m.bushings.push(Bushing {
+        name: "mount".into(),
+        node_a: None,
+        node_b: Some(a),
+        frame_a: m.nodes[a.0].frame,
+        frame_b: Frame::identity(),
+        stiffness: full([100.0, 120.0, 140.0, 10.0, 12.0, 14.0], 2.0),
+        damping: full([1.0, 1.2, 1.4, 0.1, 0.12, 0.14], 0.02),
+        form: flexmb::model::BushingForm::SmallRotation,
+    });
+    m
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_bushings() {
+    let mut seen = Seen::default();
+    // (a seed at which no rate of the deformation is near zero: the relative error of a
+    // column is measured against its own size)
+    let mut rng = Lcg(12);
+    for group in [Group::SE3, Group::R3xSO3] {
+        let model = bushings(group);
+        model.validate().expect("valid");
+        for _ in 0..3 {
+            let at = point(&model, &mut rng, 0.8);
+            check_model(&format!("bushings on {group:?}"), &model, &at, &mut seen);
+        }
+    }
+    let kinds: Vec<&String> = seen
+        .kinds
+        .iter()
+        .filter(|k| k.starts_with("bushing"))
+        .collect();
+    assert_eq!(kinds.len(), 2, "{kinds:?}");
+    assert!(seen
+        .by_differences
+        .iter()
+        .all(|k| !k.starts_with("bushing")));
     println!("worst relative error {:.2e}", seen.worst);
 }

@@ -1151,3 +1151,461 @@ fn gear_joint_gradients_and_their_derivatives_match_finite_differences() {
         }
     }
 }
+/// A spring-damper between a point of node a (or the ground) and a point of node b, with a
+/// nonlinear law.
+fn law_spring(ground_a: bool, rest_length: f64) -> SpringDamper {
+    SpringDamper {
+        name: "s".into(),
+        node_a: (!ground_a).then_some(NodeId(0)),
+        node_b: Some(NodeId(1)),
+        point_a: Vec3::new(0.2, 0.1, -0.3),
+        point_b: Vec3::new(-0.1, 0.4, 0.2),
+        stiffness: 120.0,
+        damping: 3.5,
+        rest_length,
+        relaxation: None,
+    }
+}
+
+/// Length of a spring's segment at `nodes`, computed as the element computes it.
+fn spring_length(spring: &SpringDamper, nodes: &[NodeState]) -> f64 {
+    (nodes[1].q.point(&spring.point_b) - nodes[0].q.point(&spring.point_a)).norm()
+}
+
+#[test]
+fn nonlinear_spring_tangents_match_finite_differences() {
+    // Tables, polynomials, separate curves per side, preload, and stops (one-sided springs)
+    // while they act, at random kinematics (away from a table point or a stop's onset).
+    use flexmb::elements::spring::SpringElement;
+    use flexmb::model::{ForceCurve, ForceLaw, SpringSide};
+    use std::borrow::Cow;
+    let table = ForceCurve::Table(vec![(-0.5, -80.0), (0.1, 5.0), (0.5, 60.0), (1.0, 90.0)]);
+    let cubic = ForceCurve::Polynomial(vec![40.0, -15.0, 30.0]);
+    let mut laws = vec![];
+    for (curve, compression, extension) in [
+        (Some(table.clone()), None, None),
+        (Some(cubic.clone()), None, None),
+        (None, Some(cubic.clone()), Some(table.clone())),
+    ] {
+        let law = ForceLaw {
+            preload: 7.5,
+            curve,
+            compression,
+            extension,
+            acts: SpringSide::Both,
+        };
+        laws.push((law, 0.4));
+    }
+    // stops that act: a bump stop always compressed, a strap always stretched
+    let bump = ForceLaw {
+        acts: SpringSide::Compression,
+        curve: Some(ForceCurve::Polynomial(vec![40.0, 0.0, 2.0])),
+        ..ForceLaw::default()
+    };
+    laws.push((bump, 5.0));
+    let strap = ForceLaw {
+        acts: SpringSide::Extension,
+        curve: Some(table.clone()),
+        ..ForceLaw::default()
+    };
+    laws.push((strap, 0.01));
+    let mut rng = Lcg(8);
+    for model in models() {
+        for (law, rest_length) in &laws {
+            for ground_a in [false, true] {
+                let spring = law_spring(ground_a, *rest_length);
+                let element = SpringElement {
+                    spring: Cow::Borrowed(&spring),
+                    law: Some(law),
+                };
+                let mut nodes = [rng.node(model.group), rng.node(model.group)];
+                if ground_a {
+                    nodes[0] = NodeState::ground(Frame::identity());
+                }
+                let name = format!("nonlinear spring {law:?}");
+                let ctx = Context::at(&model, 0.37, 1.0);
+                let (r, _) = evaluate_owned(&element, &ctx, &Local::nodes(&nodes), None);
+                assert!(r.norm() > 1.0, "{name}: acts");
+                check_element(&name, &element, &model, &nodes);
+            }
+        }
+    }
+}
+
+/// The tangent stiffness of a spring at a point where its law has a kink (elongation `e`
+/// exactly at a table point, or at a stop's onset) against one-sided differences taken on
+/// the side of increasing length (second order: `(-3 r(0) + 4 r(h) - r(2h)) / 2h`, `h` of
+/// the sign that lengthens the spring), the side whose slope the element uses; the damping
+/// columns against central differences.
+fn check_at_kink(
+    name: &str,
+    element: &dyn ElementKernel,
+    spring: &SpringDamper,
+    model: &Model,
+    nodes: &[NodeState],
+) {
+    let group = model.group;
+    let ctx = Context::at(model, 0.37, 1.0);
+    let active: Vec<bool> = (0..12).map(|i| element.node(i / 6).is_some()).collect();
+    let eval = |nodes: &[NodeState]| evaluate_owned(element, &ctx, &Local::nodes(nodes), None).0;
+    let l0 = spring_length(spring, nodes);
+    let r0 = eval(nodes);
+    for (what, coef) in [
+        ('q', coefficients(0.0, 0.0, 1.0, 0.0, 0.0)),
+        ('v', coefficients(0.0, 1.0, 0.0, 0.0, 0.0)),
+    ] {
+        let (_, s) = evaluate_owned(element, &ctx, &Local::nodes(nodes), Some(&coef));
+        let mut fd = DMatrix::zeros(12, 12);
+        for k in (0..12).filter(|&k| active[k]) {
+            let column = if what == 'q' {
+                let lengthens = spring_length(spring, &perturb(group, nodes, k, EPS, 'q')) >= l0;
+                let h = if lengthens { EPS } else { -EPS };
+                let r1 = eval(&perturb(group, nodes, k, h, 'q'));
+                let r2 = eval(&perturb(group, nodes, k, 2.0 * h, 'q'));
+                (&r1 * 4.0 - &r0 * 3.0 - r2) / (2.0 * h)
+            } else {
+                let rp = eval(&perturb(group, nodes, k, EPS, 'v'));
+                let rm = eval(&perturb(group, nodes, k, -EPS, 'v'));
+                (rp - rm) / (2.0 * EPS)
+            };
+            fd.set_column(k, &column);
+        }
+        assert_close(
+            &s,
+            &fd,
+            &format!("{name} on {group:?}, derivative wrt {what}"),
+            &active,
+        );
+    }
+}
+
+#[test]
+fn nonlinear_spring_tangents_at_a_table_point_and_a_stop_onset_are_one_sided() {
+    use flexmb::elements::spring::SpringElement;
+    use flexmb::model::{ForceCurve, ForceLaw, SpringSide};
+    use std::borrow::Cow;
+    let mut rng = Lcg(9);
+    for model in models() {
+        for ground_a in [false, true] {
+            let mut nodes = [rng.node(model.group), rng.node(model.group)];
+            if ground_a {
+                nodes[0] = NodeState::ground(Frame::identity());
+            }
+            // the slope jumps from 50 to 400 N/m at the table point e_1 = l - l0 (exactly the
+            // elongation the element computes)
+            let spring = law_spring(ground_a, 0.3);
+            let e1 = spring_length(&spring, &nodes) - spring.rest_length;
+            let law = ForceLaw {
+                curve: Some(ForceCurve::Table(vec![
+                    (e1 - 1.0, -50.0),
+                    (e1, 0.0),
+                    (e1 + 1.0, 400.0),
+                ])),
+                ..ForceLaw::default()
+            };
+            let element = SpringElement {
+                spring: Cow::Borrowed(&spring),
+                law: Some(&law),
+            };
+            check_at_kink("table point", &element, &spring, &model, &nodes);
+            // stops at their onset (l = l0): a compression stop is off there (its slope from
+            // the side of longer length is zero), an extension stop is on
+            for acts in [SpringSide::Compression, SpringSide::Extension] {
+                let mut nodes = nodes;
+                let mut spring = law_spring(ground_a, 0.0);
+                spring.rest_length = spring_length(&spring, &nodes);
+                let law = ForceLaw {
+                    acts,
+                    curve: Some(ForceCurve::Polynomial(vec![300.0, 0.0, 5e3])),
+                    ..ForceLaw::default()
+                };
+                let element = SpringElement {
+                    spring: Cow::Borrowed(&spring),
+                    law: Some(&law),
+                };
+                // the spring lengthening (ldot > 0: T = c ldot > 0), so that the extension
+                // stop acts at its onset
+                let ctx = Context::at(&model, 0.37, 1.0);
+                if element.tension(&ctx, &Local::nodes(&nodes)) == 0.0 {
+                    for n in &mut nodes {
+                        n.v = -n.v;
+                    }
+                }
+                let tension = element.tension(&ctx, &Local::nodes(&nodes));
+                assert_eq!(
+                    tension > 0.0,
+                    acts == SpringSide::Extension,
+                    "{acts:?}: {tension}"
+                );
+                check_at_kink(
+                    &format!("{acts:?} stop at its onset"),
+                    &element,
+                    &spring,
+                    &model,
+                    &nodes,
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn rotational_spring_tangents_match_finite_differences() {
+    // About the axis of a revolute (and a cylindrical) joint between random frames, to the
+    // ground or between two nodes, linear and with a nonlinear law; with the element state
+    // (the tracked angle) several turns away from the geometric angle's branch. Its state
+    // row (xdot - thetadot) and the columns of the state are checked too.
+    use flexmb::elements::rotational_spring::RotationalSpringElement;
+    use flexmb::model::{ForceCurve, ForceLaw, JointKind, RotationalSpring};
+    let mut rng = Lcg(10);
+    let laws = [
+        ForceLaw::default(),
+        ForceLaw {
+            preload: 3.0,
+            curve: Some(ForceCurve::Polynomial(vec![5.0, 0.0, 0.02])),
+            ..ForceLaw::default()
+        },
+    ];
+    for base in models() {
+        let group = base.group;
+        for (kind, ground_a) in [
+            (JointKind::Revolute, false),
+            (JointKind::Revolute, true),
+            (JointKind::Cylindrical, false),
+        ] {
+            for law in &laws {
+                let mut model = base.clone();
+                model.nodes[0].frame = group.exp(&rng.v6(1.0));
+                model.nodes[1].frame = group.exp(&rng.v6(1.0));
+                let joint = model.add_joint(
+                    "hinge",
+                    kind,
+                    (!ground_a).then_some(NodeId(0)),
+                    Some(NodeId(1)),
+                    rng.v3(1.0),
+                    flexmb_lie::so3::exp(&rng.v3(1.0)),
+                    None,
+                );
+                let spring = RotationalSpring {
+                    name: "torsion".into(),
+                    joint,
+                    stiffness: 35.0,
+                    damping: 1.5,
+                    angle: 0.3,
+                    law: law.clone(),
+                };
+                let element = RotationalSpringElement {
+                    spring: &spring,
+                    joint: &model.joints[joint.0],
+                };
+                let mut nodes = [rng.node(group), rng.node(group)];
+                if ground_a {
+                    nodes[0] = NodeState::ground(Frame::identity());
+                }
+                // the state: the geometric angle plus four turns, nudged
+                let (theta_g, ..) =
+                    flexmb::elements::rotational_spring::joint_angle(element.joint, &nodes);
+                let x = [theta_g + 8.0 * std::f64::consts::PI + 0.1];
+                let name = format!("rotational spring on a {kind:?} joint, law {law:?}");
+                check_element_with_states(&name, &element, &model, &nodes, &x, &[0.7]);
+                let ctx = Context::at(&model, 0.37, 1.0);
+                let local = Local {
+                    nodes: &nodes,
+                    x: &x,
+                    xdot: &[0.7],
+                };
+                let theta = element.angle(&ctx, &local);
+                assert!(
+                    (theta - theta_g - 8.0 * std::f64::consts::PI).abs() < 1e-12,
+                    "{name}: the angle is on the state's turn: {theta} vs {theta_g} + 8 pi"
+                );
+            }
+        }
+    }
+}
+
+/// A symmetric positive definite 6 x 6 matrix with couplings.
+fn spd6(rng: &mut Lcg, diagonal: [f64; 6]) -> Mat6 {
+    let a = Mat6::from_fn(|_, _| rng.next());
+    Mat6::from_diagonal(&Vec6::from_column_slice(&diagonal)) + a * a.transpose()
+}
+
+#[test]
+fn bushing_tangents_match_finite_differences() {
+    // Both forms, between two nodes and from the ground, frame offsets on both sides,
+    // relative rotations up to about 2 rad, coupled stiffness and damping.
+    use flexmb::model::{Bushing, BushingForm};
+    let mut rng = Lcg(11);
+    for model in models() {
+        for (form, ground_a) in [
+            (BushingForm::LargeRotation, false),
+            (BushingForm::LargeRotation, true),
+            (BushingForm::LargeRotation, false),
+            (BushingForm::SmallRotation, false),
+            (BushingForm::SmallRotation, true),
+            (BushingForm::SmallRotation, false),
+        ] {
+            let bushing = Bushing {
+                name: "mount".into(),
+                node_a: (!ground_a).then_some(NodeId(0)),
+                node_b: Some(NodeId(1)),
+                frame_a: Group::SE3.exp(&rng.v6(1.0)),
+                frame_b: Group::SE3.exp(&rng.v6(1.0)),
+                stiffness: spd6(&mut rng, [300.0, 200.0, 250.0, 40.0, 30.0, 50.0]),
+                damping: spd6(&mut rng, [3.0, 2.0, 2.5, 0.4, 0.3, 0.5]),
+                form,
+            };
+            let mut nodes = [rng.node(model.group), rng.node(model.group)];
+            if ground_a {
+                nodes[0] = NodeState::ground(Frame::identity());
+            }
+            check_element(&format!("bushing, {form:?}"), &bushing, &model, &nodes);
+        }
+    }
+}
+
+/// The elastic residual is the gradient of the potential energy: at rest (no damping
+/// force), `r . e_k = dV/dw_k` by central differences on the manifold, for every node
+/// direction `k` of an element with a potential.
+fn check_energy_gradient(
+    name: &str,
+    kernel: &dyn ElementKernel,
+    model: &Model,
+    nodes: &[NodeState],
+    x: &[f64],
+) {
+    let group = model.group;
+    let ctx = Context::at(model, 0.37, 1.0);
+    let mut rest = nodes.to_vec();
+    for n in &mut rest {
+        n.v = Vec6::zeros();
+        n.vdot = Vec6::zeros();
+    }
+    let xdot = vec![0.0; x.len()];
+    let local = Local {
+        nodes: &rest,
+        x,
+        xdot: &xdot,
+    };
+    let (r, _) = evaluate_owned(kernel, &ctx, &local, None);
+    let energy = |nodes: &[NodeState]| {
+        kernel.potential_energy(
+            &ctx,
+            &Local {
+                nodes,
+                x,
+                xdot: &xdot,
+            },
+        )
+    };
+    let scale = 1.0 + r.abs().max();
+    for k in (0..6 * rest.len()).filter(|&k| kernel.node(k / 6).is_some()) {
+        let dv = (energy(&perturb(group, &rest, k, EPS, 'q'))
+            - energy(&perturb(group, &rest, k, -EPS, 'q')))
+            / (2.0 * EPS);
+        assert!(
+            (dv - r[k]).abs() < 1e-6 * scale,
+            "{name}: dV/dw_{k} = {dv:.9e} vs residual {:.9e}",
+            r[k]
+        );
+    }
+}
+
+#[test]
+fn elastic_forces_are_the_gradients_of_the_potential_energies() {
+    use flexmb::elements::rotational_spring::{joint_angle, RotationalSpringElement};
+    use flexmb::elements::spring::SpringElement;
+    use flexmb::model::{Bushing, BushingForm, ForceCurve, ForceLaw, RotationalSpring, SpringSide};
+    use std::borrow::Cow;
+    let mut rng = Lcg(12);
+    let table = ForceCurve::Table(vec![(-0.5, -80.0), (0.1, 5.0), (0.5, 60.0), (1.0, 90.0)]);
+    let cubic = ForceCurve::Polynomial(vec![40.0, 0.0, 2.0]);
+    for model in models() {
+        let group = model.group;
+        // nonlinear springs: preloaded two-sided table, per-side curves, an acting bump stop
+        for (law, rest_length) in [
+            (
+                ForceLaw {
+                    preload: 7.5,
+                    curve: Some(table.clone()),
+                    ..ForceLaw::default()
+                },
+                0.4,
+            ),
+            (
+                ForceLaw {
+                    compression: Some(cubic.clone()),
+                    extension: Some(table.clone()),
+                    ..ForceLaw::default()
+                },
+                0.8,
+            ),
+            (
+                ForceLaw {
+                    acts: SpringSide::Compression,
+                    curve: Some(cubic.clone()),
+                    ..ForceLaw::default()
+                },
+                5.0,
+            ),
+        ] {
+            let mut spring = law_spring(false, rest_length);
+            spring.damping = 0.0;
+            let element = SpringElement {
+                spring: Cow::Borrowed(&spring),
+                law: Some(&law),
+            };
+            let nodes = [rng.node(group), rng.node(group)];
+            check_energy_gradient(&format!("spring {law:?}"), &element, &model, &nodes, &[]);
+        }
+        // a rotational spring with a law, wound four turns
+        let mut m = model.clone();
+        m.nodes[0].frame = group.exp(&rng.v6(1.0));
+        m.nodes[1].frame = group.exp(&rng.v6(1.0));
+        let joint = m.add_joint(
+            "hinge",
+            flexmb::model::JointKind::Revolute,
+            Some(NodeId(0)),
+            Some(NodeId(1)),
+            rng.v3(1.0),
+            flexmb_lie::so3::exp(&rng.v3(1.0)),
+            None,
+        );
+        let spring = RotationalSpring {
+            name: "torsion".into(),
+            joint,
+            stiffness: 35.0,
+            damping: 0.0,
+            angle: 0.3,
+            law: ForceLaw {
+                preload: 3.0,
+                curve: Some(ForceCurve::Polynomial(vec![5.0, 0.0, 0.02])),
+                ..ForceLaw::default()
+            },
+        };
+        let element = RotationalSpringElement {
+            spring: &spring,
+            joint: &m.joints[joint.0],
+        };
+        let nodes = [rng.node(group), rng.node(group)];
+        let x = [joint_angle(element.joint, &nodes).0 + 8.0 * std::f64::consts::PI];
+        check_energy_gradient("rotational spring", &element, &m, &nodes, &x);
+        // bushings
+        {
+            for form in [BushingForm::LargeRotation, BushingForm::SmallRotation] {
+                let bushing = Bushing {
+                    name: "mount".into(),
+                    node_a: Some(NodeId(0)),
+                    node_b: Some(NodeId(1)),
+                    frame_a: Group::SE3.exp(&rng.v6(1.0)),
+                    frame_b: Group::SE3.exp(&rng.v6(1.0)),
+                    stiffness: spd6(&mut rng, [300.0, 200.0, 250.0, 40.0, 30.0, 50.0]),
+                    damping: Mat6::zeros(),
+                    form,
+                };
+                let nodes = [rng.node(group), rng.node(group)];
+                check_energy_gradient(&format!("bushing {form:?}"), &bushing, &model, &nodes, &[]);
+            }
+        }
+    }
+}

@@ -162,7 +162,7 @@ pub fn mass_matrix_with(beam: &Beam, mass_per_length: f64, rotary_inertia: &Mat3
 
 /// `H(x, y) = d(T^-1(x) y)/dx` from the transposed derivative `G`:
 /// `e_i . T^-1(x) y = (T^-1(x)^T e_i) . y`, so row `i` of `H` is `y^T G(x, e_i)`.
-fn tangent_inv_derivative(x: &Vec6, y: &Vec6) -> Mat6 {
+pub(super) fn tangent_inv_derivative(x: &Vec6, y: &Vec6) -> Mat6 {
     let mut h = Mat6::zeros();
     for i in 0..6 {
         let mut e = Vec6::zeros();
@@ -411,7 +411,7 @@ fn inertia_forces(mm: &Mat12, alpha: f64, nodes: &[NodeState; 2]) -> Vec12 {
 }
 
 /// The unit symmetric matrix of entry `(i, j)`.
-fn unit_symmetric<const N: usize>(i: usize, j: usize) -> SMatrix<f64, N, N> {
+pub(super) fn unit_symmetric<const N: usize>(i: usize, j: usize) -> SMatrix<f64, N, N> {
     let mut e = SMatrix::<f64, N, N>::zeros();
     e[(i, j)] = 1.0;
     e[(j, i)] = 1.0;

@@ -1,7 +1,9 @@
 //! Force elements: rigid bodies (inertia and gravity), geometrically exact beams on SE(3)
 //! (two nodes, [`beam`]), applied loads, spring-dampers (with an optional Maxwell branch,
-//! [`spring`]), ropes through any number of points ([`rope`]), unilateral contacts with
-//! impact and friction ([`contact`]) and gear pairs ([`gear`]).
+//! [`spring`], nonlinear laws and stops included), rotational spring-dampers about a joint's
+//! axis ([`rotational_spring`]), 6-DOF bushings ([`bushing`]), ropes through any number of
+//! points ([`rope`]), unilateral contacts with impact and friction ([`contact`]) and gear
+//! pairs ([`gear`]).
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
@@ -33,12 +35,14 @@
 //! [`physical`].
 
 pub mod beam;
+pub mod bushing;
 pub mod contact;
 pub mod gear;
 pub mod load;
 pub mod physical;
 pub mod rigid_body;
 pub mod rope;
+pub mod rotational_spring;
 pub mod spring;
 
 use crate::model::{Model, NodeId};
@@ -191,6 +195,14 @@ pub enum ElementRef {
     /// Index in [`Model::contacts`] and the effective mass of its nodes' bodies.
     Contact(usize, f64),
     Gear(usize),
+    /// A spring-damper with a nonlinear law: indices in [`Model::springs`] and
+    /// [`Model::spring_laws`] (its place in [`ElementItem::all`] is that of
+    /// [`ElementItem::Spring`]).
+    NonlinearSpring(usize, usize),
+    /// Index in [`Model::rotational_springs`].
+    RotationalSpring(usize),
+    /// Index in [`Model::bushings`].
+    Bushing(usize),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -426,6 +438,13 @@ impl ElementRef {
     /// All force elements of a model (beam mass matrices computed here), in the order of
     /// [`ElementItem::all`].
     pub fn all(model: &Model) -> Vec<ElementRef> {
+        let mut laws = vec![None; model.springs.len()];
+        // (the first law of a spring, like `Model::spring_law`; validation allows one)
+        for (k, law) in model.spring_laws.iter().enumerate().rev() {
+            if let Some(slot) = laws.get_mut(law.spring) {
+                *slot = Some(k);
+            }
+        }
         ElementItem::all(model)
             .map(|item| match item {
                 ElementItem::Body(i) => ElementRef::Body(i),
@@ -433,13 +452,18 @@ impl ElementRef {
                     ElementRef::Beam(i, Arc::new(beam::mass_matrix(&model.beams[i])))
                 }
                 ElementItem::Load(i) => ElementRef::Load(i),
-                ElementItem::Spring(i) => ElementRef::Spring(i),
+                ElementItem::Spring(i) => match laws[i] {
+                    Some(k) => ElementRef::NonlinearSpring(i, k),
+                    None => ElementRef::Spring(i),
+                },
                 ElementItem::Rope(i) => ElementRef::Rope(i),
                 ElementItem::Contact(i) => {
                     let c = &model.contacts[i];
                     ElementRef::Contact(i, contact::effective_mass(model, c.node_a, c.node_b))
                 }
                 ElementItem::Gear(i) => ElementRef::Gear(i),
+                ElementItem::RotationalSpring(i) => ElementRef::RotationalSpring(i),
+                ElementItem::Bushing(i) => ElementRef::Bushing(i),
             })
             .collect()
     }
@@ -460,6 +484,14 @@ impl ElementRef {
                 effective_mass: *m,
             }),
             ElementRef::Gear(i) => Kernel::Gear(&model.gears[*i]),
+            ElementRef::NonlinearSpring(i, k) => Kernel::NonlinearSpring(spring::SpringElement {
+                spring: std::borrow::Cow::Borrowed(&model.springs[*i]),
+                law: Some(&model.spring_laws[*k].law),
+            }),
+            ElementRef::RotationalSpring(i) => {
+                Kernel::RotationalSpring(rotational_spring::RotationalSpringElement::of(model, *i))
+            }
+            ElementRef::Bushing(i) => Kernel::Bushing(&model.bushings[*i]),
         }
     }
 
@@ -480,6 +512,11 @@ impl ElementRef {
             ElementRef::Rope(i) => format!("rope '{}'", model.ropes[*i].name),
             ElementRef::Contact(i, _) => format!("contact '{}'", model.contacts[*i].name),
             ElementRef::Gear(i) => format!("gear pair '{}'", model.gears[*i].name),
+            ElementRef::NonlinearSpring(i, _) => format!("spring '{}'", model.springs[*i].name),
+            ElementRef::RotationalSpring(i) => {
+                format!("rotational spring '{}'", model.rotational_springs[*i].name)
+            }
+            ElementRef::Bushing(i) => format!("bushing '{}'", model.bushings[*i].name),
         }
     }
 }
@@ -495,11 +532,14 @@ pub enum ElementItem {
     Rope(usize),
     Contact(usize),
     Gear(usize),
+    RotationalSpring(usize),
+    Bushing(usize),
 }
 
 impl ElementItem {
     /// Every force element of `model`: bodies, beam elements, loads, springs, ropes,
     /// contacts, gear pairs.
+    /// rotational springs, bushings.
     pub fn all(model: &Model) -> impl Iterator<Item = ElementItem> {
         (0..model.bodies.len())
             .map(ElementItem::Body)
@@ -509,6 +549,8 @@ impl ElementItem {
             .chain((0..model.ropes.len()).map(ElementItem::Rope))
             .chain((0..model.contacts.len()).map(ElementItem::Contact))
             .chain((0..model.gears.len()).map(ElementItem::Gear))
+            .chain((0..model.rotational_springs.len()).map(ElementItem::RotationalSpring))
+            .chain((0..model.bushings.len()).map(ElementItem::Bushing))
     }
 
     /// The number of states the element owns.
@@ -521,6 +563,8 @@ impl ElementItem {
             ElementItem::Rope(i) => model.ropes[i].n_states(),
             ElementItem::Contact(i) => model.contacts[i].n_states(),
             ElementItem::Gear(i) => model.gears[i].n_states(),
+            ElementItem::RotationalSpring(_) => 1,
+            ElementItem::Bushing(i) => model.bushings[i].n_states(),
         }
     }
 
@@ -547,6 +591,9 @@ pub enum Kernel<'m> {
     Rope(&'m crate::model::Rope),
     Contact(contact::ContactElement<'m>),
     Gear(&'m crate::model::GearPair),
+    NonlinearSpring(spring::SpringElement<'m>),
+    RotationalSpring(rotational_spring::RotationalSpringElement<'m>),
+    Bushing(&'m crate::model::Bushing),
 }
 
 macro_rules! dispatch {
@@ -559,6 +606,9 @@ macro_rules! dispatch {
             Kernel::Rope($k) => $e,
             Kernel::Contact($k) => $e,
             Kernel::Gear($k) => $e,
+            Kernel::NonlinearSpring($k) => $e,
+            Kernel::RotationalSpring($k) => $e,
+            Kernel::Bushing($k) => $e,
         }
     };
 }

@@ -10,12 +10,13 @@ use crate::model::limits::{
     MAX_TIME, MIN_PHYSICAL, MIN_STEP,
 };
 use crate::model::{
-    box_inertia, clip, frame_from_axis, rotation_from_vector, JointKind, Load, LoadFrame, Model,
-    NodeId, Relaxation, Rope, RopePoint, Sensor, SensorFrame, SensorKind, SpringDamper,
+    box_inertia, clip, frame_from_axis, rotation_from_vector, Bushing, BushingForm, ForceCurve,
+    ForceLaw, JointKind, Load, LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint,
+    RotationalSpring, Sensor, SensorFrame, SensorKind, SpringDamper, SpringLaw, SpringSide,
     TimeFunction,
 };
 use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
-use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
+use flexmb_lie::{so3, Frame, Group, Mat3, Mat6, Vec3};
 use std::collections::HashMap;
 
 const TOP_KEYS: &[&str] = &[
@@ -38,6 +39,8 @@ const TOP_KEYS: &[&str] = &[
     "reference",
     "criterion",
     "gear",
+    "rotational_spring",
+    "bushing",
 ];
 /// The keys of a `[[sensor]]`: `name`, `type`, then those a type may use.
 const SENSOR_KEYS: &[&str] = &[
@@ -53,6 +56,7 @@ const SENSOR_KEYS: &[&str] = &[
     "rope",
     "contact",
     "gear",
+    "bushing",
 ];
 const NODE_STATE_KEYS: &[&str] = &[
     "position",
@@ -121,6 +125,8 @@ pub(super) struct Origins {
     springs: Vec<Origin>,
     ropes: Vec<Origin>,
     pub contacts: Vec<Origin>,
+    rotational_springs: Vec<Origin>,
+    bushings: Vec<Origin>,
     /// One per element of `Model::beams`.
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
@@ -188,6 +194,8 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     read_ropes(&top, &mut model, &mut origins)?;
     super::contact::read_contacts(&top, &mut model, &mut origins)?;
     read_gears(&top, &mut model, &mut origins)?;
+    read_rotational_springs(&top, &mut model, &mut origins)?;
+    read_bushings(&top, &mut model, &mut origins)?;
     read_sensors(&top, &mut model, &mut origins)?;
 
     model
@@ -217,6 +225,8 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
         "spring" => &origins.springs,
         "rope" => &origins.ropes,
         "contact" => &origins.contacts,
+        "rotational_spring" => &origins.rotational_springs,
+        "bushing" => &origins.bushings,
         "beam" => &origins.beams,
         "sensor" => &origins.sensors,
         "gear" => &origins.gears,
@@ -1236,6 +1246,12 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "rest_length",
             "relaxation_stiffness",
             "relaxation_damping",
+            "preload",
+            "acts",
+            "force_table",
+            "polynomial",
+            "compression",
+            "extension",
         ])?;
         let name = read_name(&t, &mut names, "spring")?;
         let node_a = match t.field("node_a") {
@@ -1245,7 +1261,9 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
         let pa = point(&t.req("point_a")?)?;
         let pb = point(&t.req("point_b")?)?;
-        let stiffness = physical_or_zero(&t.req("stiffness")?)?;
+        let law = read_force_law(&t)?;
+        // a nonlinear law may stand without a linear part
+        let stiffness = stiffness_or_curve(&t, law.as_ref())?;
         let damping = match t.field("damping") {
             Some(f) => physical_or_zero(&f)?,
             None => 0.0,
@@ -1286,9 +1304,248 @@ fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             rest_length,
             relaxation,
         });
+        let spring = model.springs.len() - 1;
+        model
+            .spring_laws
+            .extend(law.map(|law| SpringLaw { spring, law }));
         origins.springs.push(Origin::of(&t));
     }
     Ok(())
+}
+
+/// The keys of a nonlinear force law ([`read_force_law`]).
+const LAW_KEYS: [&str; 6] = [
+    "preload",
+    "acts",
+    "force_table",
+    "polynomial",
+    "compression",
+    "extension",
+];
+
+/// The nonlinear force law of a `[[spring]]` or `[[rotational_spring]]`, if it has any of
+/// [`LAW_KEYS`].
+fn read_force_law(t: &Table<'_>) -> Result<Option<ForceLaw>> {
+    if !LAW_KEYS.iter().any(|k| t.has(k)) {
+        return Ok(None);
+    }
+    let mut law = ForceLaw::default();
+    if let Some(f) = t.field("preload") {
+        law.preload = f.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?;
+    }
+    if let Some(f) = t.field("acts") {
+        law.acts = match f.choice(&["both", "compression", "extension"])? {
+            "compression" => SpringSide::Compression,
+            "extension" => SpringSide::Extension,
+            _ => SpringSide::Both,
+        };
+    }
+    law.curve = read_force_curve(t)?;
+    for (key, side) in [
+        ("compression", &mut law.compression),
+        ("extension", &mut law.extension),
+    ] {
+        if let Some(f) = t.field(key) {
+            let sub = f.table()?;
+            sub.check_keys(&["force_table", "polynomial"])?;
+            *side = read_force_curve(&sub)?;
+            if side.is_none() {
+                return Err(f.err("give the side's curve: force_table = [[e, F], ...] or polynomial = [a1, a2, ...]"));
+            }
+        }
+    }
+    Ok(Some(law))
+}
+
+/// `stiffness`: required, or 0 when absent from a table with a force curve (`law`).
+fn stiffness_or_curve(t: &Table<'_>, law: Option<&ForceLaw>) -> Result<f64> {
+    match (t.field("stiffness"), law) {
+        (Some(f), _) => physical_or_zero(&f),
+        (None, Some(law)) if law.has_curve() => Ok(0.0),
+        (None, _) => physical_or_zero(&t.req("stiffness")?),
+    }
+}
+
+/// A 6 x 6 matrix: `[k1, ..., k6]` (diagonal) or six rows of six numbers. Symmetry and
+/// definiteness are checked by `Model::validate`.
+fn read_matrix6(f: &Field<'_>) -> Result<Mat6> {
+    let rows = f.array()?;
+    if rows.len() == 6 && rows.iter().all(|v| !v.get_ref().is_array()) {
+        let d = f.numbers(6, "6 numbers (the diagonal) or 6 rows of 6 numbers")?;
+        return Ok(Mat6::from_diagonal(&flexmb_lie::Vec6::from_column_slice(
+            &d,
+        )));
+    }
+    if rows.len() != 6 {
+        return Err(f.err(format!(
+            "expected 6 numbers (the diagonal) or 6 rows of 6 numbers, got an array of {}",
+            rows.len()
+        )));
+    }
+    let mut m = Mat6::zeros();
+    for (i, v) in rows.iter().enumerate() {
+        let row = f.elem(i, v).numbers(6, "a row of 6 numbers")?;
+        for (j, x) in row.into_iter().enumerate() {
+            m[(i, j)] = x;
+        }
+    }
+    Ok(m)
+}
+
+fn read_bushings(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+    let mut names = HashMap::new();
+    for t in top.items("bushing")? {
+        t.check_keys(&[
+            "name",
+            "node_a",
+            "node_b",
+            "position",
+            "orientation",
+            "stiffness",
+            "damping",
+            "form",
+        ])?;
+        let name = read_name(&t, &mut names, "bushing")?;
+        let node_a = match t.field("node_a") {
+            Some(f) => resolve_node(model, origins, &f, true)?,
+            None => None,
+        };
+        let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
+        let position = match opt_point(&t, "position")? {
+            Some(p) => p,
+            None => node_b
+                .or(node_a)
+                .map_or(Vec3::zeros(), |n| model.nodes[n.0].frame.x),
+        };
+        let orientation = match t.field("orientation") {
+            Some(f) => read_orientation(&f)?,
+            None => Mat3::identity(),
+        };
+        let stiffness = read_matrix6(&t.req("stiffness")?)?;
+        let damping = match t.field("damping") {
+            Some(f) => read_matrix6(&f)?,
+            None => Mat6::zeros(),
+        };
+        let at = Frame::new(position, orientation);
+        let local = |n: Option<NodeId>| match n {
+            Some(id) => model.nodes[id.0].frame.inverse().compose(&at),
+            None => at,
+        };
+        model.bushings.push(Bushing {
+            name,
+            node_a,
+            node_b,
+            frame_a: local(node_a),
+            frame_b: local(node_b),
+            stiffness,
+            damping,
+            form: match t.opt_choice("form", &["large_rotation", "small_rotation"])? {
+                Some("small_rotation") => BushingForm::SmallRotation,
+                _ => BushingForm::LargeRotation,
+            },
+        });
+        origins.bushings.push(
+            Origin::of(&t)
+                .alias("frame_a", "position")
+                .alias("frame_b", "position"),
+        );
+    }
+    Ok(())
+}
+
+fn read_rotational_springs(
+    top: &Table<'_>,
+    model: &mut Model,
+    origins: &mut Origins,
+) -> Result<()> {
+    let mut names = HashMap::new();
+    for t in top.items("rotational_spring")? {
+        let mut keys = vec![
+            "name",
+            "joint",
+            "stiffness",
+            "damping",
+            "angle",
+            "angle_deg",
+        ];
+        keys.extend(LAW_KEYS);
+        t.check_keys(&keys)?;
+        let name = read_name(&t, &mut names, "rotational spring")?;
+        let f = t.req("joint")?;
+        let jname = f.str()?;
+        let joint = origins.joint_ids.get(jname).copied().ok_or_else(|| {
+            let names = || model.joints.iter().map(|j| j.name.as_str());
+            f.err(format!(
+                "unknown joint '{}'{} (joints: {})",
+                clip(jname, QUOTED),
+                suggestion(jname, names()),
+                name_list(names(), 12)
+            ))
+        })?;
+        let law = read_force_law(&t)?;
+        let stiffness = stiffness_or_curve(&t, law.as_ref())?;
+        let damping = match t.field("damping") {
+            Some(f) => physical_or_zero(&f)?,
+            None => 0.0,
+        };
+        let angle = match (t.field("angle"), t.field("angle_deg")) {
+            (Some(_), Some(f)) => return Err(f.err("give angle or angle_deg, not both")),
+            (Some(f), None) => f.f64_in(-MAX_ANGLE, MAX_ANGLE)?,
+            (None, Some(f)) => f.f64_in(-MAX_ANGLE, MAX_ANGLE)?.to_radians(),
+            (None, None) => 0.0,
+        };
+        model.rotational_springs.push(RotationalSpring {
+            name,
+            joint,
+            stiffness,
+            damping,
+            angle,
+            law: law.unwrap_or_default(),
+        });
+        origins.rotational_springs.push(Origin::of(&t));
+    }
+    Ok(())
+}
+
+/// `force_table` or `polynomial` of a table (at most one).
+fn read_force_curve(t: &Table<'_>) -> Result<Option<ForceCurve>> {
+    match (t.field("force_table"), t.field("polynomial")) {
+        (Some(_), Some(p)) => Err(p.err("give force_table or polynomial, not both")),
+        (Some(f), None) => {
+            let mut points: Vec<(f64, f64)> = Vec::new();
+            let list = f.array()?;
+            for (i, v) in list.iter().enumerate() {
+                let pt = f.elem(i, v);
+                let ef = pt.numbers(2, "a point [elongation (m), force (N)]")?;
+                if let Some(&(previous, _)) = points.last() {
+                    if ef[0] <= previous {
+                        return Err(pt.err(format!(
+                            "is not sorted in elongation: e = {} does not come after e = {previous}; the elongations must increase strictly",
+                            ef[0]
+                        )));
+                    }
+                }
+                points.push((ef[0], ef[1]));
+            }
+            if points.len() < 2 {
+                return Err(f.err(format!(
+                    "has {} point(s): a force table needs at least 2",
+                    points.len()
+                )));
+            }
+            Ok(Some(ForceCurve::Table(points)))
+        }
+        (None, Some(p)) => {
+            let list = p.array()?;
+            let a = list
+                .iter()
+                .enumerate()
+                .map(|(j, v)| p.elem(j, v).f64_in(-MAX_PHYSICAL, MAX_PHYSICAL))
+                .collect::<Result<Vec<f64>>>()?;
+            Ok(Some(ForceCurve::Polynomial(a)))
+        }
+        (None, None) => Ok(None),
+    }
 }
 
 fn read_ropes(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
@@ -1315,7 +1572,9 @@ fn read_ropes(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
                 point: to_node_frame(model, node, &p),
             });
         }
-        let stiffness = physical_or_zero(&t.req("stiffness")?)?;
+        let law = read_force_law(&t)?;
+        // a nonlinear law may stand without a linear part
+        let stiffness = stiffness_or_curve(&t, law.as_ref())?;
         let damping = match t.field("damping") {
             Some(f) => physical_or_zero(&f)?,
             None => 0.0,
@@ -1391,6 +1650,8 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "contact",
             "gear_force",
             "gear_transmission_error",
+            "rotational_spring_torque",
+            "bushing_force",
         ])?;
         let why = format!("for a {ty} sensor");
         let uses: &[&str] = match ty {
@@ -1404,6 +1665,8 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "rope_force" => &["rope"],
             "contact" => &["contact", "component"],
             "gear_force" | "gear_transmission_error" => &["gear"],
+            "rotational_spring_torque" => &["spring"],
+            "bushing_force" => &["bushing", "component"],
             _ => &[],
         };
         // The keys after `name` and `type`: each sensor type uses some of them.
@@ -1537,6 +1800,18 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                 } else {
                     SensorKind::GearTransmissionError { gear }
                 }
+            }
+            "rotational_spring_torque" => {
+                let names = || model.rotational_springs.iter().map(|s| s.name.as_str());
+                let plural = "rotational springs";
+                let spring = item_named(&t.req("spring")?, names, "rotational spring", plural)?;
+                SensorKind::RotationalSpringTorque { spring }
+            }
+            "bushing_force" => {
+                let names = || model.bushings.iter().map(|b| b.name.as_str());
+                let bushing = item_named(&t.req("bushing")?, names, "bushing", "bushings")?;
+                let component = component(&["fx", "fy", "fz", "mx", "my", "mz"])?;
+                SensorKind::BushingForce { bushing, component }
             }
             "kinetic_energy" => SensorKind::KineticEnergy,
             "potential_energy" => SensorKind::PotentialEnergy,

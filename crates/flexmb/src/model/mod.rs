@@ -176,6 +176,155 @@ pub struct Relaxation {
     pub damping: f64,
 }
 
+/// A force-elongation curve `F(e)` \[N\] of a nonlinear spring, `e = l - l0` the elongation
+/// \[m\] (tension positive). See [`crate::elements::spring`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum ForceCurve {
+    /// Piecewise linear through the points `(e_i, F_i)` (at least two, `e_i` strictly
+    /// increasing), continued beyond the first and the last point with the slopes of the end
+    /// segments. At a point `e_i` the slope is that of the segment to its right.
+    Table(Vec<(f64, f64)>),
+    /// `F = a_1 e + a_2 e^2 + ...`: the coefficients `[a_1, a_2, ...]` (no constant term: that
+    /// is the preload).
+    Polynomial(Vec<f64>),
+}
+
+/// On which side of its free length a spring acts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum SpringSide {
+    /// Always (an ordinary spring).
+    #[default]
+    Both,
+    /// Only while compressed (`e < 0`) and pushing (`T < 0`): a bump stop, engaged when the
+    /// points come closer than the free length.
+    Compression,
+    /// Only while extended (`e >= 0`) and pulling (`T >= 0`): a rebound stop, a strap.
+    Extension,
+}
+
+/// A nonlinear force law, of a spring-damper ([`SpringLaw`]) or of a rotational spring
+/// ([`RotationalSpring`]): with `e` the elongation (or the rotation angle from the neutral one),
+///
+/// ```text
+/// T = P + k e + F(e) + c edot,
+/// ```
+///
+/// `k`, `c` the element's linear stiffness and damping, `P` the preload (the force at
+/// `e = 0`), `F` the curve of the side of `e` (`compression` for `e < 0`, `extension` for
+/// `e >= 0`, each falling back to `curve`, none = 0); with `acts` a one-sided spring (a stop)
+/// whose force is zero off its side.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ForceLaw {
+    /// Preload `P` \[N or N m\], the force at `e = 0` (negative: pushing).
+    pub preload: f64,
+    /// Curve for both sides (unless a side has its own).
+    pub curve: Option<ForceCurve>,
+    /// Curve for `e < 0`.
+    pub compression: Option<ForceCurve>,
+    /// Curve for `e >= 0`.
+    pub extension: Option<ForceCurve>,
+    pub acts: SpringSide,
+}
+
+impl ForceLaw {
+    /// Whether the law has a force curve (on either side).
+    pub fn has_curve(&self) -> bool {
+        self.curve.is_some() || self.compression.is_some() || self.extension.is_some()
+    }
+
+    /// The curve that acts at `e`, if any.
+    pub fn curve_at(&self, e: f64) -> Option<&ForceCurve> {
+        let side = if e < 0.0 {
+            &self.compression
+        } else {
+            &self.extension
+        };
+        side.as_ref().or(self.curve.as_ref())
+    }
+}
+
+/// The nonlinear law of the spring-damper `Model::springs[spring]`: tension
+/// `T = P + k e + F(e) + c ldot` (plus the Maxwell branch), `e = l - l0`, `k`, `c`, `l0` (free
+/// length) those of the spring-damper ([`ForceLaw`]). Kept apart from [`SpringDamper`] so
+/// that the linear spring-damper, which users and tests build field by field, keeps its
+/// fields.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SpringLaw {
+    /// Index of the spring-damper in [`Model::springs`] (at most one law per spring).
+    pub spring: usize,
+    pub law: ForceLaw,
+}
+
+impl SpringLaw {
+    /// A law with no curve, no preload, acting on both sides (the linear spring) for
+    /// `Model::springs[spring]`.
+    pub fn new(spring: usize) -> Self {
+        Self {
+            spring,
+            law: ForceLaw::default(),
+        }
+    }
+}
+
+/// A rotational spring-damper about the axis of a revolute or cylindrical joint, between the
+/// joint's two nodes: with `theta` the relative rotation angle about the joint's z axis
+/// (frame B's x axis in frame A, measured from the initial configuration, continuous over
+/// any number of turns) and `e = theta - theta0`, the spring's torque
+/// `T = P + k e + F(e) + c edot` (the law of [`ForceLaw`], `P` its preload) acts on node B
+/// as the moment `-T` about the axis and on node A as `+T`. See
+/// [`crate::elements::rotational_spring`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RotationalSpring {
+    pub name: String,
+    /// The revolute or cylindrical joint whose axis and nodes the spring uses.
+    pub joint: JointId,
+    /// Stiffness k [N m/rad], >= 0.
+    pub stiffness: f64,
+    /// Damping c [N m s/rad], >= 0.
+    pub damping: f64,
+    /// Neutral angle theta0 \[rad\], from the initial configuration.
+    pub angle: f64,
+    /// Nonlinear part of the law, preload and stops (none: linear).
+    pub law: ForceLaw,
+}
+
+/// A 6-DOF bushing between a frame on node A and a frame on node B (either may be the
+/// ground): with `d` the relative configuration of the two frames ([`BushingForm`]: the SE(3)
+/// logarithm `log(H_A^-1 H_B)`, or the position and rotation vector of B in A; translation,
+/// then rotation; 0 where the frames coincide), the bushing's stress resultants are
+/// `sigma = K d + C ddot` in the bushing frame. See [`crate::elements::bushing`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Bushing {
+    pub name: String,
+    /// `None` is the ground.
+    pub node_a: Option<NodeId>,
+    pub node_b: Option<NodeId>,
+    /// Bushing frame A in the frame of node A (in the inertial frame if A is the ground).
+    pub frame_a: Frame,
+    /// Bushing frame B in the frame of node B (in the inertial frame if B is the ground).
+    pub frame_b: Frame,
+    /// Stiffness K (6 x 6, symmetric positive semidefinite): blocks [N/m, N/rad; N m/m,
+    /// N m/rad], ordered (translation x, y, z, rotation x, y, z) of the bushing frame.
+    pub stiffness: flexmb_lie::Mat6,
+    /// Damping C (6 x 6, symmetric positive semidefinite), the same order [N s/m ...].
+    pub damping: flexmb_lie::Mat6,
+    /// The deformation measure.
+    pub form: BushingForm,
+}
+
+/// The deformation measure `d` of a [`Bushing`] (both coincide to first order).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum BushingForm {
+    /// The SE(3) logarithm of the relative configuration `log(H_A^-1 H_B)`: objective for
+    /// large relative rotations, the elastic centre midway between the frames.
+    #[default]
+    LargeRotation,
+    /// The R3 x SO(3) logarithm: the position of frame B in frame A and the rotation vector
+    /// of the relative rotation, `(R_A^T (x_B - x_A), log(R_A^T R_B))`: the usual bushing,
+    /// the elastic centre at frame B's origin; for small relative rotations.
+    SmallRotation,
+}
+
 /// A point a rope passes through: fixed on a node (node frame) or on the ground (inertial).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RopePoint {
@@ -520,6 +669,18 @@ pub enum SensorKind {
     GearTransmissionError {
         gear: usize,
     },
+    /// Torque `T` of a rotational spring-damper, positive when it resists a positive
+    /// rotation (the moment on the joint's node B about the axis is `-T`) [N m] (index in
+    /// [`Model::rotational_springs`]).
+    RotationalSpringTorque {
+        spring: usize,
+    },
+    /// Component of the stress resultants `sigma = K d + C ddot` of a bushing (0..3: forces
+    /// \[N\], 3..6: moments [N m], bushing frame) (index in [`Model::bushings`]).
+    BushingForce {
+        bushing: usize,
+        component: usize,
+    },
 }
 
 /// The quantities a contact sensor measures, in the order of
@@ -569,6 +730,16 @@ pub struct Model {
     /// Gear pairs ([`crate::elements::gear`]).
     #[serde(default)]
     pub gears: Vec<GearPair>,
+    /// Nonlinear laws of spring-dampers (at most one per spring; a spring without one is
+    /// linear).
+    #[serde(default)]
+    pub spring_laws: Vec<SpringLaw>,
+    /// Rotational spring-dampers about joint axes.
+    #[serde(default)]
+    pub rotational_springs: Vec<RotationalSpring>,
+    /// 6-DOF bushings.
+    #[serde(default)]
+    pub bushings: Vec<Bushing>,
 }
 
 /// Reference to one item of a model and one of its fields, for error messages.
@@ -613,6 +784,9 @@ impl Model {
             sensors: Vec::new(),
             display: display::Display::default(),
             gears: Vec::new(),
+            spring_laws: Vec::new(),
+            rotational_springs: Vec::new(),
+            bushings: Vec::new(),
         }
     }
 
@@ -888,6 +1062,16 @@ impl Model {
     /// Finds a node by name (the first of that name).
     pub fn node_id(&self, name: &str) -> Option<NodeId> {
         self.nodes.iter().position(|n| n.name == name).map(NodeId)
+    }
+
+    /// The nonlinear law of spring `spring` (index in [`Model::springs`]), if it has one.
+    pub fn spring_law(&self, spring: usize) -> Option<&SpringLaw> {
+        self.spring_laws.iter().find(|l| l.spring == spring)
+    }
+
+    /// The nonlinear law of spring `spring`, to change it.
+    pub fn spring_law_mut(&mut self, spring: usize) -> Option<&mut SpringLaw> {
+        self.spring_laws.iter_mut().find(|l| l.spring == spring)
     }
 
     /// Finds a joint by name (the first of that name).

@@ -27,6 +27,12 @@
 //! | spring | `spring.<s>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `l0` \[m\] | same |
 //! | spring | `spring.<s>.point_a.<k>`, `spring.<s>.point_b.<k>` | attachment point at t = 0, inertial \[m\] | same |
 //! | spring | `spring.<s>.relaxation_stiffness`, `.relaxation_damping` | Maxwell branch `k_m` [N/m], `c_m` [N s/m] (springs that have one) | same |
+//! | spring | `spring.<s>.preload` | preload `P` \[N\] (springs with a nonlinear law) | same |
+//! | spring | `spring.<s>.polynomial.<j>`, `spring.<s>.force_table.<i>` | coefficient `a_{j+1}` of a polynomial curve, force `F_i` of point `i` of a table curve \[N\] | same (the table's elongations are not parameters) |
+//! | spring | `spring.<s>.{compression, extension}.{polynomial.<j>, force_table.<i>}` | the same for a side's own curve | same |
+//! | rotational spring | `rotational_spring.<s>.stiffness`, `.damping`, `.angle` | `k` [N m/rad], `c` [N m s/rad], `theta0` \[rad\] | same |
+//! | rotational spring | `rotational_spring.<s>.preload`, `.polynomial.<j>`, `.force_table.<i>`, `.{compression, extension}.{...}` | its law, as for a spring [N m] | same |
+//! | bushing | `bushing.<b>.stiffness.<i>.<j>`, `bushing.<b>.damping.<i>.<j>`, `i <= j` | entry `K_ij = K_ji`, `C_ij = C_ji` (order: translation x, y, z, rotation x, y, z) | the matrix form (sets one entry there) |
 //! | rope | `rope.<r>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `L0` \[m\] | same |
 //! | rope | `rope.<r>.points.<i>.point.<k>` | point `i` at t = 0, inertial \[m\] | same |
 //! | gear | `gear.<g>.mesh_stiffness`, `.damping`, `.backlash` | `k_m` [N/m], `c` [N s/m], `b` \[m\] | same |
@@ -208,6 +214,186 @@ impl ContactParam {
     }
 }
 
+/// Which curve of a nonlinear force law ([`super::ForceLaw`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CurveKey {
+    /// `curve`, both sides.
+    Both,
+    /// `compression`.
+    Compression,
+    /// `extension`.
+    Extension,
+}
+
+impl CurveKey {
+    /// The path segment (empty for `Both`: the curve's keys sit on the spring itself).
+    pub fn key(self) -> &'static str {
+        match self {
+            CurveKey::Both => "",
+            CurveKey::Compression => "compression.",
+            CurveKey::Extension => "extension.",
+        }
+    }
+
+    /// The curve of `law` this key names.
+    pub fn curve(self, law: &super::ForceLaw) -> Option<&super::ForceCurve> {
+        match self {
+            CurveKey::Both => law.curve.as_ref(),
+            CurveKey::Compression => law.compression.as_ref(),
+            CurveKey::Extension => law.extension.as_ref(),
+        }
+    }
+
+    fn curve_mut(self, law: &mut super::ForceLaw) -> Option<&mut super::ForceCurve> {
+        match self {
+            CurveKey::Both => law.curve.as_mut(),
+            CurveKey::Compression => law.compression.as_mut(),
+            CurveKey::Extension => law.extension.as_mut(),
+        }
+    }
+}
+
+/// A parameter of a nonlinear force law ([`super::ForceLaw`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpringLawParam {
+    /// Preload \[N\].
+    Preload,
+    /// Coefficient `a_{j+1}` (of `e^{j+1}`) of a polynomial curve [N/m^(j+1)].
+    Polynomial(CurveKey, usize),
+    /// Force `F_i` of point `i` of a table curve \[N\].
+    TableForce(CurveKey, usize),
+}
+
+impl SpringLawParam {
+    /// Every parameter of `law`, in registry order, with the path after the spring's name.
+    pub fn all(law: &super::ForceLaw) -> Vec<(String, SpringLawParam)> {
+        let mut out = vec![("preload".to_string(), SpringLawParam::Preload)];
+        for key in [CurveKey::Both, CurveKey::Compression, CurveKey::Extension] {
+            match key.curve(law) {
+                Some(super::ForceCurve::Polynomial(a)) => out.extend((0..a.len()).map(|j| {
+                    let path = format!("{}polynomial.{j}", key.key());
+                    (path, SpringLawParam::Polynomial(key, j))
+                })),
+                Some(super::ForceCurve::Table(points)) => out.extend((0..points.len()).map(|i| {
+                    let path = format!("{}force_table.{i}", key.key());
+                    (path, SpringLawParam::TableForce(key, i))
+                })),
+                None => {}
+            }
+        }
+        out
+    }
+
+    pub fn get(self, law: &super::ForceLaw) -> f64 {
+        match self {
+            SpringLawParam::Preload => law.preload,
+            SpringLawParam::Polynomial(key, j) => match key.curve(law) {
+                Some(super::ForceCurve::Polynomial(a)) => a[j],
+                _ => 0.0,
+            },
+            SpringLawParam::TableForce(key, i) => match key.curve(law) {
+                Some(super::ForceCurve::Table(p)) => p[i].1,
+                _ => 0.0,
+            },
+        }
+    }
+
+    pub fn set(self, law: &mut super::ForceLaw, value: f64) {
+        match self {
+            SpringLawParam::Preload => law.preload = value,
+            SpringLawParam::Polynomial(key, j) => {
+                if let Some(super::ForceCurve::Polynomial(a)) = key.curve_mut(law) {
+                    a[j] = value;
+                }
+            }
+            SpringLawParam::TableForce(key, i) => {
+                if let Some(super::ForceCurve::Table(p)) = key.curve_mut(law) {
+                    p[i].1 = value;
+                }
+            }
+        }
+    }
+}
+
+/// A parameter of a rotational spring-damper.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RotationalSpringParam {
+    /// Stiffness [N m/rad].
+    Stiffness,
+    /// Damping [N m s/rad].
+    Damping,
+    /// Neutral angle \[rad\].
+    Angle,
+    /// A parameter of its law (preload [N m], curves).
+    Law(SpringLawParam),
+}
+
+impl RotationalSpringParam {
+    pub fn get(self, s: &super::RotationalSpring) -> f64 {
+        match self {
+            RotationalSpringParam::Stiffness => s.stiffness,
+            RotationalSpringParam::Damping => s.damping,
+            RotationalSpringParam::Angle => s.angle,
+            RotationalSpringParam::Law(p) => p.get(&s.law),
+        }
+    }
+
+    pub fn set(self, s: &mut super::RotationalSpring, value: f64) {
+        match self {
+            RotationalSpringParam::Stiffness => s.stiffness = value,
+            RotationalSpringParam::Damping => s.damping = value,
+            RotationalSpringParam::Angle => s.angle = value,
+            RotationalSpringParam::Law(p) => p.set(&mut s.law, value),
+        }
+    }
+}
+
+/// A parameter of a bushing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BushingParam {
+    /// Stiffness entry `(i, j)`, `i <= j` (both symmetric entries).
+    Stiffness(usize, usize),
+    /// Damping entry `(i, j)`, `i <= j` (both symmetric entries).
+    Damping(usize, usize),
+}
+
+impl BushingParam {
+    /// Every parameter of a bushing, in registry order, with its path after the name.
+    pub fn all() -> Vec<(String, BushingParam)> {
+        let mut out = Vec::new();
+        for (key, make) in [
+            (
+                "stiffness",
+                BushingParam::Stiffness as fn(usize, usize) -> BushingParam,
+            ),
+            ("damping", BushingParam::Damping),
+        ] {
+            for i in 0..6 {
+                for j in i..6 {
+                    out.push((format!("{key}.{i}.{j}"), make(i, j)));
+                }
+            }
+        }
+        out
+    }
+
+    pub fn get(self, b: &super::Bushing) -> f64 {
+        match self {
+            BushingParam::Stiffness(i, j) => b.stiffness[(i, j)],
+            BushingParam::Damping(i, j) => b.damping[(i, j)],
+        }
+    }
+
+    pub fn set(self, b: &mut super::Bushing, value: f64) {
+        let (m, i, j) = match self {
+            BushingParam::Stiffness(i, j) => (&mut b.stiffness, i, j),
+            BushingParam::Damping(i, j) => (&mut b.damping, i, j),
+        };
+        m[(i, j)] = value;
+        m[(j, i)] = value;
+    }
+}
+
 /// Parameters of a rope.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RopeParam {
@@ -281,6 +467,12 @@ pub enum ParamKind {
     Contact(usize, ContactParam),
     /// Index in [`Model::gears`].
     Gear(usize, GearParam),
+    /// The nonlinear law of a spring-damper (index in [`Model::springs`]).
+    SpringLaw(usize, SpringLawParam),
+    /// Index in [`Model::rotational_springs`].
+    RotationalSpring(usize, RotationalSpringParam),
+    /// Index in [`Model::bushings`].
+    Bushing(usize, BushingParam),
 }
 
 /// A path that names no parameter.
@@ -418,6 +610,11 @@ impl Parameters {
                 );
                 add("relaxation_damping".into(), SpringParam::RelaxationDamping);
             }
+            if let Some(law) = model.spring_law(i) {
+                for (key, p) in SpringLawParam::all(&law.law) {
+                    reg.push(format!("spring.{name}.{key}"), ParamKind::SpringLaw(i, p));
+                }
+            }
         }
         let names = segments(model.ropes.iter().map(|r| r.name.as_str()));
         for (i, name) in names.iter().enumerate() {
@@ -465,6 +662,25 @@ impl Parameters {
                     format!("transmission_error.{n}"),
                     GearParam::TransmissionError(n),
                 );
+            }
+        }
+        let names = segments(model.rotational_springs.iter().map(|s| s.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            let mut add = |key: &str, p| {
+                let kind = ParamKind::RotationalSpring(i, p);
+                reg.push(format!("rotational_spring.{name}.{key}"), kind);
+            };
+            add("stiffness", RotationalSpringParam::Stiffness);
+            add("damping", RotationalSpringParam::Damping);
+            add("angle", RotationalSpringParam::Angle);
+            for (key, p) in SpringLawParam::all(&model.rotational_springs[i].law) {
+                add(&key, RotationalSpringParam::Law(p));
+            }
+        }
+        let names = segments(model.bushings.iter().map(|b| b.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            for (key, p) in BushingParam::all() {
+                reg.push(format!("bushing.{name}.{key}"), ParamKind::Bushing(i, p));
             }
         }
         reg
@@ -540,6 +756,9 @@ impl Parameters {
             ParamKind::Rope(i, p) => p.get(&model.ropes[i], &model.nodes),
             ParamKind::Contact(i, p) => p.get(&model.contacts[i]),
             ParamKind::Gear(i, p) => p.get(&model.gears[i]),
+            ParamKind::SpringLaw(i, p) => model.spring_law(i).map_or(0.0, |law| p.get(&law.law)),
+            ParamKind::RotationalSpring(i, p) => p.get(&model.rotational_springs[i]),
+            ParamKind::Bushing(i, p) => p.get(&model.bushings[i]),
         }
     }
 
@@ -563,6 +782,13 @@ impl Parameters {
             ParamKind::Rope(i, p) => p.set(&mut model.ropes[i], &model.nodes, value),
             ParamKind::Contact(i, p) => p.set(&mut model.contacts[i], value),
             ParamKind::Gear(i, p) => p.set(&mut model.gears[i], value),
+            ParamKind::SpringLaw(i, p) => {
+                if let Some(law) = model.spring_law_mut(i) {
+                    p.set(&mut law.law, value);
+                }
+            }
+            ParamKind::RotationalSpring(i, p) => p.set(&mut model.rotational_springs[i], value),
+            ParamKind::Bushing(i, p) => p.set(&mut model.bushings[i], value),
         }
     }
 

@@ -151,6 +151,87 @@ fn local_frame(f: &Frame) -> Check {
     finite3(&f.x, 2.0 * MAX_KINEMATIC)
 }
 
+/// A symmetric positive semidefinite 6 x 6 matrix with finite entries within the physical
+/// range (a bushing's stiffness or damping).
+fn symmetric_psd(m: &flexmb_lie::Mat6) -> Check {
+    if let Some(v) = m.iter().find(|v| !v.is_finite() || v.abs() > MAX_PHYSICAL) {
+        return Err(format!(
+            "has the entry {v}: entries must be finite and at most {MAX_PHYSICAL:e} in magnitude"
+        ));
+    }
+    let scale = m.abs().max();
+    let asym = (m - m.transpose()).abs().max();
+    if asym > 1e-12 * scale {
+        return Err(format!(
+            "is not symmetric (largest |M_ij - M_ji| = {asym:.3e})"
+        ));
+    }
+    let smallest = m.symmetric_eigenvalues().min();
+    if smallest < -1e-12 * scale {
+        return Err(format!(
+            "is not positive semidefinite (smallest eigenvalue {smallest:.6e})"
+        ));
+    }
+    Ok(())
+}
+
+/// A force law: preload in range; tables of at least 2 points, finite, strictly increasing
+/// in `e`; polynomials of 1 to 16 finite coefficients. An error names the model-file key.
+fn check_force_law(law: &super::ForceLaw) -> Result<(), (&'static str, String)> {
+    in_range(law.preload, -MAX_PHYSICAL, MAX_PHYSICAL).map_err(|m| ("preload", m))?;
+    for (curve, side) in [
+        (&law.curve, None),
+        (&law.compression, Some("compression")),
+        (&law.extension, Some("extension")),
+    ] {
+        let Some(curve) = curve else { continue };
+        let field = |own: &'static str| side.unwrap_or(own);
+        match curve {
+            super::ForceCurve::Table(points) => {
+                let field = field("force_table");
+                if points.len() < 2 {
+                    let n = points.len();
+                    let m = format!("has {n} point(s): a force table needs at least 2");
+                    return Err((field, m));
+                }
+                for (k, (e, f)) in points.iter().enumerate() {
+                    in_range(*e, -2.0 * MAX_KINEMATIC, 2.0 * MAX_KINEMATIC)
+                        .and_then(|()| in_range(*f, -MAX_PHYSICAL, MAX_PHYSICAL))
+                        .map_err(|m| (field, format!("point {k}: {m}")))?;
+                }
+                if let Some(k) = points.windows(2).position(|w| w[1].0 <= w[0].0) {
+                    return Err((
+                        field,
+                        format!(
+                            "is not sorted in elongation: point {} (e = {}) does not come after point {k} (e = {}); the elongations must increase strictly",
+                            k + 1,
+                            points[k + 1].0,
+                            points[k].0
+                        ),
+                    ));
+                }
+            }
+            super::ForceCurve::Polynomial(a) => {
+                let field = field("polynomial");
+                if a.is_empty() || a.len() > 16 {
+                    return Err((
+                        field,
+                        format!(
+                            "has {} coefficients: give 1 to 16 ([a1, a2, ...] of a1 e + a2 e^2 + ...)",
+                            a.len()
+                        ),
+                    ));
+                }
+                for (j, aj) in a.iter().enumerate() {
+                    in_range(*aj, -MAX_PHYSICAL, MAX_PHYSICAL)
+                        .map_err(|m| (field, format!("coefficient {j}: {m}")))?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 impl TimeFunction {
     /// Finite parameters within the ranges, increasing times, and intervals of at least
     /// [`MIN_STEP`] (so slopes stay finite); functions of functions at most
@@ -515,6 +596,87 @@ impl Model {
             }
         }
 
+        let mut with_law = vec![false; self.springs.len()];
+        for law in &self.spring_laws {
+            let Some(s) = self.springs.get(law.spring) else {
+                return Err(bad(
+                    "spring",
+                    law.spring,
+                    "",
+                    "spring",
+                    format!(
+                        "a nonlinear law names spring index {} but the model has {} springs",
+                        law.spring,
+                        self.springs.len()
+                    ),
+                ));
+            };
+            let fail = |field, m| bad("spring", law.spring, &s.name, field, m);
+            if std::mem::replace(&mut with_law[law.spring], true) {
+                return Err(fail("stiffness", "has two nonlinear laws".into()));
+            }
+            check_force_law(&law.law).map_err(|(field, m)| fail(field, m))?;
+            if law.law.acts != super::SpringSide::Both && s.relaxation.is_some() {
+                return Err(fail(
+                    "acts",
+                    "a one-sided spring (a stop) cannot have a Maxwell branch: its branch would hold a force while the stop is off".into(),
+                ));
+            }
+        }
+
+        for (i, s) in self.rotational_springs.iter().enumerate() {
+            let fail = |field, m| bad("rotational_spring", i, &s.name, field, m);
+            let Some(joint) = self.joints.get(s.joint.0) else {
+                return Err(fail(
+                    "joint",
+                    format!("joint index {} does not exist", s.joint.0),
+                ));
+            };
+            if !matches!(joint.kind, JointKind::Revolute | JointKind::Cylindrical) {
+                return Err(fail(
+                    "joint",
+                    format!(
+                        "joint '{}' is {}: a rotational spring acts about the axis of a revolute or cylindrical joint",
+                        clip(&joint.name, QUOTED),
+                        joint.kind.name()
+                    ),
+                ));
+            }
+            in_range(s.stiffness, 0.0, MAX_PHYSICAL).map_err(|m| fail("stiffness", m))?;
+            in_range(s.damping, 0.0, MAX_PHYSICAL).map_err(|m| fail("damping", m))?;
+            in_range(s.angle, -MAX_ANGLE, MAX_ANGLE).map_err(|m| fail("angle", m))?;
+            check_force_law(&s.law).map_err(|(field, m)| fail(field, m))?;
+        }
+
+        for (i, b) in self.bushings.iter().enumerate() {
+            let fail = |field, m| bad("bushing", i, &b.name, field, m);
+            check_node("bushing", i, &b.name, "node_a", b.node_a)?;
+            check_node("bushing", i, &b.name, "node_b", b.node_b)?;
+            match (b.node_a, b.node_b) {
+                (None, None) => {
+                    return Err(fail(
+                        "node_b",
+                        "joins the ground to the ground: give at least one node".into(),
+                    ))
+                }
+                (Some(a), Some(c)) if a == c => {
+                    return Err(fail(
+                        "node_b",
+                        format!(
+                            "joins node '{}' to itself: a bushing acts between two different nodes (or a node and the ground)",
+                            clip(&self.nodes[a.0].name, QUOTED)
+                        ),
+                    ))
+                }
+                _ => {}
+            }
+            local_frame(&b.frame_a).map_err(|m| fail("frame_a", m))?;
+            local_frame(&b.frame_b).map_err(|m| fail("frame_b", m))?;
+            for (m, field) in [(&b.stiffness, "stiffness"), (&b.damping, "damping")] {
+                symmetric_psd(m).map_err(|msg| fail(field, msg))?;
+            }
+        }
+
         for (i, c) in self.contacts.iter().enumerate() {
             let fail = |field, m| bad("contact", i, &c.name, field, m);
             check_node("contact", i, &c.name, "node_a", c.node_a)?;
@@ -795,6 +957,24 @@ impl Model {
                         return Err(fail("rope", format!("rope index {rope} does not exist")));
                     }
                     (None, None)
+                }
+                SensorKind::RotationalSpringTorque { spring } => {
+                    if *spring >= self.rotational_springs.len() {
+                        return Err(fail(
+                            "spring",
+                            format!("rotational spring index {spring} does not exist"),
+                        ));
+                    }
+                    (None, None)
+                }
+                SensorKind::BushingForce { bushing, component } => {
+                    if *bushing >= self.bushings.len() {
+                        return Err(fail(
+                            "bushing",
+                            format!("bushing index {bushing} does not exist"),
+                        ));
+                    }
+                    (None, Some((*component, 6)))
                 }
                 SensorKind::KineticEnergy
                 | SensorKind::PotentialEnergy

@@ -18,6 +18,7 @@
 //! differentiable sensors here (a criterion cannot use them).
 
 use crate::data::Layout;
+use crate::elements::rotational_spring::RotationalSpringElement;
 use crate::elements::{ElementItem, ElementKernel, LocalBuffers, NodeState};
 use crate::model::{Model, ParamId, ParamKind, Parameters, SensorKind};
 use crate::solve::step::StateTangent;
@@ -137,6 +138,16 @@ fn support(model: &Model, layout: &Layout, k: usize) -> (Vec<usize>, Vec<usize>,
             let slot = |i: usize| [c.node_a, c.node_b][i].map(|n| n.0);
             element(ElementItem::Contact(*contact), &slot, 2)
         }
+        SensorKind::RotationalSpringTorque { spring } => {
+            let r = RotationalSpringElement::of(model, *spring);
+            let slot = |i| r.node(i).map(|n| n.0);
+            element(ElementItem::RotationalSpring(*spring), &slot, r.n_slots())
+        }
+        SensorKind::BushingForce { bushing, .. } => {
+            let b = &model.bushings[*bushing];
+            let slot = |i| b.node(i).map(|n| n.0);
+            element(ElementItem::Bushing(*bushing), &slot, b.n_slots())
+        }
         SensorKind::BeamStrain { beam, .. } | SensorKind::BeamStress { beam, .. } => {
             let nodes = model.beams[*beam].nodes.iter().map(|n| n.0).collect();
             (nodes, Vec::new(), Vec::new())
@@ -165,6 +176,10 @@ pub fn sensor_parameters(model: &Model, params: &Parameters, k: usize) -> Vec<Pa
             (SensorKind::SpringForce { spring }, ParamKind::Spring(i, _)) => *spring == i,
             (SensorKind::RopeForce { rope }, ParamKind::Rope(i, _)) => *rope == i,
             (SensorKind::Contact { contact, .. }, ParamKind::Contact(i, _)) => *contact == i,
+            (SensorKind::SpringForce { spring }, ParamKind::SpringLaw(i, _)) => *spring == i,
+            (SensorKind::RotationalSpringTorque { spring }, ParamKind::RotationalSpring(i, _)) => {
+                *spring == i
+            }
             (SensorKind::BeamStress { beam, .. }, ParamKind::Beam(item, _)) => {
                 params.beam_elements(item).contains(beam)
             }
