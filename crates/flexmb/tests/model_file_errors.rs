@@ -1980,6 +1980,8 @@ fn gear_errors_name_the_key() {
         ],
     );
 }
+
+#[test]
 fn bad_rotational_springs_name_their_field() {
     let head = "[[rotational_spring]]\nname = \"clock\"\n";
     let cases = [
