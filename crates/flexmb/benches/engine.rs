@@ -38,6 +38,7 @@ const CASES: &[&str] = &[
     "beam_1000",
     "beam_10000",
     "springs_500",
+    "spheres_100",
 ];
 
 fn example(name: &str) -> PathBuf {
@@ -327,6 +328,98 @@ fn springs(n: usize) {
     timed_row(&format!("springs_{n}"), n, sim);
 }
 
+/// `n` steel balls (radius 20 mm, 0.26 kg) in a row 45 mm apart, 1 mm above a plane, rolling
+/// towards each other at +-0.3 m/s (alternately) under gravity: n ball-plane contacts with
+/// Coulomb friction (mu = 0.3) and n - 1 ball-ball contacts, Hertz stiffness of steel,
+/// Lankarani-Nikravesh law with e = 0.8; 0.2 s at a nominal h = 1e-3 s. Steps, time per step
+/// and per contact, Newton iterations per step, rejected steps (of them cut by the impacts'
+/// step control).
+fn spheres(n: usize) {
+    use flexmb::model::contact::{Contact, ContactLaw, ContactShape, Dissipation, Friction};
+    use flexmb::model::{Model, NodeId};
+    use flexmb_lie::{Frame, Group, Mat3, Vec3};
+    let (r, mass) = (0.02, 0.263);
+    let mut m = Model::new(Group::R3xSO3);
+    m.gravity = Vec3::new(0.0, 0.0, -9.81);
+    for i in 0..n {
+        let at = Frame::new(Vec3::new(i as f64 * 0.045, 0.0, r + 1e-3), Mat3::identity());
+        let id = m.add_node(&format!("n{i}"), at);
+        m.nodes[id.0].velocity = Vec3::new(if i % 2 == 0 { 0.3 } else { -0.3 }, 0.0, 0.0);
+        m.add_body(
+            &format!("b{i}"),
+            id,
+            mass,
+            Vec3::zeros(),
+            Mat3::identity() * 0.4 * mass * r * r,
+        );
+    }
+    // Hertz: E* = E / (2 (1 - nu^2)) for two steels, K = 4/3 E* sqrt(R*)
+    let e_star = 210e9 / (2.0 * (1.0 - 0.09));
+    let law = |radius: f64| ContactLaw {
+        dissipation: Dissipation::LankaraniNikravesh,
+        stiffness: 4.0 / 3.0 * e_star * radius.sqrt(),
+        exponent: 1.5,
+        restitution: 0.8,
+        min_impact_velocity: 1e-3,
+    };
+    let ball = |radius| ContactShape::Sphere {
+        center: Vec3::zeros(),
+        radius,
+        inside: false,
+    };
+    for i in 0..n {
+        m.contacts.push(Contact {
+            name: format!("floor{i}"),
+            node_a: None,
+            node_b: Some(NodeId(i)),
+            shape_a: ContactShape::Plane {
+                point: Vec3::zeros(),
+                normal: Vec3::z(),
+            },
+            shape_b: ball(r),
+            law: law(r),
+            friction: Some(Friction {
+                coefficient: 0.3,
+                stiction_velocity: 1e-3,
+                viscous: 0.0,
+                bristles: None,
+            }),
+        });
+        if i > 0 {
+            m.contacts.push(Contact {
+                name: format!("pair{i}"),
+                node_a: Some(NodeId(i - 1)),
+                node_b: Some(NodeId(i)),
+                shape_a: ball(r),
+                shape_b: ball(r),
+                law: law(r / 2.0),
+                friction: None,
+            });
+        }
+    }
+    let mut s = flexmb::DynamicSettings::new(0.2, 1e-3);
+    s.threads = thread_count();
+    let mut sim = Simulation::new(&m, s).expect("starts");
+    sim.data.threads = threads();
+    let t0 = Instant::now();
+    let stats = sim
+        .run(&mut |_: &flexmb::observe::Sample| Ok(()))
+        .expect("runs");
+    let dt = t0.elapsed().as_secs_f64();
+    let contacts = m.contacts.len();
+    println!(
+        "| spheres_{n} | {contacts} | {} | {:.1} | {:.1} | {:.2} | {:.2} | {} ({} by impacts) | {:.1e} |",
+        stats.steps,
+        dt * 1e3,
+        dt * 1e6 / stats.steps as f64,
+        dt * 1e6 / (stats.steps * contacts) as f64,
+        stats.newton_iterations as f64 / stats.steps as f64,
+        stats.rejected_steps,
+        stats.event_rejections,
+        stats.smallest_step,
+    );
+}
+
 fn run_case(case: &str) {
     match case {
         "right_angle_cantilever" => right_angle_cantilever(),
@@ -337,6 +430,7 @@ fn run_case(case: &str) {
         "heavy_top_updates" => heavy_top_updates(),
         c if c.starts_with("chain_") => chain(c[6..].parse().expect("chain size")),
         c if c.starts_with("springs_") => springs(c[8..].parse().expect("chain size")),
+        c if c.starts_with("spheres_") => spheres(c[8..].parse().expect("number of balls")),
         other => panic!("unknown case {other}; cases: {CASES:?}"),
     }
 }
@@ -424,6 +518,10 @@ fn main() {
         }
         if *case == "heavy_top_updates" {
             println!();
+        }
+        if *case == "spheres_100" {
+            println!("\n| case | contacts | steps | solve time [ms] | time/step [us] | time/step/contact [us] | Newton it./step | rejected steps | smallest step [s] |");
+            println!("|---|---|---|---|---|---|---|---|---|");
         }
         if *case == "chain_10" {
             println!("\n| case | steps | solve time [s] | time/step [us] | time/step/link [us] | Newton it./step | peak memory [MB] |");

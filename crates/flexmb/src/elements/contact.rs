@@ -84,12 +84,17 @@
 //! read `x = x_start` (friction acts in dynamics only).
 //!
 //! **Step control around impacts** ([`ElementKernel::step_limit`]): with `m*` the effective
-//! mass of the two nodes' bodies, the largest penetration an impact at speed `v` reaches is
-//! `delta* = ((n + 1) m* v^2 / (2 K))^(1 / (n + 1))` (the elastic energy balance), and the
-//! contact lasts about `2.94 delta* / v` (Hertz, `n = 3/2`; Johnson 1985, Sect. 11.4). With
-//! `v` the largest of the impact velocity and the approach speeds at both ends:
-//! - while the contact is closed, steps are at most `h_c = delta* / (12 v)` (about 35 steps
-//!   per impact); a longer one is repeated at `h_c`;
+//! mass of the two nodes' bodies, the largest penetration the motion reaches from
+//! penetration `delta` and gap rate `gdot` is `delta* = (delta^(n+1) + (n + 1) m* gdot^2 /
+//! (2 K))^(1 / (n + 1))` (the elastic energy balance; an impact at speed `v` lasts about
+//! `2.94 delta* / v` for Hertz, Johnson 1985, Sect. 11.4). With `delta*` the larger from
+//! the two ends of a step and `v` the larger gap rate:
+//! - while the contact is closed, a step changes the penetration by at most `delta* / 12`:
+//!   at most `h_c = delta* / (12 v)` long, `v` the larger of the gap rate and the speed of
+//!   an impact reaching `delta*` (about 35 steps per impact), and at most as long as the last
+//!   step's change of penetration allows; a step half as long again is repeated. A resting
+//!   contact (gap rate below 1 % of the impact velocity that closed it) is limited by the
+//!   change of penetration only;
 //! - a step that closes the contact deeper than `delta* / 12` is repeated to the time the
 //!   gap, interpolated linearly, reaches half that much (event location on the gap);
 //! - while it approaches, the next step covers at most half the gap at the approach speed
@@ -338,16 +343,24 @@ fn pose(group: Group, node: &NodeState) -> Pose<f64> {
     }
 }
 
-/// Variables of the automatic differentiation of [`ElementKernel::evaluate`].
-const N_VARS: usize = 31;
-type Dv = num_dual::DualSVec64<N_VARS>;
+/// Variables of the automatic differentiation of [`ElementKernel::evaluate`]: node
+/// variations (12), velocities (12), the impact velocity, and with bristles their deflection
+/// (3) and its rate (3).
+const N_PLAIN: usize = 25;
+const N_BRISTLES: usize = 31;
+type Dv<const N: usize> = num_dual::DualSVec64<N>;
 type D1 = num_dual::Dual64;
 
 /// The pose of a slot perturbed by the variables `w[6 k..6 k + 6]` (configuration:
 /// `x + dx`, `R (I + tilde(theta))`, exact to first order) and `w[12 + 6 k..]` (velocity).
-fn perturbed(group: Group, node: &NodeState, w: &SVector<Dv, N_VARS>, k: usize) -> Pose<Dv> {
+fn perturbed<const N: usize>(
+    group: Group,
+    node: &NodeState,
+    w: &SVector<Dv<N>, N>,
+    k: usize,
+) -> Pose<Dv<N>> {
     let p = pose(group, node);
-    let var = |i: usize| -> Vector3<Dv> { Vector3::new(w[i], w[i + 1], w[i + 2]) };
+    let var = |i: usize| -> Vector3<Dv<N>> { Vector3::new(w[i], w[i + 1], w[i + 2]) };
     let theta = var(6 * k + 3);
     let r = p.r.map(Dv::from_re) * (Matrix3::identity() + theta.cross_matrix());
     Pose {
@@ -355,6 +368,37 @@ fn perturbed(group: Group, node: &NodeState, w: &SVector<Dv, N_VARS>, k: usize) 
         r,
         xdot: p.xdot.map(Dv::from_re) + var(12 + 6 * k),
         om: p.om.map(Dv::from_re) + var(12 + 6 * k + 3),
+    }
+}
+
+impl ContactElement<'_> {
+    /// The residual `[r (12); e_z (3)]` and its Jacobian with respect to the `N` variables
+    /// ([`N_PLAIN`] without bristles, [`N_BRISTLES`] with), by forward AD.
+    fn jacobian<const N: usize>(
+        &self,
+        group: Group,
+        local: &Local,
+    ) -> (SVector<f64, 15>, SMatrix<f64, 15, N>) {
+        let nodes = local.nodes;
+        let ns = self.n_states();
+        let mut w0 = SVector::<f64, N>::zeros();
+        w0.rows_mut(24, ns).copy_from_slice(local.x);
+        if ns > 1 {
+            w0.rows_mut(28, ns - 1).copy_from_slice(&local.xdot[1..]);
+        }
+        let law = self.contact.law();
+        num_dual::jacobian(
+            |w: SVector<Dv<N>, N>| {
+                let a = perturbed(group, &nodes[0], &w, 0);
+                let b = perturbed(group, &nodes[1], &w, 1);
+                let zero = w[24] * 0.0;
+                let at = |i: usize| if i < N { w[i] } else { zero };
+                let x = [w[24], at(25), at(26), at(27)];
+                let xdot = [zero, at(28), at(29), at(30)];
+                SVector::<Dv<N>, 15>::from(self.contact.residual(&a, &b, (&x, &xdot), &law).0)
+            },
+            &w0,
+        )
     }
 }
 
@@ -382,11 +426,13 @@ impl ContactElement<'_> {
         (-state.gap_rate).max(self.contact.law.min_impact_velocity)
     }
 
-    /// `delta*` for an impact at speed `v` (module documentation).
-    fn largest_penetration(&self, v: f64) -> f64 {
+    /// `delta*`, the largest penetration the contact reaches from penetration `delta` and gap
+    /// rate `gdot` on the elastic path (module documentation).
+    fn largest_penetration(&self, delta: f64, gdot: f64) -> f64 {
         let law = &self.contact.law;
         let m1 = law.exponent + 1.0;
-        (m1 * self.effective_mass * v * v / (2.0 * law.stiffness)).powf(1.0 / m1)
+        let kinetic = m1 * self.effective_mass * gdot * gdot / (2.0 * law.stiffness);
+        (delta.powf(m1) + kinetic).powf(1.0 / m1)
     }
 }
 
@@ -459,14 +505,28 @@ impl ElementKernel for ContactElement<'_> {
             return None;
         }
         let (s0, s1) = (self.state(ctx, start), self.state(ctx, end));
-        let v = [start.x[0], -s0.gap_rate, -s1.gap_rate]
-            .into_iter()
-            .fold(self.contact.law.min_impact_velocity, f64::max);
-        let depth = self.largest_penetration(v);
+        let (d0, d1) = ((-s0.gap).max(0.0), (-s1.gap).max(0.0));
+        // The largest penetration the motion can reach (elastic energy balance) from
+        // either end, and the speed the gap changes at.
+        let depth = self
+            .largest_penetration(d0, s0.gap_rate)
+            .max(self.largest_penetration(d1, s1.gap_rate));
         let allowed = depth / STEPS_PER_PENETRATION;
+        let rate = s0.gap_rate.abs().max(s1.gap_rate.abs());
+        // The speed of the contact's elastic motion: that of an impact reaching `depth`.
+        let law = &self.contact.law;
+        let m1 = law.exponent + 1.0;
+        let elastic = (2.0 * law.stiffness * depth.powf(m1) / (m1 * self.effective_mass)).sqrt();
+        // Quiet: a resting contact, the impact that closed it spent.
+        let quiet = rate < 0.01 * start.x[0].max(end.x[0]) && (d0 > 0.0) == (d1 > 0.0);
+        let v = rate.max(elastic);
         // The step that resolves the contact: its penetration changes by `allowed` at most.
-        let h_contact = allowed / v;
-        match (s0.gap < 0.0, s1.gap < 0.0) {
+        let h_contact = if v > 0.0 && !quiet {
+            allowed / v
+        } else {
+            f64::INFINITY
+        };
+        match (d0 > 0.0, d1 > 0.0) {
             (false, false) => {
                 if s0.gap_rate < 0.0 && s1.gap_rate > 0.0 {
                     // Closed and opened again within the step if the cubic Hermite
@@ -487,19 +547,26 @@ impl ElementKernel for ContactElement<'_> {
                 (s1.gap_rate < 0.0)
                     .then(|| StepLimit::Next((0.5 * s1.gap / -s1.gap_rate).max(h_contact)))
             }
-            (false, true) => {
-                let depth1 = -s1.gap;
-                if depth1 > allowed {
-                    // Closed too deep: repeat the step to the time the gap, interpolated
-                    // linearly, reaches -allowed / 2 (event location on the gap).
-                    let fraction = (s0.gap + 0.5 * allowed) / (s0.gap + depth1);
-                    Some(StepLimit::Retry(fraction.clamp(0.01, 0.9) * h))
+            (false, true) if d1 > allowed => {
+                // Closed too deep: repeat the step to the time the gap, interpolated
+                // linearly, reaches -allowed / 2 (event location on the gap).
+                let fraction = (s0.gap + 0.5 * allowed) / (s0.gap + d1);
+                Some(StepLimit::Retry(fraction.clamp(0.01, 0.9) * h))
+            }
+            _ => {
+                let change = (d1 - d0).abs();
+                let by_change = if change > 0.0 {
+                    h * allowed / change
                 } else {
-                    Some(StepLimit::Next(h_contact))
+                    f64::INFINITY
+                };
+                let limit = h_contact.min(by_change);
+                if h > 1.5 * limit {
+                    Some(StepLimit::Retry(limit))
+                } else {
+                    limit.is_finite().then_some(StepLimit::Next(limit))
                 }
             }
-            _ if h > 1.5 * h_contact => Some(StepLimit::Retry(h_contact)),
-            _ => Some(StepLimit::Next(h_contact)),
         }
     }
 
@@ -526,21 +593,22 @@ impl ElementKernel for ContactElement<'_> {
             }
             return;
         };
-        // Variables: node variations (12), velocities (12), states (4), bristle rates (3).
-        let mut w0 = SVector::<f64, N_VARS>::zeros();
-        w0.rows_mut(24, ns).copy_from_slice(local.x);
-        w0.rows_mut(28, ns - 1).copy_from_slice(&local.xdot[1..]);
-        let law = self.contact.law();
-        let (out, jac) = num_dual::jacobian(
-            |w: SVector<Dv, N_VARS>| {
-                let a = perturbed(group, &nodes[0], &w, 0);
-                let b = perturbed(group, &nodes[1], &w, 1);
-                let x = [w[24], w[25], w[26], w[27]];
-                let xdot = [w[24] * 0.0, w[28], w[29], w[30]];
-                SVector::<Dv, 15>::from(self.contact.residual(&a, &b, (&x, &xdot), &law).0)
-            },
-            &w0,
-        );
+        if ns == 1 && self.state(ctx, local).gap > 0.0 {
+            // Open, without bristles: no force, and none nearby (the gap is continuous).
+            r.rows_mut(0, 12).fill(0.0);
+            let mut s = s.view();
+            s.fill(0.0);
+            s[(12, 12)] = if coef.xdot != 0.0 { coef.xdot } else { coef.x };
+            return;
+        }
+        let (out, jac) = if ns == 1 {
+            let (out, jac) = self.jacobian::<N_PLAIN>(group, local);
+            let mut full = SMatrix::<f64, 15, N_BRISTLES>::zeros();
+            full.fixed_columns_mut::<N_PLAIN>(0).copy_from(&jac);
+            (out, full)
+        } else {
+            self.jacobian::<N_BRISTLES>(group, local)
+        };
         let rp = Vec12::from_column_slice(&out.as_slice()[..12]);
         for i in 1..ns {
             r[12 + i] = out[11 + i];
