@@ -205,24 +205,12 @@ impl ElementKernel for RotationalSpringElement<'_> {
         let nodes = local.nodes;
         let geo = self.geometry(ctx, local);
         let force = self.force(&geo);
-        let r_p = geo.g * force.t;
-        let hv = geo.h.transpose() * geo.v_p;
-        let dt = geo.g * force.kt + hv * force.ct;
-        let k_p = geo.g * dt.transpose() + geo.h * force.t;
-        let c_p = geo.g * geo.g.transpose() * force.ct;
         let active = self.active_slots();
         let mut s = s;
-        let matrix = s.as_mut().map(|(coef, m)| (*coef, &mut **m));
-        physical::to_group(
-            ctx.group,
-            nodes,
-            &active,
-            &r_p,
-            Some(&k_p),
-            Some(&c_p),
-            r,
-            matrix,
-        );
+        let coordinate = (&geo.g, &geo.h, &geo.v_p);
+        let torque = (force.t, force.kt, force.ct);
+        super::spring::coordinate_force(ctx, nodes, &active, coordinate, torque, r, &mut s);
+        let hv = geo.h.transpose() * geo.v_p;
         r[12] = local.xdot[0] - geo.thetadot;
         let Some((coef, s)) = s else {
             return;

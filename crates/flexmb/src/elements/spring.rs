@@ -339,6 +339,37 @@ impl<'m> SpringElement<'m> {
     }
 }
 
+/// A force `T` along a scalar coordinate `c(q)` of two slots (a spring's length, a joint's
+/// angle), with the gradient `g = dc/dw_p`, its derivative `H = dg/dw_p`, the physical
+/// velocity `v_p` and `(T, dT/dc, dT/dcdot)`: the residual `r_p = T g` and the iteration
+/// matrix from `K_p = g (dT/dc g + dT/dcdot H^T v_p)^T + T H`, `C_p = dT/dcdot g g^T`, in
+/// group coordinates ([`physical::to_group`]).
+pub(super) fn coordinate_force(
+    ctx: &Context,
+    nodes: &[NodeState],
+    active: &[bool],
+    (g, h, v_p): (&Vec12, &Mat12, &Vec12),
+    (t, kt, ct): (f64, f64, f64),
+    r: &mut LocalVector,
+    s: &mut Option<(&Coefficients, &mut LocalMatrix)>,
+) {
+    let r_p = g * t;
+    let dt = g * kt + h.transpose() * v_p * ct;
+    let k_p = g * dt.transpose() + h * t;
+    let c_p = g * g.transpose() * ct;
+    let matrix = s.as_mut().map(|(coef, m)| (*coef, &mut **m));
+    physical::to_group(
+        ctx.group,
+        nodes,
+        active,
+        &r_p,
+        Some(&k_p),
+        Some(&c_p),
+        r,
+        matrix,
+    );
+}
+
 impl SpringDamper {
     /// The tension `T` of the linear spring-damper (module documentation), the branch
     /// included \[N\] (a spring with a nonlinear law: [`SpringElement::tension`]).
@@ -377,23 +408,11 @@ impl ElementKernel for SpringElement<'_> {
         let geo = self.geometry(ctx, nodes);
         let branch = self.branch(&geo, local);
         let force = self.force(&geo, branch);
-        let r_p = geo.g * force.t;
-        let dt = geo.g * force.kt + geo.h.transpose() * geo.v_p * force.ct;
-        let k_p = geo.g * dt.transpose() + geo.h * force.t;
-        let c_p = geo.g * geo.g.transpose() * force.ct;
         let active = self.active_slots();
         let mut s = s;
-        let matrix = s.as_mut().map(|(coef, m)| (*coef, &mut **m));
-        physical::to_group(
-            ctx.group,
-            nodes,
-            &active,
-            &r_p,
-            Some(&k_p),
-            Some(&c_p),
-            r,
-            matrix,
-        );
+        let coordinate = (&geo.g, &geo.h, &geo.v_p);
+        let tension = (force.t, force.kt, force.ct);
+        coordinate_force(ctx, nodes, &active, coordinate, tension, r, &mut s);
         let Some((km, cm, stretch)) = branch else {
             return;
         };

@@ -547,24 +547,8 @@ impl Model {
             let fail = |field, m| bad("spring", i, &s.name, field, m);
             check_node("spring", i, &s.name, "node_a", s.node_a)?;
             check_node("spring", i, &s.name, "node_b", s.node_b)?;
-            match (s.node_a, s.node_b) {
-                (None, None) => {
-                    return Err(fail(
-                        "node_b",
-                        "joins the ground to the ground: give at least one node".into(),
-                    ))
-                }
-                (Some(a), Some(b)) if a == b => {
-                    return Err(fail(
-                        "node_b",
-                        format!(
-                            "joins node '{}' to itself: a spring acts between two different nodes (or a node and the ground)",
-                            clip(&self.nodes[a.0].name, QUOTED)
-                        ),
-                    ))
-                }
-                _ => {}
-            }
+            self.two_nodes(s.node_a, s.node_b, "spring")
+                .map_err(|m| fail("node_b", m))?;
             finite3(&s.point_a, 2.0 * MAX_KINEMATIC).map_err(|m| fail("point_a", m))?;
             finite3(&s.point_b, 2.0 * MAX_KINEMATIC).map_err(|m| fail("point_b", m))?;
             in_range(s.stiffness, 0.0, MAX_PHYSICAL).map_err(|m| fail("stiffness", m))?;
@@ -652,24 +636,8 @@ impl Model {
             let fail = |field, m| bad("bushing", i, &b.name, field, m);
             check_node("bushing", i, &b.name, "node_a", b.node_a)?;
             check_node("bushing", i, &b.name, "node_b", b.node_b)?;
-            match (b.node_a, b.node_b) {
-                (None, None) => {
-                    return Err(fail(
-                        "node_b",
-                        "joins the ground to the ground: give at least one node".into(),
-                    ))
-                }
-                (Some(a), Some(c)) if a == c => {
-                    return Err(fail(
-                        "node_b",
-                        format!(
-                            "joins node '{}' to itself: a bushing acts between two different nodes (or a node and the ground)",
-                            clip(&self.nodes[a.0].name, QUOTED)
-                        ),
-                    ))
-                }
-                _ => {}
-            }
+            self.two_nodes(b.node_a, b.node_b, "bushing")
+                .map_err(|m| fail("node_b", m))?;
             local_frame(&b.frame_a).map_err(|m| fail("frame_a", m))?;
             local_frame(&b.frame_b).map_err(|m| fail("frame_b", m))?;
             for (m, field) in [(&b.stiffness, "stiffness"), (&b.damping, "damping")] {
@@ -681,24 +649,8 @@ impl Model {
             let fail = |field, m| bad("contact", i, &c.name, field, m);
             check_node("contact", i, &c.name, "node_a", c.node_a)?;
             check_node("contact", i, &c.name, "node_b", c.node_b)?;
-            match (c.node_a, c.node_b) {
-                (None, None) => {
-                    return Err(fail(
-                        "node_b",
-                        "puts the ground in contact with the ground: give at least one node".into(),
-                    ))
-                }
-                (Some(a), Some(b)) if a == b => {
-                    return Err(fail(
-                        "node_b",
-                        format!(
-                            "puts node '{}' in contact with itself: a contact acts between two different nodes (or a node and the ground)",
-                            clip(&self.nodes[a.0].name, QUOTED)
-                        ),
-                    ))
-                }
-                _ => {}
-            }
+            self.two_nodes(c.node_a, c.node_b, "contact")
+                .map_err(|m| fail("node_b", m))?;
             for (field, shape) in [("a", &c.shape_a), ("b", &c.shape_b)] {
                 check_contact_shape(shape).map_err(|m| fail(field, m))?;
             }
@@ -1091,24 +1043,8 @@ impl Model {
             let fail = |field, m| bad("gear", i, &g.name, field, m);
             check_node("gear", i, &g.name, "node_a", g.node_a)?;
             check_node("gear", i, &g.name, "node_b", g.node_b)?;
-            match (g.node_a, g.node_b) {
-                (None, None) => {
-                    return Err(fail(
-                        "node_b",
-                        "joins the ground to the ground: give at least one node".into(),
-                    ))
-                }
-                (Some(a), Some(b)) if a == b => {
-                    return Err(fail(
-                        "node_b",
-                        format!(
-                            "joins node '{}' to itself: a gear pair meshes two different nodes",
-                            clip(&self.nodes[a.0].name, QUOTED)
-                        ),
-                    ))
-                }
-                _ => {}
-            }
+            self.two_nodes(g.node_a, g.node_b, "gear pair")
+                .map_err(|m| fail("node_b", m))?;
             let geo = &g.geometry;
             for (field, z) in [("teeth_a", geo.teeth_a), ("teeth_b", geo.teeth_b)] {
                 if z == 0 {
@@ -1226,5 +1162,22 @@ impl Model {
             }
         }
         Ok(())
+    }
+}
+
+impl Model {
+    /// A two-node item (`what`: "spring", "bushing", ...) joins two different nodes, or a
+    /// node and the ground.
+    fn two_nodes(&self, a: Option<NodeId>, b: Option<NodeId>, what: &str) -> Check {
+        match (a, b) {
+            (None, None) => Err(format!(
+                "joins the ground to the ground: a {what} acts between two different nodes (or a node and the ground)"
+            )),
+            (Some(a), Some(b)) if a == b => Err(format!(
+                "joins node '{}' to itself: a {what} acts between two different nodes (or a node and the ground)",
+                clip(&self.nodes[a.0].name, QUOTED)
+            )),
+            _ => Ok(()),
+        }
     }
 }
