@@ -400,9 +400,7 @@ impl ContactElement<'_> {
             &w0,
         )
     }
-}
 
-impl ContactElement<'_> {
     /// What the contact finds at the kinematics of `local` (sensors, step control).
     pub fn state(&self, ctx: &Context, local: &Local) -> ContactState {
         let (a, b) = (

@@ -207,11 +207,6 @@ impl ContactParam {
             }
         }
     }
-
-    /// A typical magnitude, for finite-difference steps of a parameter at 0.
-    pub fn scale(self) -> f64 {
-        1.0
-    }
 }
 
 /// Which curve of a nonlinear force law ([`super::ForceLaw`]).
