@@ -161,7 +161,12 @@ fn an_impact_dissipates_the_energy_of_the_laws_hysteresis_loop() {
 /// slope and its speed over time (every output step).
 fn incline(overrides: &[&str]) -> Vec<(f64, f64, f64)> {
     let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-    let file = read_model_file(&common::example("incline.toml"), &overrides).expect("reads");
+    slide(read_model_file(&common::example("incline.toml"), &overrides).expect("reads"))
+}
+
+/// The run of an incline model `file`: distance down the slope and speed of the block at
+/// every output step.
+fn slide(file: flexmb::input::ModelFile) -> Vec<(f64, f64, f64)> {
     let Analysis::Dynamic(settings) = file.analysis else {
         panic!("dynamic")
     };
@@ -304,21 +309,7 @@ fn incline_with_bristles(v0: f64) -> Vec<(f64, f64, f64)> {
         4,
         "impact velocity and bristles"
     );
-    let Analysis::Dynamic(settings) = file.analysis else {
-        panic!("dynamic")
-    };
-    let theta = 20f64.to_radians();
-    let slope = flexmb_lie::Vec3::new(-theta.cos(), 0.0, -theta.sin());
-    let start = file.model.nodes[0].frame.x;
-    let mut sim = Simulation::new(file.model, settings).expect("starts");
-    let mut out = Vec::new();
-    sim.run(&mut |s: &flexmb::observe::Sample| {
-        let (x, v) = (s.state.q[0].x, s.state.v[0].fixed_rows::<3>(0).into_owned());
-        out.push((s.state.t, (x - start).dot(&slope), v.norm()));
-        Ok(())
-    })
-    .expect("runs");
-    out
+    slide(file)
 }
 
 #[test]

@@ -397,26 +397,9 @@ impl Model {
     /// Checks the references, the physical data and the ranges of every item (see
     /// [`super::limits`]); the error names the item and the field.
     pub fn validate(&self) -> Result<(), ModelError> {
-        let bad = |table, index: usize, name: &str, field, message: String| ModelError::Invalid {
-            item: ItemRef {
-                table,
-                index,
-                name: clip(name, QUOTED),
-                field,
-            },
-            message,
-        };
         let n = self.nodes.len();
-        let check_node = |table, i: usize, name: &str, field, id: Option<NodeId>| match id {
-            Some(NodeId(k)) if k >= n => Err(bad(
-                table,
-                i,
-                name,
-                field,
-                format!("node index {k} does not exist"),
-            )),
-            _ => Ok(()),
-        };
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         if n > MAX_ITEMS || self.beams.len() > MAX_ITEMS {
             return Err(bad(
                 "model",
@@ -1019,26 +1002,8 @@ impl Model {
     }
 
     fn validate_gears(&self) -> Result<(), ModelError> {
-        let bad = |table, index: usize, name: &str, field, message: String| ModelError::Invalid {
-            item: ItemRef {
-                table,
-                index,
-                name: clip(name, QUOTED),
-                field,
-            },
-            message,
-        };
-        let n = self.nodes.len();
-        let check_node = |table, i: usize, name: &str, field, id: Option<NodeId>| match id {
-            Some(NodeId(k)) if k >= n => Err(bad(
-                table,
-                i,
-                name,
-                field,
-                format!("node index {k} does not exist"),
-            )),
-            _ => Ok(()),
-        };
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         for (i, g) in self.gears.iter().enumerate() {
             let fail = |field, m| bad("gear", i, &g.name, field, m);
             check_node("gear", i, &g.name, "node_a", g.node_a)?;
@@ -1165,7 +1130,47 @@ impl Model {
     }
 }
 
+/// The error about `field` of item `index` (named `name`) of `table`.
+fn bad(
+    table: &'static str,
+    index: usize,
+    name: &str,
+    field: &'static str,
+    message: String,
+) -> ModelError {
+    ModelError::Invalid {
+        item: ItemRef {
+            table,
+            index,
+            name: clip(name, QUOTED),
+            field,
+        },
+        message,
+    }
+}
+
 impl Model {
+    /// The node `id` of `field` of an item exists (or is the ground).
+    fn check_node(
+        &self,
+        table: &'static str,
+        i: usize,
+        name: &str,
+        field: &'static str,
+        id: Option<NodeId>,
+    ) -> Result<(), ModelError> {
+        match id {
+            Some(NodeId(k)) if k >= self.nodes.len() => Err(bad(
+                table,
+                i,
+                name,
+                field,
+                format!("node index {k} does not exist"),
+            )),
+            _ => Ok(()),
+        }
+    }
+
     /// A two-node item (`what`: "spring", "bushing", ...) joins two different nodes, or a
     /// node and the ground.
     fn two_nodes(&self, a: Option<NodeId>, b: Option<NodeId>, what: &str) -> Check {

@@ -47,12 +47,14 @@ use super::newton::{
 use super::step;
 use crate::assembly::{assemble, Iterate};
 use crate::data::{Block, Data, Layout};
-use crate::elements::{Context, ElementKernel, LocalBuffers, NodeState, StepLimit, Vec12};
+use crate::elements::{
+    Context, ElementKernel, Kernel, Local, LocalBuffers, NodeState, StepLimit, Vec12,
+};
 use crate::error::{SettingsError, SolveError};
 use crate::model::Model;
 use crate::observe::{Observer, Sample, StepRecord};
 use crate::parallel::Threads;
-use crate::sensors::{node_states, node_states_into};
+use crate::sensors::node_states_into;
 use crate::state::State;
 use flexmb_lie::Vec6;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -398,6 +400,9 @@ pub struct Simulation {
     keep_steps: bool,
     /// The elements with events ([`crate::elements::ElementRef::has_events`]), indices in the layout.
     events: Vec<usize>,
+    /// Node kinematics at the start and the end of the step just converged, when there are
+    /// events ([`Simulation::event_limit`]).
+    event_nodes: [Vec<NodeState>; 2],
 }
 
 /// The memory of a simulation at a step boundary: with the model and the settings,
@@ -580,6 +585,7 @@ impl Simulation {
             started: false,
             keep_steps: false,
             events: Vec::new(),
+            event_nodes: Default::default(),
         }
         .with_events())
     }
@@ -738,6 +744,7 @@ impl Simulation {
             started: true,
             keep_steps: false,
             events: Vec::new(),
+            event_nodes: Default::default(),
         }
         .with_events())
     }
@@ -957,63 +964,61 @@ impl Simulation {
     /// What the elements with events ([`crate::elements::ElementRef::has_events`]) ask of the
     /// step of size `h` just converged, from the saved state to the current one
     /// ([`crate::elements::ElementKernel::step_limit`]): the shortest retry (the step is
-    /// rejected), and the shortest limit on the next steps.
-    fn event_limit(&self, h: f64) -> (Option<f64>, Option<f64>) {
+    /// rejected), and the shortest limit on the next steps. Takes the node kinematics of both
+    /// ends into `event_nodes`, for [`Simulation::update_element_states`].
+    fn event_limit(&mut self, h: f64) -> (Option<f64>, Option<f64>) {
         let (mut retry, mut next) = (None::<f64>, None::<f64>);
         if self.events.is_empty() {
             return (retry, next);
         }
-        let layout = &self.data.layout;
-        let ctx = Context::at(
-            &self.model,
-            self.state.t,
-            self.settings.load_factor_at(self.state.t),
-        );
-        let (start, end) = (&self.integrator.saved, &self.state);
-        let (n0, n1) = (node_states(start), node_states(end));
-        let (mut b0, mut b1) = (LocalBuffers::default(), LocalBuffers::default());
-        for &e in &self.events {
-            let kernel = layout.elements[e].kernel(&self.model);
-            let x0 = layout.state_start[e];
-            b0.gather(&kernel, &n0, (&start.x, &start.xdot, x0));
-            b1.gather(&kernel, &n1, (&end.x, &end.xdot, x0));
-            let shortest = |a: Option<f64>, b: f64| Some(a.map_or(b, |a| a.min(b)));
-            match kernel.step_limit(&ctx, &b0.local(&n0), &b1.local(&n1), h) {
+        let [n0, n1] = &mut self.event_nodes;
+        node_states_into(&self.integrator.saved, n0);
+        node_states_into(&self.state, n1);
+        let shortest = |a: Option<f64>, b: f64| Some(a.map_or(b, |a| a.min(b)));
+        self.visit_events(|kernel, ctx, start, end, _| {
+            match kernel.step_limit(ctx, start, end, h) {
                 Some(StepLimit::Retry(r)) => retry = shortest(retry, r),
                 Some(StepLimit::Next(n)) => next = shortest(next, n),
                 None => {}
             }
-        }
+        });
         (retry, next)
     }
 
-    /// After an accepted step: the elements with events set their held states
+    /// After an accepted step (its node kinematics in `event_nodes`, from
+    /// [`Simulation::event_limit`]): the elements with events set their held states
     /// ([`crate::elements::ElementKernel::update_states`]).
     fn update_element_states(&mut self) {
         if self.events.is_empty() {
             return;
         }
-        let layout = &self.data.layout;
-        let ctx = Context::at(
-            &self.model,
-            self.state.t,
-            self.settings.load_factor_at(self.state.t),
-        );
-        let (start, end) = (&self.integrator.saved, &self.state);
-        let (n0, n1) = (node_states(start), node_states(end));
-        let (mut b0, mut b1) = (LocalBuffers::default(), LocalBuffers::default());
         let mut updates = Vec::with_capacity(self.events.len());
-        for &e in &self.events {
-            let kernel = layout.elements[e].kernel(&self.model);
-            let (x0, n) = (layout.state_start[e], kernel.n_states());
-            b0.gather(&kernel, &n0, (&start.x, &start.xdot, x0));
-            b1.gather(&kernel, &n1, (&end.x, &end.xdot, x0));
-            let mut x = end.x[x0..x0 + n].to_vec();
-            kernel.update_states(&ctx, &b0.local(&n0), &b1.local(&n1), &mut x);
+        self.visit_events(|kernel, ctx, start, end, x0| {
+            let mut x = end.x.to_vec();
+            kernel.update_states(ctx, start, end, &mut x);
             updates.push((x0, x));
-        }
+        });
         for (x0, x) in updates {
             self.state.x[x0..x0 + x.len()].copy_from_slice(&x);
+        }
+    }
+
+    /// Calls `visit` with each element with events, the context at the end of the step, the
+    /// element's kinematics and states at the start and end of the step (node kinematics
+    /// from `event_nodes`) and the index of its first state.
+    fn visit_events(&self, mut visit: impl FnMut(&Kernel<'_>, &Context, &Local, &Local, usize)) {
+        let layout = &self.data.layout;
+        let t = self.state.t;
+        let ctx = Context::at(&self.model, t, self.settings.load_factor_at(t));
+        let (start, end) = (&self.integrator.saved, &self.state);
+        let [n0, n1] = &self.event_nodes;
+        let (mut b0, mut b1) = (LocalBuffers::default(), LocalBuffers::default());
+        for &e in &self.events {
+            let kernel = layout.elements[e].kernel(&self.model);
+            let x0 = layout.state_start[e];
+            b0.gather(&kernel, n0, (&start.x, &start.xdot, x0));
+            b1.gather(&kernel, n1, (&end.x, &end.xdot, x0));
+            visit(&kernel, &ctx, &b0.local(n0), &b1.local(n1), x0);
         }
     }
 
