@@ -171,6 +171,7 @@ impl Scaling {
             k: 0.0,
             x: 0.0,
             xdot: 0.0,
+            y: 0.0,
         },
         constraint_rhs: ConstraintRhs::Position,
         load_factor: 1.0,

@@ -31,7 +31,7 @@
 //! their multipliers stay zero and the others carry the load (a valid, least-constrained
 //! set).
 
-use crate::elements::ElementRef;
+use crate::elements::{ElementKernel, ElementRef};
 use crate::joints::{self, Row};
 use crate::model::{JointId, Model, NodeId};
 use crate::solve::linear::{GroupKind, Groups, LinearError, LinearSolver};
@@ -66,6 +66,8 @@ pub struct Layout {
     pub state_start: Vec<usize>,
     /// Total first-order states.
     pub n_states: usize,
+    /// Which states are algebraic ([`crate::elements::ElementKernel::is_algebraic`]).
+    pub algebraic: Vec<bool>,
 }
 
 impl Layout {
@@ -78,6 +80,11 @@ impl Layout {
         for item in crate::elements::ElementItem::all(model) {
             state_start.push(n_states);
             n_states += item.n_states(model);
+        }
+        let mut algebraic = Vec::with_capacity(n_states);
+        for e in &elements {
+            let kernel = e.kernel(model);
+            algebraic.extend((0..kernel.n_states()).map(|i| kernel.is_algebraic(i)));
         }
         let mut layout = Self {
             n_nodes: model.nodes.len(),
@@ -93,6 +100,7 @@ impl Layout {
             elements,
             state_start,
             n_states,
+            algebraic,
         };
         layout.rebuild_node_rows(model);
         layout

@@ -237,6 +237,15 @@ fn visit(
             Wrt::Own(p),
             sink,
         ),
+        ParamKind::Control(p) => {
+            let slots = crate::elements::control::slots(model);
+            let element = crate::elements::control::ControlElement {
+                system: &model.control,
+                model,
+                slots: &slots,
+            };
+            element_term(at, (&element, ElementItem::Control), Wrt::Own(p), sink)
+        }
     }
 }
 

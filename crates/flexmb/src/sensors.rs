@@ -267,6 +267,10 @@ pub fn sensor_value(
                 g.transmission_error(&ctx, &local)
             }
         }
+        SensorKind::Block { block, output } => {
+            let start = ElementItem::Control.state_start(model);
+            state.x[start + model.control.output_start[*block] + output]
+        }
     }
 }
 
@@ -336,6 +340,7 @@ pub fn unit(kind: &SensorKind) -> &'static str {
         }
         SensorKind::GearForce { .. } => "N",
         SensorKind::GearTransmissionError { .. } => "m",
+        SensorKind::Block { .. } => "",
     }
 }
 

@@ -66,7 +66,14 @@ fn entries(active: [bool; 2]) -> Vec<bool> {
 }
 
 fn coefficients(m: f64, c: f64, k: f64, x: f64, xdot: f64) -> Coefficients {
-    Coefficients { m, c, k, x, xdot }
+    Coefficients {
+        m,
+        c,
+        k,
+        x,
+        xdot,
+        y: x,
+    }
 }
 
 /// The shared checker for force elements: K (with T = I), C and M.

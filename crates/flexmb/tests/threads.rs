@@ -257,6 +257,7 @@ fn single_assembly_same_bits_for_every_right_hand_side() {
         k: 1.1,
         x: 0.9,
         xdot: 0.4,
+        y: 0.3,
     };
     for model in [&chain, &beam_and_springs] {
         for stabilized in [false, true] {

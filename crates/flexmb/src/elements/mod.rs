@@ -3,7 +3,8 @@
 //! [`spring`], nonlinear laws and stops included), rotational spring-dampers about a joint's
 //! axis ([`rotational_spring`]), 6-DOF bushings ([`bushing`]), ropes through any number of
 //! points ([`rope`]), unilateral contacts with impact and friction ([`contact`]) and gear
-//! pairs ([`gear`]).
+//! pairs ([`gear`]), and the blocks of a control diagram coupled to the mechanics
+//! ([`control`]).
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
@@ -37,6 +38,7 @@
 pub mod beam;
 pub mod bushing;
 pub mod contact;
+pub mod control;
 pub mod gear;
 pub mod load;
 pub mod physical;
@@ -132,6 +134,10 @@ pub struct Coefficients {
     pub x: f64,
     /// Factor on `dr/dxdot` (element state rates).
     pub xdot: f64,
+    /// Factor on `dr/dx` of the algebraic states ([`ElementKernel::is_algebraic`]: the
+    /// outputs of control blocks), whose values are unknowns even where the other states'
+    /// rates are (the initial accelerations).
+    pub y: f64,
 }
 
 impl Coefficients {
@@ -143,6 +149,7 @@ impl Coefficients {
         k: 0.0,
         x: 0.0,
         xdot: 1.0,
+        y: 1.0,
     };
     /// Only the tangent stiffness, and on the states only `dr/dx` (statics).
     pub const STIFFNESS: Coefficients = Coefficients {
@@ -151,6 +158,7 @@ impl Coefficients {
         k: 1.0,
         x: 1.0,
         xdot: 0.0,
+        y: 1.0,
     };
 }
 
@@ -203,6 +211,8 @@ pub enum ElementRef {
     RotationalSpring(usize),
     /// Index in [`Model::bushings`].
     Bushing(usize),
+    /// The model's block diagram ([`Model::control`]) and its slots ([`control::slots`]).
+    Control(Arc<Vec<Option<NodeId>>>),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -242,6 +252,12 @@ pub trait ElementKernel {
     /// Number of states the element owns.
     fn n_states(&self) -> usize {
         0
+    }
+    /// Whether state `i` is algebraic: its equation has no rate in it, and the value is the
+    /// unknown where the other states' rates are (the initial accelerations; matrix factor
+    /// [`Coefficients::y`]). The outputs of control blocks are.
+    fn is_algebraic(&self, _i: usize) -> bool {
+        false
     }
     /// Size of the local vector: `6 n_slots + n_states`.
     fn n_local(&self) -> usize {
@@ -464,6 +480,7 @@ impl ElementRef {
                 ElementItem::Gear(i) => ElementRef::Gear(i),
                 ElementItem::RotationalSpring(i) => ElementRef::RotationalSpring(i),
                 ElementItem::Bushing(i) => ElementRef::Bushing(i),
+                ElementItem::Control => ElementRef::Control(Arc::new(control::slots(model))),
             })
             .collect()
     }
@@ -492,14 +509,23 @@ impl ElementRef {
                 Kernel::RotationalSpring(rotational_spring::RotationalSpringElement::of(model, *i))
             }
             ElementRef::Bushing(i) => Kernel::Bushing(&model.bushings[*i]),
+            ElementRef::Control(slots) => Kernel::Control(control::ControlElement {
+                system: &model.control,
+                model,
+                slots,
+            }),
         }
     }
 
     /// Whether the element has events: the dynamic step asks it for a step limit
     /// ([`ElementKernel::step_limit`]) and lets it update its held states between steps
     /// ([`ElementKernel::update_states`]).
-    pub fn has_events(&self) -> bool {
-        matches!(self, ElementRef::Contact(..))
+    pub fn has_events(&self, model: &Model) -> bool {
+        match self {
+            ElementRef::Contact(..) => true,
+            ElementRef::Control(_) => model.control.has_holds(),
+            _ => false,
+        }
     }
 
     /// Name for diagnostics, e.g. `body 'crank'`.
@@ -517,6 +543,7 @@ impl ElementRef {
                 format!("rotational spring '{}'", model.rotational_springs[*i].name)
             }
             ElementRef::Bushing(i) => format!("bushing '{}'", model.bushings[*i].name),
+            ElementRef::Control(_) => "the control blocks".into(),
         }
     }
 }
@@ -534,6 +561,8 @@ pub enum ElementItem {
     Gear(usize),
     RotationalSpring(usize),
     Bushing(usize),
+    /// The block diagram, one element (when the model has blocks).
+    Control,
 }
 
 impl ElementItem {
@@ -551,6 +580,7 @@ impl ElementItem {
             .chain((0..model.gears.len()).map(ElementItem::Gear))
             .chain((0..model.rotational_springs.len()).map(ElementItem::RotationalSpring))
             .chain((0..model.bushings.len()).map(ElementItem::Bushing))
+            .chain((!model.control.is_empty()).then_some(ElementItem::Control))
     }
 
     /// The number of states the element owns.
@@ -565,6 +595,7 @@ impl ElementItem {
             ElementItem::Gear(i) => model.gears[i].n_states(),
             ElementItem::RotationalSpring(_) => 1,
             ElementItem::Bushing(i) => model.bushings[i].n_states(),
+            ElementItem::Control => model.control.n_unknowns,
         }
     }
 
@@ -594,6 +625,7 @@ pub enum Kernel<'m> {
     NonlinearSpring(spring::SpringElement<'m>),
     RotationalSpring(rotational_spring::RotationalSpringElement<'m>),
     Bushing(&'m crate::model::Bushing),
+    Control(control::ControlElement<'m>),
 }
 
 macro_rules! dispatch {
@@ -609,6 +641,7 @@ macro_rules! dispatch {
             Kernel::NonlinearSpring($k) => $e,
             Kernel::RotationalSpring($k) => $e,
             Kernel::Bushing($k) => $e,
+            Kernel::Control($k) => $e,
         }
     };
 }
@@ -625,6 +658,10 @@ impl ElementKernel for Kernel<'_> {
     #[inline]
     fn n_states(&self) -> usize {
         dispatch!(self, k => k.n_states())
+    }
+    #[inline]
+    fn is_algebraic(&self, i: usize) -> bool {
+        dispatch!(self, k => k.is_algebraic(i))
     }
     #[inline]
     fn evaluate(

@@ -41,6 +41,7 @@ const TOP_KEYS: &[&str] = &[
     "gear",
     "rotational_spring",
     "bushing",
+    "block",
 ];
 /// The keys of a `[[sensor]]`: `name`, `type`, then those a type may use.
 const SENSOR_KEYS: &[&str] = &[
@@ -57,6 +58,7 @@ const SENSOR_KEYS: &[&str] = &[
     "contact",
     "gear",
     "bushing",
+    "block",
 ];
 const NODE_STATE_KEYS: &[&str] = &[
     "position",
@@ -131,6 +133,7 @@ pub(super) struct Origins {
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
     gears: Vec<Origin>,
+    pub blocks: Vec<Origin>,
     /// Node and joint of each name, as they are created (names are unique in a file): look-ups
     /// by hash keep reading linear in the size of the model.
     pub node_ids: HashMap<String, NodeId>,
@@ -196,6 +199,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     read_gears(&top, &mut model, &mut origins)?;
     read_rotational_springs(&top, &mut model, &mut origins)?;
     read_bushings(&top, &mut model, &mut origins)?;
+    super::control::read_blocks(&top, &mut model, &mut origins)?;
     read_sensors(&top, &mut model, &mut origins)?;
 
     model
@@ -230,6 +234,7 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
         "beam" => &origins.beams,
         "sensor" => &origins.sensors,
         "gear" => &origins.gears,
+        "block" => &origins.blocks,
         _ => &[],
     };
     match list.get(item.index) {
@@ -808,6 +813,24 @@ fn read_nodes_and_bodies(
 }
 
 /// A node name (not the ground).
+/// The joint named by `f`.
+pub(super) fn require_joint(
+    model: &Model,
+    origins: &Origins,
+    f: &Field<'_>,
+) -> Result<crate::model::JointId> {
+    let jname = f.str()?;
+    origins.joint_ids.get(jname).copied().ok_or_else(|| {
+        let names = || model.joints.iter().map(|j| j.name.as_str());
+        f.err(format!(
+            "unknown joint '{}'{} (joints: {})",
+            clip(jname, QUOTED),
+            suggestion(jname, names()),
+            name_list(names(), 12)
+        ))
+    })
+}
+
 pub(super) fn require_node(model: &Model, origins: &Origins, f: &Field<'_>) -> Result<NodeId> {
     match resolve_node(model, origins, f, false)? {
         Some(id) => Ok(id),
@@ -847,7 +870,7 @@ pub(super) fn resolve_node(
         })
 }
 
-fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
+pub(super) fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
     read_nested_function(f, 1, 1.0)
 }
 
@@ -1471,17 +1494,7 @@ fn read_rotational_springs(
         keys.extend(LAW_KEYS);
         t.check_keys(&keys)?;
         let name = read_name(&t, &mut names, "rotational spring")?;
-        let f = t.req("joint")?;
-        let jname = f.str()?;
-        let joint = origins.joint_ids.get(jname).copied().ok_or_else(|| {
-            let names = || model.joints.iter().map(|j| j.name.as_str());
-            f.err(format!(
-                "unknown joint '{}'{} (joints: {})",
-                clip(jname, QUOTED),
-                suggestion(jname, names()),
-                name_list(names(), 12)
-            ))
-        })?;
+        let joint = require_joint(model, origins, &t.req("joint")?)?;
         let law = read_force_law(&t)?;
         let stiffness = stiffness_or_curve(&t, law.as_ref())?;
         let damping = match t.field("damping") {
@@ -1652,6 +1665,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "gear_transmission_error",
             "rotational_spring_torque",
             "bushing_force",
+            "block",
         ])?;
         let why = format!("for a {ty} sensor");
         let uses: &[&str] = match ty {
@@ -1667,6 +1681,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             "gear_force" | "gear_transmission_error" => &["gear"],
             "rotational_spring_torque" => &["spring"],
             "bushing_force" => &["bushing", "component"],
+            "block" => &["block"],
             _ => &[],
         };
         // The keys after `name` and `type`: each sensor type uses some of them.
@@ -1680,19 +1695,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
             let c = t.req("component")?.choice(allowed)?;
             Ok(allowed.iter().position(|a| *a == c).unwrap_or(0))
         };
-        let joint = || -> Result<crate::model::JointId> {
-            let f = t.req("joint")?;
-            let jname = f.str()?;
-            origins.joint_ids.get(jname).copied().ok_or_else(|| {
-                let names = || model.joints.iter().map(|j| j.name.as_str());
-                f.err(format!(
-                    "unknown joint '{}'{} (joints: {})",
-                    clip(jname, QUOTED),
-                    suggestion(jname, names()),
-                    name_list(names(), 12)
-                ))
-            })
-        };
+        let joint = || require_joint(model, origins, &t.req("joint")?);
         let kind = match ty {
             "position" | "velocity" | "acceleration" => {
                 let node = node()?;
@@ -1806,6 +1809,27 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
                 let plural = "rotational springs";
                 let spring = item_named(&t.req("spring")?, names, "rotational spring", plural)?;
                 SensorKind::RotationalSpringTorque { spring }
+            }
+            "block" => {
+                let f = t.req("block")?;
+                let names: Vec<String> = model
+                    .control
+                    .blocks
+                    .iter()
+                    .map(|b| b.name.clone())
+                    .collect();
+                let signal = super::control::resolve_signal(&f, f.str()?, &names)?;
+                let outputs = model.control.blocks[signal.block].kind.n_outputs();
+                if signal.output >= outputs {
+                    return Err(f.err(format!(
+                        "block '{}' has {outputs} output(s) (numbered from 0)",
+                        names[signal.block]
+                    )));
+                }
+                SensorKind::Block {
+                    block: signal.block,
+                    output: signal.output,
+                }
             }
             "bushing_force" => {
                 let names = || model.bushings.iter().map(|b| b.name.as_str());

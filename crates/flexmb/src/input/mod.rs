@@ -31,6 +31,7 @@
 mod beam;
 mod build;
 mod contact;
+mod control;
 mod display;
 mod error;
 mod overrides;

@@ -10,6 +10,7 @@
 //! Units are SI throughout (m, kg, s, N, rad) unless a model chooses consistent others.
 
 pub mod contact;
+pub mod control;
 pub mod display;
 pub mod limits;
 pub mod parameters;
@@ -681,6 +682,12 @@ pub enum SensorKind {
         bushing: usize,
         component: usize,
     },
+    /// Output `output` of control block `block` (index in [`Model::control`]'s blocks), in
+    /// the signal's own unit.
+    Block {
+        block: usize,
+        output: usize,
+    },
 }
 
 /// The quantities a contact sensor measures, in the order of
@@ -740,6 +747,9 @@ pub struct Model {
     /// 6-DOF bushings.
     #[serde(default)]
     pub bushings: Vec<Bushing>,
+    /// Control blocks coupled to the mechanics ([`crate::elements::control`]).
+    #[serde(default)]
+    pub control: control::ControlSystem,
 }
 
 /// Reference to one item of a model and one of its fields, for error messages.
@@ -787,6 +797,7 @@ impl Model {
             spring_laws: Vec::new(),
             rotational_springs: Vec::new(),
             bushings: Vec::new(),
+            control: control::ControlSystem::default(),
         }
     }
 

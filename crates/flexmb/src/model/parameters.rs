@@ -209,6 +209,15 @@ impl ContactParam {
     }
 }
 
+/// A parameter of a control block ([`super::control::Block::params`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ControlParam {
+    /// Index in [`super::control::ControlSystem::blocks`].
+    pub block: usize,
+    /// Index in the block's parameters.
+    pub index: usize,
+}
+
 /// Which curve of a nonlinear force law ([`super::ForceLaw`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CurveKey {
@@ -468,6 +477,7 @@ pub enum ParamKind {
     RotationalSpring(usize, RotationalSpringParam),
     /// Index in [`Model::bushings`].
     Bushing(usize, BushingParam),
+    Control(ControlParam),
 }
 
 /// A path that names no parameter.
@@ -678,6 +688,14 @@ impl Parameters {
                 reg.push(format!("bushing.{name}.{key}"), ParamKind::Bushing(i, p));
             }
         }
+        let blocks = &model.control.blocks;
+        let names = segments(blocks.iter().map(|b| b.name.as_str()));
+        for (block, name) in names.iter().enumerate() {
+            for (index, key) in blocks[block].kind.param_names().iter().enumerate() {
+                let p = ControlParam { block, index };
+                reg.push(format!("control.{name}.{key}"), ParamKind::Control(p));
+            }
+        }
         reg
     }
 
@@ -754,6 +772,7 @@ impl Parameters {
             ParamKind::SpringLaw(i, p) => model.spring_law(i).map_or(0.0, |law| p.get(&law.law)),
             ParamKind::RotationalSpring(i, p) => p.get(&model.rotational_springs[i]),
             ParamKind::Bushing(i, p) => p.get(&model.bushings[i]),
+            ParamKind::Control(p) => model.control.blocks[p.block].params[p.index],
         }
     }
 
@@ -784,6 +803,7 @@ impl Parameters {
             }
             ParamKind::RotationalSpring(i, p) => p.set(&mut model.rotational_springs[i], value),
             ParamKind::Bushing(i, p) => p.set(&mut model.bushings[i], value),
+            ParamKind::Control(p) => model.control.blocks[p.block].params[p.index] = value,
         }
     }
 

@@ -921,6 +921,12 @@ impl Model {
                     }
                     (None, None)
                 }
+                SensorKind::Block { block, output } => {
+                    let Some(b) = self.control.blocks.get(*block) else {
+                        return Err(fail("block", format!("block index {block} does not exist")));
+                    };
+                    (None, Some((*output, b.kind.n_outputs())))
+                }
             };
             check_node("sensor", i, &s.name, "node", node)?;
             if let Some((c, count)) = components {

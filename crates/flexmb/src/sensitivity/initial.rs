@@ -76,6 +76,7 @@ pub fn initial_tangents(
         k: 0.0,
         x: s,
         xdot: 0.0,
+        y: 0.0,
     };
     assemble(model, &mut data, &it, &sc, true);
     let element_rows = |i: usize| i < nd || i >= so;

@@ -157,6 +157,11 @@ fn support(model: &Model, layout: &Layout, k: usize) -> (Vec<usize>, Vec<usize>,
             let slot = |i| g.node(i).map(|n| n.0);
             element(ElementItem::Gear(*gear), &slot, g.n_slots())
         }
+        SensorKind::Block { block, output } => {
+            let start = ElementItem::Control.state_start(model);
+            let i = start + model.control.output_start[*block] + output;
+            (Vec::new(), Vec::new(), vec![i])
+        }
         _ => (Vec::new(), Vec::new(), Vec::new()),
     }
 }

@@ -593,8 +593,9 @@ impl Simulation {
     /// The simulation with its list of elements with events.
     fn with_events(mut self) -> Self {
         let elements = &self.data.layout.elements;
+        let model = &self.model;
         self.events = (0..elements.len())
-            .filter(|&e| elements[e].has_events())
+            .filter(|&e| elements[e].has_events(model))
             .collect();
         self
     }

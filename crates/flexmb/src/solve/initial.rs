@@ -195,6 +195,7 @@ pub(crate) fn acceleration_scaling(model: &Model, load_factor: f64) -> Scaling {
             k: 0.0,
             x: 0.0,
             xdot: s,
+            y: s,
         },
         constraint_rhs: ConstraintRhs::Acceleration,
         load_factor,
@@ -289,9 +290,18 @@ pub fn initial_accelerations(
     for (row, slot) in data.layout.row_unknown.iter().enumerate() {
         state.lambda[row] = slot.map_or(0.0, |k| x[nd + k] / s);
     }
-    let rates = &x[data.layout.block(Block::States)];
-    state.xdot.copy_from_slice(rates);
-    state.w.copy_from_slice(rates);
+    let solved = &x[data.layout.block(Block::States)];
+    for (i, (&v, &algebraic)) in solved.iter().zip(&data.layout.algebraic).enumerate() {
+        if algebraic {
+            // the value's correction from its initial guess; no rate
+            state.x[i] += v;
+            state.xdot[i] = 0.0;
+            state.w[i] = 0.0;
+        } else {
+            state.xdot[i] = v;
+            state.w[i] = v;
+        }
+    }
     Ok(())
 }
 

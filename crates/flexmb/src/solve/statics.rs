@@ -307,6 +307,7 @@ pub(crate) fn scaling(row_scale: f64, load_factor: f64) -> Scaling {
             k: row_scale,
             x: row_scale,
             xdot: 0.0,
+            y: row_scale,
         },
         constraint_rhs: ConstraintRhs::Position,
         load_factor,

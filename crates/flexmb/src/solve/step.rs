@@ -175,6 +175,7 @@ impl Start {
                 k: self.scale,
                 x: self.scale,
                 xdot: self.scale * self.cx,
+                y: self.scale,
             },
             constraint_rhs: ConstraintRhs::Position,
             load_factor: self.load_factor,
@@ -837,6 +838,7 @@ impl<'a> StepFunction<'a> {
             k,
             x: 0.0,
             xdot: 0.0,
+            y: 0.0,
         };
         // The rows of the element states come after the velocity-level rows.
         let so = layout.state_offset();
@@ -862,6 +864,7 @@ impl<'a> StepFunction<'a> {
         let (f_x, f_xd) = if layout.n_states > 0 {
             let x = Coefficients {
                 x: s,
+                y: s,
                 ..coef(0.0, 0.0, 0.0)
             };
             let xd = Coefficients {

@@ -1,0 +1,907 @@
+//! Block diagrams coupled monolithically to the mechanics ([`crate::model::control`]).
+//!
+//! The talk's integrated approach (Brüls & Golinval 2008, Sect. 2; Arnold & Brüls 2007,
+//! Sect. 5) adds to the equations of motion first-order states `x` and outputs `y`,
+//!
+//! ```text
+//! M vdot - hat(v)^T M v + g(q, v, t) - L(q) y + B^T lambda = 0,
+//! xdot = f(q, v, vdot, x, y, t),
+//! y = h(q, v, vdot, x, y, t),
+//! ```
+//!
+//! and integrates all of them in one Newton loop: the mechanical unknowns by the Lie group
+//! generalized-alpha scheme, the states by its first-order counterpart with the same
+//! `rho_inf` ([`crate::solve::FirstOrderParameters`], Jansen, Whiting & Hulbert 2000,
+//! Eq. (27)), the outputs as algebraic unknowns ([`ElementKernel::is_algebraic`]).
+//! All the blocks of a model form one element whose states are, block after block, the
+//! block's states and then its outputs ([`ControlSystem`]); its slots are the nodes its
+//! measurement and actuator blocks touch. Its equations, for block `b` with inputs `u_b`
+//! (outputs of other blocks: `y` may depend on `y`, an algebraic loop, solved by the same
+//! Newton iteration):
+//!
+//! ```text
+//! states:  e = xdot_b - f_b(x_b, u_b, t)      (a hold: e = xdot_b, set between steps)
+//! outputs: e = y_b - h_b(x_b, u_b, t)         (a measurement: y_b - m(q, v, vdot))
+//! nodes:   r = -L(q) u                        (an actuator: u along its target)
+//! ```
+//!
+//! with, per block kind ([`BlockKind`]):
+//!
+//! ```text
+//! source          y = f(t)
+//! gain            y = K u                  sum   y = sum s_i u_i     product  y = prod u_i
+//! integrator      xdot = k u, y = x        lag   xdot = (K u - x) / T, y = x
+//! pid             v = kp u + ki x_i + kd (u - x_f) / tf,  y = sat(v),
+//!                 xdot_i = u + kb (y - v) (back-calculation anti-windup),  xdot_f = (u - x_f) / tf
+//! state space     xdot = A x + B u, y = C x + D u
+//! transfer fn.    b(s) / a(s) in controllable canonical form (Ogata, Modern Control
+//!                 Engineering, Sect. 9-2): xdot_k = x_{k+1}, xdot_{n-1} = u - sum a_{n-k} x_k / a_0,
+//!                 y = sum (b_{n-k} - a_{n-k} b_0) x_k / a_0 + b_0 u / a_0 (b padded to degree n)
+//! saturation      y = min(max(u, lower), upper)     dead zone, lookup: piecewise linear in u
+//! rate limiter    xdot = min(max((u - x) / T, -falling), rising), y = x
+//! hold            xdot = 0, x = u(t_k) set at the samples t_k = k period, y = x
+//! dc motor        L xdot = V - R x - k_e omega (x the current), y = k_t x
+//! ```
+//!
+//! **Measurements** (inertial components along a unit `axis`; `x, R` a node's
+//! configuration, `xdot, omega` its physical velocity, `xddot, omegadot` its acceleration):
+//! `axis . (x + R p)`, its rate `axis . (xdot + R (omega x p))` and acceleration, `axis .
+//! (R omega)`, and a joint's coordinate and rate (the angle of frame B's x axis in frame A's
+//! xy plane, `atan2`, as [`crate::joints::coordinate`]; a prismatic joint's slide `a_z .
+//! (p_B - p_A)`). The angle is continuous over turns: its output equation is `e = y -
+//! theta_g - 2 pi k`, `k` the whole number of turns nearest `(y - theta_g) / 2 pi` at the
+//! iterate, so the branch follows the output itself (no extra state).
+//!
+//! **Actuators**: a force `u a` at a node's point `P`, `r = -[u a; (R^T (P - x)) x (R^T u
+//! a)]`; a moment `r_theta = -R^T u a`; a joint torque `u` about a revolute joint's axis `a =
+//! R_A a_z` (on node B, `-u a` on A), a force along a prismatic joint's axis at B's joint
+//! point (its reaction on A at the same point). `follower`: `a` turns with the node.
+//!
+//! **Iteration matrix and parameter derivatives.** The residual is one function, generic
+//! over the scalar type, of the slots' physical variations (configuration `x + dx`, `R (I +
+//! tilde(theta))`, velocities and accelerations), the states and their rates. Its
+//! derivatives are taken by forward automatic differentiation (num-dual), one pass per
+//! variable the element has (the diagrams are small), and converted to group coordinates
+//! like every element's ([`super::physical`]; on SE(3) the physical velocity `R U` and
+//! acceleration `R (Udot + Omega x U)` also turn with the rotation). The parameters of the
+//! blocks ([`crate::model::parameters::ControlParam`]) are differentiated the same way.
+//! The kinks (saturation limits, dead-zone edges, lookup breakpoints) get one-sided
+//! derivatives.
+//!
+//! **Initial values.** States start at their `initial` parameters (0 otherwise); the
+//! outputs and the held values are solved for at `t = 0` by a Newton iteration on their
+//! equations at the initial kinematics (zero accelerations), and again with the initial
+//! accelerations by the consistent-initial-conditions solve, where the outputs are
+//! unknowns in place of rates.
+//!
+//! # References
+//! - O. Brüls, J.-C. Golinval, On the numerical damping of time integrators for coupled
+//!   mechatronic systems, Comput. Methods Appl. Mech. Engrg. 197 (2008) 577-588.
+//! - M. Arnold, O. Brüls, Convergence of the generalized-alpha scheme for constrained
+//!   mechanical systems, Multibody Syst. Dyn. 18 (2007) 185-202.
+//! - K. E. Jansen, C. H. Whiting, G. M. Hulbert, A generalized-alpha method for integrating
+//!   the filtered Navier-Stokes equations with a stabilized finite element method, Comput.
+//!   Methods Appl. Mech. Engrg. 190 (2000) 305-319.
+//! - K. J. Åström, T. Hägglund, Advanced PID Control, ISA, 2006, Sect. 3.5 (anti-windup
+//!   by back-calculation) and Sect. 3.3 (filtered derivative).
+
+use super::{
+    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
+    LocalMatrix, LocalVector, NodeState, StepLimit,
+};
+use crate::model::control::{BlockKind, ControlSystem, Quantity, Target};
+use crate::model::parameters::ControlParam;
+use crate::model::{Joint, JointKind, Model, NodeId};
+use flexmb_lie::{so3::hat, Group, Vec3};
+use nalgebra::{DMatrix, DVector, Matrix3, RealField, RowVector6, Vector3};
+use num_dual::Dual64;
+use std::f64::consts::PI;
+
+/// The block diagram of a model as the assembly sees it: the system and its slots.
+#[derive(Clone, Copy, Debug)]
+pub struct ControlElement<'m> {
+    pub system: &'m ControlSystem,
+    pub model: &'m Model,
+    /// The nodes the measurements and actuators touch (`None`: the ground side of a joint).
+    pub slots: &'m [Option<NodeId>],
+}
+
+/// The slots of a model's diagram: every node a measurement or actuator touches, in the
+/// order of first use (both sides of a joint, the ground as `None`).
+pub fn slots(model: &Model) -> Vec<Option<NodeId>> {
+    let mut out: Vec<Option<NodeId>> = Vec::new();
+    let mut add = |n: Option<NodeId>| {
+        if !out.contains(&n) {
+            out.push(n);
+        }
+    };
+    for b in &model.control.blocks {
+        match &b.kind {
+            BlockKind::Measure(q) => match q {
+                Quantity::Position { node, .. }
+                | Quantity::Velocity { node, .. }
+                | Quantity::Acceleration { node, .. }
+                | Quantity::AngularVelocity { node, .. } => add(Some(*node)),
+                Quantity::JointCoordinate { joint } | Quantity::JointRate { joint } => {
+                    let j = &model.joints[joint.0];
+                    add(j.node_a);
+                    add(j.node_b);
+                }
+            },
+            BlockKind::Actuator(t) => match t {
+                Target::Force { node, .. } | Target::Moment { node, .. } => add(Some(*node)),
+                Target::Joint { joint } => {
+                    let j = &model.joints[joint.0];
+                    add(j.node_a);
+                    add(j.node_b);
+                }
+            },
+            _ => {}
+        }
+    }
+    out
+}
+
+/// Physical kinematics of a slot: configuration, velocity `(xdot, omega)` and acceleration
+/// `(xddot, omegadot)` (`omega` in the body frame).
+#[derive(Clone, Copy, Debug)]
+struct Pose<T: RealField + Copy> {
+    x: Vector3<T>,
+    r: Matrix3<T>,
+    xdot: Vector3<T>,
+    om: Vector3<T>,
+    xddot: Vector3<T>,
+    omdot: Vector3<T>,
+}
+
+/// The scalars the residual is evaluated in: `f64`, and dual numbers for its derivatives.
+trait Scalar: RealField + Copy {
+    /// The real part.
+    fn value(&self) -> f64;
+}
+
+impl Scalar for f64 {
+    fn value(&self) -> f64 {
+        *self
+    }
+}
+
+impl Scalar for Dual64 {
+    fn value(&self) -> f64 {
+        self.re
+    }
+}
+
+fn c<T: RealField + Copy>(v: f64) -> T {
+    nalgebra::convert(v)
+}
+
+fn lift<T: RealField + Copy>(v: &Vec3) -> Vector3<T> {
+    v.map(c)
+}
+
+impl<T: RealField + Copy> Pose<T> {
+    fn point(&self, p: &Vec3) -> Vector3<T> {
+        self.x + self.r * lift(p)
+    }
+    /// Velocity of the material point at the inertial position `p`.
+    fn velocity_at(&self, p: &Vector3<T>) -> Vector3<T> {
+        self.xdot + (self.r * self.om).cross(&(p - self.x))
+    }
+    /// Adds the generalized force of `f` at the inertial point `p` times `sign` to the
+    /// slot's residual rows (`r = -generalized force`).
+    fn apply_force(&self, f: &Vector3<T>, p: &Vector3<T>, sign: f64, r: &mut [T]) {
+        let rt = self.r.transpose();
+        let m = (rt * (p - self.x)).cross(&(rt * f));
+        let s: T = c(-sign);
+        for k in 0..3 {
+            r[k] += f[k] * s;
+            r[3 + k] += m[k] * s;
+        }
+    }
+    fn apply_moment(&self, m: &Vector3<T>, sign: f64, r: &mut [T]) {
+        let mb = self.r.transpose() * m;
+        let s: T = c(-sign);
+        for k in 0..3 {
+            r[3 + k] += mb[k] * s;
+        }
+    }
+}
+
+/// Physical kinematics of a node in `f64`.
+fn pose(group: Group, node: &NodeState) -> Pose<f64> {
+    let (xdot, om) = physical::velocity(group, node);
+    Pose {
+        x: node.q.x,
+        r: node.q.r,
+        xdot,
+        om,
+        xddot: super::point_acceleration(group, node, &Vec3::zeros()),
+        omdot: node.vdot.fixed_rows::<3>(3).into_owned(),
+    }
+}
+
+/// Variables of the automatic differentiation per slot: `dx, theta, dxdot, domega,
+/// dxddot, domegadot`.
+const PER_SLOT: usize = 18;
+
+/// The pose of a slot perturbed by the variables `w[18 k..18 k + 18]`.
+fn perturbed<T: RealField + Copy>(p: &Pose<f64>, w: &[T]) -> Pose<T> {
+    let v = |i: usize| Vector3::new(w[i], w[i + 1], w[i + 2]);
+    let r = p.r.map(c::<T>) * (Matrix3::identity() + v(3).cross_matrix());
+    Pose {
+        x: lift(&p.x) + v(0),
+        r,
+        xdot: lift(&p.xdot) + v(6),
+        om: lift(&p.om) + v(9),
+        xddot: lift(&p.xddot) + v(12),
+        omdot: lift(&p.omdot) + v(15),
+    }
+}
+
+/// A joint's frames in inertial coordinates from its two slots' poses: `(p_A, A, p_B, B)`.
+fn joint_frames<T: RealField + Copy>(
+    joint: &Joint,
+    a: &Pose<T>,
+    b: &Pose<T>,
+) -> (Vector3<T>, Matrix3<T>, Vector3<T>, Matrix3<T>) {
+    let ra = a.r * joint.frame_a.r.map(c::<T>);
+    let rb = b.r * joint.frame_b.r.map(c::<T>);
+    (a.point(&joint.frame_a.x), ra, b.point(&joint.frame_b.x), rb)
+}
+
+fn is_angle(joint: &Joint) -> bool {
+    matches!(joint.kind, JointKind::Revolute | JointKind::Cylindrical)
+}
+
+/// `min(max(v, lo), hi)`.
+fn clamp<T: RealField + Copy>(v: T, lo: T, hi: T) -> T {
+    if v < lo {
+        lo
+    } else if v > hi {
+        hi
+    } else {
+        v
+    }
+}
+
+/// Piecewise-linear interpolation through `(xs[i], ys[i])`, constant outside.
+fn interpolate<T: RealField + Copy>(xs: &[f64], ys: &[T], u: T) -> T {
+    let n = xs.len();
+    if u <= c(xs[0]) {
+        return ys[0];
+    }
+    if u >= c(xs[n - 1]) {
+        return ys[n - 1];
+    }
+    let k = xs.partition_point(|&x| c::<T>(x) <= u).clamp(1, n - 1);
+    let s = (u - c(xs[k - 1])) / c(xs[k] - xs[k - 1]);
+    ys[k - 1] + (ys[k] - ys[k - 1]) * s
+}
+
+/// Where the residual is evaluated: during the run, or for the initial outputs and held
+/// values (a hold's row then reads `x - u`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Phase {
+    Run,
+    Initial,
+}
+
+impl ControlElement<'_> {
+    /// The slot of a node.
+    fn slot(&self, node: Option<NodeId>) -> usize {
+        self.slots
+            .iter()
+            .position(|&s| s == node)
+            .expect("control slot")
+    }
+
+    /// Number of variables of the automatic differentiation.
+    fn n_variables(&self) -> usize {
+        PER_SLOT * self.slots.len() + 2 * self.system.n_unknowns
+    }
+
+    /// The value of a measurement.
+    fn measure<T: Scalar>(&self, q: &Quantity, poses: &[Pose<T>], y: T) -> T {
+        let node = |n: NodeId| &poses[self.slot(Some(n))];
+        match q {
+            Quantity::Position {
+                node: n,
+                point,
+                axis,
+            } => node(*n).point(point).dot(&lift(axis)),
+            Quantity::Velocity {
+                node: n,
+                point,
+                axis,
+            } => {
+                let p = node(*n);
+                (p.xdot + p.r * p.om.cross(&lift(point))).dot(&lift(axis))
+            }
+            Quantity::Acceleration {
+                node: n,
+                point,
+                axis,
+            } => {
+                let p = node(*n);
+                let pt = lift(point);
+                let a = p.xddot + p.r * (p.omdot.cross(&pt) + p.om.cross(&p.om.cross(&pt)));
+                a.dot(&lift(axis))
+            }
+            Quantity::AngularVelocity { node: n, axis } => {
+                let p = node(*n);
+                (p.r * p.om).dot(&lift(axis))
+            }
+            Quantity::JointCoordinate { joint } | Quantity::JointRate { joint } => {
+                let j = &self.model.joints[joint.0];
+                let (a, b) = (&poses[self.slot(j.node_a)], &poses[self.slot(j.node_b)]);
+                let (pa, fa, pb, fb) = joint_frames(j, a, b);
+                let axis = fa.column(2).into_owned();
+                let rate = matches!(q, Quantity::JointRate { .. });
+                match (is_angle(j), rate) {
+                    (true, false) => {
+                        let xb = fb.column(0);
+                        let g = xb.dot(&fa.column(1)).atan2(xb.dot(&fa.column(0)));
+                        let turns = ((y.value() - g.value()) / (2.0 * PI)).round();
+                        g + c::<T>(2.0 * PI * turns)
+                    }
+                    (true, true) => (b.r * b.om - a.r * a.om).dot(&axis),
+                    (false, false) => axis.dot(&(pb - pa)),
+                    (false, true) => {
+                        let axis_dot = (a.r * a.om).cross(&axis);
+                        let rel = b.velocity_at(&pb) - a.velocity_at(&pb);
+                        axis_dot.dot(&(pb - pa)) + axis.dot(&rel)
+                    }
+                }
+            }
+        }
+    }
+
+    /// Adds the generalized force of actuator input `u` on `target` to the node rows.
+    fn actuate<T: RealField + Copy>(&self, target: &Target, poses: &[Pose<T>], u: T, r: &mut [T]) {
+        match target {
+            Target::Force {
+                node,
+                point,
+                axis,
+                follower,
+            } => {
+                let k = self.slot(Some(*node));
+                let p = &poses[k];
+                let dir = if *follower {
+                    p.r * lift(axis)
+                } else {
+                    lift(axis)
+                };
+                p.apply_force(&(dir * u), &p.point(point), 1.0, &mut r[6 * k..6 * k + 6]);
+            }
+            Target::Moment {
+                node,
+                axis,
+                follower,
+            } => {
+                let k = self.slot(Some(*node));
+                let p = &poses[k];
+                let dir = if *follower {
+                    p.r * lift(axis)
+                } else {
+                    lift(axis)
+                };
+                p.apply_moment(&(dir * u), 1.0, &mut r[6 * k..6 * k + 6]);
+            }
+            Target::Joint { joint } => {
+                let j = &self.model.joints[joint.0];
+                let (ka, kb) = (self.slot(j.node_a), self.slot(j.node_b));
+                let (a, b) = (&poses[ka], &poses[kb]);
+                let (_, fa, pb, _) = joint_frames(j, a, b);
+                let axis = fa.column(2).into_owned() * u;
+                if is_angle(j) {
+                    b.apply_moment(&axis, 1.0, &mut r[6 * kb..6 * kb + 6]);
+                    a.apply_moment(&axis, -1.0, &mut r[6 * ka..6 * ka + 6]);
+                } else {
+                    b.apply_force(&axis, &pb, 1.0, &mut r[6 * kb..6 * kb + 6]);
+                    a.apply_force(&axis, &pb, -1.0, &mut r[6 * ka..6 * ka + 6]);
+                }
+            }
+        }
+    }
+
+    /// The physical residual `[r (6 per slot); e (one per unknown)]` at the poses, states
+    /// `x`, rates `xdot`, time `t`, with the blocks' parameters from `param(block, k)`.
+    fn residual<T: Scalar>(
+        &self,
+        poses: &[Pose<T>],
+        (x, xdot): (&[T], &[T]),
+        t: f64,
+        param: &dyn Fn(usize, usize) -> T,
+        phase: Phase,
+    ) -> Vec<T> {
+        let sys = self.system;
+        let ns = 6 * self.slots.len();
+        let zero = c::<T>(0.0);
+        let mut out = vec![zero; ns + sys.n_unknowns];
+        let (nodes, e) = out.split_at_mut(ns);
+        for (b, block) in sys.blocks.iter().enumerate() {
+            let p = |k: usize| param(b, k);
+            let u: Vec<T> = block.inputs.iter().map(|&s| x[sys.unknown(s)]).collect();
+            let (s0, y0) = (sys.state_start[b], sys.output_start[b]);
+            let xs = &x[s0..y0];
+            let xd = &xdot[s0..y0];
+            let ys = &x[y0..y0 + block.kind.n_outputs()];
+            // Rows: e[s0 + k] for states (rate minus f), e[y0 + k] for outputs (y minus h).
+            macro_rules! state {
+                ($k:expr, $f:expr) => {{
+                    let f = $f;
+                    e[s0 + $k] = xd[$k] - f;
+                }};
+            }
+            match &block.kind {
+                BlockKind::Source(f) => e[y0] = ys[0] - c(f.eval(t).0),
+                BlockKind::Gain { rows, cols } => {
+                    for i in 0..*rows {
+                        let h = (0..*cols).fold(zero, |acc, j| acc + p(i * cols + j) * u[j]);
+                        e[y0 + i] = ys[i] - h;
+                    }
+                }
+                BlockKind::Sum { signs } => {
+                    let h = signs
+                        .iter()
+                        .zip(&u)
+                        .fold(zero, |acc, (&s, &ui)| acc + ui * c(s));
+                    e[y0] = ys[0] - h;
+                }
+                BlockKind::Product { .. } => {
+                    e[y0] = ys[0] - u.iter().fold(c(1.0), |acc, &ui| acc * ui);
+                }
+                BlockKind::Integrator => {
+                    state!(0, p(0) * u[0]);
+                    e[y0] = ys[0] - xs[0];
+                }
+                BlockKind::Lag => {
+                    state!(0, (p(0) * u[0] - xs[0]) / p(1));
+                    e[y0] = ys[0] - xs[0];
+                }
+                BlockKind::Pid => {
+                    let (kp, ki, kd, tf) = (p(0), p(1), p(2), p(3));
+                    let v = kp * u[0] + ki * xs[0] + kd * (u[0] - xs[1]) / tf;
+                    let sat = clamp(v, p(4), p(5));
+                    state!(0, u[0] + p(6) * (sat - v));
+                    state!(1, (u[0] - xs[1]) / tf);
+                    e[y0] = ys[0] - sat;
+                }
+                BlockKind::StateSpace {
+                    states: n,
+                    inputs: m,
+                    outputs: q,
+                } => {
+                    let (n, m, q) = (*n, *m, *q);
+                    let (a, bm, cm, d) = (0, n * n, n * n + n * m, n * n + n * m + q * n);
+                    for i in 0..n {
+                        let f = (0..n).fold(zero, |acc, j| acc + p(a + i * n + j) * xs[j])
+                            + (0..m).fold(zero, |acc, j| acc + p(bm + i * m + j) * u[j]);
+                        state!(i, f);
+                    }
+                    for i in 0..q {
+                        let h = (0..n).fold(zero, |acc, j| acc + p(cm + i * n + j) * xs[j])
+                            + (0..m).fold(zero, |acc, j| acc + p(d + i * m + j) * u[j]);
+                        e[y0 + i] = ys[i] - h;
+                    }
+                }
+                BlockKind::TransferFunction { num, den } => {
+                    let n = den - 1;
+                    let a0 = p(*num);
+                    let a = |k: usize| p(num + k) / a0;
+                    // numerator padded to degree n: b_k for k = 0..=n
+                    let b = |k: usize| {
+                        if k + num > n {
+                            p(k + num - n - 1) / a0
+                        } else {
+                            zero
+                        }
+                    };
+                    for k in 0..n {
+                        let f = if k + 1 < n {
+                            xs[k + 1]
+                        } else {
+                            u[0] - (0..n).fold(zero, |acc, j| acc + a(n - j) * xs[j])
+                        };
+                        state!(k, f);
+                    }
+                    let h = (0..n).fold(b(0) * u[0], |acc, j| {
+                        acc + (b(n - j) - a(n - j) * b(0)) * xs[j]
+                    });
+                    e[y0] = ys[0] - h;
+                }
+                BlockKind::Saturation => e[y0] = ys[0] - clamp(u[0], p(0), p(1)),
+                BlockKind::DeadZone => {
+                    let h = if u[0] > p(1) {
+                        u[0] - p(1)
+                    } else if u[0] < p(0) {
+                        u[0] - p(0)
+                    } else {
+                        zero
+                    };
+                    e[y0] = ys[0] - h;
+                }
+                BlockKind::RateLimiter => {
+                    state!(0, clamp((u[0] - xs[0]) / p(2), -p(1), p(0)));
+                    e[y0] = ys[0] - xs[0];
+                }
+                BlockKind::Lookup { breakpoints } => {
+                    let values: Vec<T> = (0..breakpoints.len()).map(p).collect();
+                    e[y0] = ys[0] - interpolate(breakpoints, &values, u[0]);
+                }
+                BlockKind::Hold { .. } => {
+                    e[s0] = match phase {
+                        Phase::Run => xd[0],
+                        Phase::Initial => xs[0] - u[0],
+                    };
+                    e[y0] = ys[0] - xs[0];
+                }
+                BlockKind::DcMotor => {
+                    let (r, l, kt, ke) = (p(0), p(1), p(2), p(3));
+                    state!(0, (u[0] - r * xs[0] - ke * u[1]) / l);
+                    e[y0] = ys[0] - kt * xs[0];
+                }
+                BlockKind::Measure(q) => e[y0] = ys[0] - self.measure(q, poses, ys[0]),
+                BlockKind::Actuator(target) => self.actuate(target, poses, u[0], nodes),
+            }
+        }
+        out
+    }
+
+    /// The blocks' parameters as `f64`.
+    fn param_f64(&self) -> impl Fn(usize, usize) -> f64 + '_ {
+        |b, k| self.system.blocks[b].params[k]
+    }
+
+    /// The residual at `f64` and its Jacobian with respect to the variables
+    /// (`[18 per slot; x; xdot]`), by one forward pass per variable (`None` columns: the
+    /// slot is the ground).
+    fn jacobian(&self, ctx: &Context, local: &Local, phase: Phase) -> (DVector<f64>, DMatrix<f64>) {
+        let poses: Vec<Pose<f64>> = local.nodes.iter().map(|n| pose(ctx.group, n)).collect();
+        let nv = self.n_variables();
+        let n = self.system.n_unknowns;
+        let nrows = 6 * self.slots.len() + n;
+        let ns = PER_SLOT * self.slots.len();
+        let mut jac = DMatrix::zeros(nrows, nv);
+        let params = |b: usize, k: usize| Dual64::from_re(self.system.blocks[b].params[k]);
+        let mut w = vec![Dual64::from_re(0.0); nv];
+        for i in 0..n {
+            w[ns + i] = Dual64::from_re(local.x[i]);
+            w[ns + n + i] = Dual64::from_re(local.xdot[i]);
+        }
+        let mut value = DVector::zeros(nrows);
+        let mut filled = false;
+        for j in 0..nv {
+            if j < ns && self.slots[j / PER_SLOT].is_none() {
+                continue;
+            }
+            w[j].eps = 1.0;
+            let dual: Vec<Pose<Dual64>> = poses
+                .iter()
+                .enumerate()
+                .map(|(k, p)| perturbed(p, &w[PER_SLOT * k..PER_SLOT * (k + 1)]))
+                .collect();
+            let out = self.residual(&dual, (&w[ns..ns + n], &w[ns + n..]), ctx.t, &params, phase);
+            w[j].eps = 0.0;
+            for (i, o) in out.iter().enumerate() {
+                jac[(i, j)] = o.eps;
+                value[i] = o.re;
+            }
+            filled = true;
+        }
+        if !filled {
+            let out = self.residual(
+                &poses,
+                (local.x, local.xdot),
+                ctx.t,
+                &self.param_f64(),
+                phase,
+            );
+            value = DVector::from_vec(out);
+        }
+        (value, jac)
+    }
+
+    /// Which slots are nodes.
+    fn active(&self) -> Vec<bool> {
+        self.slots.iter().map(Option::is_some).collect()
+    }
+
+    /// Outputs and held values at `t` from the states in `x` (the outputs' and holds' entries
+    /// are the starting guess), by Newton's method on their equations at fixed kinematics.
+    fn solve_outputs(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+        let sys = self.system;
+        let unknowns: Vec<usize> = (0..sys.n_unknowns)
+            .filter(|&i| {
+                sys.is_output(i)
+                    || sys.blocks.iter().enumerate().any(|(b, block)| {
+                        matches!(block.kind, BlockKind::Hold { .. }) && sys.state_start[b] == i
+                    })
+            })
+            .collect();
+        let ns = PER_SLOT * self.slots.len();
+        let rows = 6 * self.slots.len();
+        for _ in 0..30 {
+            let here = Local {
+                nodes: local.nodes,
+                x: &*x,
+                xdot: local.xdot,
+            };
+            let (value, jac) = self.jacobian(ctx, &here, Phase::Initial);
+            let m = unknowns.len();
+            let a = DMatrix::from_fn(m, m, |i, j| jac[(rows + unknowns[i], ns + unknowns[j])]);
+            let r = DVector::from_fn(m, |i, _| value[rows + unknowns[i]]);
+            let Some(dx) = a.lu().solve(&r) else {
+                return;
+            };
+            for (k, &i) in unknowns.iter().enumerate() {
+                x[i] -= dx[k];
+            }
+            if dx.amax() <= 1e-14 * (1.0 + r.amax()) {
+                return;
+            }
+        }
+    }
+}
+
+/// A state row's physical derivatives `(de/dw_p, de/dv_p, de/dvdot_p)` at a node as its row of
+/// the iteration matrix in group coordinates, `k de/dw T + c de/dv + m de/dvdot`. On SE(3)
+/// (`P = blockdiag(R, I)`) the physical velocity `R U` and acceleration `R (Udot + Omega x U)`
+/// depend on the rotation and on `U`, `Omega`.
+fn row_to_group(
+    group: Group,
+    node: &NodeState,
+    (dw, dv, da): (RowVector6<f64>, RowVector6<f64>, RowVector6<f64>),
+    coef: &Coefficients,
+) -> RowVector6<f64> {
+    let (mut gw, mut gv, mut ga) = (dw, dv, da);
+    if group == Group::SE3 {
+        let r = node.q.r;
+        let (u, om) = flexmb_lie::split(&node.v);
+        let (ud, _) = flexmb_lie::split(&node.vdot);
+        let t = |m: &RowVector6<f64>| m.fixed_columns::<3>(0).into_owned();
+        let (dw_t, dv_t, da_t) = (t(&dw), t(&dv), t(&da));
+        gw.fixed_columns_mut::<3>(0).copy_from(&(dw_t * r));
+        let turn: nalgebra::RowVector3<f64> =
+            dv_t * (-r * hat(&u)) + da_t * (-r * hat(&(ud + om.cross(&u))));
+        let mut rot = gw.fixed_columns_mut::<3>(3);
+        rot += turn;
+        gv.fixed_columns_mut::<3>(0)
+            .copy_from(&(dv_t * r + da_t * (r * hat(&om))));
+        let mut gv_rot = gv.fixed_columns_mut::<3>(3);
+        gv_rot += da_t * (-r * hat(&u));
+        ga.fixed_columns_mut::<3>(0).copy_from(&(da_t * r));
+    }
+    gw * node.t * coef.k + gv * coef.c + ga * coef.m
+}
+
+impl ElementKernel for ControlElement<'_> {
+    fn n_slots(&self) -> usize {
+        self.slots.len()
+    }
+
+    fn node(&self, k: usize) -> Option<NodeId> {
+        self.slots[k]
+    }
+
+    fn n_states(&self) -> usize {
+        self.system.n_unknowns
+    }
+
+    fn is_algebraic(&self, i: usize) -> bool {
+        self.system.is_output(i)
+    }
+
+    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+        let sys = self.system;
+        for (b, block) in sys.blocks.iter().enumerate() {
+            let s0 = sys.state_start[b];
+            let initial = |name: &str| block.param(name).unwrap_or(0.0);
+            match &block.kind {
+                BlockKind::Integrator | BlockKind::Lag => x[s0] = initial("initial"),
+                BlockKind::StateSpace { states, .. } => {
+                    for k in 0..*states {
+                        x[s0 + k] = initial(&format!("x0[{k}]"));
+                    }
+                }
+                _ => {}
+            }
+        }
+        // Measured angles start on the branch of the geometric angle.
+        self.solve_outputs(ctx, local, x);
+    }
+
+    fn evaluate(
+        &self,
+        ctx: &Context,
+        local: &Local,
+        r: &mut LocalVector,
+        s: Option<(&Coefficients, &mut LocalMatrix)>,
+    ) {
+        let group = ctx.group;
+        let nslots = self.slots.len();
+        let (rows, n) = (6 * nslots, self.system.n_unknowns);
+        let active = self.active();
+        let Some((coef, s)) = s else {
+            let poses: Vec<Pose<f64>> = local.nodes.iter().map(|n| pose(group, n)).collect();
+            let out = self.residual(
+                &poses,
+                (local.x, local.xdot),
+                ctx.t,
+                &self.param_f64(),
+                Phase::Run,
+            );
+            let rp = DVector::from_column_slice(&out[..rows]);
+            physical::to_group(group, local.nodes, &active, &rp, None, None, r, None);
+            r.rows_mut(rows, n).copy_from_slice(&out[rows..]);
+            return;
+        };
+        let (value, jac) = self.jacobian(ctx, local, Phase::Run);
+        let ns = PER_SLOT * nslots;
+        let rp = value.rows(0, rows).into_owned();
+        let node_block = |offset: usize| {
+            DMatrix::from_fn(rows, rows, |i, j| {
+                jac[(i, PER_SLOT * (j / 6) + offset + j % 6)]
+            })
+        };
+        let k_p = node_block(0);
+        physical::to_group(
+            group,
+            local.nodes,
+            &active,
+            &rp,
+            Some(&k_p),
+            None,
+            r,
+            Some((coef, s)),
+        );
+        r.rows_mut(rows, n).copy_from(&value.rows(rows, n));
+        let mut s = s.view();
+        // State columns: x dr/dx (outputs: y dr/dy) + xdot dr/dxdot, node rows in group
+        // coordinates.
+        let column_factor = |j: usize| {
+            if self.system.is_output(j) {
+                coef.y
+            } else {
+                coef.x
+            }
+        };
+        for j in 0..n {
+            let (fx, fxd) = (column_factor(j), coef.xdot);
+            let mut col = DVector::from_fn(rows + n, |i, _| {
+                jac[(i, ns + j)] * fx + jac[(i, ns + n + j)] * fxd
+            });
+            physical::translations_to_group(
+                group,
+                local.nodes,
+                &active,
+                &mut col.rows_mut(0, rows),
+            );
+            s.view_mut((0, rows + j), (rows + n, 1)).copy_from(&col);
+        }
+        // State rows, node columns.
+        for i in 0..n {
+            for k in 0..nslots {
+                let block = if active[k] {
+                    let part = |o: usize| {
+                        RowVector6::from_fn(|_, m| jac[(rows + i, PER_SLOT * k + o + m)])
+                    };
+                    row_to_group(group, &local.nodes[k], (part(0), part(6), part(12)), coef)
+                } else {
+                    RowVector6::zeros()
+                };
+                s.view_mut((rows + i, 6 * k), (1, 6)).copy_from(&block);
+            }
+        }
+        // A hold without a rate term (statics) keeps its value: its row reads x = x_start.
+        if coef.xdot == 0.0 {
+            for (b, block) in self.system.blocks.iter().enumerate() {
+                if matches!(block.kind, BlockKind::Hold { .. }) {
+                    let i = rows + self.system.state_start[b];
+                    s[(i, i)] = coef.x;
+                }
+            }
+        }
+    }
+
+    fn update_states(&self, ctx: &Context, _start: &Local, end: &Local, x: &mut [f64]) {
+        let sys = self.system;
+        for (b, block) in sys.blocks.iter().enumerate() {
+            if let BlockKind::Hold { period } = block.kind {
+                if on_sample(ctx.t, period) {
+                    x[sys.state_start[b]] = end.x[sys.unknown(block.inputs[0])];
+                }
+            }
+        }
+    }
+
+    fn step_limit(&self, ctx: &Context, _start: &Local, _end: &Local, h: f64) -> Option<StepLimit> {
+        let (t0, t1) = (ctx.t - h, ctx.t);
+        let mut limit: Option<StepLimit> = None;
+        for block in &self.system.blocks {
+            let BlockKind::Hold { period } = block.kind else {
+                continue;
+            };
+            let tol = SAMPLE_TOLERANCE * period;
+            // the first sample after the start of the step
+            let next = ((t0 + tol) / period).floor() * period + period;
+            let this = if t1 > next + tol {
+                StepLimit::Retry(next - t0)
+            } else {
+                let after = if on_sample(t1, period) {
+                    period
+                } else {
+                    next - t1
+                };
+                StepLimit::Next(after)
+            };
+            limit = Some(match (limit, this) {
+                (Some(StepLimit::Retry(a)), StepLimit::Retry(b)) => StepLimit::Retry(a.min(b)),
+                (Some(StepLimit::Retry(a)), _) => StepLimit::Retry(a),
+                (_, StepLimit::Retry(b)) => StepLimit::Retry(b),
+                (Some(StepLimit::Next(a)), StepLimit::Next(b)) => StepLimit::Next(a.min(b)),
+                (None, l) => l,
+            });
+        }
+        limit
+    }
+}
+
+/// Relative tolerance (of the period) within which a time is a sample instant.
+const SAMPLE_TOLERANCE: f64 = 1e-9;
+
+/// Whether `t` is a sample instant of a hold with `period`.
+fn on_sample(t: f64, period: f64) -> bool {
+    let k = (t / period).round();
+    (t - k * period).abs() <= SAMPLE_TOLERANCE * period
+}
+
+impl ElementParameters for ControlElement<'_> {
+    type Param = ControlParam;
+
+    fn parameter_derivative(
+        &self,
+        ctx: &Context,
+        p: ControlParam,
+        local: &Local,
+        dr: &mut LocalVector,
+    ) -> DerivativeMethod {
+        let poses: Vec<Pose<Dual64>> = local
+            .nodes
+            .iter()
+            .map(|n| {
+                let p = pose(ctx.group, n);
+                perturbed(&p, &[Dual64::from_re(0.0); PER_SLOT])
+            })
+            .collect();
+        let x: Vec<Dual64> = local.x.iter().map(|&v| Dual64::from_re(v)).collect();
+        let xdot: Vec<Dual64> = local.xdot.iter().map(|&v| Dual64::from_re(v)).collect();
+        let params = |b: usize, k: usize| {
+            let v = Dual64::from_re(self.system.blocks[b].params[k]);
+            if (b, k) == (p.block, p.index) {
+                Dual64::new(v.re, 1.0)
+            } else {
+                v
+            }
+        };
+        let out = self.residual(&poses, (&x, &xdot), ctx.t, &params, Phase::Run);
+        let rows = 6 * self.slots.len();
+        let d = DVector::from_fn(rows, |i, _| out[i].eps);
+        physical::to_group(
+            ctx.group,
+            local.nodes,
+            &self.active(),
+            &d,
+            None,
+            None,
+            dr,
+            None,
+        );
+        for (i, o) in out[rows..].iter().enumerate() {
+            dr[rows + i] = o.eps;
+        }
+        DerivativeMethod::Analytic
+    }
+}
