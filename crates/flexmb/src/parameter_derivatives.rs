@@ -52,6 +52,7 @@ use crate::elements::{
 };
 use crate::joints::parameters::{ConstraintParameters, JointDerivative};
 use crate::joints::{self, Row};
+use crate::model::parameters::ControlWrt;
 use crate::model::{Model, NodeId, ParamId, ParamKind, Parameters};
 use nalgebra::DVector;
 
@@ -208,6 +209,19 @@ fn visit(
             let (t, lambda) = (at.point.t, &at.point.lambda[start..start + rows.len()]);
             let (d, method) = joint.parameter_derivative(model, rows, p, &nodes, t, lambda);
             sink(Piece::Joint(j.0, &d));
+            // the block diagram along the joint (not in a point without states: the
+            // constraint forces alone, `constraint_force_derivative`)
+            let control = crate::elements::control::ControlElement::uses_joint(&model.control, j);
+            if control && !at.point.x.is_empty() {
+                let slots = crate::elements::control::slots(model);
+                let element = crate::elements::control::ControlElement {
+                    system: &model.control,
+                    model,
+                    slots: &slots,
+                };
+                let wrt = Wrt::Own(ControlWrt::Joint(j, p));
+                element_term(at, (&element, ElementItem::Control), wrt, sink);
+            }
             method
         }
         ParamKind::Gear(i, p) => element_term(
@@ -244,7 +258,12 @@ fn visit(
                 model,
                 slots: &slots,
             };
-            element_term(at, (&element, ElementItem::Control), Wrt::Own(p), sink)
+            element_term(
+                at,
+                (&element, ElementItem::Control),
+                Wrt::Own(ControlWrt::Block(p)),
+                sink,
+            )
         }
     }
 }

@@ -91,20 +91,20 @@ fn check_element_with_states(
     x: &[f64],
     xdot: &[f64],
 ) {
-    check_states(name, kernel, model, nodes, (x, xdot), (false, EPS));
+    check_states(name, kernel, model, nodes, (x, xdot), (&[], EPS));
 }
 
-/// [`check_element_with_states`] for an element whose states are held values (equation
-/// `xdot = 0`): without a rate term (statics), the iteration matrix reads the equation as
-/// `x = x_start` (diagonal 1) while the residual stays `xdot`, so that diagonal entry is
-/// checked against 1 instead of a difference.
+/// [`check_element_with_states`] for an element with states `held` (local state indices)
+/// that are held values (equation `xdot = 0`): without a rate term (statics), the iteration
+/// matrix reads their equations as `x = x_start` (diagonal 1) while the residual stays
+/// `xdot`, so those diagonal entries are checked against 1 instead of a difference.
 fn check_states(
     name: &str,
     kernel: &dyn ElementKernel,
     model: &Model,
     nodes: &[NodeState],
     (x, xdot): (&[f64], &[f64]),
-    (held, eps): (bool, f64),
+    (held, eps): (&[usize], f64),
 ) {
     let group = model.group;
     let ctx = Context::at(model, 0.37, 1.0);
@@ -168,9 +168,9 @@ fn check_states(
             };
             fd.set_column(k, &((rp - rm) / (2.0 * eps)));
         }
-        if held && what == 'x' {
-            for i in n6..n {
-                fd[(i, i)] = 1.0;
+        if what == 'x' {
+            for &i in held {
+                fd[(n6 + i, n6 + i)] = 1.0;
             }
         }
         assert_close(
@@ -873,7 +873,8 @@ fn contact_tangents_match_finite_differences() {
                     "contact '{}' (friction {:?})",
                     contact.name, contact.friction
                 );
-                check_states(&name, &element, &model, &nodes, (&x, &xdot), (true, EPS));
+                let held: Vec<usize> = (0..x.len()).collect();
+                check_states(&name, &element, &model, &nodes, (&x, &xdot), (&held, EPS));
             }
         }
     }
@@ -1007,7 +1008,8 @@ fn contact_tangents_match_one_sided_differences_at_the_onset() {
                 };
                 let name = format!("contact '{}' at penetration {depth:e}", contact.name);
                 let (x, xdot) = contact_states(&contact, &mut rng);
-                check_states(&name, &element, &model, &slow, (&x, &xdot), (true, eps));
+                let held: Vec<usize> = (0..x.len()).collect();
+                check_states(&name, &element, &model, &slow, (&x, &xdot), (&held, eps));
             }
         }
     }
@@ -1613,6 +1615,52 @@ fn elastic_forces_are_the_gradients_of_the_potential_energies() {
                 let nodes = [rng.node(group), rng.node(group)];
                 check_energy_gradient(&format!("bushing {form:?}"), &bushing, &model, &nodes, &[]);
             }
+        }
+    }
+}
+
+#[test]
+fn control_block_tangents_match_finite_differences() {
+    // Every kind of block, measurement and actuator in one diagram
+    // (`common::control_diagram`), at random node kinematics, states and rates; the hold's
+    // state is a held value.
+    use flexmb::elements::control::{slots, ControlElement};
+    use flexmb::model::control::BlockKind;
+    let mut rng = Lcg(17);
+    for group in [Group::R3xSO3, Group::SE3] {
+        let model = common::control_diagram(group);
+        let slots = slots(&model);
+        let element = ControlElement {
+            system: &model.control,
+            model: &model,
+            slots: &slots,
+        };
+        let hold = model
+            .control
+            .blocks
+            .iter()
+            .position(|b| matches!(b.kind, BlockKind::Hold { .. }))
+            .map(|b| model.control.state_start[b])
+            .expect("a hold");
+        for _ in 0..3 {
+            let nodes: Vec<NodeState> = slots
+                .iter()
+                .map(|s| match s {
+                    Some(_) => rng.node(group),
+                    None => NodeState::ground(Frame::identity()),
+                })
+                .collect();
+            let n = model.control.n_unknowns;
+            let x: Vec<f64> = (0..n).map(|_| 0.5 * rng.next()).collect();
+            let xdot: Vec<f64> = (0..n).map(|_| 0.5 * rng.next()).collect();
+            check_states(
+                "control blocks",
+                &element,
+                &model,
+                &nodes,
+                (&x, &xdot),
+                (&[hold], EPS),
+            );
         }
     }
 }

@@ -90,7 +90,7 @@ use super::{
     LocalMatrix, LocalVector, NodeState, StepLimit,
 };
 use crate::model::control::{BlockKind, ControlSystem, Quantity, Target};
-use crate::model::parameters::ControlParam;
+use crate::model::parameters::ControlWrt;
 use crate::model::{Joint, JointKind, Model, NodeId};
 use flexmb_lie::{so3::hat, Group, Vec3};
 use nalgebra::{DMatrix, DVector, Matrix3, RealField, RowVector6, Vector3};
@@ -858,16 +858,46 @@ fn on_sample(t: f64, period: f64) -> bool {
     (t - k * period).abs() <= SAMPLE_TOLERANCE * period
 }
 
+impl ControlElement<'_> {
+    /// Whether a measurement or actuator acts along joint `j`.
+    pub fn uses_joint(system: &ControlSystem, j: crate::model::JointId) -> bool {
+        system.blocks.iter().any(|b| {
+            matches!(&b.kind, BlockKind::Measure(Quantity::JointCoordinate { joint } | Quantity::JointRate { joint })
+                | BlockKind::Actuator(Target::Joint { joint }) if *joint == j)
+        })
+    }
+}
+
 impl ElementParameters for ControlElement<'_> {
-    type Param = ControlParam;
+    type Param = ControlWrt;
 
     fn parameter_derivative(
         &self,
         ctx: &Context,
-        p: ControlParam,
+        wrt: ControlWrt,
         local: &Local,
         dr: &mut LocalVector,
     ) -> DerivativeMethod {
+        let p = match wrt {
+            ControlWrt::Block(p) => p,
+            ControlWrt::Joint(j, jp) => {
+                // the joint's frames enter the measurements and actuators along it: central
+                // difference on copies of the model
+                let value = jp.get(&self.model.joints[j.0], &self.model.nodes);
+                let h = super::FD_STEP * value.abs().max(self.model.extent().max(1.0));
+                let r = |v: f64| {
+                    let mut model = self.model.clone();
+                    jp.set(&mut model.joints[j.0], &self.model.nodes, v);
+                    let moved = ControlElement {
+                        model: &model,
+                        ..*self
+                    };
+                    super::evaluate_owned(&moved, ctx, local, None).0
+                };
+                dr.copy_from(&((r(value + h) - r(value - h)) / (2.0 * h)));
+                return DerivativeMethod::FiniteDifference;
+            }
+        };
         let poses: Vec<Pose<Dual64>> = local
             .nodes
             .iter()

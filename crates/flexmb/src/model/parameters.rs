@@ -218,6 +218,14 @@ pub struct ControlParam {
     pub index: usize,
 }
 
+/// What the block diagram's equations are differentiated with respect to: a block's own
+/// parameter, or a parameter of a joint its measurements or actuators act along.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ControlWrt {
+    Block(ControlParam),
+    Joint(JointId, JointParam),
+}
+
 /// Which curve of a nonlinear force law ([`super::ForceLaw`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CurveKey {

@@ -191,3 +191,226 @@ impl Lcg {
         }
     }
 }
+
+/// A model with a block diagram that holds every kind of block, measurement and actuator
+/// (for the derivative checks): nodes `a` and `b`, a revolute joint `hinge` between them
+/// and a prismatic joint `slide` from the ground to `b`, frames turned off the axes.
+pub fn control_diagram(group: flexmb_lie::Group) -> flexmb::model::Model {
+    use flexmb::model::control::{Block, BlockKind, ControlSystem, Quantity, Signal, Target};
+    use flexmb::model::{Joint, JointId, JointKind, Model, NodeId, TimeFunction};
+    use flexmb_lie::Frame;
+    let mut rng = Lcg(31);
+    let mut m = Model::new(group);
+    let a = m.add_node("a", Frame::identity());
+    let b = m.add_node("b", Frame::identity());
+    let joint = |name: &str, kind, node_a: Option<NodeId>, rng: &mut Lcg| Joint {
+        name: name.into(),
+        kind,
+        node_a,
+        node_b: Some(b),
+        frame_a: flexmb_lie::Group::SE3.exp(&rng.v6(0.6)),
+        frame_b: flexmb_lie::Group::SE3.exp(&rng.v6(0.6)),
+        drive: None,
+    };
+    m.joints
+        .push(joint("hinge", JointKind::Revolute, Some(a), &mut rng));
+    m.joints
+        .push(joint("slide", JointKind::Prismatic, None, &mut rng));
+    let (hinge, slide) = (JointId(0), JointId(1));
+    let s = |block: usize| Signal { block, output: 0 };
+    let axis = |rng: &mut Lcg| rng.v3(1.0).normalize();
+    let point = |rng: &mut Lcg| rng.v3(0.5);
+    let block = |name: &str, kind: BlockKind, params: Vec<f64>, inputs: Vec<Signal>| Block {
+        name: name.into(),
+        kind,
+        params,
+        inputs,
+    };
+    let measure = |name: &str, q: Quantity| block(name, BlockKind::Measure(q), vec![], vec![]);
+    let blocks = vec![
+        block(
+            "src",
+            BlockKind::Source(TimeFunction::Sine {
+                amplitude: 0.4,
+                frequency: 1.3,
+                phase: 0.2,
+                offset: 0.1,
+            }),
+            vec![],
+            vec![],
+        ),
+        measure(
+            "pos",
+            Quantity::Position {
+                node: a,
+                point: point(&mut rng),
+                axis: axis(&mut rng),
+            },
+        ),
+        measure(
+            "vel",
+            Quantity::Velocity {
+                node: b,
+                point: point(&mut rng),
+                axis: axis(&mut rng),
+            },
+        ),
+        measure(
+            "acc",
+            Quantity::Acceleration {
+                node: a,
+                point: point(&mut rng),
+                axis: axis(&mut rng),
+            },
+        ),
+        measure(
+            "omega",
+            Quantity::AngularVelocity {
+                node: b,
+                axis: axis(&mut rng),
+            },
+        ),
+        measure("angle", Quantity::JointCoordinate { joint: hinge }),
+        measure("rate", Quantity::JointRate { joint: hinge }),
+        measure("slide", Quantity::JointCoordinate { joint: slide }),
+        measure("slide_rate", Quantity::JointRate { joint: slide }),
+        block(
+            "sum",
+            BlockKind::Sum {
+                signs: vec![1.0, -1.0, 0.5],
+            },
+            vec![],
+            vec![s(0), s(1), s(2)],
+        ),
+        block(
+            "gain",
+            BlockKind::Gain { rows: 2, cols: 2 },
+            vec![1.5, -0.3, 0.7, 2.0],
+            vec![s(3), s(4)],
+        ),
+        block(
+            "product",
+            BlockKind::Product { inputs: 2 },
+            vec![],
+            vec![s(5), s(6)],
+        ),
+        block(
+            "integrator",
+            BlockKind::Integrator,
+            vec![1.7, 0.0],
+            vec![s(9)],
+        ),
+        block("lag", BlockKind::Lag, vec![0.8, 0.3, 0.0], vec![s(10)]),
+        block(
+            "pid",
+            BlockKind::Pid,
+            vec![3.0, 2.0, 0.5, 0.05, -0.6, 0.4, 0.7],
+            vec![s(7)],
+        ),
+        block(
+            "ss",
+            BlockKind::StateSpace {
+                states: 2,
+                inputs: 2,
+                outputs: 1,
+            },
+            vec![
+                -1.0, 0.5, -0.3, -2.0, 1.0, 0.2, 0.0, 0.7, 0.4, -0.9, 0.3, 0.1, 0.0, 0.0,
+            ],
+            vec![s(8), s(11)],
+        ),
+        block(
+            "tf",
+            BlockKind::TransferFunction { num: 2, den: 3 },
+            vec![0.5, 2.0, 1.0, 0.8, 4.0],
+            vec![Signal {
+                block: 10,
+                output: 1,
+            }],
+        ),
+        block(
+            "saturation",
+            BlockKind::Saturation,
+            vec![-0.35, 0.3],
+            vec![s(12)],
+        ),
+        block(
+            "dead_zone",
+            BlockKind::DeadZone,
+            vec![-0.2, 0.1],
+            vec![s(13)],
+        ),
+        block(
+            "rate_limiter",
+            BlockKind::RateLimiter,
+            vec![2.0, 1.5, 0.2],
+            vec![s(14)],
+        ),
+        block(
+            "lookup",
+            BlockKind::Lookup {
+                breakpoints: vec![-1.0, -0.2, 0.3, 1.0],
+            },
+            vec![0.5, -0.4, 0.9, 0.2],
+            vec![s(16)],
+        ),
+        block(
+            "hold",
+            BlockKind::Hold { period: 0.01 },
+            vec![],
+            vec![s(18)],
+        ),
+        block(
+            "motor",
+            BlockKind::DcMotor,
+            vec![1.2, 0.05, 0.3, 0.25],
+            vec![s(17), s(6)],
+        ),
+        block(
+            "force",
+            BlockKind::Actuator(Target::Force {
+                node: a,
+                point: point(&mut rng),
+                axis: axis(&mut rng),
+                follower: false,
+            }),
+            vec![],
+            vec![s(22)],
+        ),
+        block(
+            "moment",
+            BlockKind::Actuator(Target::Moment {
+                node: b,
+                axis: axis(&mut rng),
+                follower: true,
+            }),
+            vec![],
+            vec![s(15)],
+        ),
+        block(
+            "torque",
+            BlockKind::Actuator(Target::Joint { joint: hinge }),
+            vec![],
+            vec![s(19)],
+        ),
+        block(
+            "push",
+            BlockKind::Actuator(Target::Joint { joint: slide }),
+            vec![],
+            vec![s(20)],
+        ),
+        block(
+            "follower",
+            BlockKind::Actuator(Target::Force {
+                node: b,
+                point: point(&mut rng),
+                axis: axis(&mut rng),
+                follower: true,
+            }),
+            vec![],
+            vec![s(21)],
+        ),
+    ];
+    m.control = ControlSystem::new(blocks);
+    m
+}
