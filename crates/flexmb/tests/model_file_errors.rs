@@ -2141,3 +2141,99 @@ fn bushings_are_read_and_bad_matrices_are_located() {
     let file = parse_model_str(&text, "mount.toml", &[]).expect("reads on R3xSO(3)");
     assert_eq!(file.model.group, Group::R3xSO3);
 }
+
+/// Bad `[[block]]` input in `examples/pid_mass_spring.toml`: wiring and parameters, located.
+#[test]
+fn control_block_errors_are_located() {
+    let path: PathBuf = [
+        env!("CARGO_MANIFEST_DIR"),
+        "../../examples/pid_mass_spring.toml",
+    ]
+    .iter()
+    .collect();
+    let good = std::fs::read_to_string(&path).expect("example");
+    parse_model_str(&good, "pid.toml", &[]).expect("the example reads");
+    let edit = |from: &str, to: &str| {
+        assert!(good.contains(from), "{from}");
+        match parse_model_str(&good.replace(from, to), "pid.toml", &[]) {
+            Ok(_) => panic!("accepted: {to}"),
+            Err(e) => e.to_string(),
+        }
+    };
+    for (from, to, parts) in [
+        (
+            "input = \"error\"",
+            "input = \"eror\"",
+            &[
+                "pid.toml:",
+                "field 'block[3].input'",
+                "unknown signal 'eror'",
+                "'error'",
+            ][..],
+        ),
+        (
+            "inputs = [\"reference\", \"position\"]",
+            "inputs = [\"reference\"]",
+            &["field 'block[2].signs'", "one sign per input (1)"],
+        ),
+        (
+            "inputs = [\"reference\", \"position\"]\nsigns = [1.0, -1.0]",
+            "inputs = [\"reference\", \"position[1]\"]\nsigns = [1.0, -1.0]",
+            &["field 'block[2].inputs[1]'", "'position' has 1 output"],
+        ),
+        (
+            "input = \"pid\"\ntarget",
+            "inputs = [\"pid\", \"error\"]\ntarget",
+            &["field 'block[4].inputs'", "takes 1 input, got 2"],
+        ),
+        (
+            "\ntf = 0.01\n",
+            "\ntf = -0.01\n",
+            &["field 'block[3].tf'", "positive"],
+        ),
+        (
+            "\ntf = 0.01\n",
+            "\ntf = 0.01\nlower = 5.0\nupper = -5.0\n",
+            &["field 'block[3].upper'", ">= lower"],
+        ),
+        (
+            "node = \"mass\"\ncomponent = \"x\"\n\n[[block]]\nname = \"error\"",
+            "node = \"mas\"\ncomponent = \"x\"\n\n[[block]]\nname = \"error\"",
+            &["field 'block[1].node'", "unknown node 'mas'"],
+        ),
+        (
+            "quantity = \"position\"",
+            "quantity = \"joint_coordinate\"\njoint = \"spring\"",
+            &["field 'block[1].joint'", "unknown joint 'spring'"],
+        ),
+        (
+            "type = \"pid\"",
+            "type = \"pdi\"",
+            &["field 'block[3].type'", "\"pid\""],
+        ),
+        ("kd = 20.0", "kd = 20.0\nkk = 1.0", &["block[3]", "kk"]),
+    ] {
+        assert_contains(&edit(from, to), parts);
+    }
+    // An algebraic loop whose gain is 1 (e = r - x, x = x + e: singular) is located on it;
+    // one of gain 1/2 is solved.
+    let with_loop = |gain: &str| {
+        good.replace(
+            "[[block]]\nname = \"pid\"",
+            &format!("[[block]]\nname = \"echo\"\ntype = \"gain\"\ninput = \"loop\"\ngain = {gain}\n\n[[block]]\nname = \"loop\"\ntype = \"sum\"\ninputs = [\"echo\", \"error\"]\n\n[[block]]\nname = \"pid\""),
+        )
+    };
+    let e = parse_model_str(&with_loop("1.0"), "pid.toml", &[]).expect_err("singular loop");
+    assert_contains(
+        &e.to_string(),
+        &[
+            "block[3]",
+            "algebraic loop through blocks 'echo', 'loop'",
+            "cannot be solved",
+        ],
+    );
+    parse_model_str(&with_loop("0.5"), "pid.toml", &[]).expect("a loop of gain 1/2");
+    // --set overrides are checked like the file.
+    let e = parse_model_str(&good, "pid.toml", &["block.3.tf=0".to_string()]).expect_err("tf = 0");
+    assert_contains(&e.to_string(), &["tf", "positive"]);
+}

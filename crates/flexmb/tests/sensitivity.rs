@@ -523,3 +523,33 @@ fn adjoint_memory_stays_within_budgets_when_the_run_takes_more_steps() {
     }
     assert!(fallbacks > 0, "some budget sweeps from checkpoints");
 }
+
+#[test]
+fn closed_loop_gains_and_plant() {
+    // The PID loop of pid_mass_spring.toml: the gains and filter constant enter the
+    // block equations, the plant's stiffness and mass the mechanics; the outputs of the
+    // blocks are algebraic unknowns (their initial values solved with the accelerations).
+    let p = problem(
+        "pid_mass_spring.toml",
+        &[
+            "solver.t_end=0.5",
+            "solver.h=2e-3",
+            "solver.rtol=1e-11",
+            "solver.atol=1e-14",
+        ],
+        &[
+            "control.pid.kp",
+            "control.pid.ki",
+            "control.pid.kd",
+            "control.pid.tf",
+            "control.reference.function.value",
+            "spring.spring.stiffness",
+            "body.mass.mass",
+        ],
+        &[
+            ("x_end", CriterionKind::Terminal, "x"),
+            ("effort", CriterionKind::Integral, "sq(force)"),
+        ],
+    );
+    agree("PID loop", &p, 1e-9, 1e-5);
+}

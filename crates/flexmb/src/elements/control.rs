@@ -436,7 +436,14 @@ impl ControlElement<'_> {
                 }};
             }
             match &block.kind {
-                BlockKind::Source(f) => e[y0] = ys[0] - c(f.eval(t).0),
+                BlockKind::Source(f) => {
+                    // f(t) is linear in its amplitudes (the parameters): their derivative
+                    let value = (0..block.params.len()).fold(c::<T>(f.eval(t).0), |v, k| {
+                        let g = f.amplitude_derivative(k, t).0;
+                        v + (p(k) - c(block.params[k])) * c(g)
+                    });
+                    e[y0] = ys[0] - value;
+                }
                 BlockKind::Gain { rows, cols } => {
                     for i in 0..*rows {
                         let h = (0..*cols).fold(zero, |acc, j| acc + p(i * cols + j) * u[j]);
@@ -644,6 +651,146 @@ impl ControlElement<'_> {
             }
         }
     }
+}
+
+/// The blocks on cycles of direct feedthrough (algebraic loops), each cycle once, in the
+/// order of the blocks (depth-first search over the feedthrough edges `input -> block`).
+pub fn algebraic_loops(system: &ControlSystem) -> Vec<Vec<usize>> {
+    let n = system.blocks.len();
+    // successors: the feedthrough blocks that read each block
+    let mut next = vec![Vec::new(); n];
+    for (b, block) in system.blocks.iter().enumerate() {
+        if block.kind.feedthrough() {
+            for s in &block.inputs {
+                next[s.block].push(b);
+            }
+        }
+    }
+    let mut loops: Vec<Vec<usize>> = Vec::new();
+    // Tarjan's strongly connected components, iteratively
+    let (mut index, mut low, mut on) = (vec![usize::MAX; n], vec![0; n], vec![false; n]);
+    let (mut stack, mut count) = (Vec::new(), 0);
+    for root in 0..n {
+        if index[root] != usize::MAX {
+            continue;
+        }
+        let mut work = vec![(root, 0usize)];
+        while let Some((v, k)) = work.pop() {
+            if k == 0 {
+                index[v] = count;
+                low[v] = count;
+                count += 1;
+                stack.push(v);
+                on[v] = true;
+            }
+            if let Some(&w) = next[v].get(k) {
+                work.push((v, k + 1));
+                if index[w] == usize::MAX {
+                    work.push((w, 0));
+                } else if on[w] {
+                    low[v] = low[v].min(index[w]);
+                }
+                continue;
+            }
+            if let Some(&(parent, _)) = work.last() {
+                low[parent] = low[parent].min(low[v]);
+            }
+            if low[v] == index[v] {
+                let mut component = Vec::new();
+                while let Some(w) = stack.pop() {
+                    on[w] = false;
+                    component.push(w);
+                    if w == v {
+                        break;
+                    }
+                }
+                let cyclic = component.len() > 1 || next[v].contains(&v);
+                if cyclic {
+                    component.sort_unstable();
+                    loops.push(component);
+                }
+            }
+        }
+    }
+    loops.sort();
+    loops
+}
+
+/// A located reason why the diagram of `model` cannot be solved at its initial state:
+/// an algebraic loop whose equations are singular there (e.g. a loop gain of 1), as the
+/// index of a block on it and a message. `None` when every loop can be solved.
+pub fn unsolvable_loop(model: &Model) -> Option<(usize, String)> {
+    let system = &model.control;
+    let loops = algebraic_loops(system);
+    if loops.is_empty() {
+        return None;
+    }
+    let slots = slots(model);
+    let element = ControlElement {
+        system,
+        model,
+        slots: &slots,
+    };
+    let nodes: Vec<NodeState> = slots
+        .iter()
+        .map(|s| match s {
+            Some(n) => {
+                let node = &model.nodes[n.0];
+                let u = match model.group {
+                    Group::R3xSO3 => node.velocity,
+                    Group::SE3 => node.frame.r.transpose() * node.velocity,
+                };
+                NodeState {
+                    v: flexmb_lie::join(&u, &node.angular_velocity),
+                    ..NodeState::ground(node.frame)
+                }
+            }
+            None => NodeState::ground(flexmb_lie::Frame::identity()),
+        })
+        .collect();
+    let ctx = Context::at(model, 0.0, 1.0);
+    let n = system.n_unknowns;
+    let (mut x, xdot) = (vec![0.0; n], vec![0.0; n]);
+    let local = Local {
+        nodes: &nodes,
+        x: &xdot,
+        xdot: &xdot,
+    };
+    element.initial_states(&ctx, &local, &mut x);
+    let local = Local {
+        nodes: &nodes,
+        x: &x,
+        xdot: &xdot,
+    };
+    let (_, jac) = element.jacobian(&ctx, &local, Phase::Initial);
+    let (rows, ns) = (6 * slots.len(), PER_SLOT * slots.len());
+    for blocks in loops {
+        let outputs: Vec<usize> = blocks
+            .iter()
+            .flat_map(|&b| {
+                let y0 = system.output_start[b];
+                y0..y0 + system.blocks[b].kind.n_outputs()
+            })
+            .collect();
+        let m = outputs.len();
+        let a = DMatrix::from_fn(m, m, |i, j| jac[(rows + outputs[i], ns + outputs[j])]);
+        let svd = a.singular_values();
+        let (smax, smin) = (svd.max(), svd.min());
+        if !(smin > 1e-10 * smax.max(1.0)) {
+            let names: Vec<String> = blocks
+                .iter()
+                .map(|&b| format!("'{}'", system.blocks[b].name))
+                .collect();
+            return Some((
+                blocks[0],
+                format!(
+                    "the algebraic loop through blocks {} cannot be solved: its output equations are singular at t = 0 (a loop gain of 1?); break it with a block that has a state (integrator, lag)",
+                    names.join(", ")
+                ),
+            ));
+        }
+    }
+    None
 }
 
 /// A state row's physical derivatives `(de/dw_p, de/dv_p, de/dvdot_p)` at a node as its row of

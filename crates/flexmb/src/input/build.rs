@@ -205,6 +205,18 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     model
         .validate()
         .map_err(|e| map_model_error(src, e, &origins))?;
+    if let Some((block, message)) = crate::elements::control::unsolvable_loop(&model) {
+        let e = ModelError::Invalid {
+            item: crate::model::ItemRef {
+                table: "block",
+                index: block,
+                name: model.control.blocks[block].name.clone(),
+                field: "inputs",
+            },
+            message,
+        };
+        return Err(map_model_error(src, e, &origins));
+    }
     let sensitivity = super::sensitivity::read_sensitivity(&top, &model, &analysis, src.file)?;
     Ok(ModelFile {
         model,

@@ -266,10 +266,11 @@ fn read_kind(
 ) -> Result<(BlockKind, Vec<f64>)> {
     let positive = |key: &str| physical(&t.req(key)?);
     Ok(match ty {
-        "source" => (
-            BlockKind::Source(read_function(&t.req("function")?)?),
-            Vec::new(),
-        ),
+        "source" => {
+            let f = read_function(&t.req("function")?)?;
+            let amplitudes = (0..f.amplitude_count()).map(|k| f.amplitude(k)).collect();
+            (BlockKind::Source(f), amplitudes)
+        }
         "gain" => {
             let f = t.req("gain")?;
             match f.array() {

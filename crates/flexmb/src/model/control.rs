@@ -75,7 +75,8 @@ pub enum Target {
 /// The kind of a block, with its structure (sizes); its numbers are in [`Block::params`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum BlockKind {
-    /// `y = f(t)` (constant, step, ramp, sine, chirp, table, a CSV signal).
+    /// `y = f(t)` (the time functions of the model file); params: its amplitudes
+    /// ([`TimeFunction::amplitude_keys`], `function.<key>`), kept equal to the function's.
     Source(TimeFunction),
     /// `y = K u`, `K` of `rows x cols` (params `gain`, or `gain[i,j]`).
     Gain { rows: usize, cols: usize },
@@ -210,6 +211,11 @@ impl BlockKind {
             (0..n).map(|i| format!("{name}[{i}]")).collect()
         };
         match self {
+            BlockKind::Source(f) => f
+                .amplitude_keys()
+                .iter()
+                .map(|k| format!("function.{k}"))
+                .collect(),
             BlockKind::Gain { rows: 1, cols: 1 } => list(&["gain"]),
             BlockKind::Gain { rows, cols } => matrix("gain", *rows, *cols),
             BlockKind::Integrator => list(&["gain", "initial"]),
@@ -253,6 +259,14 @@ pub struct Block {
 }
 
 impl Block {
+    /// Sets parameter `k` (a source's amplitude in its function too).
+    pub fn set_param(&mut self, k: usize, value: f64) {
+        self.params[k] = value;
+        if let BlockKind::Source(f) = &mut self.kind {
+            f.set_amplitude(k, value);
+        }
+    }
+
     /// The parameter named `name`.
     pub fn param(&self, name: &str) -> Option<f64> {
         let k = self.kind.param_names().iter().position(|n| n == name)?;

@@ -811,7 +811,7 @@ impl Parameters {
             }
             ParamKind::RotationalSpring(i, p) => p.set(&mut model.rotational_springs[i], value),
             ParamKind::Bushing(i, p) => p.set(&mut model.bushings[i], value),
-            ParamKind::Control(p) => model.control.blocks[p.block].params[p.index] = value,
+            ParamKind::Control(p) => model.control.blocks[p.block].set_param(p.index, value),
         }
     }
 

@@ -722,6 +722,7 @@ impl Model {
         }
 
         self.validate_gears()?;
+        self.validate_control()?;
 
         let model_extent = self.extent();
         for (i, b) in self.beams.iter().enumerate() {
@@ -1003,6 +1004,142 @@ impl Model {
                 "the wheel centres are {:.3e} m apart across the axis: the line of centres is undefined",
                 radial
             ));
+        }
+        Ok(())
+    }
+
+    /// The block diagram: wiring (inputs name existing outputs, as many as the kind
+    /// takes), the nodes and joints of measurements and actuators, and the parameters
+    /// (finite; time constants, the filter constant of a PID with a derivative, a motor's
+    /// constants and a hold's period positive; limits ordered; a transfer function's
+    /// leading denominator coefficient nonzero).
+    fn validate_control(&self) -> Result<(), ModelError> {
+        use super::control::{BlockKind, Quantity, Target};
+        let blocks = &self.control.blocks;
+        for (i, b) in blocks.iter().enumerate() {
+            let fail = |field, m| bad("block", i, &b.name, field, m);
+            let names = b.kind.param_names();
+            if b.params.len() != names.len() {
+                return Err(fail(
+                    "params",
+                    format!(
+                        "{} parameters, the kind takes {}",
+                        b.params.len(),
+                        names.len()
+                    ),
+                ));
+            }
+            for (k, v) in b.params.iter().enumerate() {
+                if !v.is_finite() {
+                    return Err(fail("params", format!("{} is {v}", names[k])));
+                }
+            }
+            if b.inputs.len() != b.kind.n_inputs() {
+                return Err(fail(
+                    "inputs",
+                    format!(
+                        "a {} block takes {} inputs, got {}",
+                        b.kind.name(),
+                        b.kind.n_inputs(),
+                        b.inputs.len()
+                    ),
+                ));
+            }
+            for s in &b.inputs {
+                let known = blocks
+                    .get(s.block)
+                    .is_some_and(|source| s.output < source.kind.n_outputs());
+                if !known {
+                    return Err(fail(
+                        "inputs",
+                        format!("output {} of block {} does not exist", s.output, s.block),
+                    ));
+                }
+            }
+            let positive = |field: &'static str, v: f64| {
+                if v > 0.0 {
+                    Ok(())
+                } else {
+                    Err(fail(field, format!("must be positive, got {v}")))
+                }
+            };
+            let ordered = |lo: f64, hi: f64| {
+                if lo <= hi {
+                    Ok(())
+                } else {
+                    Err(fail("upper", format!("must be >= lower ({lo}), got {hi}")))
+                }
+            };
+            let p = &b.params;
+            match &b.kind {
+                BlockKind::Lag => positive("time_constant", p[1])?,
+                BlockKind::Pid => {
+                    positive("tf", p[3])?;
+                    ordered(p[4], p[5])?;
+                    if p[6] < 0.0 {
+                        return Err(fail("kb", format!("must be >= 0, got {}", p[6])));
+                    }
+                }
+                BlockKind::RateLimiter => {
+                    positive("rising", p[0])?;
+                    positive("falling", p[1])?;
+                    positive("time_constant", p[2])?;
+                }
+                BlockKind::Saturation | BlockKind::DeadZone => ordered(p[0], p[1])?,
+                BlockKind::TransferFunction { num, den } => {
+                    if *den == 0 || p[*num] == 0.0 {
+                        return Err(fail(
+                            "denominator",
+                            "the leading coefficient must not be 0".into(),
+                        ));
+                    }
+                    if num > den {
+                        return Err(fail(
+                            "numerator",
+                            "the transfer function must be proper".into(),
+                        ));
+                    }
+                }
+                BlockKind::Hold { period } => positive("period", *period)?,
+                BlockKind::DcMotor => {
+                    for (k, field) in ["resistance", "inductance", "torque_constant", "back_emf"]
+                        .iter()
+                        .enumerate()
+                    {
+                        positive(field, p[k])?;
+                    }
+                }
+                BlockKind::Measure(q) => match q {
+                    Quantity::Position { node, .. }
+                    | Quantity::Velocity { node, .. }
+                    | Quantity::Acceleration { node, .. }
+                    | Quantity::AngularVelocity { node, .. } => {
+                        self.check_node("block", i, &b.name, "node", Some(*node))?
+                    }
+                    Quantity::JointCoordinate { joint } | Quantity::JointRate { joint } => {
+                        if joint.0 >= self.joints.len() {
+                            return Err(fail(
+                                "joint",
+                                format!("joint index {} does not exist", joint.0),
+                            ));
+                        }
+                    }
+                },
+                BlockKind::Actuator(t) => match t {
+                    Target::Force { node, .. } | Target::Moment { node, .. } => {
+                        self.check_node("block", i, &b.name, "node", Some(*node))?
+                    }
+                    Target::Joint { joint } => {
+                        if joint.0 >= self.joints.len() {
+                            return Err(fail(
+                                "joint",
+                                format!("joint index {} does not exist", joint.0),
+                            ));
+                        }
+                    }
+                },
+                _ => {}
+            }
         }
         Ok(())
     }

@@ -5,7 +5,8 @@
 //! [`crate::model::ParamRole::InitialState`]: on SE(3) the translational part is
 //! `R_0^T xdot_0`). The element states `x_0` are [`crate::elements::ElementKernel::initial_states`]
 //! of the model (e.g. a Maxwell branch starts unstressed). The accelerations, multipliers
-//! and state rates `y = (vdot_0, mu_0, xdot_0)` solve the linear system of
+//! and state rates `y = (vdot_0, mu_0, xdot_0)` (for an algebraic state, a control block's
+//! output, its value `x_0` in place of its rate) solve the linear system of
 //! [`crate::solve::initial_accelerations`] (Arnold & Brüls 2007, Sect. 3),
 //!
 //! ```text
@@ -103,6 +104,12 @@ pub fn initial_tangents(
         initial_velocity(model, params, id, &mut ds.v);
         if layout.n_states > 0 && params.role(id) == ParamRole::Residual {
             ds.x = initial_states_derivative(model, params, id, &layout);
+            // the algebraic states are unknowns of the solve, not inputs
+            for (d, &algebraic) in ds.x.iter_mut().zip(&layout.algebraic) {
+                if algebraic {
+                    *d = 0.0;
+                }
+            }
         }
         let mut g = vec![0.0; layout.n_unknowns()];
         if params.role(id) == ParamRole::Residual {
@@ -159,8 +166,12 @@ pub fn initial_tangents(
             ds.lambda[row] = -g[nd + k] / s;
         }
         for (i, d) in g[layout.block(Block::States)].iter().enumerate() {
-            ds.xdot[i] = -d;
-            ds.w[i] = -d;
+            if layout.algebraic[i] {
+                ds.x[i] = -d;
+            } else {
+                ds.xdot[i] = -d;
+                ds.w[i] = -d;
+            }
         }
         out.push(ds);
     }

@@ -236,7 +236,7 @@ pub fn control_diagram(group: flexmb_lie::Group) -> flexmb::model::Model {
                 phase: 0.2,
                 offset: 0.1,
             }),
-            vec![],
+            vec![0.4, 0.1],
             vec![],
         ),
         measure(
