@@ -237,6 +237,12 @@ fn visit(
             Wrt::Own(p),
             sink,
         ),
+        ParamKind::WormGear(i, p) => element_term(
+            at,
+            (&model.worm_gears[i], ElementItem::WormGear(i)),
+            Wrt::Own(p),
+            sink,
+        ),
     }
 }
 

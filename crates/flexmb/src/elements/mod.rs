@@ -2,8 +2,8 @@
 //! (two nodes, [`beam`]), applied loads, spring-dampers (with an optional Maxwell branch,
 //! [`spring`], nonlinear laws and stops included), rotational spring-dampers about a joint's
 //! axis ([`rotational_spring`]), 6-DOF bushings ([`bushing`]), ropes through any number of
-//! points ([`rope`]), unilateral contacts with impact and friction ([`contact`]) and gear
-//! pairs ([`gear`]).
+//! points ([`rope`]), unilateral contacts with impact and friction ([`contact`]), gear
+//! pairs ([`gear`]) and worm gear pairs with mesh friction ([`worm_gear`]).
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
@@ -40,10 +40,12 @@ pub mod contact;
 pub mod gear;
 pub mod load;
 pub mod physical;
+pub mod pose;
 pub mod rigid_body;
 pub mod rope;
 pub mod rotational_spring;
 pub mod spring;
+pub mod worm_gear;
 
 use crate::model::{Model, NodeId};
 use flexmb_lie::{Frame, Group, Mat6, Vec3, Vec6};
@@ -203,6 +205,8 @@ pub enum ElementRef {
     RotationalSpring(usize),
     /// Index in [`Model::bushings`].
     Bushing(usize),
+    /// Index in [`Model::worm_gears`].
+    WormGear(usize),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -464,6 +468,7 @@ impl ElementRef {
                 ElementItem::Gear(i) => ElementRef::Gear(i),
                 ElementItem::RotationalSpring(i) => ElementRef::RotationalSpring(i),
                 ElementItem::Bushing(i) => ElementRef::Bushing(i),
+                ElementItem::WormGear(i) => ElementRef::WormGear(i),
             })
             .collect()
     }
@@ -492,6 +497,7 @@ impl ElementRef {
                 Kernel::RotationalSpring(rotational_spring::RotationalSpringElement::of(model, *i))
             }
             ElementRef::Bushing(i) => Kernel::Bushing(&model.bushings[*i]),
+            ElementRef::WormGear(i) => Kernel::WormGear(&model.worm_gears[*i]),
         }
     }
 
@@ -517,6 +523,7 @@ impl ElementRef {
                 format!("rotational spring '{}'", model.rotational_springs[*i].name)
             }
             ElementRef::Bushing(i) => format!("bushing '{}'", model.bushings[*i].name),
+            ElementRef::WormGear(i) => format!("worm gear '{}'", model.worm_gears[*i].name),
         }
     }
 }
@@ -534,12 +541,12 @@ pub enum ElementItem {
     Gear(usize),
     RotationalSpring(usize),
     Bushing(usize),
+    WormGear(usize),
 }
 
 impl ElementItem {
     /// Every force element of `model`: bodies, beam elements, loads, springs, ropes,
-    /// contacts, gear pairs.
-    /// rotational springs, bushings.
+    /// contacts, gear pairs, rotational springs, bushings, worm gear pairs.
     pub fn all(model: &Model) -> impl Iterator<Item = ElementItem> {
         (0..model.bodies.len())
             .map(ElementItem::Body)
@@ -551,6 +558,7 @@ impl ElementItem {
             .chain((0..model.gears.len()).map(ElementItem::Gear))
             .chain((0..model.rotational_springs.len()).map(ElementItem::RotationalSpring))
             .chain((0..model.bushings.len()).map(ElementItem::Bushing))
+            .chain((0..model.worm_gears.len()).map(ElementItem::WormGear))
     }
 
     /// The number of states the element owns.
@@ -565,6 +573,7 @@ impl ElementItem {
             ElementItem::Gear(i) => model.gears[i].n_states(),
             ElementItem::RotationalSpring(_) => 1,
             ElementItem::Bushing(i) => model.bushings[i].n_states(),
+            ElementItem::WormGear(_) => 0,
         }
     }
 
@@ -594,6 +603,7 @@ pub enum Kernel<'m> {
     NonlinearSpring(spring::SpringElement<'m>),
     RotationalSpring(rotational_spring::RotationalSpringElement<'m>),
     Bushing(&'m crate::model::Bushing),
+    WormGear(&'m crate::model::WormGear),
 }
 
 macro_rules! dispatch {
@@ -609,6 +619,7 @@ macro_rules! dispatch {
             Kernel::NonlinearSpring($k) => $e,
             Kernel::RotationalSpring($k) => $e,
             Kernel::Bushing($k) => $e,
+            Kernel::WormGear($k) => $e,
         }
     };
 }

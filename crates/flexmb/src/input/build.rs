@@ -41,6 +41,7 @@ const TOP_KEYS: &[&str] = &[
     "gear",
     "rotational_spring",
     "bushing",
+    "worm_gear",
 ];
 /// The keys of a `[[sensor]]`: `name`, `type`, then those a type may use.
 const SENSOR_KEYS: &[&str] = &[
@@ -131,6 +132,7 @@ pub(super) struct Origins {
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
     gears: Vec<Origin>,
+    pub worm_gears: Vec<Origin>,
     /// Node and joint of each name, as they are created (names are unique in a file): look-ups
     /// by hash keep reading linear in the size of the model.
     pub node_ids: HashMap<String, NodeId>,
@@ -194,6 +196,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     read_ropes(&top, &mut model, &mut origins)?;
     super::contact::read_contacts(&top, &mut model, &mut origins)?;
     read_gears(&top, &mut model, &mut origins)?;
+    super::worm_gear::read_worm_gears(&top, &mut model, &mut origins)?;
     read_rotational_springs(&top, &mut model, &mut origins)?;
     read_bushings(&top, &mut model, &mut origins)?;
     read_sensors(&top, &mut model, &mut origins)?;
@@ -230,6 +233,7 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
         "beam" => &origins.beams,
         "sensor" => &origins.sensors,
         "gear" => &origins.gears,
+        "worm_gear" => &origins.worm_gears,
         _ => &[],
     };
     match list.get(item.index) {
@@ -1825,7 +1829,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
 }
 
 /// A whole number of teeth, at least 1.
-fn teeth(f: &Field<'_>) -> Result<u32> {
+pub(super) fn teeth(f: &Field<'_>) -> Result<u32> {
     let z = f.int()?;
     match u32::try_from(z) {
         Ok(z) if (1..=100_000).contains(&z) => Ok(z),
@@ -1837,7 +1841,11 @@ fn teeth(f: &Field<'_>) -> Result<u32> {
 
 /// The centres of two wheels on `nodes` (inertial, t = 0): `center_a`, `center_b`, each by
 /// default its node's position (required for a wheel on the ground).
-fn wheel_centers(t: &Table<'_>, model: &Model, nodes: [Option<NodeId>; 2]) -> Result<[Vec3; 2]> {
+pub(super) fn wheel_centers(
+    t: &Table<'_>,
+    model: &Model,
+    nodes: [Option<NodeId>; 2],
+) -> Result<[Vec3; 2]> {
     let mut out = [Vec3::zeros(); 2];
     for (i, key) in ["center_a", "center_b"].into_iter().enumerate() {
         out[i] = match (opt_point(t, key)?, nodes[i]) {

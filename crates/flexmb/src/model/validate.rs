@@ -6,8 +6,9 @@
 
 use super::contact::{Contact, ContactShape};
 use super::limits::{
-    within, MAX_ANGLE, MAX_FUNCTION_DEPTH, MAX_FUNCTION_TERMS, MAX_ITEMS, MAX_KINEMATIC,
-    MAX_PHYSICAL, MAX_ROPE_POINTS, MAX_TIME, MIN_PHYSICAL, MIN_RELATIVE_LENGTH, MIN_STEP,
+    within, MAX_ANGLE, MAX_FRICTION, MAX_FUNCTION_DEPTH, MAX_FUNCTION_TERMS, MAX_ITEMS,
+    MAX_KINEMATIC, MAX_PHYSICAL, MAX_ROPE_POINTS, MAX_TIME, MIN_PHYSICAL, MIN_RELATIVE_LENGTH,
+    MIN_STEP,
 };
 use super::{ItemRef, JointKind, Model, NodeId, RopePoint, SensorKind, TimeFunction};
 use crate::error::ModelError;
@@ -651,7 +652,7 @@ impl Model {
             in_range(law.min_impact_velocity, MIN_PHYSICAL, MAX_PHYSICAL)
                 .map_err(|m| fail("min_impact_velocity", m))?;
             if let Some(f) = &c.friction {
-                in_range(f.coefficient, 0.0, 100.0).map_err(|m| fail("friction", m))?;
+                in_range(f.coefficient, 0.0, MAX_FRICTION).map_err(|m| fail("friction", m))?;
                 in_range(f.stiction_velocity, MIN_PHYSICAL, MAX_PHYSICAL)
                     .map_err(|m| fail("friction", format!("stiction_velocity {m}")))?;
                 in_range(f.viscous, 0.0, MAX_PHYSICAL)
@@ -722,6 +723,7 @@ impl Model {
         }
 
         self.validate_gears()?;
+        self.validate_worm_gears()?;
 
         let model_extent = self.extent();
         for (i, b) in self.beams.iter().enumerate() {
@@ -997,6 +999,67 @@ impl Model {
                 "the wheel centres are {:.3e} m apart across the axis: the line of centres is undefined",
                 radial
             ));
+        }
+        Ok(())
+    }
+
+    fn validate_worm_gears(&self) -> Result<(), ModelError> {
+        for (i, g) in self.worm_gears.iter().enumerate() {
+            let fail = |field, m| bad("worm_gear", i, &g.name, field, m);
+            self.check_node("worm_gear", i, &g.name, "node_a", g.node_a)?;
+            self.check_node("worm_gear", i, &g.name, "node_b", g.node_b)?;
+            self.two_nodes(g.node_a, g.node_b, "worm gear")
+                .map_err(|m| fail("node_b", m))?;
+            for (field, z) in [("starts", g.starts), ("teeth", g.teeth)] {
+                if z == 0 {
+                    return Err(fail(field, "must be a whole number >= 1".into()));
+                }
+            }
+            for f in [&g.frame_a, &g.frame_b] {
+                local_frame(f).map_err(|m| fail("center_b", m))?;
+            }
+            let world = |n: Option<NodeId>, f: &Frame| match n {
+                Some(id) => self.nodes[id.0].frame.compose(f),
+                None => *f,
+            };
+            let (wa, wb) = (world(g.node_a, &g.frame_a), world(g.node_b, &g.frame_b));
+            let cosine = wa.r.column(2).dot(&wb.r.column(2));
+            if cosine.abs() > 1e-6 {
+                return Err(fail(
+                    "axis_b",
+                    format!(
+                        "the worm and wheel axes must be perpendicular at t = 0, they are {:.4} deg apart",
+                        cosine.clamp(-1.0, 1.0).acos().to_degrees()
+                    ),
+                ));
+            }
+            in_range(g.center_distance, MIN_PHYSICAL, MAX_KINEMATIC)
+                .map_err(|m| fail("center_b", format!("centre distance {m}")))?;
+            if !(g.worm_radius > 0.0 && g.worm_radius < g.center_distance) {
+                return Err(fail(
+                    "worm_radius",
+                    format!(
+                        "must be above 0 and below the centre distance {:.6e} m (the wheel's pitch radius is the rest), got {}",
+                        g.center_distance, g.worm_radius
+                    ),
+                ));
+            }
+            if !(g.pressure_angle > 0.0 && g.pressure_angle < 1.2) {
+                return Err(fail(
+                    "pressure_angle_deg",
+                    format!(
+                        "must be between 0 and 68.75 deg, got {} deg",
+                        g.pressure_angle.to_degrees()
+                    ),
+                ));
+            }
+            in_range(g.mesh_stiffness, MIN_PHYSICAL, MAX_PHYSICAL)
+                .map_err(|m| fail("mesh_stiffness", m))?;
+            in_range(g.damping, 0.0, MAX_PHYSICAL).map_err(|m| fail("damping", m))?;
+            in_range(g.friction, 0.0, MAX_FRICTION).map_err(|m| fail("friction", m))?;
+            in_range(g.stiction_velocity, MIN_PHYSICAL, MAX_KINEMATIC)
+                .map_err(|m| fail("stiction_velocity", m))?;
+            in_range(g.washer_radius, 0.0, MAX_KINEMATIC).map_err(|m| fail("washer_radius", m))?;
         }
         Ok(())
     }
