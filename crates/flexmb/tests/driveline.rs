@@ -84,3 +84,47 @@ fn torsen_torque_bias_ratio_matches_the_worm_gear_friction_model() {
     }
     println!("{}", table.join("\n"));
 }
+
+#[test]
+fn driveline_runs_through_the_driver_and_biases_the_torque() {
+    // `flexmb run examples/driveline.toml`: the driver writes sensors.csv; at the steady
+    // state (after the 50 ms ramp of the motor torque) the differential slips and the loads'
+    // torques are in the bias ratio, the gearbox reduces the speed 9 times, and the motor
+    // torque times 9 reaches the loads.
+    let file = read_model_file(&example("driveline.toml"), &[]).expect("model");
+    let out = std::env::temp_dir().join(format!("flexmb-driveline-{}", std::process::id()));
+    let dir = flexmb::output::OutputDir::prepare(&out).expect("output directory");
+    let report = flexmb::driver::run(&file, &dir, Default::default(), &mut |_, _| {}, None);
+    assert_eq!(
+        report.summary.status,
+        flexmb::output::Status::Ok,
+        "{:?}",
+        report.summary
+    );
+    let text = std::fs::read_to_string(out.join("sensors.csv")).expect("sensors.csv");
+    let _ = std::fs::remove_dir_all(&out);
+    let header: Vec<&str> = text.lines().next().expect("header").split(',').collect();
+    let last: Vec<f64> = text
+        .lines()
+        .last()
+        .expect("rows")
+        .split(',')
+        .map(|v| v.parse().expect("number"))
+        .collect();
+    let value = |name: &str| last[header.iter().position(|h| *h == name).expect(name)];
+    assert!((value("time") - 0.12).abs() < 1e-12);
+    let (left, right) = (value("load_left"), value("load_right"));
+    let tbr = torque_bias_ratio(&file.model.worm_gears[0]);
+    // slipping (the left side faster), the ratio is the bias ratio (not the loads' 10:1)
+    assert!(value("omega_left") > value("omega_right") + 5.0);
+    assert!(
+        (right / left / tbr - 1.0).abs() < 1e-4,
+        "TDR {} vs TBR {tbr}",
+        right / left
+    );
+    assert!((left + right - 180.0).abs() < 0.1, "{left} + {right}");
+    // the axles carry the loads' torques
+    assert!((value("axle_left").abs() / left - 1.0).abs() < 1e-3);
+    assert!((value("axle_right").abs() / right - 1.0).abs() < 1e-3);
+    assert!((value("omega_motor") / value("omega_case") - 9.0).abs() < 1e-3);
+}
