@@ -1839,13 +1839,25 @@ pub(super) fn teeth(f: &Field<'_>) -> Result<u32> {
     }
 }
 
+/// The name (unique among `table`), the two nodes (`node_a`, `node_b`, either may be the
+/// ground) and the centres of two meshing members: gear joints, gear pairs, worm gears.
+pub(super) fn read_wheels(
+    t: &Table<'_>,
+    names: &mut HashMap<String, String>,
+    table: &str,
+    model: &Model,
+    origins: &Origins,
+) -> Result<(String, [Option<NodeId>; 2], [Vec3; 2])> {
+    let name = read_name(t, names, table)?;
+    let node_a = resolve_node(model, origins, &t.req("node_a")?, true)?;
+    let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
+    let centers = wheel_centers(t, model, [node_a, node_b])?;
+    Ok((name, [node_a, node_b], centers))
+}
+
 /// The centres of two wheels on `nodes` (inertial, t = 0): `center_a`, `center_b`, each by
 /// default its node's position (required for a wheel on the ground).
-pub(super) fn wheel_centers(
-    t: &Table<'_>,
-    model: &Model,
-    nodes: [Option<NodeId>; 2],
-) -> Result<[Vec3; 2]> {
+fn wheel_centers(t: &Table<'_>, model: &Model, nodes: [Option<NodeId>; 2]) -> Result<[Vec3; 2]> {
     let mut out = [Vec3::zeros(); 2];
     for (i, key) in ["center_a", "center_b"].into_iter().enumerate() {
         out[i] = match (opt_point(t, key)?, nodes[i]) {
@@ -1876,10 +1888,7 @@ fn read_gear_joint(
         "name", "type", "node_a", "node_b", "center_a", "center_b", "axis", "teeth_a", "teeth_b",
         "internal",
     ])?;
-    let name = read_name(t, names, "joint")?;
-    let node_a = resolve_node(model, origins, &t.req("node_a")?, true)?;
-    let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
-    let centers = wheel_centers(t, model, [node_a, node_b])?;
+    let (name, [node_a, node_b], centers) = read_wheels(t, names, "joint", model, origins)?;
     let axis = nonzero_vec3(&t.req("axis")?)?;
     let za = teeth(&t.req("teeth_a")?)?;
     let zb = teeth(&t.req("teeth_b")?)?;
@@ -1940,10 +1949,8 @@ fn read_gears(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
             "transmission_error",
             "mesh_phase",
         ])?;
-        let name = read_name(&t, &mut names, "gear")?;
-        let node_a = resolve_node(model, origins, &t.req("node_a")?, true)?;
-        let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
-        let centers = wheel_centers(&t, model, [node_a, node_b])?;
+        let (name, [node_a, node_b], centers) =
+            read_wheels(&t, &mut names, "gear", model, origins)?;
         let axis = nonzero_vec3(&t.req("axis")?)?;
         let angle = |key: &str, default: f64| -> Result<f64> {
             Ok(match t.field(key) {

@@ -1,8 +1,8 @@
 //! `[[worm_gear]]`: worm gear pairs with mesh and thrust-washer friction (documented in
 //! `docs/model-format.md`, "Worm gear"; mechanics in [`crate::elements::worm_gear`]).
 
-use super::build::{nonzero_vec3, physical, physical_or_zero, read_name, resolve_node};
-use super::build::{teeth, wheel_centers, Origin, Origins};
+use super::build::{nonzero_vec3, physical, physical_or_zero, read_wheels, teeth};
+use super::build::{Origin, Origins};
 use super::reader::{Result, Table};
 use crate::model::limits::{MAX_FRICTION, MAX_KINEMATIC};
 use crate::model::Model;
@@ -34,10 +34,8 @@ pub(super) fn read_worm_gears(
             "stiction_velocity",
             "washer_radius",
         ])?;
-        let name = read_name(&t, &mut names, "worm_gear")?;
-        let node_a = resolve_node(model, origins, &t.req("node_a")?, true)?;
-        let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
-        let centers = wheel_centers(&t, model, [node_a, node_b])?;
+        let (name, [node_a, node_b], centers) =
+            read_wheels(&t, &mut names, "worm_gear", model, origins)?;
         let axis_a = nonzero_vec3(&t.req("axis_a")?)?;
         let f = t.req("axis_b")?;
         let axis_b = nonzero_vec3(&f)?;

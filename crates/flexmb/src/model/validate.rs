@@ -147,6 +147,18 @@ fn rotation(r: &Mat3) -> Check {
 
 /// A frame fixed on a node: a rotation, and a position within twice the coordinate range
 /// (a point given in the frame of a node anywhere in the range).
+/// A normal pressure angle of a gear or worm gear \[rad\], in (0, 1.2).
+fn pressure_angle(a: f64) -> Check {
+    if a > 0.0 && a < 1.2 {
+        Ok(())
+    } else {
+        Err(format!(
+            "must be between 0 and 68.75 deg, got {} deg",
+            a.to_degrees()
+        ))
+    }
+}
+
 fn local_frame(f: &Frame) -> Check {
     rotation(&f.r)?;
     finite3(&f.x, 2.0 * MAX_KINEMATIC)
@@ -1044,15 +1056,7 @@ impl Model {
                     ),
                 ));
             }
-            if !(g.pressure_angle > 0.0 && g.pressure_angle < 1.2) {
-                return Err(fail(
-                    "pressure_angle_deg",
-                    format!(
-                        "must be between 0 and 68.75 deg, got {} deg",
-                        g.pressure_angle.to_degrees()
-                    ),
-                ));
-            }
+            pressure_angle(g.pressure_angle).map_err(|m| fail("pressure_angle_deg", m))?;
             in_range(g.mesh_stiffness, MIN_PHYSICAL, MAX_PHYSICAL)
                 .map_err(|m| fail("mesh_stiffness", m))?;
             in_range(g.damping, 0.0, MAX_PHYSICAL).map_err(|m| fail("damping", m))?;
@@ -1080,15 +1084,7 @@ impl Model {
                 }
             }
             in_range(geo.module, MIN_PHYSICAL, MAX_KINEMATIC).map_err(|m| fail("module", m))?;
-            if !(geo.pressure_angle > 0.0 && geo.pressure_angle < 1.2) {
-                return Err(fail(
-                    "pressure_angle_deg",
-                    format!(
-                        "must be between 0 and 68.75 deg, got {} deg",
-                        geo.pressure_angle.to_degrees()
-                    ),
-                ));
-            }
+            pressure_angle(geo.pressure_angle).map_err(|m| fail("pressure_angle_deg", m))?;
             if geo.helix_angle.is_nan() || geo.helix_angle.abs() >= 1.2 {
                 return Err(fail(
                     "helix_angle_deg",
