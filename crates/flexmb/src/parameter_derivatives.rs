@@ -251,6 +251,12 @@ fn visit(
             Wrt::Own(p),
             sink,
         ),
+        ParamKind::WormGear(i, p) => element_term(
+            at,
+            (&model.worm_gears[i], ElementItem::WormGear(i)),
+            Wrt::Own(p),
+            sink,
+        ),
         ParamKind::Control(p) => {
             let slots = crate::elements::control::slots(model);
             let element = crate::elements::control::ControlElement {

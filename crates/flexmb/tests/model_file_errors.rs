@@ -1602,10 +1602,17 @@ fn contact_errors_are_located() {
     );
 }
 
-/// The example gear stage with `from` replaced by `to` (once): the error, and the line of
-/// `line_of` in the edited text (1-based).
-fn gears_with(from: &str, to: &str, line_of: &str) -> (String, usize) {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/gear_rattle.toml");
+/// The example `example` with `from` replaced by `to` (once), read as the file `name` with
+/// the overrides `set`: the error, and the line of `line_of` in the edited text (1-based).
+fn example_with(
+    (example, name): (&str, &str),
+    (from, to): (&str, &str),
+    line_of: &str,
+    set: &[String],
+) -> (String, usize) {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples")
+        .join(example);
     let text = std::fs::read_to_string(path).expect("example");
     assert!(text.contains(from), "{from:?} not in the example");
     let edited = text.replacen(from, to, 1);
@@ -1614,10 +1621,16 @@ fn gears_with(from: &str, to: &str, line_of: &str) -> (String, usize) {
         .position(|l| l.contains(line_of))
         .expect("the key")
         + 1;
-    match parse_model_str(&edited, "gears.toml", &[]) {
-        Ok(_) => panic!("accepted with {to:?}"),
+    match parse_model_str(&edited, name, set) {
+        Ok(_) => panic!("accepted with {to:?} and {set:?}"),
         Err(e) => (e.to_string(), line),
     }
+}
+
+/// The example gear stage with `from` replaced by `to` (once): the error, and the line of
+/// `line_of` in the edited text (1-based).
+fn gears_with(from: &str, to: &str, line_of: &str) -> (String, usize) {
+    example_with(("gear_rattle.toml", "gears.toml"), (from, to), line_of, &[])
 }
 /// `GOOD` with `extra` lines after the spring's `stiffness = 100` (replaced by `stiffness`
 /// when given), and the line of the first extra line.
@@ -2140,6 +2153,72 @@ fn bushings_are_read_and_bad_matrices_are_located() {
         .replace("group = \"SE3\"", "group = \"R3xSO3\"");
     let file = parse_model_str(&text, "mount.toml", &[]).expect("reads on R3xSO(3)");
     assert_eq!(file.model.group, Group::R3xSO3);
+}
+
+#[test]
+fn worm_gear_errors_name_the_key() {
+    let at = |line: usize| format!("torsen.toml:{line}:");
+    let torsen = ("torsen.toml", "torsen.toml");
+    for (from, to, key, field, message) in [
+        (
+            "mesh_stiffness = 1e8",
+            "mesh_stiffness = -1e8",
+            "mesh_stiffness = -",
+            "worm_gear[0].mesh_stiffness",
+            "must be positive",
+        ),
+        (
+            "friction = 0.1",
+            "friction = -0.1",
+            "friction = -",
+            "worm_gear[0].friction",
+            "must be >= 0",
+        ),
+        (
+            "node_a = \"side_left\"",
+            "node_a = \"side_lef\"",
+            "\"side_lef\"",
+            "worm_gear[0].node_a",
+            "unknown node 'side_lef'",
+        ),
+        (
+            "axis_b = [0.0, 1.0, 0.0]",
+            "axis_b = [0.1, 1.0, 0.0]",
+            "axis_b = [0.1",
+            "worm_gear[0].axis_b",
+            "perpendicular to axis_a",
+        ),
+        (
+            "washer_radius = 0.0095",
+            "washer_radius = -0.0095",
+            "washer_radius = -",
+            "worm_gear[0].washer_radius",
+            "must be >= 0",
+        ),
+        // found by Model::validate, mapped back to the key
+        (
+            "worm_radius = 0.02",
+            "worm_radius = 0.04",
+            "worm_radius = 0.04",
+            "worm_gear[0].worm_radius",
+            "below the centre distance",
+        ),
+    ] {
+        let (e, line) = example_with(torsen, (from, to), key, &[]);
+        assert_contains(&e, &[&at(line), &format!("field '{field}'"), message]);
+    }
+    // an override of the second worm gear's friction, located at its key
+    let set = ["worm_gear.right.friction=-0.2".to_string()];
+    let (e, _) = example_with(torsen, ("title", "title"), "title", &set);
+    assert_contains(&e, &["field 'worm_gear[1].friction'", "must be >= 0"]);
+    // a model built in Rust: the same check by Model::validate
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/torsen.toml");
+    let mut model = flexmb::input::read_model_file(&path, &[])
+        .expect("example")
+        .model;
+    model.worm_gears[1].friction = -0.1;
+    let e = model.validate().expect_err("negative friction").to_string();
+    assert_contains(&e, &["worm_gear", "right", "friction", "-0.1"]);
 }
 
 /// Bad `[[block]]` input in `examples/pid_mass_spring.toml`: wiring and parameters, located.

@@ -10,7 +10,7 @@ use flexmb::elements::{
 use flexmb::joints;
 use flexmb::model::parameters::{
     BodyParam, BushingParam, ContactParam, GearParam, JointParam, LoadParam, NodeParam, RopeParam,
-    RotationalSpringParam, SectionParam, SpringLawParam, SpringParam,
+    RotationalSpringParam, SectionParam, SpringLawParam, SpringParam, WormGearParam,
 };
 use flexmb::model::{
     BeamMass, BeamSection, JointKind, Load, LoadFrame, Model, NodeId, ParamId, ParamKind,
@@ -214,6 +214,12 @@ fn pattern(params: &Parameters, id: ParamId) -> String {
         ParamKind::Bushing(_, p) => match p {
             BushingParam::Stiffness(..) => "bushing.<b>.stiffness.<i>.<j>",
             BushingParam::Damping(..) => "bushing.<b>.damping.<i>.<j>",
+        },
+        ParamKind::WormGear(_, p) => match p {
+            WormGearParam::MeshStiffness => "worm_gear.<g>.mesh_stiffness",
+            WormGearParam::Damping => "worm_gear.<g>.damping",
+            WormGearParam::Friction => "worm_gear.<g>.friction",
+            WormGearParam::WasherRadius => "worm_gear.<g>.washer_radius",
         },
         ParamKind::Control(_) => {
             let path = params.path(id);
@@ -1029,6 +1035,45 @@ fn parameter_derivatives_match_finite_differences_on_bushings() {
         .by_differences
         .iter()
         .all(|k| !k.starts_with("bushing")));
+    println!("worst relative error {:.2e}", seen.worst);
+}
+
+#[test]
+fn parameter_derivatives_match_finite_differences_on_worm_gears() {
+    // Both flanks, sliding and sticking (the same velocities, below a large stiction
+    // velocity: the regularization's linear range).
+    let mut seen = Seen::default();
+    let mut rng = Lcg(13);
+    for group in [Group::R3xSO3, Group::SE3] {
+        let mut model = common::worm_pair(group, &mut rng, false);
+        model.validate().expect("valid");
+        let axis = model.worm_gears[0].frame_a.r.column(2).into_owned();
+        for (turn, v_e) in [(0.02, 1e-3), (-0.02, 1e-3), (0.02, 10.0), (-0.02, 10.0)] {
+            model.worm_gears[0].stiction_velocity = v_e;
+            let mut at = point(&model, &mut rng, 1e-6);
+            at.nodes.iter_mut().for_each(|n| n.v *= 0.3);
+            let twist = flexmb_lie::join(&Vec3::zeros(), &(axis * turn));
+            at.nodes[0].q = group.integrate(&at.nodes[0].q, &twist);
+            let gear = &model.worm_gears[0];
+            let ctx = Context::at(&model, 0.0, 1.0);
+            let state = gear.state(&ctx, &Local::nodes(&at.nodes));
+            let slip = state.slip_velocity.abs() / v_e;
+            assert!(
+                state.normal_force * turn > 0.0 && !(0.5..=2.0).contains(&slip),
+                "{state:?}"
+            );
+            let name = format!("worm gear on {group:?} (turn {turn}, |v_s| / v_e {slip:.3})");
+            check_model(&name, &model, &at, &mut seen);
+        }
+    }
+    let kinds: Vec<&str> = seen
+        .kinds
+        .iter()
+        .map(String::as_str)
+        .filter(|k| k.starts_with("worm_gear"))
+        .collect();
+    assert_eq!(kinds.len(), 4, "{kinds:?}");
+    assert!(seen.by_differences.iter().all(|k| !k.starts_with("worm")));
     println!("worst relative error {:.2e}", seen.worst);
 }
 

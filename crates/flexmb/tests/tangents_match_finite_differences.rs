@@ -1620,6 +1620,58 @@ fn elastic_forces_are_the_gradients_of_the_potential_energies() {
 }
 
 #[test]
+fn worm_gear_tangents_match_finite_differences() {
+    // Each flank in contact in turn (the worm turned one way, then the other), sliding
+    // (Coulomb: |v_s| above the stiction velocity, also at the washer) and sticking (the
+    // regularization's linear range), right and left hand, the worm on the ground or not.
+    let mut rng = Lcg(21);
+    for group in [Group::R3xSO3, Group::SE3] {
+        for left_hand in [false, true] {
+            let model = common::worm_pair(group, &mut rng, left_hand);
+            let original = model.worm_gears[0].clone();
+            let axis = original.frame_a.r.column(2).into_owned();
+            for (turn, slip) in [(0.02, true), (-0.02, true), (0.02, false), (-0.02, false)] {
+                for ground_a in [false, true] {
+                    let speed = if slip { 0.5 } else { 1e-5 };
+                    let mut nodes = [0, 1].map(|i| NodeState {
+                        q: group.integrate(&model.nodes[i].frame, &rng.v6(1e-6)),
+                        v: rng.v6(speed),
+                        vdot: rng.v6(3.0),
+                        t: Mat6::identity(),
+                    });
+                    let twist = flexmb_lie::join(&Vec3::zeros(), &(axis * turn));
+                    nodes[0].q = group.integrate(&nodes[0].q, &twist);
+                    let mut gear = original.clone();
+                    if ground_a {
+                        gear.node_a = None;
+                        gear.frame_a = nodes[0].q.compose(&gear.frame_a);
+                        nodes[0] = NodeState::ground(Frame::identity());
+                    }
+                    let mut model = model.clone();
+                    model.worm_gears[0] = gear.clone();
+                    let ctx = context(&model);
+                    let state = gear.state(&ctx, &Local::nodes(&nodes));
+                    let v_e = gear.stiction_velocity;
+                    // a left-handed thread loads the other flank for the same turn
+                    let hand = if left_hand { -1.0 } else { 1.0 };
+                    assert!(
+                        state.normal_force * turn * hand > 0.0
+                            && (state.slip_velocity.abs() > 2.0 * v_e) == slip
+                            && (state.slip_velocity.abs() < 0.5 * v_e) != slip
+                            && state.washer_torque != 0.0,
+                        "left hand {left_hand}, turn {turn}, slip {slip}: {state:?}"
+                    );
+                    let name = format!(
+                        "worm gear (left hand {left_hand}, turn {turn}, slip {slip}, ground a {ground_a})"
+                    );
+                    check_element(&name, &gear, &model, &nodes);
+                }
+            }
+        }
+    }
+}
+
+#[test]
 fn control_block_tangents_match_finite_differences() {
     // Every kind of block, measurement and actuator in one diagram
     // (`common::control_diagram`), at random node kinematics, states and rates; the hold's

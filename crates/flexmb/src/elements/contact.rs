@@ -105,6 +105,7 @@
 //!
 //! After the contact opens, the step grows back (doubling every 4 accepted steps).
 
+use super::pose::{c, lift, perturbed, pose, Dv, Pose, D1};
 use super::{
     physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
     LocalMatrix, LocalVector, NodeState, StepLimit, Vec12,
@@ -112,8 +113,8 @@ use super::{
 use crate::model::contact::{Contact, ContactShape};
 use crate::model::parameters::ContactParam;
 use crate::model::{Model, NodeId};
-use flexmb_lie::{Group, Vec3};
-use nalgebra::{Matrix3, RealField, SMatrix, SVector, Vector3};
+use flexmb_lie::Group;
+use nalgebra::{RealField, SMatrix, SVector, Vector3};
 
 /// Penetration change per step allowed, as a fraction of the largest penetration of the
 /// impact (`delta* / 12`).
@@ -125,39 +126,6 @@ const STEPS_PER_PENETRATION: f64 = 12.0;
 pub struct ContactElement<'m> {
     pub contact: &'m Contact,
     pub effective_mass: f64,
-}
-
-/// Configuration and physical velocity of one slot: `(x, R, xdot, Omega)`.
-#[derive(Clone, Copy, Debug)]
-struct Pose<T: RealField + Copy> {
-    x: Vector3<T>,
-    r: Matrix3<T>,
-    xdot: Vector3<T>,
-    om: Vector3<T>,
-}
-
-impl<T: RealField + Copy> Pose<T> {
-    fn point(&self, p: &Vec3) -> Vector3<T> {
-        self.x + self.r * p.map(c)
-    }
-    fn direction(&self, d: &Vec3) -> Vector3<T> {
-        self.r * d.map(c)
-    }
-    /// Velocity of the material point at the inertial position `p`.
-    fn velocity_at(&self, p: &Vector3<T>) -> Vector3<T> {
-        self.xdot + (self.r * self.om).cross(&(p - self.x))
-    }
-    /// `[F; (R^T (P - x)) x (R^T F)]` times `sign`: the generalized force of `F` at `P`.
-    fn generalized(&self, f: &Vector3<T>, p: &Vector3<T>, sign: f64) -> [T; 6] {
-        let rt = self.r.transpose();
-        let m = (rt * (p - self.x)).cross(&(rt * f));
-        let s: T = c(sign);
-        [f[0] * s, f[1] * s, f[2] * s, m[0] * s, m[1] * s, m[2] * s]
-    }
-}
-
-fn c<T: RealField + Copy>(v: f64) -> T {
-    nalgebra::convert(v)
 }
 
 /// The parameters of a contact's law that are differentiated ([`ContactParam`], in its
@@ -332,45 +300,11 @@ fn row_to_group(
     dw * node.t * coef.k + dv * coef.c
 }
 
-/// The pose of a slot in `f64`.
-fn pose(group: Group, node: &NodeState) -> Pose<f64> {
-    let (xdot, om) = physical::velocity(group, node);
-    Pose {
-        x: node.q.x,
-        r: node.q.r,
-        xdot,
-        om,
-    }
-}
-
 /// Variables of the automatic differentiation of [`ElementKernel::evaluate`]: node
 /// variations (12), velocities (12), the impact velocity, and with bristles their deflection
 /// (3) and its rate (3).
 const N_PLAIN: usize = 25;
 const N_BRISTLES: usize = 31;
-type Dv<const N: usize> = num_dual::DualSVec64<N>;
-type D1 = num_dual::Dual64;
-
-/// The pose of a slot perturbed by the variables `w[6 k..6 k + 6]` (configuration:
-/// `x + dx`, `R (I + tilde(theta))`, exact to first order) and `w[12 + 6 k..]` (velocity).
-fn perturbed<const N: usize>(
-    group: Group,
-    node: &NodeState,
-    w: &SVector<Dv<N>, N>,
-    k: usize,
-) -> Pose<Dv<N>> {
-    let p = pose(group, node);
-    let var = |i: usize| -> Vector3<Dv<N>> { Vector3::new(w[i], w[i + 1], w[i + 2]) };
-    let theta = var(6 * k + 3);
-    let r = p.r.map(Dv::from_re) * (Matrix3::identity() + theta.cross_matrix());
-    Pose {
-        x: p.x.map(Dv::from_re) + var(6 * k),
-        r,
-        xdot: p.xdot.map(Dv::from_re) + var(12 + 6 * k),
-        om: p.om.map(Dv::from_re) + var(12 + 6 * k + 3),
-    }
-}
-
 impl ContactElement<'_> {
     /// The residual `[r (12); e_z (3)]` and its Jacobian with respect to the `N` variables
     /// ([`N_PLAIN`] without bristles, [`N_BRISTLES`] with), by forward AD.
@@ -694,12 +628,6 @@ impl ElementParameters for ContactElement<'_> {
         let nodes = local.nodes;
         let group = ctx.group;
         let (a, b) = (pose(group, &nodes[0]), pose(group, &nodes[1]));
-        let lift = |p: &Pose<f64>| Pose {
-            x: p.x.map(D1::from_re),
-            r: p.r.map(D1::from_re),
-            xdot: p.xdot.map(D1::from_re),
-            om: p.om.map(D1::from_re),
-        };
         let mut law = self.contact.law::<D1>();
         let parameter = match p {
             ContactParam::Stiffness => &mut law.stiffness,

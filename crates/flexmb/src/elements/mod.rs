@@ -2,9 +2,9 @@
 //! (two nodes, [`beam`]), applied loads, spring-dampers (with an optional Maxwell branch,
 //! [`spring`], nonlinear laws and stops included), rotational spring-dampers about a joint's
 //! axis ([`rotational_spring`]), 6-DOF bushings ([`bushing`]), ropes through any number of
-//! points ([`rope`]), unilateral contacts with impact and friction ([`contact`]) and gear
-//! pairs ([`gear`]), and the blocks of a control diagram coupled to the mechanics
-//! ([`control`]).
+//! points ([`rope`]), unilateral contacts with impact and friction ([`contact`]), gear
+//! pairs ([`gear`]), worm gear pairs with mesh friction ([`worm_gear`]), and the blocks of a
+//! control diagram coupled to the mechanics ([`control`]).
 //!
 //! Every element contributes to the equations of motion of Brüls & Cardona (2010), Eq. (37),
 //!
@@ -42,10 +42,12 @@ pub mod control;
 pub mod gear;
 pub mod load;
 pub mod physical;
+pub mod pose;
 pub mod rigid_body;
 pub mod rope;
 pub mod rotational_spring;
 pub mod spring;
+pub mod worm_gear;
 
 use crate::model::{Model, NodeId};
 use flexmb_lie::{Frame, Group, Mat6, Vec3, Vec6};
@@ -211,6 +213,8 @@ pub enum ElementRef {
     RotationalSpring(usize),
     /// Index in [`Model::bushings`].
     Bushing(usize),
+    /// Index in [`Model::worm_gears`].
+    WormGear(usize),
     /// The model's block diagram ([`Model::control`]) and its slots ([`control::slots`]).
     Control(Arc<Vec<Option<NodeId>>>),
 }
@@ -480,6 +484,7 @@ impl ElementRef {
                 ElementItem::Gear(i) => ElementRef::Gear(i),
                 ElementItem::RotationalSpring(i) => ElementRef::RotationalSpring(i),
                 ElementItem::Bushing(i) => ElementRef::Bushing(i),
+                ElementItem::WormGear(i) => ElementRef::WormGear(i),
                 ElementItem::Control => ElementRef::Control(Arc::new(control::slots(model))),
             })
             .collect()
@@ -509,6 +514,7 @@ impl ElementRef {
                 Kernel::RotationalSpring(rotational_spring::RotationalSpringElement::of(model, *i))
             }
             ElementRef::Bushing(i) => Kernel::Bushing(&model.bushings[*i]),
+            ElementRef::WormGear(i) => Kernel::WormGear(&model.worm_gears[*i]),
             ElementRef::Control(slots) => Kernel::Control(control::ControlElement {
                 system: &model.control,
                 model,
@@ -543,6 +549,7 @@ impl ElementRef {
                 format!("rotational spring '{}'", model.rotational_springs[*i].name)
             }
             ElementRef::Bushing(i) => format!("bushing '{}'", model.bushings[*i].name),
+            ElementRef::WormGear(i) => format!("worm gear '{}'", model.worm_gears[*i].name),
             ElementRef::Control(_) => "the control blocks".into(),
         }
     }
@@ -561,14 +568,14 @@ pub enum ElementItem {
     Gear(usize),
     RotationalSpring(usize),
     Bushing(usize),
+    WormGear(usize),
     /// The block diagram, one element (when the model has blocks).
     Control,
 }
 
 impl ElementItem {
     /// Every force element of `model`: bodies, beam elements, loads, springs, ropes,
-    /// contacts, gear pairs.
-    /// rotational springs, bushings.
+    /// contacts, gear pairs, rotational springs, bushings, worm gear pairs.
     pub fn all(model: &Model) -> impl Iterator<Item = ElementItem> {
         (0..model.bodies.len())
             .map(ElementItem::Body)
@@ -580,6 +587,7 @@ impl ElementItem {
             .chain((0..model.gears.len()).map(ElementItem::Gear))
             .chain((0..model.rotational_springs.len()).map(ElementItem::RotationalSpring))
             .chain((0..model.bushings.len()).map(ElementItem::Bushing))
+            .chain((0..model.worm_gears.len()).map(ElementItem::WormGear))
             .chain((!model.control.is_empty()).then_some(ElementItem::Control))
     }
 
@@ -595,6 +603,7 @@ impl ElementItem {
             ElementItem::Gear(i) => model.gears[i].n_states(),
             ElementItem::RotationalSpring(_) => 1,
             ElementItem::Bushing(i) => model.bushings[i].n_states(),
+            ElementItem::WormGear(_) => 0,
             ElementItem::Control => model.control.n_unknowns,
         }
     }
@@ -625,6 +634,7 @@ pub enum Kernel<'m> {
     NonlinearSpring(spring::SpringElement<'m>),
     RotationalSpring(rotational_spring::RotationalSpringElement<'m>),
     Bushing(&'m crate::model::Bushing),
+    WormGear(&'m crate::model::WormGear),
     Control(control::ControlElement<'m>),
 }
 
@@ -641,6 +651,7 @@ macro_rules! dispatch {
             Kernel::NonlinearSpring($k) => $e,
             Kernel::RotationalSpring($k) => $e,
             Kernel::Bushing($k) => $e,
+            Kernel::WormGear($k) => $e,
             Kernel::Control($k) => $e,
         }
     };

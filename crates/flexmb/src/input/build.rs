@@ -41,6 +41,7 @@ const TOP_KEYS: &[&str] = &[
     "gear",
     "rotational_spring",
     "bushing",
+    "worm_gear",
     "block",
 ];
 /// The keys of a `[[sensor]]`: `name`, `type`, then those a type may use.
@@ -133,6 +134,7 @@ pub(super) struct Origins {
     pub beams: Vec<Origin>,
     sensors: Vec<Origin>,
     gears: Vec<Origin>,
+    pub worm_gears: Vec<Origin>,
     pub blocks: Vec<Origin>,
     /// Node and joint of each name, as they are created (names are unique in a file): look-ups
     /// by hash keep reading linear in the size of the model.
@@ -197,6 +199,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     read_ropes(&top, &mut model, &mut origins)?;
     super::contact::read_contacts(&top, &mut model, &mut origins)?;
     read_gears(&top, &mut model, &mut origins)?;
+    super::worm_gear::read_worm_gears(&top, &mut model, &mut origins)?;
     read_rotational_springs(&top, &mut model, &mut origins)?;
     read_bushings(&top, &mut model, &mut origins)?;
     super::control::read_blocks(&top, &mut model, &mut origins)?;
@@ -246,6 +249,7 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
         "beam" => &origins.beams,
         "sensor" => &origins.sensors,
         "gear" => &origins.gears,
+        "worm_gear" => &origins.worm_gears,
         "block" => &origins.blocks,
         _ => &[],
     };
@@ -1861,7 +1865,7 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
 }
 
 /// A whole number of teeth, at least 1.
-fn teeth(f: &Field<'_>) -> Result<u32> {
+pub(super) fn teeth(f: &Field<'_>) -> Result<u32> {
     let z = f.int()?;
     match u32::try_from(z) {
         Ok(z) if (1..=100_000).contains(&z) => Ok(z),
@@ -1869,6 +1873,22 @@ fn teeth(f: &Field<'_>) -> Result<u32> {
             "must be a whole number of teeth from 1 to 100000, got {z}"
         ))),
     }
+}
+
+/// The name (unique among `table`), the two nodes (`node_a`, `node_b`, either may be the
+/// ground) and the centres of two meshing members: gear joints, gear pairs, worm gears.
+pub(super) fn read_wheels(
+    t: &Table<'_>,
+    names: &mut HashMap<String, String>,
+    table: &str,
+    model: &Model,
+    origins: &Origins,
+) -> Result<(String, [Option<NodeId>; 2], [Vec3; 2])> {
+    let name = read_name(t, names, table)?;
+    let node_a = resolve_node(model, origins, &t.req("node_a")?, true)?;
+    let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
+    let centers = wheel_centers(t, model, [node_a, node_b])?;
+    Ok((name, [node_a, node_b], centers))
 }
 
 /// The centres of two wheels on `nodes` (inertial, t = 0): `center_a`, `center_b`, each by
@@ -1904,10 +1924,7 @@ fn read_gear_joint(
         "name", "type", "node_a", "node_b", "center_a", "center_b", "axis", "teeth_a", "teeth_b",
         "internal",
     ])?;
-    let name = read_name(t, names, "joint")?;
-    let node_a = resolve_node(model, origins, &t.req("node_a")?, true)?;
-    let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
-    let centers = wheel_centers(t, model, [node_a, node_b])?;
+    let (name, [node_a, node_b], centers) = read_wheels(t, names, "joint", model, origins)?;
     let axis = nonzero_vec3(&t.req("axis")?)?;
     let za = teeth(&t.req("teeth_a")?)?;
     let zb = teeth(&t.req("teeth_b")?)?;
@@ -1968,10 +1985,8 @@ fn read_gears(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
             "transmission_error",
             "mesh_phase",
         ])?;
-        let name = read_name(&t, &mut names, "gear")?;
-        let node_a = resolve_node(model, origins, &t.req("node_a")?, true)?;
-        let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
-        let centers = wheel_centers(&t, model, [node_a, node_b])?;
+        let (name, [node_a, node_b], centers) =
+            read_wheels(&t, &mut names, "gear", model, origins)?;
         let axis = nonzero_vec3(&t.req("axis")?)?;
         let angle = |key: &str, default: f64| -> Result<f64> {
             Ok(match t.field(key) {

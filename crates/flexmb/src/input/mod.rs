@@ -37,6 +37,7 @@ mod error;
 mod overrides;
 mod reader;
 mod sensitivity;
+mod worm_gear;
 
 pub use error::{InputError, ItemLabel, Location};
 

@@ -19,6 +19,9 @@ pub const MAX_PHYSICAL: f64 = 1e30;
 /// singular without a visible cause).
 pub const MIN_PHYSICAL: f64 = 1e-30;
 
+/// Largest friction coefficient (contacts, worm gears).
+pub const MAX_FRICTION: f64 = 100.0;
+
 /// Largest angle \[rad\] (rotation vector, phase) and, in degrees, `angle_deg`: beyond it a
 /// double has lost the 1e-10 precision of an orientation.
 pub const MAX_ANGLE: f64 = 1e6;

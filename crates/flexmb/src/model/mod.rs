@@ -16,10 +16,12 @@ pub mod limits;
 pub mod parameters;
 mod time_function;
 mod validate;
+pub mod worm_gear;
 
 pub use parameters::{ParamId, ParamKind, ParamRole, Parameters};
 pub use time_function::TimeFunction;
 pub(crate) use validate::{clip, QUOTED};
+pub use worm_gear::WormGear;
 
 use flexmb_lie::{so3, Frame, Group, Mat3, Vec3};
 
@@ -747,6 +749,9 @@ pub struct Model {
     /// 6-DOF bushings.
     #[serde(default)]
     pub bushings: Vec<Bushing>,
+    /// Worm gear pairs with mesh friction ([`crate::elements::worm_gear`]).
+    #[serde(default)]
+    pub worm_gears: Vec<WormGear>,
     /// Control blocks coupled to the mechanics ([`crate::elements::control`]).
     #[serde(default)]
     pub control: control::ControlSystem,
@@ -797,6 +802,7 @@ impl Model {
             spring_laws: Vec::new(),
             rotational_springs: Vec::new(),
             bushings: Vec::new(),
+            worm_gears: Vec::new(),
             control: control::ControlSystem::default(),
         }
     }

@@ -38,6 +38,7 @@
 //! | gear | `gear.<g>.mesh_stiffness`, `.damping`, `.backlash` | `k_m` [N/m], `c` [N s/m], `b` \[m\] | same |
 //! | gear | `gear.<g>.stiffness_variation.<n>` | relative amplitude `eps_n` of harmonic `n` (0-based) of the mesh stiffness | the first number of entry `n` |
 //! | gear | `gear.<g>.transmission_error.<n>` | amplitude `e_n` of harmonic `n` (0-based) of the static transmission error \[m\] | the first number of entry `n` |
+//! | worm gear | `worm_gear.<g>.mesh_stiffness`, `.damping`, `.friction`, `.washer_radius` | `k` [N/m], `c` [N s/m], `mu`, `r_w` \[m\] | same |
 //!
 //! Components `<k>` are 0, 1, 2 (x, y, z); matrix indices follow the strain order
 //! `(axial, shear 2, shear 3, torsion, bending 2, bending 3)` for `C` and `(x, y, z)` for `J`.
@@ -63,7 +64,7 @@
 
 use super::contact::Contact;
 use super::{BeamSection, JointId};
-use super::{GearPair, Joint, Load, Model, Node, NodeId, RigidBody, Rope, SpringDamper};
+use super::{GearPair, Joint, Load, Model, Node, NodeId, RigidBody, Rope, SpringDamper, WormGear};
 use flexmb_lie::Vec3;
 use std::collections::HashMap;
 
@@ -458,6 +459,49 @@ impl GearParam {
     }
 }
 
+/// A parameter of a worm gear pair ([`WormGear`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WormGearParam {
+    /// Mesh stiffness `k` [N/m].
+    MeshStiffness,
+    /// Mesh damping `c` [N s/m].
+    Damping,
+    /// Friction coefficient `mu` of the flanks and the washer.
+    Friction,
+    /// Friction radius `r_w` of the thrust washer \[m\].
+    WasherRadius,
+}
+
+impl WormGearParam {
+    /// Every parameter with its key.
+    pub const ALL: [(&'static str, WormGearParam); 4] = [
+        ("mesh_stiffness", WormGearParam::MeshStiffness),
+        ("damping", WormGearParam::Damping),
+        ("friction", WormGearParam::Friction),
+        ("washer_radius", WormGearParam::WasherRadius),
+    ];
+
+    /// The value.
+    pub fn get(self, g: &WormGear) -> f64 {
+        match self {
+            WormGearParam::MeshStiffness => g.mesh_stiffness,
+            WormGearParam::Damping => g.damping,
+            WormGearParam::Friction => g.friction,
+            WormGearParam::WasherRadius => g.washer_radius,
+        }
+    }
+
+    /// Sets the value.
+    pub fn set(self, g: &mut WormGear, value: f64) {
+        match self {
+            WormGearParam::MeshStiffness => g.mesh_stiffness = value,
+            WormGearParam::Damping => g.damping = value,
+            WormGearParam::Friction => g.friction = value,
+            WormGearParam::WasherRadius => g.washer_radius = value,
+        }
+    }
+}
+
 /// What a parameter is: its item and which of the item's quantities.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ParamKind {
@@ -485,6 +529,8 @@ pub enum ParamKind {
     RotationalSpring(usize, RotationalSpringParam),
     /// Index in [`Model::bushings`].
     Bushing(usize, BushingParam),
+    /// Index in [`Model::worm_gears`].
+    WormGear(usize, WormGearParam),
     Control(ControlParam),
 }
 
@@ -696,6 +742,12 @@ impl Parameters {
                 reg.push(format!("bushing.{name}.{key}"), ParamKind::Bushing(i, p));
             }
         }
+        let names = segments(model.worm_gears.iter().map(|g| g.name.as_str()));
+        for (i, name) in names.iter().enumerate() {
+            for (key, p) in WormGearParam::ALL {
+                reg.push(format!("worm_gear.{name}.{key}"), ParamKind::WormGear(i, p));
+            }
+        }
         let blocks = &model.control.blocks;
         let names = segments(blocks.iter().map(|b| b.name.as_str()));
         for (block, name) in names.iter().enumerate() {
@@ -780,6 +832,7 @@ impl Parameters {
             ParamKind::SpringLaw(i, p) => model.spring_law(i).map_or(0.0, |law| p.get(&law.law)),
             ParamKind::RotationalSpring(i, p) => p.get(&model.rotational_springs[i]),
             ParamKind::Bushing(i, p) => p.get(&model.bushings[i]),
+            ParamKind::WormGear(i, p) => p.get(&model.worm_gears[i]),
             ParamKind::Control(p) => model.control.blocks[p.block].params[p.index],
         }
     }
@@ -811,6 +864,7 @@ impl Parameters {
             }
             ParamKind::RotationalSpring(i, p) => p.set(&mut model.rotational_springs[i], value),
             ParamKind::Bushing(i, p) => p.set(&mut model.bushings[i], value),
+            ParamKind::WormGear(i, p) => p.set(&mut model.worm_gears[i], value),
             ParamKind::Control(p) => model.control.blocks[p.block].set_param(p.index, value),
         }
     }

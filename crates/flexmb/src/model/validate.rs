@@ -6,8 +6,9 @@
 
 use super::contact::{Contact, ContactShape};
 use super::limits::{
-    within, MAX_ANGLE, MAX_FUNCTION_DEPTH, MAX_FUNCTION_TERMS, MAX_ITEMS, MAX_KINEMATIC,
-    MAX_PHYSICAL, MAX_ROPE_POINTS, MAX_TIME, MIN_PHYSICAL, MIN_RELATIVE_LENGTH, MIN_STEP,
+    within, MAX_ANGLE, MAX_FRICTION, MAX_FUNCTION_DEPTH, MAX_FUNCTION_TERMS, MAX_ITEMS,
+    MAX_KINEMATIC, MAX_PHYSICAL, MAX_ROPE_POINTS, MAX_TIME, MIN_PHYSICAL, MIN_RELATIVE_LENGTH,
+    MIN_STEP,
 };
 use super::{ItemRef, JointKind, Model, NodeId, RopePoint, SensorKind, TimeFunction};
 use crate::error::ModelError;
@@ -146,6 +147,18 @@ fn rotation(r: &Mat3) -> Check {
 
 /// A frame fixed on a node: a rotation, and a position within twice the coordinate range
 /// (a point given in the frame of a node anywhere in the range).
+/// A normal pressure angle of a gear or worm gear \[rad\], in (0, 1.2).
+fn pressure_angle(a: f64) -> Check {
+    if a > 0.0 && a < 1.2 {
+        Ok(())
+    } else {
+        Err(format!(
+            "must be between 0 and 68.75 deg, got {} deg",
+            a.to_degrees()
+        ))
+    }
+}
+
 fn local_frame(f: &Frame) -> Check {
     rotation(&f.r)?;
     finite3(&f.x, 2.0 * MAX_KINEMATIC)
@@ -651,7 +664,7 @@ impl Model {
             in_range(law.min_impact_velocity, MIN_PHYSICAL, MAX_PHYSICAL)
                 .map_err(|m| fail("min_impact_velocity", m))?;
             if let Some(f) = &c.friction {
-                in_range(f.coefficient, 0.0, 100.0).map_err(|m| fail("friction", m))?;
+                in_range(f.coefficient, 0.0, MAX_FRICTION).map_err(|m| fail("friction", m))?;
                 in_range(f.stiction_velocity, MIN_PHYSICAL, MAX_PHYSICAL)
                     .map_err(|m| fail("friction", format!("stiction_velocity {m}")))?;
                 in_range(f.viscous, 0.0, MAX_PHYSICAL)
@@ -722,6 +735,7 @@ impl Model {
         }
 
         self.validate_gears()?;
+        self.validate_worm_gears()?;
         self.validate_control()?;
 
         let model_extent = self.extent();
@@ -1008,6 +1022,59 @@ impl Model {
         Ok(())
     }
 
+    fn validate_worm_gears(&self) -> Result<(), ModelError> {
+        for (i, g) in self.worm_gears.iter().enumerate() {
+            let fail = |field, m| bad("worm_gear", i, &g.name, field, m);
+            self.check_node("worm_gear", i, &g.name, "node_a", g.node_a)?;
+            self.check_node("worm_gear", i, &g.name, "node_b", g.node_b)?;
+            self.two_nodes(g.node_a, g.node_b, "worm gear")
+                .map_err(|m| fail("node_b", m))?;
+            for (field, z) in [("starts", g.starts), ("teeth", g.teeth)] {
+                if z == 0 {
+                    return Err(fail(field, "must be a whole number >= 1".into()));
+                }
+            }
+            for f in [&g.frame_a, &g.frame_b] {
+                local_frame(f).map_err(|m| fail("center_b", m))?;
+            }
+            let world = |n: Option<NodeId>, f: &Frame| match n {
+                Some(id) => self.nodes[id.0].frame.compose(f),
+                None => *f,
+            };
+            let (wa, wb) = (world(g.node_a, &g.frame_a), world(g.node_b, &g.frame_b));
+            let cosine = wa.r.column(2).dot(&wb.r.column(2));
+            if cosine.abs() > 1e-6 {
+                return Err(fail(
+                    "axis_b",
+                    format!(
+                        "the worm and wheel axes must be perpendicular at t = 0, they are {:.4} deg apart",
+                        cosine.clamp(-1.0, 1.0).acos().to_degrees()
+                    ),
+                ));
+            }
+            in_range(g.center_distance, MIN_PHYSICAL, MAX_KINEMATIC)
+                .map_err(|m| fail("center_b", format!("centre distance {m}")))?;
+            if !(g.worm_radius > 0.0 && g.worm_radius < g.center_distance) {
+                return Err(fail(
+                    "worm_radius",
+                    format!(
+                        "must be above 0 and below the centre distance {:.6e} m (the wheel's pitch radius is the rest), got {}",
+                        g.center_distance, g.worm_radius
+                    ),
+                ));
+            }
+            pressure_angle(g.pressure_angle).map_err(|m| fail("pressure_angle_deg", m))?;
+            in_range(g.mesh_stiffness, MIN_PHYSICAL, MAX_PHYSICAL)
+                .map_err(|m| fail("mesh_stiffness", m))?;
+            in_range(g.damping, 0.0, MAX_PHYSICAL).map_err(|m| fail("damping", m))?;
+            in_range(g.friction, 0.0, MAX_FRICTION).map_err(|m| fail("friction", m))?;
+            in_range(g.stiction_velocity, MIN_PHYSICAL, MAX_KINEMATIC)
+                .map_err(|m| fail("stiction_velocity", m))?;
+            in_range(g.washer_radius, 0.0, MAX_KINEMATIC).map_err(|m| fail("washer_radius", m))?;
+        }
+        Ok(())
+    }
+
     /// The block diagram: wiring (inputs name existing outputs, as many as the kind
     /// takes), the nodes and joints of measurements and actuators, and the parameters
     /// (finite; time constants, the filter constant of a PID with a derivative, a motor's
@@ -1160,15 +1227,7 @@ impl Model {
                 }
             }
             in_range(geo.module, MIN_PHYSICAL, MAX_KINEMATIC).map_err(|m| fail("module", m))?;
-            if !(geo.pressure_angle > 0.0 && geo.pressure_angle < 1.2) {
-                return Err(fail(
-                    "pressure_angle_deg",
-                    format!(
-                        "must be between 0 and 68.75 deg, got {} deg",
-                        geo.pressure_angle.to_degrees()
-                    ),
-                ));
-            }
+            pressure_angle(geo.pressure_angle).map_err(|m| fail("pressure_angle_deg", m))?;
             if geo.helix_angle.is_nan() || geo.helix_angle.abs() >= 1.2 {
                 return Err(fail(
                     "helix_angle_deg",

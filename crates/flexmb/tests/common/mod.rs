@@ -192,6 +192,38 @@ impl Lcg {
     }
 }
 
+/// A worm (node "worm", 4 threads, pitch radius 20 mm) meshing with a wheel (node "wheel", 9
+/// teeth, centre distance 32 mm: lead angle 14.9 deg) at a random place and orientation, the
+/// nodes at the frames' origins; stiffness 1e8 N/m, damping 2e3 N s/m, friction 0.1 and a
+/// thrust washer of radius 15 mm. For the derivative checks.
+pub fn worm_pair(group: flexmb_lie::Group, rng: &mut Lcg, left_hand: bool) -> flexmb::model::Model {
+    use flexmb_lie::Frame;
+    let mut model = flexmb::model::Model::new(group);
+    let axis = rng.v3(1.0).normalize();
+    let across = axis.cross(&rng.v3(1.0)).normalize();
+    let ca = rng.v3(0.5);
+    let cb = ca + across * 0.032;
+    let wheel_axis = axis.cross(&across);
+    let a = model.add_node("worm", Frame::new(ca, group.exp(&rng.v6(1.0)).r));
+    let b = model.add_node("wheel", Frame::new(cb, group.exp(&rng.v6(1.0)).r));
+    // the centres given off the common perpendicular: the frames are at its feet
+    let centers = [ca - axis * 0.01, cb + wheel_axis * 0.02];
+    let g = model.add_worm_gear(
+        "mesh",
+        [Some(a), Some(b)],
+        centers,
+        [axis, -wheel_axis],
+        (4, 9, 0.02),
+        1e8,
+    );
+    let gear = &mut model.worm_gears[g];
+    gear.damping = 2e3;
+    gear.friction = 0.1;
+    gear.washer_radius = 0.015;
+    gear.left_hand = left_hand;
+    model
+}
+
 /// A model with a block diagram that holds every kind of block, measurement and actuator
 /// (for the derivative checks): nodes `a` and `b`, a revolute joint `hinge` between them
 /// and a prismatic joint `slide` from the ground to `b`, frames turned off the axes.
