@@ -1102,8 +1102,9 @@ fn parameter_derivatives_match_finite_differences_on_control_blocks() {
         .iter()
         .filter(|k| k.starts_with("control"))
         .collect();
-    // every named parameter of every kind of block (A, B, C, D, x0, num, den, values, ...)
-    assert_eq!(kinds.len(), 24, "{kinds:?}");
+    // every named parameter of every kind of block (A, B, C, D, x0, num, den, values,
+    // the amplitudes of a source, ...)
+    assert_eq!(kinds.len(), 26, "{kinds:?}");
     assert!(seen
         .by_differences
         .iter()
