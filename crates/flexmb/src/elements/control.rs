@@ -20,7 +20,10 @@
 //! Newton iteration):
 //!
 //! ```text
-//! states:  e = xdot_b - f_b(x_b, u_b, t)      (a hold: e = xdot_b, set between steps)
+//! states:  e = xdot_b - f_b(x_b, u_b, t)      (a hold: e = xdot_b, set between steps;
+//!                                             a lag, the PID's filter and a motor's
+//!                                             current: e = T xdot_b - T f_b, times their
+//!                                             time constant or inductance, for scaling)
 //! outputs: e = y_b - h_b(x_b, u_b, t)         (a measurement: y_b - m(q, v, vdot))
 //! nodes:   r = -L(q) u                        (an actuator: u along its target)
 //! ```
@@ -434,6 +437,12 @@ impl ControlElement<'_> {
                     let f = $f;
                     e[s0 + $k] = xd[$k] - f;
                 }};
+                // `T xdot = f`, written multiplied by the time constant `T` (a row of
+                // entries T, 1 rather than 1, 1/T: well scaled for a fast filter)
+                ($k:expr, $f:expr, $t:expr) => {{
+                    let f = $f;
+                    e[s0 + $k] = $t * xd[$k] - f;
+                }};
             }
             match &block.kind {
                 BlockKind::Source(f) => {
@@ -465,7 +474,7 @@ impl ControlElement<'_> {
                     e[y0] = ys[0] - xs[0];
                 }
                 BlockKind::Lag => {
-                    state!(0, (p(0) * u[0] - xs[0]) / p(1));
+                    state!(0, p(0) * u[0] - xs[0], p(1));
                     e[y0] = ys[0] - xs[0];
                 }
                 BlockKind::Pid => {
@@ -473,7 +482,7 @@ impl ControlElement<'_> {
                     let v = kp * u[0] + ki * xs[0] + kd * (u[0] - xs[1]) / tf;
                     let sat = clamp(v, p(4), p(5));
                     state!(0, u[0] + p(6) * (sat - v));
-                    state!(1, (u[0] - xs[1]) / tf);
+                    state!(1, u[0] - xs[1], tf);
                     e[y0] = ys[0] - sat;
                 }
                 BlockKind::StateSpace {
@@ -547,7 +556,7 @@ impl ControlElement<'_> {
                 }
                 BlockKind::DcMotor => {
                     let (r, l, kt, ke) = (p(0), p(1), p(2), p(3));
-                    state!(0, (u[0] - r * xs[0] - ke * u[1]) / l);
+                    state!(0, u[0] - r * xs[0] - ke * u[1], l);
                     e[y0] = ys[0] - kt * xs[0];
                 }
                 BlockKind::Measure(q) => e[y0] = ys[0] - self.measure(q, poses, ys[0]),
