@@ -119,8 +119,13 @@ pub fn slots(model: &Model) -> Vec<Option<NodeId>> {
         }
     };
     for b in &model.control.blocks {
-        match &b.kind {
-            BlockKind::Measure(q) => match q {
+        let (quantity, target) = match &b.kind {
+            BlockKind::Measure(q) => (Some(q), None),
+            BlockKind::Actuator(t) => (None, Some(t)),
+            _ => (None, None),
+        };
+        if let Some(q) = quantity {
+            match q {
                 Quantity::Position { node, .. }
                 | Quantity::Velocity { node, .. }
                 | Quantity::Acceleration { node, .. }
@@ -130,16 +135,17 @@ pub fn slots(model: &Model) -> Vec<Option<NodeId>> {
                     add(j.node_a);
                     add(j.node_b);
                 }
-            },
-            BlockKind::Actuator(t) => match t {
+            }
+        }
+        if let Some(t) = target {
+            match t {
                 Target::Force { node, .. } | Target::Moment { node, .. } => add(Some(*node)),
                 Target::Joint { joint } => {
                     let j = &model.joints[joint.0];
                     add(j.node_a);
                     add(j.node_b);
                 }
-            },
-            _ => {}
+            }
         }
     }
     out
@@ -352,7 +358,7 @@ impl ControlElement<'_> {
                     (false, false) => axis.dot(&(pb - pa)),
                     (false, true) => {
                         let axis_dot = (a.r * a.om).cross(&axis);
-                        let rel = b.velocity_at(&pb) - a.velocity_at(&pb);
+                        let rel = b.velocity_at(&pb) - a.velocity_at(&pa);
                         axis_dot.dot(&(pb - pa)) + axis.dot(&rel)
                     }
                 }
