@@ -181,3 +181,66 @@ fn coupled_scheme_damps_unresolved_modes_at_rho_inf() {
     eprintln!("rho_inf 0: decay over 10 steps {decay:.2e}");
     assert!(decay < 1e-12, "{decay}");
 }
+
+#[test]
+fn zero_order_hold_samples_a_csv_signal_on_its_period() {
+    // A signal read from a CSV file (t, value: a ramp of slope 2), sampled by a zero-order
+    // hold of period 0.05 s while the steps are 0.013 s: the step control lands on every
+    // sample, and the held value is the signal at the last sample, to round-off.
+    let dir = std::env::temp_dir().join(format!("flexmb_hold_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    std::fs::write(dir.join("signal.csv"), "t, u\n0.0, 0.0\n1.0, 2.0\n").expect("csv");
+    let text = r#"flexmb = 1
+[model]
+group = "R3xSO3"
+[solver]
+analysis = "dynamic"
+t_end = 0.5
+h = 0.013
+[[body]]
+name = "mass"
+mass = 1.0
+inertia = [1.0, 1.0, 1.0]
+[[block]]
+name = "signal"
+type = "source"
+file = "signal.csv"
+[[block]]
+name = "held"
+type = "hold"
+input = "signal"
+period = 0.05
+[[sensor]]
+name = "held"
+type = "block"
+block = "held"
+[[sensor]]
+name = "signal"
+type = "block"
+block = "signal"
+"#;
+    let file = dir.join("hold.toml");
+    let f = flexmb::input::parse_model_str(text, file.to_str().expect("path"), &[]).expect("model");
+    let flexmb::input::Analysis::Dynamic(settings) = f.analysis else {
+        panic!("dynamic")
+    };
+    let h = common::run_model(&f.model, settings).expect("runs");
+    let mut samples = 0;
+    for (t, v) in &h.rows {
+        let (held, signal) = (v[0], v[1]);
+        assert!((signal - 2.0 * t).abs() < 1e-12, "signal at {t}: {signal}");
+        // the last sample at or before t
+        let k = ((t + 1e-9) / 0.05).floor();
+        assert!(
+            (held - 2.0 * 0.05 * k).abs() < 1e-12,
+            "held at {t}: {held}, expected {}",
+            0.1 * k
+        );
+        if ((t / 0.05).round() * 0.05 - t).abs() < 1e-12 {
+            samples += 1;
+        }
+    }
+    // every sample instant is an output point (the steps land on it)
+    assert_eq!(samples, 11, "sample instants among the outputs");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -845,7 +845,8 @@ impl ElementKernel for ControlElement<'_> {
     }
 
     fn node(&self, k: usize) -> Option<NodeId> {
-        self.slots[k]
+        // (a diagram without measurements or actuators has no slots)
+        self.slots.get(k).copied().flatten()
     }
 
     fn n_states(&self) -> usize {
@@ -973,7 +974,10 @@ impl ElementKernel for ControlElement<'_> {
         for (b, block) in sys.blocks.iter().enumerate() {
             if let BlockKind::Hold { period } = block.kind {
                 if on_sample(ctx.t, period) {
-                    x[sys.state_start[b]] = end.x[sys.unknown(block.inputs[0])];
+                    // the held value and the output that equals it
+                    let u = end.x[sys.unknown(block.inputs[0])];
+                    x[sys.state_start[b]] = u;
+                    x[sys.output_start[b]] = u;
                 }
             }
         }

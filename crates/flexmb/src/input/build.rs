@@ -905,6 +905,7 @@ fn read_nested_function(f: &Field<'_>, level: usize, scale: f64) -> Result<TimeF
         "ramp",
         "step",
         "sine",
+        "chirp",
         "table",
         "spin_up",
         "bump",
@@ -920,6 +921,7 @@ fn read_nested_function(f: &Field<'_>, level: usize, scale: f64) -> Result<TimeF
         "ramp" => &["type", "t0", "t1", "value"],
         "step" => &["type", "t0", "value"],
         "sine" => &["type", "amplitude", "frequency", "phase", "offset"],
+        "chirp" => &["type", "amplitude", "f0", "f1", "duration", "offset"],
         "table" => &["type", "points"],
         "bump" => &["type", "height", "start", "duration"],
         "smooth_step" => &["type", "value", "start", "duration"],
@@ -975,6 +977,20 @@ fn read_nested_function(f: &Field<'_>, level: usize, scale: f64) -> Result<TimeF
             phase: match t.field("phase") {
                 Some(f) => f.f64_in(-MAX_ANGLE, MAX_ANGLE)?,
                 None => 0.0,
+            },
+            offset: num_or("offset", 0.0)?,
+        },
+        "chirp" => TimeFunction::Chirp {
+            amplitude: num("amplitude")?,
+            f0: t.req("f0")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,
+            f1: t.req("f1")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,
+            duration: {
+                let f = t.req("duration")?;
+                let d = f.f64_in(-MAX_TIME, MAX_TIME)?;
+                if d <= 0.0 {
+                    return Err(f.err(format!("must be positive, got {d}")));
+                }
+                d
             },
             offset: num_or("offset", 0.0)?,
         },

@@ -23,6 +23,16 @@ pub enum TimeFunction {
         phase: f64,
         offset: f64,
     },
+    /// Linear chirp: `f = offset + amplitude sin(2 pi (f0 t + (f1 - f0) t^2 / (2 duration)))`,
+    /// the frequency sweeping from `f0` at `t = 0` to `f1` at `duration` (and on at the same
+    /// rate after it).
+    Chirp {
+        amplitude: f64,
+        f0: f64,
+        f1: f64,
+        duration: f64,
+        offset: f64,
+    },
     /// Piecewise-linear interpolation of `(t, f)` points, constant outside.
     Table { points: Vec<(f64, f64)> },
     /// Smooth spin-up of a hub (Simo & Vu-Quoc 1986; Kane, Ryan & Banerjee 1987):
@@ -109,6 +119,24 @@ impl TimeFunction {
                     offset + amplitude * s,
                     amplitude * w * c,
                     -amplitude * w * w * s,
+                )
+            }
+            TimeFunction::Chirp {
+                amplitude,
+                f0,
+                f1,
+                duration,
+                offset,
+            } => {
+                // phase 2 pi (f0 t + r t^2 / 2), r the sweep rate
+                let r = (f1 - f0) / duration;
+                let phi = 2.0 * PI * (f0 * t + 0.5 * r * t * t);
+                let (dphi, ddphi) = (2.0 * PI * (f0 + r * t), 2.0 * PI * r);
+                let (s, c) = phi.sin_cos();
+                (
+                    offset + amplitude * s,
+                    amplitude * c * dphi,
+                    amplitude * (ddphi * c - dphi * dphi * s),
                 )
             }
             TimeFunction::Table { points } => table(points, t),
@@ -212,7 +240,9 @@ impl TimeFunction {
             | TimeFunction::Step { .. }
             | TimeFunction::SmoothStep { .. } => vec!["value".into()],
             TimeFunction::Linear { .. } => vec!["slope".into(), "offset".into()],
-            TimeFunction::Sine { .. } => vec!["amplitude".into(), "offset".into()],
+            TimeFunction::Sine { .. } | TimeFunction::Chirp { .. } => {
+                vec!["amplitude".into(), "offset".into()]
+            }
             TimeFunction::Table { points } => {
                 (0..points.len()).map(|i| format!("points.{i}.1")).collect()
             }
@@ -236,7 +266,9 @@ impl TimeFunction {
     pub fn amplitude_count(&self) -> usize {
         match self {
             TimeFunction::Table { points } => points.len(),
-            TimeFunction::Linear { .. } | TimeFunction::Sine { .. } => 2,
+            TimeFunction::Linear { .. }
+            | TimeFunction::Sine { .. }
+            | TimeFunction::Chirp { .. } => 2,
             TimeFunction::Delay { function, .. } | TimeFunction::Window { function, .. } => {
                 function.amplitude_count()
             }
@@ -273,6 +305,9 @@ impl TimeFunction {
             TimeFunction::Linear { slope, offset, .. } => vec![slope, offset],
             TimeFunction::Sine {
                 amplitude, offset, ..
+            }
+            | TimeFunction::Chirp {
+                amplitude, offset, ..
             } => vec![amplitude, offset],
             TimeFunction::Table { points } => points.iter_mut().map(|p| &mut p.1).collect(),
             TimeFunction::SpinUp { omega, .. } => vec![omega],
@@ -301,6 +336,9 @@ impl TimeFunction {
             | TimeFunction::SmoothStep { value, .. } => [*value][k],
             TimeFunction::Linear { slope, offset, .. } => [*slope, *offset][k],
             TimeFunction::Sine {
+                amplitude, offset, ..
+            }
+            | TimeFunction::Chirp {
                 amplitude, offset, ..
             } => [*amplitude, *offset][k],
             TimeFunction::Table { points } => points[k].1,
@@ -443,6 +481,16 @@ mod tests {
             },
             &[0.5, 3.0],
         );
+        check_derivatives(
+            &TimeFunction::Chirp {
+                amplitude: 0.5,
+                f0: 0.5,
+                f1: 4.0,
+                duration: 2.0,
+                offset: 0.1,
+            },
+            &[0.0, 0.7, 1.9, 3.0],
+        );
     }
 
     #[test]
@@ -471,6 +519,13 @@ mod tests {
             },
             TimeFunction::Table {
                 points: vec![(0.0, 1.0), (1.0, 5.0), (2.0, -1.0)],
+            },
+            TimeFunction::Chirp {
+                amplitude: 0.5,
+                f0: 0.5,
+                f1: 4.0,
+                duration: 2.0,
+                offset: 0.1,
             },
             TimeFunction::SpinUp {
                 omega: 6.0,

@@ -311,6 +311,24 @@ impl TimeFunction {
                 in_range(*phase, -MAX_ANGLE, MAX_ANGLE).map_err(|m| format!("phase {m}"))?;
                 value("offset", *offset)
             }
+            TimeFunction::Chirp {
+                amplitude,
+                f0,
+                f1,
+                duration,
+                offset,
+            } => {
+                value("amplitude", *amplitude)?;
+                for (name, f) in [("f0", f0), ("f1", f1)] {
+                    in_range(*f, -MAX_KINEMATIC, MAX_KINEMATIC)
+                        .map_err(|m| format!("{name} {m}"))?;
+                }
+                time("duration", *duration)?;
+                if *duration <= 0.0 {
+                    return Err(format!("duration must be positive, got {duration}"));
+                }
+                value("offset", *offset)
+            }
             TimeFunction::Table { points } => {
                 if points.is_empty() {
                     return Err("needs at least one [t, value] point".into());
