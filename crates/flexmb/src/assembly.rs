@@ -286,7 +286,10 @@ impl<'a> Pass<'a> {
             layout,
             it: *it,
             sc: *sc,
-            ctx: Context::at(model, it.t, sc.load_factor),
+            ctx: Context {
+                acceleration_level: sc.constraint_rhs == ConstraintRhs::Acceleration,
+                ..Context::at(model, it.t, sc.load_factor)
+            },
             ground: [NodeState::ground(Default::default()); 2],
         }
     }

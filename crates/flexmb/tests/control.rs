@@ -244,3 +244,44 @@ block = "signal"
     assert_eq!(samples, 11, "sample instants among the outputs");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn servo_constraint_gives_the_inverse_dynamics_input_of_a_mass_spring_mass() {
+    // examples/servo_mass_spring_mass.toml (its header derives the exact solution): cart 1
+    // prescribed, x1 = A (1 - cos(w t)); cart 2 on the spring, y = x2 - 1 from
+    // m2 y'' + k y = k x1; the input u = m1 x1'' - k (y - x1).
+    let (a, w, m1, m2, k): (f64, f64, f64, f64, f64) = (0.1, std::f64::consts::PI, 1.0, 0.5, 100.0);
+    let big = (k / m2).sqrt();
+    let c = a * big * big / (big * big - w * w);
+    let x1 = |t: f64| a * (1.0 - (w * t).cos());
+    let y = |t: f64| a - c * (w * t).cos() + (c - a) * (big * t).cos();
+    let u = |t: f64| m1 * a * w * w * (w * t).cos() - k * (y(t) - x1(t));
+    let mut errors = Vec::new();
+    let hs = [2e-3, 1e-3, 5e-4];
+    for h in hs {
+        let hist = common::run("servo_mass_spring_mass.toml", &[&format!("solver.h={h}")]);
+        let on_path = hist
+            .series("x1")
+            .iter()
+            .map(|&(t, x)| (x - x1(t)).abs())
+            .fold(0.0, f64::max);
+        assert!(on_path < 1e-10, "x1 off its trajectory by {on_path:e}");
+        let err = hist
+            .series("force")
+            .iter()
+            .map(|&(t, f)| (f - u(t)).abs())
+            .fold(0.0, f64::max);
+        let err_x2 = hist
+            .series("x2")
+            .iter()
+            .map(|&(t, x)| (x - 1.0 - y(t)).abs())
+            .fold(0.0, f64::max);
+        eprintln!("h {h}: input error {err:.3e}, x2 error {err_x2:.3e}");
+        errors.push(err);
+    }
+    let order = common::order(&hs, &errors);
+    eprintln!("servo input: errors {errors:?}, order {order:.2}");
+    // |u| up to about 3 N
+    assert!(errors[1] < 1e-3, "input error at h = 1e-3: {:e}", errors[1]);
+    assert!((order - 2.0).abs() < 0.2, "order {order}");
+}

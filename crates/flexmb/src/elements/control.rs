@@ -122,6 +122,9 @@ pub fn slots(model: &Model) -> Vec<Option<NodeId>> {
         let (quantity, target) = match &b.kind {
             BlockKind::Measure(q) => (Some(q), None),
             BlockKind::Actuator(t) => (None, Some(t)),
+            BlockKind::Servo {
+                quantity, target, ..
+            } => (Some(quantity), Some(target)),
             _ => (None, None),
         };
         if let Some(q) = quantity {
@@ -294,6 +297,18 @@ fn interpolate<T: RealField + Copy>(xs: &[f64], ys: &[T], u: T) -> T {
 enum Phase {
     Run,
     Initial,
+    /// The consistent initial accelerations ([`Context::acceleration_level`]).
+    Accelerations,
+}
+
+impl Phase {
+    fn of(ctx: &Context) -> Self {
+        if ctx.acceleration_level {
+            Phase::Accelerations
+        } else {
+            Phase::Run
+        }
+    }
 }
 
 impl ControlElement<'_> {
@@ -363,6 +378,45 @@ impl ControlElement<'_> {
                     }
                 }
             }
+        }
+    }
+
+    /// The second time derivative of a position-level quantity (a node's position along an
+    /// axis, a joint coordinate), from the slots' accelerations.
+    fn second_derivative<T: Scalar>(&self, q: &Quantity, poses: &[Pose<T>]) -> T {
+        match q {
+            Quantity::Position { node, point, axis } => {
+                let acceleration = Quantity::Acceleration {
+                    node: *node,
+                    point: *point,
+                    axis: *axis,
+                };
+                self.measure(&acceleration, poses, c(0.0))
+            }
+            Quantity::JointCoordinate { joint } => {
+                let j = &self.model.joints[joint.0];
+                let (a, b) = (&poses[self.slot(j.node_a)], &poses[self.slot(j.node_b)]);
+                let (pa, fa, pb, _) = joint_frames(j, a, b);
+                let axis = fa.column(2).into_owned();
+                let (wa, wb) = (a.r * a.om, b.r * b.om);
+                let (aa, ab) = (a.r * a.omdot, b.r * b.omdot);
+                let axis_dot = wa.cross(&axis);
+                if is_angle(j) {
+                    axis.dot(&(ab - aa)) + axis_dot.dot(&(wb - wa))
+                } else {
+                    // material accelerations of the joint points
+                    let acc = |p: &Pose<T>, w: &Vector3<T>, al: &Vector3<T>, at: &Vector3<T>| {
+                        let r = at - p.x;
+                        p.xddot + al.cross(&r) + w.cross(&w.cross(&r))
+                    };
+                    let axis_ddot = aa.cross(&axis) + wa.cross(&axis_dot);
+                    let d = pb - pa;
+                    let d_dot = b.velocity_at(&pb) - a.velocity_at(&pa);
+                    let d_ddot = acc(b, &wb, &ab, &pb) - acc(a, &wa, &aa, &pa);
+                    axis_ddot.dot(&d) + axis_dot.dot(&d_dot) * c(2.0) + axis.dot(&d_ddot)
+                }
+            }
+            _ => unreachable!("a servo follows a position-level quantity"),
         }
     }
 
@@ -555,8 +609,8 @@ impl ControlElement<'_> {
                 }
                 BlockKind::Hold { .. } => {
                     e[s0] = match phase {
-                        Phase::Run => xd[0],
                         Phase::Initial => xs[0] - u[0],
+                        _ => xd[0],
                     };
                     e[y0] = ys[0] - xs[0];
                 }
@@ -567,6 +621,32 @@ impl ControlElement<'_> {
                 }
                 BlockKind::Measure(q) => e[y0] = ys[0] - self.measure(q, poses, ys[0]),
                 BlockKind::Actuator(target) => self.actuate(target, poses, u[0], nodes),
+                BlockKind::Servo {
+                    quantity,
+                    target,
+                    function,
+                } => {
+                    // f(t) and f''(t), linear in the amplitudes (the first parameters)
+                    let n = function.amplitude_count();
+                    let (f0, _, f2) = function.eval(t);
+                    let (mut f, mut fdd) = (c::<T>(f0), c::<T>(f2));
+                    for k in 0..n {
+                        let (g, _, g2) = function.amplitude_derivative(k, t);
+                        let dp = p(k) - c(block.params[k]);
+                        f += dp * c(g);
+                        fdd += dp * c(g2);
+                    }
+                    // position level; for the consistent initial accelerations, acceleration
+                    // level where the input enters it (collocated), else u = initial
+                    e[y0] = match phase {
+                        Phase::Accelerations if ControlSystem::collocated(quantity, target) => {
+                            self.second_derivative(quantity, poses) - fdd
+                        }
+                        Phase::Accelerations => ys[0] - p(n),
+                        _ => self.measure(quantity, poses, f) - f,
+                    };
+                    self.actuate(target, poses, ys[0], nodes);
+                }
             }
         }
         out
@@ -637,12 +717,18 @@ impl ControlElement<'_> {
         let sys = self.system;
         let unknowns: Vec<usize> = (0..sys.n_unknowns)
             .filter(|&i| {
-                sys.is_output(i)
-                    || sys.blocks.iter().enumerate().any(|(b, block)| {
-                        matches!(block.kind, BlockKind::Hold { .. }) && sys.state_start[b] == i
-                    })
+                let b = sys.owner(i);
+                match sys.blocks[b].kind {
+                    // (its input follows from the mechanics: the initial accelerations)
+                    BlockKind::Servo { .. } => false,
+                    BlockKind::Hold { .. } => true,
+                    _ => sys.is_output(i),
+                }
             })
             .collect();
+        if unknowns.is_empty() {
+            return;
+        }
         let ns = PER_SLOT * self.slots.len();
         let rows = 6 * self.slots.len();
         for _ in 0..30 {
@@ -869,6 +955,7 @@ impl ElementKernel for ControlElement<'_> {
                         x[s0 + k] = initial(&format!("x0[{k}]"));
                     }
                 }
+                BlockKind::Servo { .. } => x[sys.output_start[b]] = initial("initial"),
                 _ => {}
             }
         }
@@ -894,14 +981,14 @@ impl ElementKernel for ControlElement<'_> {
                 (local.x, local.xdot),
                 ctx.t,
                 &self.param_f64(),
-                Phase::Run,
+                Phase::of(ctx),
             );
             let rp = DVector::from_column_slice(&out[..rows]);
             physical::to_group(group, local.nodes, &active, &rp, None, None, r, None);
             r.rows_mut(rows, n).copy_from_slice(&out[rows..]);
             return;
         };
-        let (value, jac) = self.jacobian(ctx, local, Phase::Run);
+        let (value, jac) = self.jacobian(ctx, local, Phase::of(ctx));
         let ns = PER_SLOT * nslots;
         let rp = value.rows(0, rows).into_owned();
         let node_block = |offset: usize| {
@@ -1082,7 +1169,7 @@ impl ElementParameters for ControlElement<'_> {
                 v
             }
         };
-        let out = self.residual(&poses, (&x, &xdot), ctx.t, &params, Phase::Run);
+        let out = self.residual(&poses, (&x, &xdot), ctx.t, &params, Phase::of(ctx));
         let rows = 6 * self.slots.len();
         let d = DVector::from_fn(rows, |i, _| out[i].eps);
         physical::to_group(

@@ -174,6 +174,10 @@ pub struct Context<'a> {
     pub gravity_scale: f64,
     /// Applied loads are multiplied by this factor (load factor in statics, 1 in dynamics).
     pub load_scale: f64,
+    /// The system of the consistent initial accelerations is assembled: position-level
+    /// equations of elements (a servo constraint) are written at acceleration level there,
+    /// like the joints' rows.
+    pub acceleration_level: bool,
 }
 
 impl<'a> Context<'a> {
@@ -185,6 +189,7 @@ impl<'a> Context<'a> {
             t,
             gravity_scale: load_factor,
             load_scale: load_factor,
+            acceleration_level: false,
         }
     }
 }

@@ -32,6 +32,7 @@ const TYPES: &[&str] = &[
     "dc_motor",
     "measure",
     "actuator",
+    "servo",
 ];
 
 /// Any finite number in the physical range (gains, limits, coefficients: any sign).
@@ -83,9 +84,10 @@ fn matrix(
     Ok((items.len(), width.unwrap_or(0), out))
 }
 
-/// The unit vector of `axis`, or of `component = "x" | "y" | "z"`.
-fn axis(t: &Table<'_>) -> Result<Vec3> {
-    match (t.field("axis"), t.field("component")) {
+/// The unit vector of `<prefix>axis`, or of `<prefix>component = "x" | "y" | "z"`.
+fn axis(t: &Table<'_>, prefix: &str) -> Result<Vec3> {
+    let (axis_key, component_key) = (format!("{prefix}axis"), format!("{prefix}component"));
+    match (t.field(&axis_key), t.field(&component_key)) {
         (Some(f), None) => Ok(nonzero_vec3(&f)?.normalize()),
         (None, Some(f)) => {
             let c = f.choice(&["x", "y", "z"])?;
@@ -290,6 +292,23 @@ fn keys(ty: &str) -> Vec<&'static str> {
             "axis",
             "joint",
             "follower",
+        ],
+        "servo" => &[
+            "quantity",
+            "node",
+            "point",
+            "component",
+            "axis",
+            "joint",
+            "function",
+            "target",
+            "target_node",
+            "target_point",
+            "target_component",
+            "target_axis",
+            "target_joint",
+            "follower",
+            "initial",
         ],
         _ => &[],
     });
@@ -502,25 +521,55 @@ fn read_kind(
             ],
         ),
         "measure" => (
-            BlockKind::Measure(read_quantity(t, model, origins)?),
+            BlockKind::Measure(read_quantity(t, model, origins, QUANTITIES)?),
             Vec::new(),
         ),
+        "servo" => {
+            let quantity = read_quantity(t, model, origins, &["position", "joint_coordinate"])?;
+            let target = read_target(t, model, origins, "target_")?;
+            if !ControlSystem::collocated(&quantity, &target) {
+                return Err(t.key_err(
+                    "target",
+                    "a servo's target must act along the quantity it prescribes (a force on the same node along the same axis, or the same joint): non-collocated servo constraints are of higher index and not supported yet",
+                ));
+            }
+            let function = read_function(&t.req("function")?)?;
+            let mut params: Vec<f64> = (0..function.amplitude_count())
+                .map(|k| function.amplitude(k))
+                .collect();
+            params.push(number_or(t, "initial", 0.0)?);
+            let kind = BlockKind::Servo {
+                quantity,
+                target,
+                function,
+            };
+            (kind, params)
+        }
         _ => (
-            BlockKind::Actuator(read_target(t, model, origins)?),
+            BlockKind::Actuator(read_target(t, model, origins, "")?),
             Vec::new(),
         ),
     })
 }
 
-fn read_quantity(t: &Table<'_>, model: &Model, origins: &Origins) -> Result<Quantity> {
-    let q = t.req("quantity")?.choice(&[
-        "position",
-        "velocity",
-        "acceleration",
-        "angular_velocity",
-        "joint_coordinate",
-        "joint_rate",
-    ])?;
+/// The quantities a measurement reads.
+const QUANTITIES: &[&str] = &[
+    "position",
+    "velocity",
+    "acceleration",
+    "angular_velocity",
+    "joint_coordinate",
+    "joint_rate",
+];
+
+/// The `quantity` of a measurement or servo (one of `allowed`) and what it is of.
+fn read_quantity(
+    t: &Table<'_>,
+    model: &Model,
+    origins: &Origins,
+    allowed: &[&'static str],
+) -> Result<Quantity> {
+    let q = t.req("quantity")?.choice(allowed)?;
     Ok(match q {
         "joint_coordinate" | "joint_rate" => {
             let f = t.req("joint")?;
@@ -534,7 +583,7 @@ fn read_quantity(t: &Table<'_>, model: &Model, origins: &Origins) -> Result<Quan
         }
         _ => {
             let node = require_node(model, origins, &t.req("node")?)?;
-            let axis = axis(t)?;
+            let axis = axis(t, "")?;
             let p = match t.field("point") {
                 Some(f) => point(&f)?,
                 None => model.nodes[node.0].frame.x,
@@ -564,22 +613,25 @@ fn check_joint_axis(model: &Model, f: &Field<'_>, joint: crate::model::JointId) 
     }
 }
 
-fn read_target(t: &Table<'_>, model: &Model, origins: &Origins) -> Result<Target> {
+/// The `target` of an actuator (its keys `joint`, `node`, ...) or of a servo (`target_joint`,
+/// `target_node`, ...: `prefix` "target_").
+fn read_target(t: &Table<'_>, model: &Model, origins: &Origins, prefix: &str) -> Result<Target> {
+    let key = |k: &str| format!("{prefix}{k}");
     let target = t.req("target")?.choice(&["joint", "force", "moment"])?;
     Ok(match target {
         "joint" => {
-            let f = t.req("joint")?;
+            let f = t.req(&key("joint"))?;
             let joint = require_joint(model, origins, &f)?;
             check_joint_axis(model, &f, joint)?;
             Target::Joint { joint }
         }
         _ => {
-            let node = require_node(model, origins, &t.req("node")?)?;
+            let node = require_node(model, origins, &t.req(&key("node"))?)?;
             let follower = match t.field("follower") {
                 Some(f) => f.bool()?,
                 None => false,
             };
-            let mut axis = axis(t)?;
+            let mut axis = axis(t, prefix)?;
             if follower {
                 axis = model.nodes[node.0].frame.r.transpose() * axis;
             }
@@ -590,7 +642,7 @@ fn read_target(t: &Table<'_>, model: &Model, origins: &Origins) -> Result<Target
                     follower,
                 }
             } else {
-                let p = match t.field("point") {
+                let p = match t.field(&key("point")) {
                     Some(f) => point(&f)?,
                     None => model.nodes[node.0].frame.x,
                 };

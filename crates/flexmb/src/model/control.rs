@@ -120,6 +120,17 @@ pub enum BlockKind {
     Measure(Quantity),
     /// Applies its input to the mechanics.
     Actuator(Target),
+    /// Servo constraint: its output `u`, applied along `target`, is the input that makes
+    /// `quantity` (a node's position along an axis, or a joint coordinate) follow `f(t)`
+    /// (params: the amplitudes of `f`, as a source's, then `initial`, the value of `u`
+    /// the consistent initial accelerations start from when `target` is not collocated
+    /// with `quantity`). The inverse dynamics of an underactuated system (Blajer &
+    /// Kołodziejczyk 2004).
+    Servo {
+        quantity: Quantity,
+        target: Target,
+        function: TimeFunction,
+    },
 }
 
 impl BlockKind {
@@ -143,13 +154,14 @@ impl BlockKind {
             BlockKind::DcMotor => "dc_motor",
             BlockKind::Measure(_) => "measure",
             BlockKind::Actuator(_) => "actuator",
+            BlockKind::Servo { .. } => "servo",
         }
     }
 
     /// Number of inputs.
     pub fn n_inputs(&self) -> usize {
         match self {
-            BlockKind::Source(_) | BlockKind::Measure(_) => 0,
+            BlockKind::Source(_) | BlockKind::Measure(_) | BlockKind::Servo { .. } => 0,
             BlockKind::Gain { cols, .. } => *cols,
             BlockKind::Sum { signs } => signs.len(),
             BlockKind::Product { inputs } => *inputs,
@@ -196,6 +208,7 @@ impl BlockKind {
                 | BlockKind::DcMotor
                 | BlockKind::Source(_)
                 | BlockKind::Measure(_)
+                | BlockKind::Servo { .. }
         )
     }
 
@@ -215,6 +228,12 @@ impl BlockKind {
                 .amplitude_keys()
                 .iter()
                 .map(|k| format!("function.{k}"))
+                .collect(),
+            BlockKind::Servo { function: f, .. } => f
+                .amplitude_keys()
+                .iter()
+                .map(|k| format!("function.{k}"))
+                .chain(["initial".to_string()])
                 .collect(),
             BlockKind::Gain { rows: 1, cols: 1 } => list(&["gain"]),
             BlockKind::Gain { rows, cols } => matrix("gain", *rows, *cols),
@@ -262,8 +281,10 @@ impl Block {
     /// Sets parameter `k` (a source's amplitude in its function too).
     pub fn set_param(&mut self, k: usize, value: f64) {
         self.params[k] = value;
-        if let BlockKind::Source(f) = &mut self.kind {
-            f.set_amplitude(k, value);
+        if let BlockKind::Source(f) | BlockKind::Servo { function: f, .. } = &mut self.kind {
+            if k < f.amplitude_count() {
+                f.set_amplitude(k, value);
+            }
         }
     }
 
@@ -310,6 +331,25 @@ impl ControlSystem {
         self.blocks.is_empty()
     }
 
+    /// Whether a servo's target acts along its measured quantity (a force on the measured
+    /// node along the measured axis, a joint's torque or force on its own coordinate): its
+    /// input then appears in the quantity's second derivative (relative degree 2).
+    pub fn collocated(quantity: &Quantity, target: &Target) -> bool {
+        match (quantity, target) {
+            (
+                Quantity::Position { node, axis, .. },
+                Target::Force {
+                    node: n,
+                    axis: a,
+                    follower: false,
+                    ..
+                },
+            ) => node == n && (axis - a).norm() < 1e-12,
+            (Quantity::JointCoordinate { joint }, Target::Joint { joint: j }) => joint == j,
+            _ => false,
+        }
+    }
+
     /// Whether a block is a zero-order hold (the diagram then has events: its samples).
     pub fn has_holds(&self) -> bool {
         self.blocks
@@ -324,7 +364,7 @@ impl ControlSystem {
 
     /// The block that owns unknown `i` (the last whose unknowns start at or before `i`: a
     /// block without unknowns shares its start with the next block).
-    fn owner(&self, i: usize) -> usize {
+    pub fn owner(&self, i: usize) -> usize {
         self.state_start.partition_point(|&s| s <= i) - 1
     }
 

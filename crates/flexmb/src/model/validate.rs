@@ -1099,7 +1099,7 @@ impl Model {
     /// constants and a hold's period positive; limits ordered; a transfer function's
     /// leading denominator coefficient nonzero).
     fn validate_control(&self) -> Result<(), ModelError> {
-        use super::control::{BlockKind, Quantity, Target};
+        use super::control::BlockKind;
         let blocks = &self.control.blocks;
         for (i, b) in blocks.iter().enumerate() {
             let fail = |field, m| bad("block", i, &b.name, field, m);
@@ -1194,39 +1194,74 @@ impl Model {
                         positive(field, p[k])?;
                     }
                 }
-                BlockKind::Measure(q) => match q {
-                    Quantity::Position { node, .. }
-                    | Quantity::Velocity { node, .. }
-                    | Quantity::Acceleration { node, .. }
-                    | Quantity::AngularVelocity { node, .. } => {
-                        self.check_node("block", i, &b.name, "node", Some(*node))?
-                    }
-                    Quantity::JointCoordinate { joint } | Quantity::JointRate { joint } => {
-                        if joint.0 >= self.joints.len() {
-                            return Err(fail(
-                                "joint",
-                                format!("joint index {} does not exist", joint.0),
-                            ));
-                        }
-                    }
-                },
-                BlockKind::Actuator(t) => match t {
-                    Target::Force { node, .. } | Target::Moment { node, .. } => {
-                        self.check_node("block", i, &b.name, "node", Some(*node))?
-                    }
-                    Target::Joint { joint } => {
-                        if joint.0 >= self.joints.len() {
-                            return Err(fail(
-                                "joint",
-                                format!("joint index {} does not exist", joint.0),
-                            ));
-                        }
-                    }
-                },
+                BlockKind::Measure(q) => self.check_quantity(i, b, q)?,
+                BlockKind::Actuator(t) => self.check_target(i, b, t)?,
+                BlockKind::Servo {
+                    quantity, target, ..
+                } => {
+                    self.check_quantity(i, b, quantity)?;
+                    self.check_target(i, b, target)?;
+                }
                 _ => {}
             }
         }
         Ok(())
+    }
+
+    /// The node or joint a measurement of block `i` reads exists.
+    fn check_quantity(
+        &self,
+        i: usize,
+        b: &super::control::Block,
+        q: &super::control::Quantity,
+    ) -> Result<(), ModelError> {
+        use super::control::Quantity;
+        match q {
+            Quantity::Position { node, .. }
+            | Quantity::Velocity { node, .. }
+            | Quantity::Acceleration { node, .. }
+            | Quantity::AngularVelocity { node, .. } => {
+                self.check_node("block", i, &b.name, "node", Some(*node))
+            }
+            Quantity::JointCoordinate { joint } | Quantity::JointRate { joint } => {
+                self.check_joint_index(i, b, *joint)
+            }
+        }
+    }
+
+    /// The node or joint the actuator of block `i` acts on exists.
+    fn check_target(
+        &self,
+        i: usize,
+        b: &super::control::Block,
+        t: &super::control::Target,
+    ) -> Result<(), ModelError> {
+        use super::control::Target;
+        match t {
+            Target::Force { node, .. } | Target::Moment { node, .. } => {
+                self.check_node("block", i, &b.name, "node", Some(*node))
+            }
+            Target::Joint { joint } => self.check_joint_index(i, b, *joint),
+        }
+    }
+
+    fn check_joint_index(
+        &self,
+        i: usize,
+        b: &super::control::Block,
+        joint: super::JointId,
+    ) -> Result<(), ModelError> {
+        if joint.0 < self.joints.len() {
+            Ok(())
+        } else {
+            Err(bad(
+                "block",
+                i,
+                &b.name,
+                "joint",
+                format!("joint index {} does not exist", joint.0),
+            ))
+        }
     }
 
     fn validate_gears(&self) -> Result<(), ModelError> {

@@ -442,6 +442,21 @@ pub fn control_diagram(group: flexmb_lie::Group) -> flexmb::model::Model {
             vec![],
             vec![s(21)],
         ),
+        block(
+            "servo",
+            BlockKind::Servo {
+                quantity: Quantity::JointCoordinate { joint: hinge },
+                target: Target::Joint { joint: hinge },
+                function: TimeFunction::Sine {
+                    amplitude: 0.3,
+                    frequency: 0.8,
+                    phase: 0.0,
+                    offset: 0.0,
+                },
+            },
+            vec![0.3, 0.0, 0.5],
+            vec![],
+        ),
     ];
     m.control = ControlSystem::new(blocks);
     m
