@@ -877,7 +877,8 @@ pub fn unsolvable_loop(model: &Model) -> Option<(usize, String)> {
         let a = DMatrix::from_fn(m, m, |i, j| jac[(rows + outputs[i], ns + outputs[j])]);
         let svd = a.singular_values();
         let (smax, smin) = (svd.max(), svd.min());
-        if !(smin > 1e-10 * smax.max(1.0)) {
+        // (a NaN singular value counts as singular)
+        if smin.is_nan() || smin <= 1e-10 * smax.max(1.0) {
             let names: Vec<String> = blocks
                 .iter()
                 .map(|&b| format!("'{}'", system.blocks[b].name))

@@ -151,12 +151,15 @@ fn read_signal(f: &Field<'_>) -> Result<TimeFunction> {
     Ok(TimeFunction::Table { points })
 }
 
+/// The field that names a block's inputs (`input` or `inputs`), and each name with its
+/// own field.
+type InputNames<'a> = (Field<'a>, Vec<(Field<'a>, &'a str)>);
+
 /// What one `[[block]]` says before its inputs are resolved.
 struct Parsed<'a> {
     table: Table<'a>,
     block: Block,
-    /// The field that names the inputs (`input` or `inputs`) and the names.
-    inputs: Option<(Field<'a>, Vec<(Field<'a>, &'a str)>)>,
+    inputs: Option<InputNames<'a>>,
 }
 
 pub(super) fn read_blocks(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
@@ -219,7 +222,7 @@ pub(super) fn read_blocks(top: &Table<'_>, model: &mut Model, origins: &mut Orig
 }
 
 /// The names of `input` (one) or `inputs` (a list).
-fn read_input_names<'a>(t: &Table<'a>) -> Result<Option<(Field<'a>, Vec<(Field<'a>, &'a str)>)>> {
+fn read_input_names<'a>(t: &Table<'a>) -> Result<Option<InputNames<'a>>> {
     match (t.field("input"), t.field("inputs")) {
         (Some(f), None) => {
             let name = f.str()?;
