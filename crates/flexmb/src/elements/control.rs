@@ -88,6 +88,7 @@
 //! - K. J. Åström, T. Hägglund, Advanced PID Control, ISA, 2006, Sect. 3.5 (anti-windup
 //!   by back-calculation) and Sect. 3.3 (filtered derivative).
 
+use super::pose::{c, pose, Pose};
 use super::{
     physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
     LocalMatrix, LocalVector, NodeState, StepLimit,
@@ -154,18 +155,6 @@ pub fn slots(model: &Model) -> Vec<Option<NodeId>> {
     out
 }
 
-/// Physical kinematics of a slot: configuration, velocity `(xdot, omega)` and acceleration
-/// `(xddot, omegadot)` (`omega` in the body frame).
-#[derive(Clone, Copy, Debug)]
-struct Pose<T: RealField + Copy> {
-    x: Vector3<T>,
-    r: Matrix3<T>,
-    xdot: Vector3<T>,
-    om: Vector3<T>,
-    xddot: Vector3<T>,
-    omdot: Vector3<T>,
-}
-
 /// The scalars the residual is evaluated in: `f64`, and dual numbers for its derivatives.
 trait Scalar: RealField + Copy {
     /// The real part.
@@ -184,52 +173,15 @@ impl Scalar for Dual64 {
     }
 }
 
-fn c<T: RealField + Copy>(v: f64) -> T {
-    nalgebra::convert(v)
-}
-
-fn lift<T: RealField + Copy>(v: &Vec3) -> Vector3<T> {
+/// `v` as a vector of the scalar type `T`.
+fn vector<T: RealField + Copy>(v: &Vec3) -> Vector3<T> {
     v.map(c)
 }
 
-impl<T: RealField + Copy> Pose<T> {
-    fn point(&self, p: &Vec3) -> Vector3<T> {
-        self.x + self.r * lift(p)
-    }
-    /// Velocity of the material point at the inertial position `p`.
-    fn velocity_at(&self, p: &Vector3<T>) -> Vector3<T> {
-        self.xdot + (self.r * self.om).cross(&(p - self.x))
-    }
-    /// Adds the generalized force of `f` at the inertial point `p` times `sign` to the
-    /// slot's residual rows (`r = -generalized force`).
-    fn apply_force(&self, f: &Vector3<T>, p: &Vector3<T>, sign: f64, r: &mut [T]) {
-        let rt = self.r.transpose();
-        let m = (rt * (p - self.x)).cross(&(rt * f));
-        let s: T = c(-sign);
-        for k in 0..3 {
-            r[k] += f[k] * s;
-            r[3 + k] += m[k] * s;
-        }
-    }
-    fn apply_moment(&self, m: &Vector3<T>, sign: f64, r: &mut [T]) {
-        let mb = self.r.transpose() * m;
-        let s: T = c(-sign);
-        for k in 0..3 {
-            r[3 + k] += mb[k] * s;
-        }
-    }
-}
-
-/// Physical kinematics of a node in `f64`.
-fn pose(group: Group, node: &NodeState) -> Pose<f64> {
-    let (xdot, om) = physical::velocity(group, node);
-    Pose {
-        x: node.q.x,
-        r: node.q.r,
-        xdot,
-        om,
-        xddot: super::point_acceleration(group, node, &Vec3::zeros()),
-        omdot: node.vdot.fixed_rows::<3>(3).into_owned(),
+/// `r -= g`: a generalized force ([`Pose::generalized`]) on a slot's residual rows.
+fn subtract<T: RealField + Copy>(r: &mut [T], g: [T; 6]) {
+    for (ri, gi) in r.iter_mut().zip(g) {
+        *ri -= gi;
     }
 }
 
@@ -242,12 +194,12 @@ fn perturbed<T: RealField + Copy>(p: &Pose<f64>, w: &[T]) -> Pose<T> {
     let v = |i: usize| Vector3::new(w[i], w[i + 1], w[i + 2]);
     let r = p.r.map(c::<T>) * (Matrix3::identity() + v(3).cross_matrix());
     Pose {
-        x: lift(&p.x) + v(0),
+        x: vector(&p.x) + v(0),
         r,
-        xdot: lift(&p.xdot) + v(6),
-        om: lift(&p.om) + v(9),
-        xddot: lift(&p.xddot) + v(12),
-        omdot: lift(&p.omdot) + v(15),
+        xdot: vector(&p.xdot) + v(6),
+        om: vector(&p.om) + v(9),
+        xddot: vector(&p.xddot) + v(12),
+        omdot: vector(&p.omdot) + v(15),
     }
 }
 
@@ -333,14 +285,14 @@ impl ControlElement<'_> {
                 node: n,
                 point,
                 axis,
-            } => node(*n).point(point).dot(&lift(axis)),
+            } => node(*n).point(point).dot(&vector(axis)),
             Quantity::Velocity {
                 node: n,
                 point,
                 axis,
             } => {
                 let p = node(*n);
-                (p.xdot + p.r * p.om.cross(&lift(point))).dot(&lift(axis))
+                (p.xdot + p.r * p.om.cross(&vector(point))).dot(&vector(axis))
             }
             Quantity::Acceleration {
                 node: n,
@@ -348,13 +300,13 @@ impl ControlElement<'_> {
                 axis,
             } => {
                 let p = node(*n);
-                let pt = lift(point);
+                let pt = vector(point);
                 let a = p.xddot + p.r * (p.omdot.cross(&pt) + p.om.cross(&p.om.cross(&pt)));
-                a.dot(&lift(axis))
+                a.dot(&vector(axis))
             }
             Quantity::AngularVelocity { node: n, axis } => {
                 let p = node(*n);
-                (p.r * p.om).dot(&lift(axis))
+                (p.r * p.om).dot(&vector(axis))
             }
             Quantity::JointCoordinate { joint } | Quantity::JointRate { joint } => {
                 let j = &self.model.joints[joint.0];
@@ -422,6 +374,17 @@ impl ControlElement<'_> {
 
     /// Adds the generalized force of actuator input `u` on `target` to the node rows.
     fn actuate<T: RealField + Copy>(&self, target: &Target, poses: &[Pose<T>], u: T, r: &mut [T]) {
+        // the slot of a node and `u` times a direction fixed in space or turning with it
+        let along = |node: &NodeId, axis: &Vec3, follower: bool| {
+            let k = self.slot(Some(*node));
+            let p = &poses[k];
+            let dir = if follower {
+                p.r * vector(axis)
+            } else {
+                vector(axis)
+            };
+            (k, p, dir * u)
+        };
         match target {
             Target::Force {
                 node,
@@ -429,28 +392,19 @@ impl ControlElement<'_> {
                 axis,
                 follower,
             } => {
-                let k = self.slot(Some(*node));
-                let p = &poses[k];
-                let dir = if *follower {
-                    p.r * lift(axis)
-                } else {
-                    lift(axis)
-                };
-                p.apply_force(&(dir * u), &p.point(point), 1.0, &mut r[6 * k..6 * k + 6]);
+                let (k, p, f) = along(node, axis, *follower);
+                subtract(
+                    &mut r[6 * k..6 * k + 6],
+                    p.generalized(&f, &p.point(point), 1.0),
+                );
             }
             Target::Moment {
                 node,
                 axis,
                 follower,
             } => {
-                let k = self.slot(Some(*node));
-                let p = &poses[k];
-                let dir = if *follower {
-                    p.r * lift(axis)
-                } else {
-                    lift(axis)
-                };
-                p.apply_moment(&(dir * u), 1.0, &mut r[6 * k..6 * k + 6]);
+                let (k, p, m) = along(node, axis, *follower);
+                subtract(&mut r[6 * k..6 * k + 6], p.generalized_moment(&m, 1.0));
             }
             Target::Joint { joint } => {
                 let j = &self.model.joints[joint.0];
@@ -459,11 +413,14 @@ impl ControlElement<'_> {
                 let (_, fa, pb, _) = joint_frames(j, a, b);
                 let axis = fa.column(2).into_owned() * u;
                 if is_angle(j) {
-                    b.apply_moment(&axis, 1.0, &mut r[6 * kb..6 * kb + 6]);
-                    a.apply_moment(&axis, -1.0, &mut r[6 * ka..6 * ka + 6]);
+                    subtract(&mut r[6 * kb..6 * kb + 6], b.generalized_moment(&axis, 1.0));
+                    subtract(
+                        &mut r[6 * ka..6 * ka + 6],
+                        a.generalized_moment(&axis, -1.0),
+                    );
                 } else {
-                    b.apply_force(&axis, &pb, 1.0, &mut r[6 * kb..6 * kb + 6]);
-                    a.apply_force(&axis, &pb, -1.0, &mut r[6 * ka..6 * ka + 6]);
+                    subtract(&mut r[6 * kb..6 * kb + 6], b.generalized(&axis, &pb, 1.0));
+                    subtract(&mut r[6 * ka..6 * ka + 6], a.generalized(&axis, &pb, -1.0));
                 }
             }
         }

@@ -1,9 +1,11 @@
 //! The pose of a node slot as a generic scalar type, for the elements whose residual is one
 //! function of the two slots' poses differentiated by forward automatic differentiation
-//! (`num-dual`): contacts ([`super::contact`]) and worm gear meshes ([`super::worm_gear`]).
+//! (`num-dual`): contacts ([`super::contact`]), worm gear meshes ([`super::worm_gear`]) and
+//! the block diagram ([`super::control`]).
 //!
-//! A slot's pose is its position `x`, rotation `R` and physical velocity (`xdot` inertial,
-//! `Omega` in the body frame, [`super::physical::velocity`]). The variations the iteration
+//! A slot's pose is its position `x`, rotation `R`, physical velocity (`xdot` inertial,
+//! `Omega` in the body frame, [`super::physical::velocity`]) and acceleration (`xddot`
+//! inertial, `Omegadot`; the measurements of control blocks, [`super::control`], read it). The variations the iteration
 //! matrix needs, in physical coordinates ([`super::physical`]), are `x -> x + dx`,
 //! `R -> R (I + tilde(theta))` (exact to first order, which is all a forward derivative
 //! sees), `xdot -> xdot + dxdot`, `Omega -> Omega + dOmega`: [`perturbed`] lifts a pose to
@@ -14,13 +16,16 @@ use super::{physical, NodeState};
 use flexmb_lie::{Group, Vec3};
 use nalgebra::{Matrix3, RealField, SVector, Vector3};
 
-/// Configuration and physical velocity of one slot: `(x, R, xdot, Omega)`.
+/// Configuration, physical velocity and acceleration of one slot: `(x, R, xdot, Omega,
+/// xddot, Omegadot)`.
 #[derive(Clone, Copy, Debug)]
 pub struct Pose<T: RealField + Copy> {
     pub x: Vector3<T>,
     pub r: Matrix3<T>,
     pub xdot: Vector3<T>,
     pub om: Vector3<T>,
+    pub xddot: Vector3<T>,
+    pub omdot: Vector3<T>,
 }
 
 impl<T: RealField + Copy> Pose<T> {
@@ -68,6 +73,8 @@ pub fn pose(group: Group, node: &NodeState) -> Pose<f64> {
         r: node.q.r,
         xdot,
         om,
+        xddot: super::point_acceleration(group, node, &Vec3::zeros()),
+        omdot: node.vdot.fixed_rows::<3>(3).into_owned(),
     }
 }
 
@@ -78,6 +85,8 @@ pub fn lift(p: &Pose<f64>) -> Pose<D1> {
         r: p.r.map(D1::from_re),
         xdot: p.xdot.map(D1::from_re),
         om: p.om.map(D1::from_re),
+        xddot: p.xddot.map(D1::from_re),
+        omdot: p.omdot.map(D1::from_re),
     }
 }
 
@@ -103,5 +112,7 @@ pub fn perturbed<const N: usize>(
         r,
         xdot: p.xdot.map(Dv::from_re) + var(12 + 6 * k),
         om: p.om.map(Dv::from_re) + var(12 + 6 * k + 3),
+        xddot: p.xddot.map(Dv::from_re),
+        omdot: p.omdot.map(Dv::from_re),
     }
 }
