@@ -108,7 +108,7 @@
 use super::pose::{c, lift, perturbed, pose, Dv, Pose, D1};
 use super::{
     physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
-    LocalMatrix, LocalVector, NodeState, StepLimit, Vec12,
+    LocalMatrix, LocalVector, StepLimit, Vec12,
 };
 use crate::model::contact::{Contact, ContactShape};
 use crate::model::parameters::ContactParam;
@@ -273,31 +273,6 @@ impl Contact {
     fn active(&self) -> [bool; 2] {
         [self.node_a.is_some(), self.node_b.is_some()]
     }
-}
-
-/// A row of the bristles' equations, `(de/dw_p, de/dv_p)` in the physical coordinates of one
-/// node, as the row of the iteration matrix in group coordinates: `k de/dw T + c de/dv`
-/// (on SE(3), `dw_p = P dw`, `v_p = P v` with `P = blockdiag(R, I)`, whose translation
-/// velocity `R U` also turns with the rotation: `dv_p/dtheta = -R tilde(U)`).
-fn row_to_group(
-    group: Group,
-    node: &NodeState,
-    (de_dw, de_dv): (nalgebra::RowVector6<f64>, nalgebra::RowVector6<f64>),
-    coef: &Coefficients,
-) -> nalgebra::RowVector6<f64> {
-    let (mut dw, mut dv) = (de_dw, de_dv);
-    if group == Group::SE3 {
-        let r = node.q.r;
-        let u = node.v.fixed_rows::<3>(0).into_owned();
-        let dv_t = de_dv.fixed_columns::<3>(0).into_owned();
-        dw.fixed_columns_mut::<3>(0)
-            .copy_from(&(de_dw.fixed_columns::<3>(0) * r));
-        let turn = dv_t * (-r * flexmb_lie::so3::hat(&u));
-        let mut rot = dw.fixed_columns_mut::<3>(3);
-        rot += turn;
-        dv.fixed_columns_mut::<3>(0).copy_from(&(dv_t * r));
-    }
-    dw * node.t * coef.k + dv * coef.c
 }
 
 /// Variables of the automatic differentiation of [`ElementKernel::evaluate`]: node
@@ -577,7 +552,12 @@ impl ElementKernel for ContactElement<'_> {
                 let block = if active[a] {
                     let de_dw = jac.fixed_view::<1, 6>(row, 6 * a).into_owned();
                     let de_dv = jac.fixed_view::<1, 6>(row, 12 + 6 * a).into_owned();
-                    row_to_group(group, &nodes[a], (de_dw, de_dv), coef)
+                    physical::row_to_group(
+                        group,
+                        &nodes[a],
+                        (de_dw, de_dv, nalgebra::RowVector6::zeros()),
+                        coef,
+                    )
                 } else {
                     nalgebra::RowVector6::zeros()
                 };

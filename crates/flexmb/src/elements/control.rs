@@ -96,7 +96,7 @@ use super::{
 use crate::model::control::{BlockKind, ControlSystem, Quantity, Target};
 use crate::model::parameters::ControlWrt;
 use crate::model::{Joint, JointKind, Model, NodeId};
-use flexmb_lie::{so3::hat, Group, Vec3};
+use flexmb_lie::{Group, Vec3};
 use nalgebra::{DMatrix, DVector, Matrix3, RealField, RowVector6, Vector3};
 use num_dual::Dual64;
 use std::f64::consts::PI;
@@ -852,37 +852,6 @@ pub fn unsolvable_loop(model: &Model) -> Option<(usize, String)> {
     None
 }
 
-/// A state row's physical derivatives `(de/dw_p, de/dv_p, de/dvdot_p)` at a node as its row of
-/// the iteration matrix in group coordinates, `k de/dw T + c de/dv + m de/dvdot`. On SE(3)
-/// (`P = blockdiag(R, I)`) the physical velocity `R U` and acceleration `R (Udot + Omega x U)`
-/// depend on the rotation and on `U`, `Omega`.
-fn row_to_group(
-    group: Group,
-    node: &NodeState,
-    (dw, dv, da): (RowVector6<f64>, RowVector6<f64>, RowVector6<f64>),
-    coef: &Coefficients,
-) -> RowVector6<f64> {
-    let (mut gw, mut gv, mut ga) = (dw, dv, da);
-    if group == Group::SE3 {
-        let r = node.q.r;
-        let (u, om) = flexmb_lie::split(&node.v);
-        let (ud, _) = flexmb_lie::split(&node.vdot);
-        let t = |m: &RowVector6<f64>| m.fixed_columns::<3>(0).into_owned();
-        let (dw_t, dv_t, da_t) = (t(&dw), t(&dv), t(&da));
-        gw.fixed_columns_mut::<3>(0).copy_from(&(dw_t * r));
-        let turn: nalgebra::RowVector3<f64> =
-            dv_t * (-r * hat(&u)) + da_t * (-r * hat(&(ud + om.cross(&u))));
-        let mut rot = gw.fixed_columns_mut::<3>(3);
-        rot += turn;
-        gv.fixed_columns_mut::<3>(0)
-            .copy_from(&(dv_t * r + da_t * (r * hat(&om))));
-        let mut gv_rot = gv.fixed_columns_mut::<3>(3);
-        gv_rot += da_t * (-r * hat(&u));
-        ga.fixed_columns_mut::<3>(0).copy_from(&(da_t * r));
-    }
-    gw * node.t * coef.k + gv * coef.c + ga * coef.m
-}
-
 impl ElementKernel for ControlElement<'_> {
     fn n_slots(&self) -> usize {
         self.slots.len()
@@ -996,7 +965,12 @@ impl ElementKernel for ControlElement<'_> {
                     let part = |o: usize| {
                         RowVector6::from_fn(|_, m| jac[(rows + i, PER_SLOT * k + o + m)])
                     };
-                    row_to_group(group, &local.nodes[k], (part(0), part(6), part(12)), coef)
+                    physical::row_to_group(
+                        group,
+                        &local.nodes[k],
+                        (part(0), part(6), part(12)),
+                        coef,
+                    )
                 } else {
                     RowVector6::zeros()
                 };

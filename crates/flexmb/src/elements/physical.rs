@@ -18,6 +18,7 @@
 use super::{Coefficients, LocalMatrix, LocalVector, NodeState};
 use flexmb_lie::{so3::hat, Group, Mat3, Mat6, Vec3};
 use nalgebra::allocator::Allocator;
+use nalgebra::RowVector6;
 use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, OVector, Storage, StorageMut, U3, U6};
 
 /// Physical velocity `(xdot, Omega)` of a node.
@@ -188,4 +189,36 @@ pub fn apply_tangent_full<R1, C1, S1, R2, C2, S2>(
         let mut target = s.fixed_columns_mut::<6>(6 * b);
         target += cols;
     }
+}
+
+/// A row of an element's state equations: its physical derivatives `(de/dw_p, de/dv_p,
+/// de/dvdot_p)` at a node as its row of the iteration matrix in group coordinates,
+/// `k de/dw T + c de/dv + m de/dvdot` (contact bristles, control blocks). On SE(3)
+/// (`P = blockdiag(R, I)`) the physical velocity `R U` and acceleration `R (Udot + Omega x U)`
+/// depend on the rotation and on `U`, `Omega`.
+pub fn row_to_group(
+    group: Group,
+    node: &NodeState,
+    (dw, dv, da): (RowVector6<f64>, RowVector6<f64>, RowVector6<f64>),
+    coef: &Coefficients,
+) -> RowVector6<f64> {
+    let (mut gw, mut gv, mut ga) = (dw, dv, da);
+    if group == Group::SE3 {
+        let r = node.q.r;
+        let (u, om) = flexmb_lie::split(&node.v);
+        let (ud, _) = flexmb_lie::split(&node.vdot);
+        let t = |m: &RowVector6<f64>| m.fixed_columns::<3>(0).into_owned();
+        let (dw_t, dv_t, da_t) = (t(&dw), t(&dv), t(&da));
+        gw.fixed_columns_mut::<3>(0).copy_from(&(dw_t * r));
+        let turn: nalgebra::RowVector3<f64> =
+            dv_t * (-r * hat(&u)) + da_t * (-r * hat(&(ud + om.cross(&u))));
+        let mut rot = gw.fixed_columns_mut::<3>(3);
+        rot += turn;
+        gv.fixed_columns_mut::<3>(0)
+            .copy_from(&(dv_t * r + da_t * (r * hat(&om))));
+        let mut gv_rot = gv.fixed_columns_mut::<3>(3);
+        gv_rot += da_t * (-r * hat(&u));
+        ga.fixed_columns_mut::<3>(0).copy_from(&(da_t * r));
+    }
+    gw * node.t * coef.k + gv * coef.c + ga * coef.m
 }
