@@ -10,10 +10,12 @@
 //! per [`StoreFormat`]: the HDF5 library's start-up and the file's creation overlap the first
 //! steps of the solve), then takes what the channel holds as one batch: it writes the CSV
 //! rows of each output step (one write per file and step), gives the step to the stores, and
-//! after the batch syncs the stores ([`Store::sync`]: the HDF5 file is written and flushed).
-//! When the writer keeps up, a batch is one output step; when it falls behind, one sync
-//! covers every step it has received. A run killed by SIGKILL thus loses the output steps
-//! still in the channel and those of the batch being written.
+//! after the batch syncs the stores ([`Store::sync`]: the HDF5 file is written and flushed)
+//! and pauses for [`PAUSE`]. When output steps come further apart than that, a batch is one
+//! output step; when they come faster, or the writer falls behind, one sync covers every
+//! step it has received. A run killed by SIGKILL thus loses the output steps that had not
+//! reached the writer (sent during its pause or waiting in the channel) and those of the
+//! batch being written.
 //!
 //! Errors: the writer stops at its first error (a full disk) and drops its end of the
 //! channel, so that the solver's next send fails ([`Stopped`]) and the run stops;
@@ -29,9 +31,10 @@ use crate::sensors::SensorEvaluator;
 use crate::solve::StepInfo;
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::{Scope, ScopedJoinHandle};
+use std::time::Duration;
 
 /// Bytes of output steps the channel holds at most, about, and its bounds in messages (an
-/// output step or an accepted step each).
+/// output step, or accepted steps without one).
 const HELD_BYTES: usize = 16 << 20;
 const MIN_MESSAGES: usize = 16;
 const MAX_MESSAGES: usize = 1024;
@@ -68,13 +71,20 @@ pub struct Stopped;
 
 enum Message {
     /// An output step, after the accepted steps since the previous message.
-    Output(Vec<StepInfo>, Snapshot),
+    Output(Vec<StepInfo>, Box<Snapshot>),
     /// Accepted steps with no output step after them yet (before a sync, at the end of the
     /// run, or [`MAX_STEPS`] of them).
     Steps(Vec<StepInfo>),
     /// Sync the stores and answer where the files stand.
     Sync(SyncSender<Synced>),
 }
+
+/// How long the writer pauses after a batch with output steps before it takes the next one
+/// (cut short at a checkpoint and at the end of the run): output steps that come faster
+/// are written and flushed together, and the solver's sends do not wake the writer each
+/// time (a wake-up costs the sender several microseconds, as much as computing an output
+/// step of a small model).
+const PAUSE: Duration = Duration::from_millis(1);
 
 /// Accepted steps the solver's end holds at most before it sends them (they go with the
 /// next output step, one message, unless there are this many).
@@ -138,7 +148,7 @@ impl<'scope> Writer<'scope> {
             Snapshot::capture_shape(model, state, at, sensors)
         };
         let steps = std::mem::take(&mut self.steps);
-        self.send(Message::Output(steps, snapshot))
+        self.send(Message::Output(steps, Box::new(snapshot)))
     }
 
     /// Takes an accepted step for the stores (sent with the next output step); says whether
@@ -161,6 +171,7 @@ impl<'scope> Writer<'scope> {
         self.send_steps()?;
         let (reply, answer) = sync_channel(1);
         self.send(Message::Sync(reply))?;
+        self.thread.thread().unpark();
         answer.recv().map_err(|_| Stopped)
     }
 
@@ -169,6 +180,7 @@ impl<'scope> Writer<'scope> {
         // A writer that has stopped has its error.
         let _ = self.send_steps();
         drop(self.sender);
+        self.thread.thread().unpark();
         self.thread
             .join()
             .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
@@ -256,6 +268,8 @@ impl Files {
             }
             if outputs {
                 self.sync()?;
+                // Not waiting on the channel, the writer is not woken by each send.
+                std::thread::park_timeout(PAUSE);
             }
         }
         Ok(())
