@@ -95,7 +95,7 @@ struct Recorder {
 impl Observer for Recorder {
     fn output(&mut self, s: &Sample) -> Result<(), String> {
         let values = self.sensors.evaluate(s.model, s.data, s.state);
-        let snap = Snapshot::capture(s.model, s.data, s.state, s.at, values);
+        let snap = Snapshot::capture(s.model, &s.data.layout, s.state, s.at, values);
         self.results.snapshots.push(snap);
         Ok(())
     }

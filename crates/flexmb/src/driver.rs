@@ -12,6 +12,7 @@
 //! The directory must have been taken over by [`OutputDir::prepare`] (which removes the
 //! results of an earlier run).
 
+use crate::data::Layout;
 use crate::input::{Analysis, ModelFile};
 use crate::observe::{Observer, Observers, Sample};
 use crate::output::writer::{Open, Stopped, Writer, Written};
@@ -273,12 +274,14 @@ impl Observer for Progress<'_> {
     }
 }
 
-/// The result files of a run being opened: which, and the sensors' memory.
+/// The result files of a run being opened: which, the sensors' memory and the rows of the
+/// multipliers.
 struct Opening<'a> {
     out: &'a OutputDir,
     formats: &'a [&'a dyn StoreFormat],
     open: Open,
     sensors: SensorEvaluator,
+    layout: Layout,
 }
 
 /// Runs an analysis with the result files (written by a writer thread) and the progress as
@@ -292,7 +295,14 @@ fn observed<R>(
 ) -> (Result<(), SolveError>, Written, f64) {
     std::thread::scope(|scope| {
         let t0 = Instant::now();
-        let writer = Writer::spawn(scope, files.out, model, files.formats, files.open);
+        let writer = Writer::spawn(
+            scope,
+            files.out,
+            model,
+            files.layout,
+            files.formats,
+            files.open,
+        );
         let mut sink = ResultSink {
             model,
             sensors: files.sensors,
@@ -338,6 +348,7 @@ fn run_static(
             first: "load_factor",
         },
         sensors: SensorEvaluator::new(model),
+        layout: statics.data.layout.clone(),
     };
     let (result, written, seconds) = observed(model, files, progress, |sink, progress| {
         statics.run(&mut Observers(vec![sink, progress]))
@@ -374,6 +385,7 @@ fn start_dynamic<'a>(
             formats,
             open: Open::Create { first: "time" },
             sensors: SensorEvaluator::new(model),
+            layout: sim.data.layout.clone(),
         };
         return Ok((sim, files));
     }
@@ -425,6 +437,7 @@ fn start_dynamic<'a>(
             rows: outputs,
         },
         sensors,
+        layout: sim.data.layout.clone(),
     };
     Ok((sim, files))
 }

@@ -1,8 +1,9 @@
-//! One output step of a run as owned values ([`Snapshot`]): what the solver's thread takes
-//! of its state at an output point and hands to the writer thread ([`super::writer`]),
-//! which writes the CSV files and the stores from it.
+//! One output step of a run as owned values ([`Snapshot`]): what the result files hold of
+//! the state at an output point. The writer thread ([`super::writer`]) computes it from the
+//! copy of the state the solver's thread hands over, and writes the CSV files and the
+//! stores from it.
 
-use crate::data::Data;
+use crate::data::Layout;
 use crate::elements::{point_velocity, NodeState};
 use crate::model::{JointId, Model};
 use crate::sensors::{joint_point, joint_reaction, node_states};
@@ -37,8 +38,15 @@ pub struct Snapshot {
 }
 
 impl Snapshot {
-    /// The snapshot of `state` at `at`; `sensors` are the sensor values.
-    pub fn capture(model: &Model, data: &Data, state: &State, at: f64, sensors: Vec<f64>) -> Self {
+    /// The snapshot of `state` at `at` (`layout`: the rows of the state's multipliers);
+    /// `sensors` are the sensor values.
+    pub fn capture(
+        model: &Model,
+        layout: &Layout,
+        state: &State,
+        at: f64,
+        sensors: Vec<f64>,
+    ) -> Self {
         let nodes = node_states(state);
         let mut s = Self::of_nodes(model, &nodes, at, sensors);
         s.multipliers = state.lambda.clone();
@@ -48,7 +56,7 @@ impl Snapshot {
             s.velocity.push([v.x, v.y, v.z, om.x, om.y, om.z]);
         }
         for j in 0..model.joints.len() {
-            let (f, m) = joint_reaction(model, &data.layout, JointId(j), &nodes, state);
+            let (f, m) = joint_reaction(model, layout, JointId(j), &nodes, state);
             s.joint_position
                 .push(joint_point(model, JointId(j), &nodes).into());
             s.joint_reaction.push([f.x, f.y, f.z, m.x, m.y, m.z]);

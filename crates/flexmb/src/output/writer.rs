@@ -1,15 +1,18 @@
 //! The writer thread of a run: the result files are created, written and flushed on a thread
 //! of their own while the solver goes on.
 //!
-//! The solver's thread captures each output step ([`Snapshot`]) and sends it through a
-//! bounded channel, in one message with the statistics of the accepted steps before it when
-//! there are stores ([`Writer::output`], [`Writer::step`]): that is all the output costs
-//! it, unless the writer has fallen a channel's length behind and it waits.
+//! At each output step the solver's thread copies the state and sends it with the sensor
+//! values through a bounded channel, in one message with the statistics of the accepted
+//! steps before it when there are stores ([`Writer::output`], [`Writer::step`]): that is all
+//! the output costs it (with the sensors, which it evaluates), unless the writer has fallen
+//! a channel's length behind and it waits.
 //!
 //! The writer thread creates the files (the CSV files of [`ResultFiles`] and one [`Store`]
 //! per [`StoreFormat`]: the HDF5 library's start-up and the file's creation overlap the first
-//! steps of the solve), then takes what the channel holds as one batch: it writes the CSV
-//! rows of each output step (one write per file and step), gives the step to the stores, and
+//! steps of the solve), then takes what the channel holds as one batch: it computes each
+//! output step's [`Snapshot`] (node positions and velocities, joint reactions, beam strains
+//! and stress resultants), writes its CSV rows (one write per file and step), gives it to
+//! the stores, and
 //! after the batch syncs the stores ([`Store::sync`]: the HDF5 file is written and flushed)
 //! and pauses for [`PAUSE`]. When output steps come further apart than that, a batch is one
 //! output step; when they come faster, or the writer falls behind, one sync covers every
@@ -25,10 +28,12 @@
 //! [`Writer::sync`] (a checkpoint) waits until every step sent is in the files.
 
 use super::{OutputDir, OutputError, ResultFiles, Snapshot, Store, StoreFormat};
+use crate::data::Layout;
 use crate::model::Model;
 use crate::observe::Sample;
 use crate::sensors::SensorEvaluator;
 use crate::solve::StepInfo;
+use crate::state::State;
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::{Scope, ScopedJoinHandle};
 use std::time::Duration;
@@ -69,9 +74,40 @@ pub struct Written {
 #[derive(Debug)]
 pub struct Stopped;
 
+/// An output step as the solver's thread hands it over: the accepted steps before it, a
+/// copy of the state, from which the writer computes the step's [`Snapshot`], and the sensor
+/// values. The writer sends it back once written, to be filled again: after the first
+/// steps, the copies cost no allocation.
+#[derive(Default)]
+struct Taken {
+    steps: Vec<StepInfo>,
+    at: f64,
+    state: State,
+    sensors: Vec<f64>,
+}
+
+impl Taken {
+    /// Copies `sample` into the buffers of an earlier output step.
+    fn fill(&mut self, sample: &Sample, sensors: Vec<f64>) {
+        let (from, to) = (sample.state, &mut self.state);
+        to.t = from.t;
+        to.q.clone_from(&from.q);
+        to.v.clone_from(&from.v);
+        to.vdot.clone_from(&from.vdot);
+        to.a.clone_from(&from.a);
+        to.lambda.clone_from(&from.lambda);
+        to.x.clone_from(&from.x);
+        to.xdot.clone_from(&from.xdot);
+        to.w.clone_from(&from.w);
+        debug_assert!(to == from, "every field of the state is copied");
+        self.at = sample.at;
+        self.sensors = sensors;
+    }
+}
+
 enum Message {
-    /// An output step, after the accepted steps since the previous message.
-    Output(Vec<StepInfo>, Box<Snapshot>),
+    /// An output step.
+    Output(Box<Taken>),
     /// Accepted steps with no output step after them yet (before a sync, at the end of the
     /// run, or [`MAX_STEPS`] of them).
     Steps(Vec<StepInfo>),
@@ -93,9 +129,10 @@ const MAX_STEPS: usize = 4096;
 /// The solver's end of the writer thread.
 pub struct Writer<'scope> {
     sender: SyncSender<Message>,
+    /// The output steps the writer has written, to be filled again.
+    returned: Receiver<Box<Taken>>,
     thread: ScopedJoinHandle<'scope, Written>,
-    /// Whether there are stores: they get the whole snapshot and the accepted steps (the
-    /// CSV files need neither the velocities and joints nor the steps).
+    /// Whether there are stores: they get the accepted steps (the CSV files do not).
     stores: bool,
     /// The accepted steps not sent yet.
     steps: Vec<StepInfo>,
@@ -103,18 +140,21 @@ pub struct Writer<'scope> {
 
 impl<'scope> Writer<'scope> {
     /// Starts the thread, which opens the files of `model` in `out` (one store of each of
-    /// `formats`) and writes them until [`Writer::finish`].
+    /// `formats`) and writes them until [`Writer::finish`]; `layout` numbers the rows of the
+    /// states' multipliers.
     pub fn spawn(
         scope: &'scope Scope<'scope, '_>,
         out: &'scope OutputDir,
         model: &'scope Model,
+        layout: Layout,
         formats: &'scope [&'scope dyn StoreFormat],
         open: Open,
     ) -> Self {
         let capacity = capacity(model);
         let (sender, receiver) = sync_channel(capacity);
+        let (recycle, returned) = sync_channel(capacity);
         let thread = scope.spawn(move || {
-            let mut files = match Files::open(out, model, formats, open) {
+            let mut files = match Files::open(out, model, layout, formats, open, recycle) {
                 Ok(files) => files,
                 Err(e) => {
                     return Written {
@@ -133,6 +173,7 @@ impl<'scope> Writer<'scope> {
         });
         Self {
             sender,
+            returned,
             thread,
             stores: !formats.is_empty(),
             steps: Vec::new(),
@@ -141,14 +182,11 @@ impl<'scope> Writer<'scope> {
 
     /// Hands over the output step `sample` with its sensor values.
     pub fn output(&mut self, sample: &Sample, sensors: Vec<f64>) -> Result<(), Stopped> {
-        let (model, state, at) = (sample.model, sample.state, sample.at);
-        let snapshot = if self.stores {
-            Snapshot::capture(model, sample.data, state, at, sensors)
-        } else {
-            Snapshot::capture_shape(model, state, at, sensors)
-        };
-        let steps = std::mem::take(&mut self.steps);
-        self.send(Message::Output(steps, Box::new(snapshot)))
+        let mut taken = self.returned.try_recv().unwrap_or_default();
+        taken.fill(sample, sensors);
+        // The accepted steps go with it; its (emptied) list takes the next ones.
+        std::mem::swap(&mut taken.steps, &mut self.steps);
+        self.send(Message::Output(taken))
     }
 
     /// Takes an accepted step for the stores (sent with the next output step); says whether
@@ -202,31 +240,34 @@ impl<'scope> Writer<'scope> {
 
 /// Messages the channel holds: [`HELD_BYTES`] of output steps of `model`, within bounds.
 fn capacity(model: &Model) -> usize {
-    // The values of a snapshot, about: 16 per node, 9 per joint, 12 per beam element.
-    let values = 1
-        + 16 * model.nodes.len()
-        + 9 * model.joints.len()
-        + 12 * model.beams.len()
-        + model.sensors.len();
+    // The values of an output step, about: the state's 30 per node (configuration,
+    // velocities, accelerations) and up to 6 multipliers per joint, and the sensors.
+    let values = 1 + 30 * model.nodes.len() + 6 * model.joints.len() + model.sensors.len();
     (HELD_BYTES / (8 * values)).clamp(MIN_MESSAGES, MAX_MESSAGES)
 }
 
-/// What the writer thread writes.
-struct Files {
+/// What the writer thread writes, and what it computes the output steps with.
+struct Files<'m> {
+    model: &'m Model,
+    layout: Layout,
     csv: ResultFiles,
     stores: Vec<Box<dyn Store>>,
     /// Output steps in the CSV files.
     rows: usize,
     /// The CSV files' lengths and rows when the stores were last synced.
     synced: (Vec<(String, u64)>, usize),
+    /// Where the output steps written go back to the solver's thread.
+    recycle: SyncSender<Box<Taken>>,
 }
 
-impl Files {
+impl<'m> Files<'m> {
     fn open(
         out: &OutputDir,
-        model: &Model,
+        model: &'m Model,
+        layout: Layout,
         formats: &[&dyn StoreFormat],
         open: Open,
+        recycle: SyncSender<Box<Taken>>,
     ) -> Result<Self, OutputError> {
         let (csv, stores, rows) = match open {
             Open::Create { first } => {
@@ -250,10 +291,13 @@ impl Files {
         };
         let synced = (csv.lengths(), rows);
         Ok(Self {
+            model,
+            layout,
             csv,
             stores,
             rows,
             synced,
+            recycle,
         })
     }
 
@@ -278,11 +322,23 @@ impl Files {
     /// Writes one message; says whether it was an output step.
     fn take(&mut self, message: Message) -> Result<bool, OutputError> {
         match message {
-            Message::Output(steps, snapshot) => {
-                self.steps(&steps)?;
+            Message::Output(mut taken) => {
+                self.steps(&taken.steps)?;
+                let (state, at) = (&taken.state, taken.at);
+                let sensors = std::mem::take(&mut taken.sensors);
+                // The CSV files need neither the velocities nor the joints.
+                let snapshot = if self.stores.is_empty() {
+                    Snapshot::capture_shape(self.model, state, at, sensors)
+                } else {
+                    Snapshot::capture(self.model, &self.layout, state, at, sensors)
+                };
                 self.csv.write_step(&snapshot)?;
                 self.rows += 1;
                 self.each_store(|s| s.write(&snapshot))?;
+                // Back to the solver's thread (unless it has enough), with the sensors' list.
+                taken.sensors = snapshot.sensors;
+                taken.steps.clear();
+                let _ = self.recycle.try_send(taken);
                 Ok(true)
             }
             Message::Steps(steps) => {
