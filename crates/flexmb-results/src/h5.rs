@@ -228,7 +228,8 @@ fn write_strings(file: &File, name: &str, values: &[String]) -> hdf5::Result<()>
 impl H5Store {
     /// Creates `path` (replacing a file there) with the metadata of `info`.
     pub fn create(path: &Path, info: &ModelInfo) -> hdf5::Result<Self> {
-        // No modification times in the file: the same run gives the same bytes.
+        // No modification times in the file (its bytes still depend on how the output
+        // steps were batched, and on the padding of the solver steps' records).
         let file = File::with_options()
             .with_fcpl(|p| p.obj_track_times(false))
             .create(path)?;
