@@ -13,10 +13,9 @@
 //! output step's [`Snapshot`] (node positions and velocities, joint reactions, beam strains
 //! and stress resultants), writes its CSV rows (one write per file and step) and gives it to
 //! the stores; after the batch it syncs the stores ([`Store::sync`]: the HDF5 file is
-//! written and flushed) and pauses for `PAUSE` (1 ms). When output steps come further apart than
-//! that, a batch is one
-//! output step; when they come faster, or the writer falls behind, one sync covers every
-//! step it has received. A run killed by SIGKILL thus loses the output steps that had not
+//! written and flushed) and pauses for `PAUSE` (1 ms). When output steps come further
+//! apart than that, a batch is one output step; when they come faster, or the writer falls
+//! behind, one sync covers every step it has received. A run killed by SIGKILL thus loses the output steps that had not
 //! reached the writer (sent during its pause or waiting in the channel) and those of the
 //! batch being written.
 //!
