@@ -74,9 +74,9 @@ pub fn run(
     run_with(file, out, options, &[], progress, interrupt)
 }
 
-/// [`run`] with more result files: one [`Store`] of each of `formats`, written at every
-/// output step beside the CSV files (a file that cannot be written fails the run as a CSV
-/// file would; the time spent writing it counts as output time).
+/// [`run`] with more result files: one [`crate::output::Store`] of each of `formats`,
+/// written at every output step beside the CSV files, on the run's writer thread (a file
+/// that cannot be written fails the run as a CSV file would).
 pub fn run_with(
     file: &ModelFile,
     out: &OutputDir,
@@ -222,7 +222,7 @@ struct ResultSink<'m, 'w> {
     sensors: SensorEvaluator,
     writer: Writer<'w>,
     /// Wall time of the solver's thread spent on output \[s\]: evaluating the sensors,
-    /// capturing and handing over the steps (waiting when the writer is behind), the
+    /// copying the state and handing it over (waiting when the writer is behind), the
     /// checkpoints and the wait for the writer at the end.
     seconds: f64,
     /// The writer thread has stopped (on an error that [`Writer::finish`] returns).

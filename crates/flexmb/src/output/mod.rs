@@ -564,7 +564,9 @@ pub struct Summary {
     pub newton_iterations_per_step: f64,
     /// Wall time of the whole run including output \[s\].
     pub wall_seconds: f64,
-    /// Wall time spent in the solver only \[s\].
+    /// Wall time spent in the solver only \[s\]: `wall_seconds` less the time the run's
+    /// thread spent on output (evaluating the sensors, handing the output steps to the
+    /// writer thread, waiting for it at the end); the writer's work runs beside the solve.
     pub solve_seconds: f64,
     pub unknowns: usize,
     pub linear_solver: String,
