@@ -90,6 +90,9 @@ fn failed_run_keeps_its_rows_and_says_why() {
     // t = 0, 0.01, ..., 0.05 were completed before the blow-up.
     assert_eq!(csv.lines().count(), 1 + 6, "{csv}");
     assert_eq!(s["outputs"], 6);
+    // The results file has them too: the run waits for its writer thread.
+    let r = flexmb_results::h5::read(&out).expect("the results file of a failed run reads");
+    assert_eq!(r.snapshots.len(), 6);
     assert!(
         s["steps"].as_u64().unwrap() >= 50,
         "the counts of the work done"

@@ -17,24 +17,21 @@
 //! * one row per accepted step (static: per converged load step): `solver/steps`, a
 //!   compound of `at`, `h`, `iterations`, `rejected` and `fresh_matrix` (a [`StepStat`]).
 //!
-//! Rows are written, `time` (`load_factor`) last, and the file flushed at every output step
-//! that comes [`FLUSH_INTERVAL`] (50 ms of wall time) or more after the last flush; output
-//! steps that come faster are held in memory and written together at the next one (one
-//! HDF5 write per dataset instead of one per step: writing and flushing every step of a
-//! fast run costs about 20 times the CSV files). The held steps are written at every
-//! checkpoint and when the run ends, whatever its outcome ([`Store::sync`]). A reader takes
-//! the length of `time` as the number of complete output steps, so a run killed at any
-//! moment leaves a file with every output step completed 50 ms before it was killed.
+//! The store is written on the run's writer thread ([`flexmb::output::writer`]): output steps
+//! are held in memory ([`Store::write`]) and, at every [`Store::sync`] (after each batch of
+//! output steps the writer takes, at checkpoints and at the end of the run, whatever its
+//! outcome), written with one HDF5 write per dataset, `time` (`load_factor`) last, and the
+//! file flushed. A reader takes the length of `time` as the number of complete output
+//! steps, so a run killed at any moment leaves a file with every output step of the last
+//! sync.
 
 use crate::info::ModelInfo;
 use crate::snapshot::{Results, Snapshot, StepStat};
-use flexmb::observe::Sample;
 use flexmb::output::{OutputDir, OutputError, Store, StoreFormat, RESULTS_H5_FILE};
 use flexmb::solve::StepInfo;
 use hdf5::types::{FixedUnicode, VarLenUnicode};
 use hdf5::{Dataset, File, H5Type, Hyperslab, SliceOrIndex};
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
 
 /// Version of the layout, root attribute `version`.
 pub const VERSION: u32 = 1;
@@ -159,12 +156,6 @@ impl Column {
     }
 }
 
-/// Longest time \[s of wall time\] rows wait in memory before they are written and the file
-/// is flushed (rows that come further apart are written one by one).
-pub const FLUSH_INTERVAL: Duration = Duration::from_millis(50);
-/// Most values of output steps kept in memory between writes.
-const MAX_PENDING_VALUES: usize = 1 << 20;
-
 /// The HDF5 results file of a run being written.
 pub struct H5Store {
     file: File,
@@ -179,8 +170,6 @@ pub struct H5Store {
     /// Output steps (their times) and solver steps not written yet.
     times: Vec<f64>,
     pending: Vec<StepStat>,
-    /// When the file was last flushed (`None`: never).
-    flushed: Option<Instant>,
 }
 
 /// The dataset of the solver's steps.
@@ -239,7 +228,8 @@ fn write_strings(file: &File, name: &str, values: &[String]) -> hdf5::Result<()>
 impl H5Store {
     /// Creates `path` (replacing a file there) with the metadata of `info`.
     pub fn create(path: &Path, info: &ModelInfo) -> hdf5::Result<Self> {
-        // No modification times in the file: the same run gives the same bytes.
+        // No modification times in the file (its bytes still depend on how the output
+        // steps were batched, and on the padding of the solver steps' records).
         let file = File::with_options()
             .with_fcpl(|p| p.obj_track_times(false))
             .create(path)?;
@@ -305,7 +295,6 @@ impl H5Store {
             step_rows: 0,
             times: Vec::new(),
             pending: Vec::new(),
-            flushed: None,
         })
     }
 
@@ -341,24 +330,15 @@ impl H5Store {
             step_rows,
             times: Vec::new(),
             pending: Vec::new(),
-            flushed: Some(Instant::now()),
         })
     }
 
-    /// Appends one output step (and the solver steps recorded since the last one): into the
-    /// file at once when the file was flushed more than [`FLUSH_INTERVAL`] ago, else with
-    /// the next ones.
-    pub fn append(&mut self, snapshot: &Snapshot) -> hdf5::Result<()> {
+    /// Appends one output step; it is written by the next [`H5Store::write_pending`].
+    pub fn append(&mut self, snapshot: &Snapshot) {
         for (_, row, values) in &mut self.columns {
             values.extend_from_slice(row(snapshot));
         }
         self.times.push(snapshot.at);
-        let held: usize = self.columns.iter().map(|(_, _, v)| v.len()).sum();
-        let due = self.flushed.is_none_or(|t| t.elapsed() >= FLUSH_INTERVAL);
-        if due || held >= MAX_PENDING_VALUES {
-            self.write_pending()?;
-        }
-        Ok(())
     }
 
     /// Writes the output and solver steps held in memory, `time` last, and flushes the file.
@@ -373,9 +353,7 @@ impl H5Store {
         self.time.append(self.rows, &self.times)?;
         self.rows += self.times.len();
         self.times.clear();
-        self.file.flush()?;
-        self.flushed = Some(Instant::now());
-        Ok(())
+        self.file.flush()
     }
 
     /// Records a solver step; it is written with the next output step.
@@ -395,16 +373,9 @@ impl Drop for H5Store {
 }
 
 impl Store for H5Store {
-    fn write(&mut self, sample: &Sample, sensors: &[f64]) -> Result<(), OutputError> {
-        let snap = Snapshot::capture(
-            sample.model,
-            sample.data,
-            sample.state,
-            sample.at,
-            sensors.to_vec(),
-        );
-        let path = self.path.clone();
-        self.append(&snap).map_err(h5_error(&path, "cannot write"))
+    fn write(&mut self, snapshot: &Snapshot) -> Result<(), OutputError> {
+        self.append(snapshot);
+        Ok(())
     }
 
     fn step(&mut self, info: &StepInfo) -> Result<(), OutputError> {

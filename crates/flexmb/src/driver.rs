@@ -12,11 +12,12 @@
 //! The directory must have been taken over by [`OutputDir::prepare`] (which removes the
 //! results of an earlier run).
 
+use crate::data::Layout;
 use crate::input::{Analysis, ModelFile};
 use crate::observe::{Observer, Observers, Sample};
+use crate::output::writer::{Open, Stopped, Writer, Written};
 use crate::output::{
-    ErrorKind, OutputDir, OutputError, ResultFiles, Status, Store, StoreFormat, Summary,
-    CHECKPOINT_FILE,
+    ErrorKind, OutputDir, OutputError, Status, StoreFormat, Summary, CHECKPOINT_FILE,
 };
 use crate::sensors::SensorEvaluator;
 use crate::solve::dynamics::Checkpoint;
@@ -73,9 +74,9 @@ pub fn run(
     run_with(file, out, options, &[], progress, interrupt)
 }
 
-/// [`run`] with more result files: one [`Store`] of each of `formats`, written at every
-/// output step beside the CSV files (a file that cannot be written fails the run as a CSV
-/// file would; the time spent writing it counts as output time).
+/// [`run`] with more result files: one [`crate::output::Store`] of each of `formats`,
+/// written at every output step beside the CSV files, on the run's writer thread (a file
+/// that cannot be written fails the run as a CSV file would).
 pub fn run_with(
     file: &ModelFile,
     out: &OutputDir,
@@ -169,15 +170,14 @@ impl Ended {
         }
     }
 
-    /// The outcome of a run that started: a write error seen by the output callback takes
-    /// precedence over the solver's report of it.
+    /// The outcome of a run that started: a write error takes precedence over the solver's
+    /// report of it.
     fn of_run(
         work: Work,
         result: Result<(), SolveError>,
-        outputs: Option<Outputs>,
         output_error: Option<OutputError>,
+        output_seconds: f64,
     ) -> Self {
-        let output_seconds = outputs.as_ref().map_or(0.0, |o| o.seconds);
         let outcome = match (output_error, result) {
             (Some(e), _) => Outcome::Output(e),
             (None, Ok(())) => Outcome::Completed,
@@ -214,123 +214,50 @@ impl Ended {
     }
 }
 
-/// The files written at every output step (sensors, deformed shape, beam results), the
-/// output steps written and the time spent writing them.
-struct Outputs<'m> {
+/// The result files as the solver's thread sees them: at every output point the sensors are
+/// evaluated and the step is handed to the writer thread, which writes the files. Keeps the
+/// time the solver's thread spends on output and the error of a checkpoint file.
+struct ResultSink<'m, 'w> {
     model: &'m crate::Model,
     sensors: SensorEvaluator,
-    files: ResultFiles,
-    stores: Vec<Box<dyn Store>>,
-    rows: usize,
+    writer: Writer<'w>,
+    /// Wall time of the solver's thread spent on output \[s\]: evaluating the sensors,
+    /// copying the state and handing it over (waiting when the writer is behind), the
+    /// checkpoints and the wait for the writer at the end.
     seconds: f64,
-}
-
-impl<'m> Outputs<'m> {
-    /// The files of a resumed run, where its checkpoint left them.
-    fn reopen(
-        out: &OutputDir,
-        model: &'m crate::Model,
-        formats: &[&dyn StoreFormat],
-        files: &[(String, u64)],
-        rows: usize,
-        sensors: SensorEvaluator,
-    ) -> Result<Self, OutputError> {
-        Ok(Self {
-            model,
-            sensors,
-            files: ResultFiles::reopen(out, files)?,
-            stores: formats
-                .iter()
-                .map(|f| f.reopen(out, model, files))
-                .collect::<Result<_, _>>()?,
-            rows,
-            seconds: 0.0,
-        })
-    }
-
-    /// Creates the files; `first` names the first column (`time` or `load_factor`).
-    fn create(
-        out: &OutputDir,
-        first: &str,
-        model: &'m crate::Model,
-        formats: &[&dyn StoreFormat],
-    ) -> Result<Self, OutputError> {
-        let t0 = Instant::now();
-        let names = SensorEvaluator::names(model);
-        let analysis = if first == "time" { "dynamic" } else { "static" };
-        Ok(Self {
-            model,
-            sensors: SensorEvaluator::new(model),
-            files: ResultFiles::create(out, first, model, &names)?,
-            stores: formats
-                .iter()
-                .map(|f| f.create(out, model, analysis))
-                .collect::<Result<_, _>>()?,
-            rows: 0,
-            // Creating the files is output time too (the HDF5 library starts here).
-            seconds: t0.elapsed().as_secs_f64(),
-        })
-    }
-
-    /// The files and their lengths (the marks of the stores too, synced), for a checkpoint.
-    fn lengths(&mut self) -> Result<Vec<(String, u64)>, OutputError> {
-        let t0 = Instant::now();
-        let mut out = self.files.lengths();
-        let synced = self.stores.iter_mut().try_for_each(|store| {
-            out.extend(store.sync()?);
-            Ok(())
-        });
-        self.seconds += t0.elapsed().as_secs_f64();
-        synced.map(|()| out)
-    }
-
-    /// Appends the rows of one output step.
-    fn write(&mut self, sample: &crate::observe::Sample) -> Result<(), OutputError> {
-        let t0 = Instant::now();
-        let values = self.sensors.evaluate(self.model, sample.data, sample.state);
-        self.files
-            .write_step(sample.at, &values, self.model, sample.state)?;
-        self.rows += 1;
-        let stored = self
-            .stores
-            .iter_mut()
-            .try_for_each(|s| s.write(sample, &values));
-        self.seconds += t0.elapsed().as_secs_f64();
-        stored
-    }
-
-    /// Passes an accepted step to the stores (they keep it for their next output step).
-    fn step(&mut self, info: &StepInfo) -> Result<(), OutputError> {
-        self.stores.iter_mut().try_for_each(|s| s.step(info))
-    }
-}
-
-/// The result files as an observer: writes every output point and keeps the first write
-/// error (the solver only sees its message and stops).
-struct ResultSink<'m> {
-    outputs: Outputs<'m>,
+    /// The writer thread has stopped (on an error that [`Writer::finish`] returns).
+    stopped: bool,
+    /// A checkpoint that could not be written.
     error: Option<OutputError>,
 }
 
-impl ResultSink<'_> {
-    /// Keeps the first write error and gives the solver its message.
-    fn keep(&mut self, result: Result<(), OutputError>) -> Result<(), String> {
-        result.map_err(|e| {
-            let message = e.to_string();
-            self.error = Some(e);
-            message
+impl ResultSink<'_, '_> {
+    /// Runs `f`, counting its time as output time; a writer that has stopped stops the run.
+    fn timed<T>(&mut self, f: impl FnOnce(&mut Self) -> Result<T, Stopped>) -> Result<T, String> {
+        let t0 = Instant::now();
+        let result = f(self);
+        self.seconds += t0.elapsed().as_secs_f64();
+        result.map_err(|Stopped| {
+            self.stopped = true;
+            "the result files could not be written".to_string()
         })
+    }
+
+    /// Whether the run must stop for its outputs.
+    fn failed(&self) -> bool {
+        self.stopped || self.error.is_some()
     }
 }
 
-impl Observer for ResultSink<'_> {
+impl Observer for ResultSink<'_, '_> {
     fn output(&mut self, s: &Sample) -> Result<(), String> {
-        let result = self.outputs.write(s);
-        self.keep(result)
+        self.timed(|sink| {
+            let values = sink.sensors.evaluate(sink.model, s.data, s.state);
+            sink.writer.output(s, values)
+        })
     }
     fn accepted(&mut self, info: &StepInfo) -> Result<(), String> {
-        let result = self.outputs.step(info);
-        self.keep(result)
+        self.timed(|sink| sink.writer.step(info))
     }
 }
 
@@ -347,33 +274,53 @@ impl Observer for Progress<'_> {
     }
 }
 
-/// Runs an analysis with the result files and the progress as its observers (`run` gets
-/// both); returns the analysis' result, the files (if they could be created) and the first
-/// write error.
-fn observed<'m, R>(
-    outputs: Result<Outputs<'m>, OutputError>,
+/// The result files of a run being opened: which, the sensors' memory and the rows of the
+/// multipliers.
+struct Opening<'a> {
+    out: &'a OutputDir,
+    formats: &'a [&'a dyn StoreFormat],
+    open: Open,
+    sensors: SensorEvaluator,
+    layout: Layout,
+}
+
+/// Runs an analysis with the result files (written by a writer thread) and the progress as
+/// its observers (`run` gets both); returns the analysis' result, what was written (with
+/// the first write error) and the output time of the solver's thread.
+fn observed<R>(
+    model: &crate::Model,
+    files: Opening,
     mut progress: Progress,
-    run: impl FnOnce(&mut ResultSink<'m>, &mut Progress) -> Result<R, SolveError>,
-) -> (
-    Result<(), SolveError>,
-    Option<Outputs<'m>>,
-    Option<OutputError>,
-) {
-    match outputs {
-        Ok(outputs) => {
-            let mut sink = ResultSink {
-                outputs,
-                error: None,
-            };
-            let result = run(&mut sink, &mut progress);
-            // Whatever the outcome, the stores hold every step delivered.
-            if let Err(e) = sink.outputs.lengths() {
-                sink.error.get_or_insert(e);
-            }
-            (result.map(|_| ()), Some(sink.outputs), sink.error)
+    run: impl FnOnce(&mut ResultSink, &mut Progress) -> Result<R, SolveError>,
+) -> (Result<(), SolveError>, Written, f64) {
+    std::thread::scope(|scope| {
+        let t0 = Instant::now();
+        let writer = Writer::spawn(
+            scope,
+            files.out,
+            model,
+            files.layout,
+            files.formats,
+            files.open,
+        );
+        let mut sink = ResultSink {
+            model,
+            sensors: files.sensors,
+            writer,
+            seconds: t0.elapsed().as_secs_f64(),
+            stopped: false,
+            error: None,
+        };
+        let result = run(&mut sink, &mut progress);
+        // Whatever the outcome, the files get every step handed over.
+        let t1 = Instant::now();
+        let mut written = sink.writer.finish();
+        let seconds = sink.seconds + t1.elapsed().as_secs_f64();
+        if let Some(e) = sink.error {
+            written.error.get_or_insert(e);
         }
-        Err(e) => (Ok(()), None, Some(e)),
-    }
+        (result.map(|_| ()), written, seconds)
+    })
 }
 
 /// Static analysis: `sensors.csv` has the load factor in its first column.
@@ -394,8 +341,16 @@ fn run_static(
         report: progress,
         end: settings.load_factor,
     };
-    let outputs = Outputs::create(out, "load_factor", model, formats);
-    let (result, outputs, error) = observed(outputs, progress, |sink, progress| {
+    let files = Opening {
+        out,
+        formats,
+        open: Open::Create {
+            first: "load_factor",
+        },
+        sensors: SensorEvaluator::new(model),
+        layout: statics.data.layout.clone(),
+    };
+    let (result, written, seconds) = observed(model, files, progress, |sink, progress| {
         statics.run(&mut Observers(vec![sink, progress]))
     });
     let stats = statics.stats;
@@ -404,28 +359,35 @@ fn run_static(
         newton_iterations: stats.newton_iterations,
         rejected_steps: stats.rejected_steps,
         factorizations: stats.factorizations,
-        outputs: outputs.as_ref().map_or(0, |o| o.rows),
+        outputs: written.rows,
         reached: statics.load_factor,
         unknowns: statics.data.layout.n_unknowns(),
         linear_solver: format!("{:?}", statics.data.solver.backend()).to_lowercase(),
         warnings: statics.warnings.clone(),
         verify: statics.verification.clone(),
     };
-    Ended::of_run(work, result, outputs, error)
+    Ended::of_run(work, result, written.error, seconds)
 }
 
 /// The simulation and result files of a dynamic run: new, or resumed from the checkpoint
 /// in `out`.
-fn start_dynamic<'m>(
-    model: &'m crate::Model,
+fn start_dynamic<'a>(
+    model: &crate::Model,
     settings: &DynamicSettings,
-    out: &OutputDir,
+    out: &'a OutputDir,
     options: RunOptions,
-    formats: &[&dyn StoreFormat],
-) -> Result<(Simulation, Result<Outputs<'m>, OutputError>), SolveError> {
+    formats: &'a [&'a dyn StoreFormat],
+) -> Result<(Simulation, Opening<'a>), SolveError> {
     if !options.resume {
         let sim = Simulation::new(model, *settings)?;
-        return Ok((sim, Outputs::create(out, "time", model, formats)));
+        let files = Opening {
+            out,
+            formats,
+            open: Open::Create { first: "time" },
+            sensors: SensorEvaluator::new(model),
+            layout: sim.data.layout.clone(),
+        };
+        return Ok((sim, files));
     }
     let bad = |m: String| SolveError::Checkpoint(m);
     let path = out.file(CHECKPOINT_FILE);
@@ -467,26 +429,34 @@ fn start_dynamic<'m>(
     } = saved;
     checkpoint.settings.threads = settings.threads;
     let sim = Simulation::resume(checkpoint, settings.t_end)?;
-    Ok((
-        sim,
-        Outputs::reopen(out, model, formats, &files, outputs, sensors),
-    ))
+    let files = Opening {
+        out,
+        formats,
+        open: Open::Reopen {
+            lengths: files,
+            rows: outputs,
+        },
+        sensors,
+        layout: sim.data.layout.clone(),
+    };
+    Ok((sim, files))
 }
 
-/// Writes the checkpoint of a dynamic run and of its result files.
-fn write_checkpoint(
-    out: &OutputDir,
-    sim: &Simulation,
-    outputs: &mut Outputs,
-) -> Result<(), OutputError> {
+/// Writes the checkpoint of a dynamic run and of its result files (once the writer has put
+/// every step handed over into them). A checkpoint that cannot be written is kept as the
+/// sink's error.
+fn write_checkpoint(out: &OutputDir, sim: &Simulation, sink: &mut ResultSink) {
+    let Ok(synced) = sink.timed(|sink| sink.writer.sync()) else {
+        return;
+    };
     let saved = RunCheckpoint {
         checkpoint: sim.checkpoint(),
-        files: outputs.lengths()?,
-        outputs: outputs.rows,
-        sensors: outputs.sensors.clone(),
+        files: synced.files,
+        outputs: synced.rows,
+        sensors: sink.sensors.clone(),
     };
     let text = serde_json::to_string(&saved).expect("a checkpoint (numbers, strings) serializes");
-    out.write_checkpoint(&text)
+    sink.error = out.write_checkpoint(&text).err();
 }
 
 /// Dynamic analysis: `sensors.csv` has the time in its first column. The run goes in
@@ -500,7 +470,7 @@ fn run_dynamic(
     progress: &mut dyn FnMut(f64, f64),
     interrupt: Option<Arc<AtomicBool>>,
 ) -> Ended {
-    let (mut sim, outputs) = match start_dynamic(model, settings, out, options, formats) {
+    let (mut sim, files) = match start_dynamic(model, settings, out, options, formats) {
         Ok(started) => started,
         Err(e) => return Ended::rejected(e),
     };
@@ -510,7 +480,7 @@ fn run_dynamic(
         report: progress,
         end: t_end,
     };
-    let (result, outputs, error) = observed(outputs, progress, |sink, progress| {
+    let (result, written, seconds) = observed(model, files, progress, |sink, progress| {
         let result = loop {
             // The next multiple of the interval after now; an interval too small to advance
             // the time (or not positive) leaves only the checkpoint at the end.
@@ -526,12 +496,10 @@ fn run_dynamic(
                 Ok(_) => options.checkpoint_interval.is_some(),
                 Err(e) => matches!(e, SolveError::Interrupted { .. }),
             };
-            if checkpoint && sink.error.is_none() {
-                if let Err(e) = write_checkpoint(out, &sim, &mut sink.outputs) {
-                    sink.error = Some(e);
-                }
+            if checkpoint && !sink.failed() {
+                write_checkpoint(out, &sim, sink);
             }
-            if result.is_err() || sink.error.is_some() || sim.state.t >= t_end {
+            if result.is_err() || sink.failed() || sim.state.t >= t_end {
                 break result;
             }
         };
@@ -544,12 +512,12 @@ fn run_dynamic(
         newton_iterations: sim.stats.newton_iterations,
         rejected_steps: sim.stats.rejected_steps,
         factorizations: sim.stats.factorizations,
-        outputs: outputs.as_ref().map_or(0, |o| o.rows),
+        outputs: written.rows,
         reached: sim.state.t,
         unknowns: sim.data.layout.n_unknowns(),
         linear_solver: format!("{:?}", sim.data.solver.backend()).to_lowercase(),
         warnings: sim.warnings.clone(),
         verify: sim.verification.clone(),
     };
-    Ended::of_run(work, result, outputs, error)
+    Ended::of_run(work, result, written.error, seconds)
 }

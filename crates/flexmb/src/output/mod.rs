@@ -8,9 +8,10 @@
 //! * `sensors.csv`: header `time,<sensor names>` (`load_factor` for a static analysis), one
 //!   row per output step; `nodes.csv`: `time,node,x,y,z,qw,qx,qy,qz` for every node at every
 //!   output step; `beams.csv` (models with beams): `time,element,<6 strains>,<6 stress
-//!   resultants>` per beam element and output step. The rows of one output step go to the
-//!   operating system in one write per file before the run goes on, so a run that fails or is
-//!   interrupted keeps every completed output step.
+//!   resultants>` per beam element and output step. The files are written on the run's
+//!   writer thread ([`writer`]): the rows of one output step go to the operating system in one
+//!   write per file, and the end of the run waits for every output step handed over, so a
+//!   run that fails or is interrupted keeps every completed output step.
 //! * Numbers in the CSV files are written in the shortest form that reads back to the same
 //!   `f64` bit for bit (plain decimals for magnitudes in `[1e-5, 1e16)` and zero, scientific
 //!   notation such as `1.7976931348623157e308` otherwise); a non-finite value would be written
@@ -20,7 +21,11 @@
 //!   leaves a partial summary. Its `status` is [`Status`]: `running` from the start, then
 //!   `ok`, `failed` (with `error_kind` and `error`) or `interrupted`.
 
+pub mod snapshot;
+pub mod writer;
+
 use serde::Serialize;
+pub use snapshot::Snapshot;
 use std::fmt::Write as _;
 use std::fs::File;
 use std::io::{Seek, SeekFrom, Write as _};
@@ -332,6 +337,9 @@ pub struct ResultFiles {
     sensors: CsvFile,
     nodes: CsvFile,
     beams: Option<CsvFile>,
+    /// The labels of the rows of `nodes.csv` and `beams.csv`.
+    node_names: Vec<String>,
+    beam_names: Vec<String>,
 }
 
 impl ResultFiles {
@@ -365,12 +373,18 @@ impl ResultFiles {
             sensors,
             nodes,
             beams,
+            node_names: model.nodes.iter().map(|n| n.name.clone()).collect(),
+            beam_names: model.beams.iter().map(|b| b.name.clone()).collect(),
         })
     }
 
-    /// The files of an earlier run, cut back to the lengths [`ResultFiles::lengths`]
-    /// returned when its checkpoint was written.
-    pub fn reopen(dir: &OutputDir, lengths: &[(String, u64)]) -> Result<Self, OutputError> {
+    /// The files of an earlier run of `model`, cut back to the lengths
+    /// [`ResultFiles::lengths`] returned when its checkpoint was written.
+    pub fn reopen(
+        dir: &OutputDir,
+        model: &crate::Model,
+        lengths: &[(String, u64)],
+    ) -> Result<Self, OutputError> {
         let open = |name: &str| -> Result<Option<CsvFile>, OutputError> {
             lengths
                 .iter()
@@ -387,6 +401,8 @@ impl ResultFiles {
             sensors: open(SENSORS_FILE)?.ok_or_else(|| missing(SENSORS_FILE))?,
             nodes: open(NODES_FILE)?.ok_or_else(|| missing(NODES_FILE))?,
             beams: open(BEAMS_FILE)?,
+            node_names: model.nodes.iter().map(|n| n.name.clone()).collect(),
+            beam_names: model.beams.iter().map(|b| b.name.clone()).collect(),
         })
     }
 
@@ -402,33 +418,44 @@ impl ResultFiles {
         out
     }
 
-    /// Appends the rows of one output step at `t`: the sensor values, the configuration of
-    /// every node and the strains and stress resultants of every beam element.
-    pub fn write_step(
-        &mut self,
-        t: f64,
-        sensors: &[f64],
-        model: &crate::Model,
-        state: &crate::State,
-    ) -> Result<(), OutputError> {
+    /// Cuts every file back to the lengths [`ResultFiles::lengths`] returned (best effort):
+    /// the steps written since then are taken back, e.g. when another result file could not
+    /// take them.
+    pub fn cut_back(&mut self, lengths: &[(String, u64)]) {
+        let find = |name: &str| lengths.iter().find(|(n, _)| n == name).map(|&(_, l)| l);
+        let files = [
+            (SENSORS_FILE, Some(&mut self.sensors)),
+            (NODES_FILE, Some(&mut self.nodes)),
+            (BEAMS_FILE, self.beams.as_mut()),
+        ];
+        for (name, file) in files {
+            if let (Some(f), Some(len)) = (file, find(name)) {
+                f.truncate(len);
+            }
+        }
+    }
+
+    /// Appends the rows of one output step: the sensor values, the configuration of every
+    /// node and the strains and stress resultants of every beam element.
+    pub fn write_step(&mut self, s: &Snapshot) -> Result<(), OutputError> {
+        let t = s.at;
         self.sensors.start_row(t, None);
-        for &v in sensors {
+        for &v in &s.sensors {
             self.sensors.field(v);
         }
         self.sensors.end_row();
-        for (node, q) in model.nodes.iter().zip(&state.q) {
-            self.nodes.start_row(t, Some(&node.name));
-            for x in [q.x.x, q.x.y, q.x.z].into_iter().chain(q.quaternion()) {
-                self.nodes.field(x);
+        for ((name, x), q) in self.node_names.iter().zip(&s.position).zip(&s.orientation) {
+            self.nodes.start_row(t, Some(name));
+            for &v in x.iter().chain(q) {
+                self.nodes.field(v);
             }
             self.nodes.end_row();
         }
         if let Some(beams) = self.beams.as_mut() {
-            let nodes = crate::sensors::node_states(state);
-            for b in &model.beams {
-                let st = b.state(&[nodes[b.nodes[0].0], nodes[b.nodes[1].0]]);
-                beams.start_row(t, Some(&b.name));
-                for &v in st.strain.iter().chain(st.stress.iter()) {
+            let states = s.beam_strain.iter().zip(&s.beam_stress);
+            for (name, (strain, stress)) in self.beam_names.iter().zip(states) {
+                beams.start_row(t, Some(name));
+                for &v in strain.iter().chain(stress) {
                     beams.field(v);
                 }
                 beams.end_row();
@@ -454,26 +481,24 @@ impl ResultFiles {
 
 /// A results file written beside the CSV files, step by step, by a format that lives outside
 /// the engine (the HDF5 file of `flexmb-results`): [`crate::driver::run_with`] creates one
-/// per [`StoreFormat`] and calls it at every output step after the CSV rows.
+/// per [`StoreFormat`] on the run's writer thread ([`writer`]), which calls it at every
+/// output step after the CSV rows.
 pub trait Store {
-    /// Appends one output step; `sensors` are its sensor values (computed once for all files).
-    fn write(
-        &mut self,
-        sample: &crate::observe::Sample,
-        sensors: &[f64],
-    ) -> Result<(), OutputError>;
+    /// Appends one output step (it may wait in memory until the next [`Store::sync`]).
+    fn write(&mut self, snapshot: &Snapshot) -> Result<(), OutputError>;
     /// Records an accepted step of a dynamic run (called before the output of its time).
     fn step(&mut self, info: &crate::solve::StepInfo) -> Result<(), OutputError>;
-    /// Puts every step received so far into the file and makes it durable (a store may keep
-    /// the latest steps in memory between syncs, e.g. to write them in one go), then says
-    /// where the file stands, for a checkpoint: names and counts that
-    /// [`StoreFormat::reopen`] gets back to go on from there. Called at every checkpoint and
-    /// when the run ends, whatever its outcome.
+    /// Puts every step received so far into the file and makes it durable (flushed: a run
+    /// killed afterwards leaves a file with these steps), then says where the file stands,
+    /// for a checkpoint: names and counts that [`StoreFormat::reopen`] gets back to go on
+    /// from there. Called after every batch of output steps the writer thread takes, at
+    /// every checkpoint and when the run ends, whatever its outcome.
     fn sync(&mut self) -> Result<Vec<(String, u64)>, OutputError>;
 }
 
-/// How to create (or reopen, for a resumed run) a [`Store`] in an output directory.
-pub trait StoreFormat {
+/// How to create (or reopen, for a resumed run) a [`Store`] in an output directory; called
+/// on the run's writer thread.
+pub trait StoreFormat: Sync {
     /// A new file for a run of `model`; `analysis` is `dynamic` or `static`.
     fn create(
         &self,
@@ -539,7 +564,9 @@ pub struct Summary {
     pub newton_iterations_per_step: f64,
     /// Wall time of the whole run including output \[s\].
     pub wall_seconds: f64,
-    /// Wall time spent in the solver only \[s\].
+    /// Wall time spent in the solver only \[s\]: `wall_seconds` less the time the run's
+    /// thread spent on output (evaluating the sensors, handing the output steps to the
+    /// writer thread, waiting for it at the end); the writer's work runs beside the solve.
     pub solve_seconds: f64,
     pub unknowns: usize,
     pub linear_solver: String,
@@ -669,15 +696,17 @@ mod tests {
         let values = hard_values();
         let names: Vec<String> = (0..values.len()).map(|i| format!("s{i}")).collect();
         let model = crate::Model::new(flexmb_lie::Group::SE3);
-        let state = crate::State::initial(&model, &crate::data::Layout::new(&model));
         let mut files = ResultFiles::create(&out, "time", &model, &names).unwrap();
         // Each row: a time taken from the list and every value, rotated by the row number.
         for row in 0..5 {
             let mut rotated = values.clone();
             rotated.rotate_left(row);
-            files
-                .write_step(values[row], &rotated, &model, &state)
-                .unwrap();
+            let step = Snapshot {
+                at: values[row],
+                sensors: rotated,
+                ..Default::default()
+            };
+            files.write_step(&step).unwrap();
         }
         let text = std::fs::read_to_string(out.file(SENSORS_FILE)).unwrap();
         let mut lines = text.lines();
