@@ -294,11 +294,14 @@ impl Layout {
                 "velocity-level constraint of {}",
                 self.describe_row(model, self.joint_row_start[joint.0] + row as usize)
             ),
-            UnknownId::State { element, index } => format!(
-                "state equation {} of {}",
-                index + 1,
-                self.elements[element].describe(model)
-            ),
+            UnknownId::State { element, index } => match &self.elements[element] {
+                // a block's own words: `output 0 of block 'pid'`
+                ElementRef::Control(_) => format!(
+                    "the equation of {} (control blocks)",
+                    model.control.describe(index as usize)
+                ),
+                e => format!("state equation {} of {}", index + 1, e.describe(model)),
+            },
         }
     }
 

@@ -285,3 +285,23 @@ fn servo_constraint_gives_the_inverse_dynamics_input_of_a_mass_spring_mass() {
     assert!(errors[1] < 1e-3, "input error at h = 1e-3: {:e}", errors[1]);
     assert!((order - 2.0).abs() < 0.2, "order {order}");
 }
+
+#[test]
+fn diagnoses_name_blocks() {
+    // The unknowns of the diagram in words (what a Newton failure or a singular matrix
+    // reports): the block and its state or output, not an index.
+    let f = flexmb::input::read_model_file(&common::example("pid_mass_spring.toml"), &[])
+        .expect("model");
+    let layout = flexmb::data::Layout::new(&f.model);
+    let words: Vec<String> = (0..layout.n_states)
+        .map(|k| layout.describe_unknown(&f.model, layout.state_offset() + k))
+        .collect();
+    // reference (output), position (output), error (output), pid (2 states, output)
+    assert!(
+        words[0].contains("output 0 of block 'reference'"),
+        "{words:?}"
+    );
+    assert!(words[3].contains("state 0 of block 'pid'"), "{words:?}");
+    assert!(words[4].contains("state 1 of block 'pid'"), "{words:?}");
+    assert!(words[5].contains("output 0 of block 'pid'"), "{words:?}");
+}
