@@ -211,7 +211,7 @@ fn visit(
             sink(Piece::Joint(j.0, &d));
             // the block diagram along the joint (not in a point without states: the
             // constraint forces alone, `constraint_force_derivative`)
-            let control = crate::elements::control::ControlElement::uses_joint(&model.control, j);
+            let control = model.control.uses_joint(j);
             if control && !at.point.x.is_empty() {
                 let slots = crate::elements::control::slots(model);
                 let element = crate::elements::control::ControlElement {

@@ -157,7 +157,7 @@ block = "filter"
 
 #[test]
 fn coupled_scheme_damps_unresolved_modes_at_rho_inf() {
-    // Brüls & Golinval 2008, Sect. 4: the coupled scheme (Lie group generalized-alpha for
+    // Brüls & Golinval 2008: the coupled scheme (Lie group generalized-alpha for
     // the mechanics, its first-order form for the block states, both from rho_inf) has the
     // spectral radius rho_inf for modes far beyond the step's resolution. The loop is
     // linear, so its solution is z_n = G^n z_0: the decay over steps 100 to 200 gives the
@@ -205,6 +205,7 @@ inertia = [1.0, 1.0, 1.0]
 name = "signal"
 type = "source"
 file = "signal.csv"
+column = "u"
 [[block]]
 name = "held"
 type = "hold"
@@ -304,4 +305,61 @@ fn diagnoses_name_blocks() {
     assert!(words[3].contains("state 0 of block 'pid'"), "{words:?}");
     assert!(words[4].contains("state 1 of block 'pid'"), "{words:?}");
     assert!(words[5].contains("output 0 of block 'pid'"), "{words:?}");
+}
+
+#[test]
+fn transfer_function_realizes_its_ratio() {
+    // (s + 2) / (s^2 + 3 s + 2) = 1 / (s + 1): its unit step response is 1 - exp(-t); the
+    // lag block T = 1 gives the same (both integrated by the same scheme, so they agree to
+    // the Newton tolerance, and both to the exact response at second order in h).
+    let text = r#"flexmb = 1
+[model]
+group = "R3xSO3"
+[solver]
+analysis = "dynamic"
+t_end = 3.0
+h = 1e-3
+rtol = 1e-12
+atol = 1e-14
+[[body]]
+name = "mass"
+mass = 1.0
+inertia = [1.0, 1.0, 1.0]
+[[block]]
+name = "step"
+type = "source"
+function = { type = "constant", value = 1.0 }
+[[block]]
+name = "tf"
+type = "transfer_function"
+input = "step"
+numerator = [1.0, 2.0]
+denominator = [1.0, 3.0, 2.0]
+[[block]]
+name = "lag"
+type = "lag"
+input = "step"
+time_constant = 1.0
+[[sensor]]
+name = "tf"
+type = "block"
+block = "tf"
+[[sensor]]
+name = "lag"
+type = "block"
+block = "lag"
+"#;
+    let f = flexmb::input::parse_model_str(text, "tf.toml", &[]).expect("model");
+    let flexmb::input::Analysis::Dynamic(settings) = f.analysis else {
+        panic!("dynamic")
+    };
+    let h = common::run_model(&f.model, settings).expect("runs");
+    let (mut exact, mut lag) = (0.0f64, 0.0f64);
+    for (t, v) in &h.rows {
+        exact = exact.max((v[0] - (1.0 - (-t).exp())).abs());
+        lag = lag.max((v[0] - v[1]).abs());
+    }
+    eprintln!("transfer function: {exact:.2e} from 1 - exp(-t), {lag:.2e} from the lag");
+    assert!(exact < 1e-6, "{exact}");
+    assert!(lag < 1e-6, "{lag}");
 }

@@ -332,7 +332,7 @@ fn check_model(name: &str, model: &Model, at: &Point, seen: &mut Seen) {
         constraint_force_derivative(model, &params, id, &at.nodes, at.t, &at.lambda, &mut dforce);
         if let ParamKind::Joint(j, _) = params.kind(id) {
             // (a block diagram acting along the joint adds its own term to dr)
-            if !flexmb::elements::control::ControlElement::uses_joint(&model.control, j) {
+            if !model.control.uses_joint(j) {
                 assert_eq!(dforce, dr, "{name}: {path}: d(B^T lambda)/dp");
             }
         } else {

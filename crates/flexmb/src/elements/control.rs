@@ -1,7 +1,6 @@
 //! Block diagrams coupled monolithically to the mechanics ([`crate::model::control`]).
 //!
-//! The talk's integrated approach (Brüls & Golinval 2008, Sect. 2; Arnold & Brüls 2007,
-//! Sect. 5) adds to the equations of motion first-order states `x` and outputs `y`,
+//! The talk's integrated approach (Brüls & Golinval 2008; Arnold & Brüls 2007) adds to the equations of motion first-order states `x` and outputs `y`,
 //!
 //! ```text
 //! M vdot - hat(v)^T M v + g(q, v, t) - L(q) y + B^T lambda = 0,
@@ -37,9 +36,10 @@
 //! pid             v = kp u + ki x_i + kd (u - x_f) / tf,  y = sat(v),
 //!                 xdot_i = u + kb (y - v) (back-calculation anti-windup),  xdot_f = (u - x_f) / tf
 //! state space     xdot = A x + B u, y = C x + D u
-//! transfer fn.    b(s) / a(s) in controllable canonical form (Ogata, Modern Control
-//!                 Engineering, Sect. 9-2): xdot_k = x_{k+1}, xdot_{n-1} = u - sum a_{n-k} x_k / a_0,
-//!                 y = sum (b_{n-k} - a_{n-k} b_0) x_k / a_0 + b_0 u / a_0 (b padded to degree n)
+//! transfer fn.    b(s) / a(s) in controllable canonical form (e.g. Ogata, Modern Control
+//!                 Engineering), a and b divided by a_0, b padded to degree n:
+//!                 xdot_k = x_{k+1}, xdot_{n-1} = u - sum a_{n-k} x_k,
+//!                 y = sum (b_{n-k} - a_{n-k} b_0) x_k + b_0 u
 //! saturation      y = min(max(u, lower), upper)     dead zone, lookup: piecewise linear in u
 //! rate limiter    xdot = min(max((u - x) / T, -falling), rising), y = x
 //! hold            xdot = 0, x = u(t_k) set at the samples t_k = k period, y = x
@@ -85,18 +85,18 @@
 //! - K. E. Jansen, C. H. Whiting, G. M. Hulbert, A generalized-alpha method for integrating
 //!   the filtered Navier-Stokes equations with a stabilized finite element method, Comput.
 //!   Methods Appl. Mech. Engrg. 190 (2000) 305-319.
-//! - K. J. Åström, T. Hägglund, Advanced PID Control, ISA, 2006, Sect. 3.5 (anti-windup
-//!   by back-calculation) and Sect. 3.3 (filtered derivative).
+//! - K. J. Åström, T. Hägglund, Advanced PID Control, ISA, 2006 (filtered derivative,
+//!   anti-windup by back-calculation).
 
 use super::pose::{c, pose, Pose};
 use super::{
     physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
-    LocalMatrix, LocalVector, NodeState, StepLimit,
+    LocalMatrix, LocalVector, StepLimit,
 };
 use crate::model::control::{BlockKind, ControlSystem, Quantity, Target};
 use crate::model::parameters::ControlWrt;
 use crate::model::{Joint, JointKind, Model, NodeId};
-use flexmb_lie::{Group, Vec3};
+use flexmb_lie::Vec3;
 use nalgebra::{DMatrix, DVector, Matrix3, RealField, RowVector6, Vector3};
 use num_dual::Dual64;
 use std::f64::consts::PI;
@@ -443,7 +443,8 @@ impl ControlElement<'_> {
         let (nodes, e) = out.split_at_mut(ns);
         for (b, block) in sys.blocks.iter().enumerate() {
             let p = |k: usize| param(b, k);
-            let u: Vec<T> = block.inputs.iter().map(|&s| x[sys.unknown(s)]).collect();
+            // input i: the output of another block (no copy: read in place)
+            let u = |i: usize| x[sys.unknown(block.inputs[i])];
             let (s0, y0) = (sys.state_start[b], sys.output_start[b]);
             let xs = &x[s0..y0];
             let xd = &xdot[s0..y0];
@@ -464,42 +465,42 @@ impl ControlElement<'_> {
             match &block.kind {
                 BlockKind::Source(f) => {
                     // f(t) is linear in its amplitudes (the parameters): their derivative
-                    let value = (0..block.params.len()).fold(c::<T>(f.eval(t).0), |v, k| {
+                    let value = (0..f.amplitude_count()).fold(c::<T>(f.eval(t).0), |v, k| {
                         let g = f.amplitude_derivative(k, t).0;
-                        v + (p(k) - c(block.params[k])) * c(g)
+                        v + (p(k) - c(block.value(k))) * c(g)
                     });
                     e[y0] = ys[0] - value;
                 }
                 BlockKind::Gain { rows, cols } => {
                     for i in 0..*rows {
-                        let h = (0..*cols).fold(zero, |acc, j| acc + p(i * cols + j) * u[j]);
+                        let h = (0..*cols).fold(zero, |acc, j| acc + p(i * cols + j) * u(j));
                         e[y0 + i] = ys[i] - h;
                     }
                 }
                 BlockKind::Sum { signs } => {
                     let h = signs
                         .iter()
-                        .zip(&u)
-                        .fold(zero, |acc, (&s, &ui)| acc + ui * c(s));
+                        .enumerate()
+                        .fold(zero, |acc, (i, &s)| acc + u(i) * c(s));
                     e[y0] = ys[0] - h;
                 }
                 BlockKind::Product { .. } => {
-                    e[y0] = ys[0] - u.iter().fold(c(1.0), |acc, &ui| acc * ui);
+                    e[y0] = ys[0] - (0..block.inputs.len()).fold(c(1.0), |acc, i| acc * u(i));
                 }
                 BlockKind::Integrator => {
-                    state!(0, p(0) * u[0]);
+                    state!(0, p(0) * u(0));
                     e[y0] = ys[0] - xs[0];
                 }
                 BlockKind::Lag => {
-                    state!(0, p(0) * u[0] - xs[0], p(1));
+                    state!(0, p(0) * u(0) - xs[0], p(1));
                     e[y0] = ys[0] - xs[0];
                 }
                 BlockKind::Pid => {
                     let (kp, ki, kd, tf) = (p(0), p(1), p(2), p(3));
-                    let v = kp * u[0] + ki * xs[0] + kd * (u[0] - xs[1]) / tf;
+                    let v = kp * u(0) + ki * xs[0] + kd * (u(0) - xs[1]) / tf;
                     let sat = clamp(v, p(4), p(5));
-                    state!(0, u[0] + p(6) * (sat - v));
-                    state!(1, u[0] - xs[1], tf);
+                    state!(0, u(0) + p(6) * (sat - v));
+                    state!(1, u(0) - xs[1], tf);
                     e[y0] = ys[0] - sat;
                 }
                 BlockKind::StateSpace {
@@ -511,12 +512,12 @@ impl ControlElement<'_> {
                     let (a, bm, cm, d) = (0, n * n, n * n + n * m, n * n + n * m + q * n);
                     for i in 0..n {
                         let f = (0..n).fold(zero, |acc, j| acc + p(a + i * n + j) * xs[j])
-                            + (0..m).fold(zero, |acc, j| acc + p(bm + i * m + j) * u[j]);
+                            + (0..m).fold(zero, |acc, j| acc + p(bm + i * m + j) * u(j));
                         state!(i, f);
                     }
                     for i in 0..q {
                         let h = (0..n).fold(zero, |acc, j| acc + p(cm + i * n + j) * xs[j])
-                            + (0..m).fold(zero, |acc, j| acc + p(d + i * m + j) * u[j]);
+                            + (0..m).fold(zero, |acc, j| acc + p(d + i * m + j) * u(j));
                         e[y0 + i] = ys[i] - h;
                     }
                 }
@@ -536,48 +537,48 @@ impl ControlElement<'_> {
                         let f = if k + 1 < n {
                             xs[k + 1]
                         } else {
-                            u[0] - (0..n).fold(zero, |acc, j| acc + a(n - j) * xs[j])
+                            u(0) - (0..n).fold(zero, |acc, j| acc + a(n - j) * xs[j])
                         };
                         state!(k, f);
                     }
-                    let h = (0..n).fold(b(0) * u[0], |acc, j| {
+                    let h = (0..n).fold(b(0) * u(0), |acc, j| {
                         acc + (b(n - j) - a(n - j) * b(0)) * xs[j]
                     });
                     e[y0] = ys[0] - h;
                 }
-                BlockKind::Saturation => e[y0] = ys[0] - clamp(u[0], p(0), p(1)),
+                BlockKind::Saturation => e[y0] = ys[0] - clamp(u(0), p(0), p(1)),
                 BlockKind::DeadZone => {
-                    let h = if u[0] > p(1) {
-                        u[0] - p(1)
-                    } else if u[0] < p(0) {
-                        u[0] - p(0)
+                    let h = if u(0) > p(1) {
+                        u(0) - p(1)
+                    } else if u(0) < p(0) {
+                        u(0) - p(0)
                     } else {
                         zero
                     };
                     e[y0] = ys[0] - h;
                 }
                 BlockKind::RateLimiter => {
-                    state!(0, clamp((u[0] - xs[0]) / p(2), -p(1), p(0)));
+                    state!(0, clamp((u(0) - xs[0]) / p(2), -p(1), p(0)));
                     e[y0] = ys[0] - xs[0];
                 }
                 BlockKind::Lookup { breakpoints } => {
                     let values: Vec<T> = (0..breakpoints.len()).map(p).collect();
-                    e[y0] = ys[0] - interpolate(breakpoints, &values, u[0]);
+                    e[y0] = ys[0] - interpolate(breakpoints, &values, u(0));
                 }
                 BlockKind::Hold { .. } => {
                     e[s0] = match phase {
-                        Phase::Initial => xs[0] - u[0],
+                        Phase::Initial => xs[0] - u(0),
                         _ => xd[0],
                     };
                     e[y0] = ys[0] - xs[0];
                 }
                 BlockKind::DcMotor => {
                     let (r, l, kt, ke) = (p(0), p(1), p(2), p(3));
-                    state!(0, u[0] - r * xs[0] - ke * u[1], l);
+                    state!(0, u(0) - r * xs[0] - ke * u(1), l);
                     e[y0] = ys[0] - kt * xs[0];
                 }
                 BlockKind::Measure(q) => e[y0] = ys[0] - self.measure(q, poses, ys[0]),
-                BlockKind::Actuator(target) => self.actuate(target, poses, u[0], nodes),
+                BlockKind::Actuator(target) => self.actuate(target, poses, u(0), nodes),
                 BlockKind::Servo {
                     quantity,
                     target,
@@ -589,7 +590,7 @@ impl ControlElement<'_> {
                     let (mut f, mut fdd) = (c::<T>(f0), c::<T>(f2));
                     for k in 0..n {
                         let (g, _, g2) = function.amplitude_derivative(k, t);
-                        let dp = p(k) - c(block.params[k]);
+                        let dp = p(k) - c(block.value(k));
                         f += dp * c(g);
                         fdd += dp * c(g2);
                     }
@@ -611,7 +612,7 @@ impl ControlElement<'_> {
 
     /// The blocks' parameters as `f64`.
     fn param_f64(&self) -> impl Fn(usize, usize) -> f64 + '_ {
-        |b, k| self.system.blocks[b].params[k]
+        |b, k| self.system.blocks[b].value(k)
     }
 
     /// The residual at `f64` and its Jacobian with respect to the variables
@@ -624,7 +625,7 @@ impl ControlElement<'_> {
         let nrows = 6 * self.slots.len() + n;
         let ns = PER_SLOT * self.slots.len();
         let mut jac = DMatrix::zeros(nrows, nv);
-        let params = |b: usize, k: usize| Dual64::from_re(self.system.blocks[b].params[k]);
+        let params = |b: usize, k: usize| Dual64::from_re(self.system.blocks[b].value(k));
         let mut w = vec![Dual64::from_re(0.0); nv];
         for i in 0..n {
             w[ns + i] = Dual64::from_re(local.x[i]);
@@ -783,45 +784,28 @@ pub fn unsolvable_loop(model: &Model) -> Option<(usize, String)> {
     if loops.is_empty() {
         return None;
     }
-    let slots = slots(model);
-    let element = ControlElement {
-        system,
-        model,
-        slots: &slots,
-    };
-    let nodes: Vec<NodeState> = slots
+    // the initial state of the model: node kinematics, the blocks' states and outputs
+    let layout = crate::data::Layout::new(model);
+    let state = crate::state::State::initial(model, &layout);
+    let control = layout
+        .elements
         .iter()
-        .map(|s| match s {
-            Some(n) => {
-                let node = &model.nodes[n.0];
-                let u = match model.group {
-                    Group::R3xSO3 => node.velocity,
-                    Group::SE3 => node.frame.r.transpose() * node.velocity,
-                };
-                NodeState {
-                    v: flexmb_lie::join(&u, &node.angular_velocity),
-                    ..NodeState::ground(node.frame)
-                }
-            }
-            None => NodeState::ground(flexmb_lie::Frame::identity()),
-        })
-        .collect();
+        .position(|e| matches!(e, super::ElementRef::Control(_)))?;
+    let kernel = layout.elements[control].kernel(model);
+    let mut buffers = super::LocalBuffers::default();
+    let all = crate::sensors::node_states(&state);
+    buffers.gather(
+        &kernel,
+        &all,
+        (&state.x, &state.xdot, layout.state_start[control]),
+    );
+    let local = buffers.local(&all);
+    let super::Kernel::Control(element) = kernel else {
+        return None;
+    };
     let ctx = Context::at(model, 0.0, 1.0);
-    let n = system.n_unknowns;
-    let (mut x, xdot) = (vec![0.0; n], vec![0.0; n]);
-    let local = Local {
-        nodes: &nodes,
-        x: &xdot,
-        xdot: &xdot,
-    };
-    element.initial_states(&ctx, &local, &mut x);
-    let local = Local {
-        nodes: &nodes,
-        x: &x,
-        xdot: &xdot,
-    };
     let (_, jac) = element.jacobian(&ctx, &local, Phase::Initial);
-    let (rows, ns) = (6 * slots.len(), PER_SLOT * slots.len());
+    let (rows, ns) = (6 * element.slots.len(), PER_SLOT * element.slots.len());
     for blocks in loops {
         let outputs: Vec<usize> = blocks
             .iter()
@@ -1043,16 +1027,6 @@ fn on_sample(t: f64, period: f64) -> bool {
     (t - k * period).abs() <= SAMPLE_TOLERANCE * period
 }
 
-impl ControlElement<'_> {
-    /// Whether a measurement or actuator acts along joint `j`.
-    pub fn uses_joint(system: &ControlSystem, j: crate::model::JointId) -> bool {
-        system.blocks.iter().any(|b| {
-            matches!(&b.kind, BlockKind::Measure(Quantity::JointCoordinate { joint } | Quantity::JointRate { joint })
-                | BlockKind::Actuator(Target::Joint { joint }) if *joint == j)
-        })
-    }
-}
-
 impl ElementParameters for ControlElement<'_> {
     type Param = ControlWrt;
 
@@ -1094,7 +1068,7 @@ impl ElementParameters for ControlElement<'_> {
         let x: Vec<Dual64> = local.x.iter().map(|&v| Dual64::from_re(v)).collect();
         let xdot: Vec<Dual64> = local.xdot.iter().map(|&v| Dual64::from_re(v)).collect();
         let params = |b: usize, k: usize| {
-            let v = Dual64::from_re(self.system.blocks[b].params[k]);
+            let v = Dual64::from_re(self.system.blocks[b].value(k));
             if (b, k) == (p.block, p.index) {
                 Dual64::new(v.re, 1.0)
             } else {

@@ -984,14 +984,7 @@ fn read_nested_function(f: &Field<'_>, level: usize, scale: f64) -> Result<TimeF
             amplitude: num("amplitude")?,
             f0: t.req("f0")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,
             f1: t.req("f1")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,
-            duration: {
-                let f = t.req("duration")?;
-                let d = f.f64_in(-MAX_TIME, MAX_TIME)?;
-                if d <= 0.0 {
-                    return Err(f.err(format!("must be positive, got {d}")));
-                }
-                d
-            },
+            duration: positive_step(&t.req("duration")?)?,
             offset: num_or("offset", 0.0)?,
         },
         "table" => {

@@ -9,7 +9,7 @@ use super::build::{read_function, to_node_frame, Origin, Origins};
 use super::reader::{name_list, suggestion, Field, Result, Table, QUOTED};
 use crate::model::clip;
 use crate::model::control::{Block, BlockKind, ControlSystem, Quantity, Signal, Target};
-use crate::model::limits::{MAX_PHYSICAL, MAX_TIME};
+use crate::model::limits::MAX_PHYSICAL;
 use crate::model::{Model, TimeFunction};
 use flexmb_lie::Vec3;
 use std::collections::HashMap;
@@ -102,53 +102,20 @@ fn axis(t: &Table<'_>, prefix: &str) -> Result<Vec3> {
     }
 }
 
-/// A signal from a CSV file (path relative to the model file): rows `t, value` (commas or
-/// blanks between them; a first line that is not two numbers is a header; `#` starts a
-/// comment), times increasing, interpolated linearly and constant outside.
-fn read_signal(f: &Field<'_>) -> Result<TimeFunction> {
-    let name = f.str()?;
+/// A source's signal from a CSV file with a header (path relative to the model file), its
+/// columns `time_column` (default `t`) and `column`, read as a `[[reference]]`'s
+/// ([`super::sensitivity::read_signal`]): interpolated linearly, constant outside.
+fn read_signal_file(t: &Table<'_>, f: &Field<'_>) -> Result<TimeFunction> {
     let base = std::path::Path::new(f.src.file).parent();
+    let name = f.str()?;
     let path = base.map_or_else(|| name.into(), |b| b.join(name));
-    let text = std::fs::read_to_string(&path)
-        .map_err(|e| f.err(format!("cannot read '{}': {e}", path.display())))?;
-    let mut points: Vec<(f64, f64)> = Vec::new();
-    let mut first = true;
-    for (n, line) in text.lines().enumerate() {
-        let line = line.split('#').next().unwrap_or_default().trim();
-        if line.is_empty() {
-            continue;
-        }
-        let numbers: Vec<Option<f64>> = line
-            .split(|c: char| c == ',' || c.is_whitespace())
-            .filter(|s| !s.is_empty())
-            .map(|s| s.parse::<f64>().ok())
-            .collect();
-        let at = |m: String| f.err(format!("'{}' line {}: {m}", path.display(), n + 1));
-        match numbers.as_slice() {
-            [Some(t), Some(v)] => {
-                if !(t.is_finite()
-                    && v.is_finite()
-                    && t.abs() <= MAX_TIME
-                    && v.abs() <= MAX_PHYSICAL)
-                {
-                    return Err(at(format!(
-                        "{t}, {v} is not a finite time and value in range"
-                    )));
-                }
-                if points.last().is_some_and(|p| *t <= p.0) {
-                    return Err(at(format!("time {t} does not increase")));
-                }
-                points.push((*t, *v));
-            }
-            _ if first => {} // a header
-            _ => return Err(at("expected two numbers: time, value".into())),
-        }
-        first = false;
-    }
-    if points.is_empty() {
-        return Err(f.err(format!("'{}' holds no rows 'time, value'", path.display())));
-    }
-    Ok(TimeFunction::Table { points })
+    let time_column = t.opt_str("time_column")?.unwrap_or("t");
+    let column = t.req("column")?.str()?;
+    let (times, values) = super::sensitivity::read_signal(&path, time_column, column)
+        .map_err(|m| f.err(format!("{}: {m}", path.display())))?;
+    Ok(TimeFunction::Table {
+        points: times.into_iter().zip(values).collect(),
+    })
 }
 
 /// The field that names a block's inputs (`input` or `inputs`), and each name with its
@@ -273,7 +240,7 @@ pub(super) fn resolve_signal(f: &Field<'_>, text: &str, names: &[String]) -> Res
 fn keys(ty: &str) -> Vec<&'static str> {
     let mut k = vec!["name", "type", "input", "inputs"];
     k.extend_from_slice(match ty {
-        "source" => &["function", "file"],
+        "source" => &["function", "file", "time_column", "column"],
         "gain" => &["gain"],
         "sum" => &["signs"],
         "integrator" => &["gain", "initial"],
@@ -340,7 +307,7 @@ fn read_kind(
         "source" => {
             let f = match (t.field("function"), t.field("file")) {
                 (Some(f), None) => read_function(&f)?,
-                (None, Some(f)) => read_signal(&f)?,
+                (None, Some(f)) => read_signal_file(t, &f)?,
                 (Some(_), Some(f)) => return Err(f.err("give either function or file, not both")),
                 (None, None) => {
                     return Err(t.key_err(
@@ -349,8 +316,7 @@ fn read_kind(
                     ))
                 }
             };
-            let amplitudes = (0..f.amplitude_count()).map(|k| f.amplitude(k)).collect();
-            (BlockKind::Source(f), amplitudes)
+            (BlockKind::Source(f), Vec::new())
         }
         "gain" => {
             let f = t.req("gain")?;
@@ -537,10 +503,7 @@ fn read_kind(
                 ));
             }
             let function = read_function(&t.req("function")?)?;
-            let mut params: Vec<f64> = (0..function.amplitude_count())
-                .map(|k| function.amplitude(k))
-                .collect();
-            params.push(number_or(t, "initial", 0.0)?);
+            let params = vec![number_or(t, "initial", 0.0)?];
             let kind = BlockKind::Servo {
                 quantity,
                 target,

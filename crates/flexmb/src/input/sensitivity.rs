@@ -187,8 +187,8 @@ pub(super) fn read_sensitivity(
 }
 
 /// The columns `time_column` and `column` of a CSV file with a header: times increasing,
-/// every value finite.
-fn read_signal(
+/// every value finite (`[[reference]]`, and a `[[block]]` source's `file`).
+pub(super) fn read_signal(
     path: &Path,
     time_column: &str,
     column: &str,

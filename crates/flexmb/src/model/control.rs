@@ -75,8 +75,8 @@ pub enum Target {
 /// The kind of a block, with its structure (sizes); its numbers are in [`Block::params`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum BlockKind {
-    /// `y = f(t)` (the time functions of the model file); params: its amplitudes
-    /// ([`TimeFunction::amplitude_keys`], `function.<key>`), kept equal to the function's.
+    /// `y = f(t)` (the time functions of the model file); its parameters are the function's
+    /// amplitudes ([`TimeFunction::amplitude_keys`], `function.<key>`).
     Source(TimeFunction),
     /// `y = K u`, `K` of `rows x cols` (params `gain`, or `gain[i,j]`).
     Gain { rows: usize, cols: usize },
@@ -122,7 +122,7 @@ pub enum BlockKind {
     Actuator(Target),
     /// Servo constraint: its output `u`, applied along `target`, is the input that makes
     /// `quantity` (a node's position along an axis, or a joint coordinate) follow `f(t)`
-    /// (params: the amplitudes of `f`, as a source's, then `initial`, the value of `u`
+    /// (parameters: the amplitudes of `f`, as a source's, then `initial`, the value of `u`
     /// the consistent initial accelerations start from when `target` is not collocated
     /// with `quantity`). The inverse dynamics of an underactuated system (Blajer &
     /// Kołodziejczyk 2004).
@@ -271,27 +271,50 @@ impl BlockKind {
 pub struct Block {
     pub name: String,
     pub kind: BlockKind,
-    /// Values of [`BlockKind::param_names`], in order.
+    /// Values of the block's own parameters: [`BlockKind::param_names`] after the amplitudes
+    /// of a source's or servo's function, which stay in the function ([`Block::value`]).
     pub params: Vec<f64>,
     /// One per input ([`BlockKind::n_inputs`]).
     pub inputs: Vec<Signal>,
 }
 
 impl Block {
-    /// Sets parameter `k` (a source's amplitude in its function too).
-    pub fn set_param(&mut self, k: usize, value: f64) {
-        self.params[k] = value;
-        if let BlockKind::Source(f) | BlockKind::Servo { function: f, .. } = &mut self.kind {
-            if k < f.amplitude_count() {
-                f.set_amplitude(k, value);
+    /// The number of amplitudes of the block's time function (a source's, a servo's): its
+    /// first parameters.
+    pub fn n_amplitudes(&self) -> usize {
+        match &self.kind {
+            BlockKind::Source(f) | BlockKind::Servo { function: f, .. } => f.amplitude_count(),
+            _ => 0,
+        }
+    }
+
+    /// Parameter `k` of [`BlockKind::param_names`].
+    pub fn value(&self, k: usize) -> f64 {
+        match &self.kind {
+            BlockKind::Source(f) | BlockKind::Servo { function: f, .. }
+                if k < f.amplitude_count() =>
+            {
+                f.amplitude(k)
             }
+            _ => self.params[k - self.n_amplitudes()],
+        }
+    }
+
+    /// Sets parameter `k` of [`BlockKind::param_names`].
+    pub fn set_param(&mut self, k: usize, value: f64) {
+        let n = self.n_amplitudes();
+        match &mut self.kind {
+            BlockKind::Source(f) | BlockKind::Servo { function: f, .. } if k < n => {
+                f.set_amplitude(k, value)
+            }
+            _ => self.params[k - n] = value,
         }
     }
 
     /// The parameter named `name`.
     pub fn param(&self, name: &str) -> Option<f64> {
         let k = self.kind.param_names().iter().position(|n| n == name)?;
-        self.params.get(k).copied()
+        Some(self.value(k))
     }
 }
 
@@ -348,6 +371,22 @@ impl ControlSystem {
             (Quantity::JointCoordinate { joint }, Target::Joint { joint: j }) => joint == j,
             _ => false,
         }
+    }
+
+    /// Whether a measurement, actuator or servo acts along joint `j`.
+    pub fn uses_joint(&self, j: JointId) -> bool {
+        let along = |q: Option<&Quantity>, t: Option<&Target>| {
+            matches!(q, Some(Quantity::JointCoordinate { joint } | Quantity::JointRate { joint }) if *joint == j)
+                || matches!(t, Some(Target::Joint { joint }) if *joint == j)
+        };
+        self.blocks.iter().any(|b| match &b.kind {
+            BlockKind::Measure(q) => along(Some(q), None),
+            BlockKind::Actuator(t) => along(None, Some(t)),
+            BlockKind::Servo {
+                quantity, target, ..
+            } => along(Some(quantity), Some(target)),
+            _ => false,
+        })
     }
 
     /// Whether a block is a zero-order hold (the diagram then has events: its samples).

@@ -833,7 +833,7 @@ impl Parameters {
             ParamKind::RotationalSpring(i, p) => p.get(&model.rotational_springs[i]),
             ParamKind::Bushing(i, p) => p.get(&model.bushings[i]),
             ParamKind::WormGear(i, p) => p.get(&model.worm_gears[i]),
-            ParamKind::Control(p) => model.control.blocks[p.block].params[p.index],
+            ParamKind::Control(p) => model.control.blocks[p.block].value(p.index),
         }
     }
 

@@ -323,10 +323,7 @@ impl TimeFunction {
                     in_range(*f, -MAX_KINEMATIC, MAX_KINEMATIC)
                         .map_err(|m| format!("{name} {m}"))?;
                 }
-                time("duration", *duration)?;
-                if *duration <= 0.0 {
-                    return Err(format!("duration must be positive, got {duration}"));
-                }
+                in_range(*duration, MIN_STEP, MAX_TIME).map_err(|m| format!("duration {m}"))?;
                 value("offset", *offset)
             }
             TimeFunction::Table { points } => {
@@ -1101,22 +1098,34 @@ impl Model {
     fn validate_control(&self) -> Result<(), ModelError> {
         use super::control::BlockKind;
         let blocks = &self.control.blocks;
+        // the numbering of the unknowns is that of the blocks (a model built in Rust)
+        let fresh = super::control::ControlSystem::new(blocks.clone());
+        if fresh != self.control {
+            return Err(bad(
+                "block",
+                0,
+                blocks.first().map_or("", |b| b.name.as_str()),
+                "blocks",
+                "the blocks were changed after ControlSystem::new: build the system again".into(),
+            ));
+        }
         for (i, b) in blocks.iter().enumerate() {
             let fail = |field, m| bad("block", i, &b.name, field, m);
             let names = b.kind.param_names();
-            if b.params.len() != names.len() {
+            let n_own = names.len() - b.n_amplitudes();
+            if b.params.len() != n_own {
                 return Err(fail(
                     "params",
-                    format!(
-                        "{} parameters, the kind takes {}",
-                        b.params.len(),
-                        names.len()
-                    ),
+                    format!("{} parameters, the kind takes {n_own}", b.params.len()),
                 ));
             }
+            // (the amplitudes of a function are checked with the function)
             for (k, v) in b.params.iter().enumerate() {
                 if !v.is_finite() {
-                    return Err(fail("params", format!("{} is {v}", names[k])));
+                    return Err(fail(
+                        "params",
+                        format!("{} is {v}", names[b.n_amplitudes() + k]),
+                    ));
                 }
             }
             if b.inputs.len() != b.kind.n_inputs() {

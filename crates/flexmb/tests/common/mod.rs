@@ -268,7 +268,7 @@ pub fn control_diagram(group: flexmb_lie::Group) -> flexmb::model::Model {
                 phase: 0.2,
                 offset: 0.1,
             }),
-            vec![0.4, 0.1],
+            vec![],
             vec![],
         ),
         measure(
@@ -454,7 +454,7 @@ pub fn control_diagram(group: flexmb_lie::Group) -> flexmb::model::Model {
                     offset: 0.0,
                 },
             },
-            vec![0.3, 0.0, 0.5],
+            vec![0.5],
             vec![],
         ),
     ];
