@@ -46,6 +46,15 @@ fn pid_loop() -> DMatrix<f64> {
     a
 }
 
+/// Runs a model given as text (`file`: its name, the base of relative paths in it).
+fn run_text(text: &str, file: &str) -> common::History {
+    let f = flexmb::input::parse_model_str(text, file, &[]).expect("model");
+    let flexmb::input::Analysis::Dynamic(settings) = f.analysis else {
+        panic!("{file} is a dynamic analysis")
+    };
+    common::run_model(&f.model, settings).expect("runs")
+}
+
 /// Largest error of the sensor `x` against the exact closed-loop response, over the run.
 fn pid_error(h: f64) -> (f64, common::History) {
     let hist = common::run("pid_mass_spring.toml", &[&format!("solver.h={h}")]);
@@ -147,11 +156,7 @@ type = "block"
 block = "filter"
 "#
     );
-    let f = flexmb::input::parse_model_str(&text, "stiff.toml", &[]).expect("model");
-    let flexmb::input::Analysis::Dynamic(settings) = f.analysis else {
-        panic!("dynamic")
-    };
-    let h = common::run_model(&f.model, settings).expect("runs");
+    let h = run_text(&text, "stiff.toml");
     h.rows.iter().map(|(t, v)| (*t, v[0], v[1])).collect()
 }
 
@@ -221,11 +226,7 @@ type = "block"
 block = "signal"
 "#;
     let file = dir.join("hold.toml");
-    let f = flexmb::input::parse_model_str(text, file.to_str().expect("path"), &[]).expect("model");
-    let flexmb::input::Analysis::Dynamic(settings) = f.analysis else {
-        panic!("dynamic")
-    };
-    let h = common::run_model(&f.model, settings).expect("runs");
+    let h = run_text(text, file.to_str().expect("path"));
     let mut samples = 0;
     for (t, v) in &h.rows {
         let (held, signal) = (v[0], v[1]);
@@ -349,11 +350,7 @@ name = "lag"
 type = "block"
 block = "lag"
 "#;
-    let f = flexmb::input::parse_model_str(text, "tf.toml", &[]).expect("model");
-    let flexmb::input::Analysis::Dynamic(settings) = f.analysis else {
-        panic!("dynamic")
-    };
-    let h = common::run_model(&f.model, settings).expect("runs");
+    let h = run_text(text, "tf.toml");
     let (mut exact, mut lag) = (0.0f64, 0.0f64);
     for (t, v) in &h.rows {
         exact = exact.max((v[0] - (1.0 - (-t).exp())).abs());
