@@ -368,7 +368,7 @@ fn element<'m, S: Sink>(
     let dof = |k: usize| layout.dof(kernel.node(k));
     let it = &p.it;
     if S::EVALUATE {
-        buffers.gather(&kernel, it.nodes, (it.x, it.xdot, x_start));
+        buffers.gather(&kernel, it.nodes, (it.x, it.xdot, x_start), it.lambda);
     }
     let (local, mut r, mut se) = buffers.split(kernel.n_local(), it.nodes);
     if S::EVALUATE {
@@ -377,10 +377,30 @@ fn element<'m, S: Sink>(
     }
     if S::MATRIX {
         scatter_blocks(sink, n_slots, dof, |i, j| se.get(i, j));
+        let ratio = p.sc.state_scale / p.sc.row_scale;
+        let xs = layout.state_offset() + x_start;
         if n_states > 0 {
-            let ratio = p.sc.state_scale / p.sc.row_scale;
-            let xs = layout.state_offset() + x_start;
             scatter_states(sink, (n_slots, n_states), dof, xs, ratio, &se);
+        }
+        let rows = kernel.multiplier_rows();
+        if !rows.is_empty() {
+            // the multipliers' columns (active rows only) of the slots' and states' rows
+            let n6 = 6 * n_slots;
+            for (m, &row) in rows.iter().enumerate() {
+                let Some(k) = layout.row_unknown[row] else {
+                    continue;
+                };
+                let (c, j) = (layout.n_dofs + k, n6 + n_states + m);
+                for ka in 0..n_slots {
+                    let Some(a) = dof(ka) else { continue };
+                    for i in 0..6 {
+                        sink.entry(a + i, c, se.get(6 * ka + i, j));
+                    }
+                }
+                for i in 0..n_states {
+                    sink.entry(xs + i, c, se.get(n6 + i, j) * ratio);
+                }
+            }
         }
     }
     kernel

@@ -120,7 +120,7 @@ fn element_term<E: ElementParameters>(
     let mut buffers = LocalBuffers::default();
     let p = at.point;
     let state_start = item.state_start(at.model);
-    buffers.gather(e, p.nodes, (p.x, p.xdot, state_start));
+    buffers.gather(e, p.nodes, (p.x, p.xdot, state_start), p.lambda);
     let local = buffers.local(p.nodes);
     let mut d = DVector::zeros(e.n_local());
     let mut dv = d.as_view_mut();
@@ -131,7 +131,9 @@ fn element_term<E: ElementParameters>(
             DerivativeMethod::Analytic
         }
     };
-    sink(Piece::Element(&slots, state_start, d.as_slice()));
+    // (no equations for the multipliers an element reads)
+    let n = 6 * slots.len() + e.n_states();
+    sink(Piece::Element(&slots, state_start, &d.as_slice()[..n]));
     method
 }
 
@@ -167,6 +169,13 @@ fn visit(
             for &e in params.beam_elements(item) {
                 let beam = (&model.beams[e], ElementItem::Beam(e));
                 method = element_term(at, beam, Wrt::Own(p), sink);
+                // the block diagram measuring the element's section forces
+                if model.control.uses_beam(e) && !at.point.x.is_empty() {
+                    let slots = crate::elements::control::slots(model);
+                    let element = crate::elements::control::ControlElement::new(model, &slots);
+                    let wrt = Wrt::Own(ControlWrt::Section(e, p));
+                    element_term(at, (&element, ElementItem::Control), wrt, sink);
+                }
             }
             method
         }
@@ -214,11 +223,7 @@ fn visit(
             let control = model.control.uses_joint(j);
             if control && !at.point.x.is_empty() {
                 let slots = crate::elements::control::slots(model);
-                let element = crate::elements::control::ControlElement {
-                    system: &model.control,
-                    model,
-                    slots: &slots,
-                };
+                let element = crate::elements::control::ControlElement::new(model, &slots);
                 let wrt = Wrt::Own(ControlWrt::Joint(j, p));
                 element_term(at, (&element, ElementItem::Control), wrt, sink);
             }
@@ -259,11 +264,7 @@ fn visit(
         ),
         ParamKind::Control(p) => {
             let slots = crate::elements::control::slots(model);
-            let element = crate::elements::control::ControlElement {
-                system: &model.control,
-                model,
-                slots: &slots,
-            };
+            let element = crate::elements::control::ControlElement::new(model, &slots);
             element_term(
                 at,
                 (&element, ElementItem::Control),
@@ -315,7 +316,9 @@ pub fn residual_derivative(
             scatter(dr, slots, d);
             let states = &d[6 * slots.len()..];
             if !de.is_empty() {
-                de[x_start..x_start + states.len()].copy_from_slice(states);
+                // (added: the diagram may have a term for each beam element it measures)
+                let out = &mut de[x_start..x_start + states.len()];
+                out.iter_mut().zip(states).for_each(|(o, s)| *o += s);
             }
         }
         Piece::Joint(j, d) => {

@@ -44,7 +44,7 @@ pub fn energies(model: &Model, elements: &[ElementRef], state: &State) -> (f64, 
     let mut start = 0;
     for e in elements {
         let k = e.kernel(model);
-        buffers.gather(&k, &nodes, (&state.x, &state.xdot, start));
+        buffers.gather(&k, &nodes, (&state.x, &state.xdot, start), &state.lambda);
         start += k.n_states();
         let local = buffers.local(&nodes);
         ke += k.kinetic_energy(&ctx, &local);
@@ -191,7 +191,7 @@ pub fn sensor_value(
         SensorKind::SpringForce { spring } => {
             let sp = crate::elements::spring::SpringElement::of(model, *spring);
             let start = ElementItem::Spring(*spring).state_start(model);
-            buffers.gather(&sp, nodes, (&state.x, &state.xdot, start));
+            buffers.gather(&sp, nodes, (&state.x, &state.xdot, start), &state.lambda);
             sp.tension(&ctx, &buffers.local(nodes))
         }
         SensorKind::Contact { contact, quantity } => {
@@ -205,6 +205,7 @@ pub fn sensor_value(
                 &element,
                 nodes,
                 (&state.x, &state.xdot, item.state_start(model)),
+                &state.lambda,
             );
             let s = element.state(&ctx, &buffers.local(nodes));
             match quantity {
@@ -222,18 +223,18 @@ pub fn sensor_value(
         SensorKind::RopeForce { rope: i } => {
             let rope = &model.ropes[*i];
             let start = ElementItem::Rope(*i).state_start(model);
-            buffers.gather(rope, nodes, (&state.x, &state.xdot, start));
+            buffers.gather(rope, nodes, (&state.x, &state.xdot, start), &state.lambda);
             rope.force(&ctx, &buffers.local(nodes))
         }
         SensorKind::RotationalSpringTorque { spring: i } => {
             let sp = crate::elements::rotational_spring::RotationalSpringElement::of(model, *i);
             let start = ElementItem::RotationalSpring(*i).state_start(model);
-            buffers.gather(&sp, nodes, (&state.x, &state.xdot, start));
+            buffers.gather(&sp, nodes, (&state.x, &state.xdot, start), &state.lambda);
             sp.torque(&ctx, &buffers.local(nodes))
         }
         SensorKind::BushingForce { bushing, component } => {
             let b = &model.bushings[*bushing];
-            buffers.gather(b, nodes, (&state.x, &state.xdot, 0));
+            buffers.gather(b, nodes, (&state.x, &state.xdot, 0), &state.lambda);
             b.state(model.group, buffers.local(nodes).nodes).sigma[*component]
         }
         kind @ (SensorKind::KineticEnergy
@@ -259,7 +260,7 @@ pub fn sensor_value(
         }
         kind @ (SensorKind::GearForce { gear } | SensorKind::GearTransmissionError { gear }) => {
             let g = &model.gears[*gear];
-            buffers.gather(g, nodes, (&state.x, &state.xdot, 0));
+            buffers.gather(g, nodes, (&state.x, &state.xdot, 0), &state.lambda);
             let local = buffers.local(nodes);
             if matches!(kind, SensorKind::GearForce { .. }) {
                 g.mesh_force(&ctx, &local)

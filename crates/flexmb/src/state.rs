@@ -72,7 +72,12 @@ impl State {
                 let ns = kernel.n_states();
                 if ns > 0 {
                     // the states and rates are still zero here
-                    buffers.gather(&kernel, &nodes, (&state.x, &state.xdot, start));
+                    buffers.gather(
+                        &kernel,
+                        &nodes,
+                        (&state.x, &state.xdot, start),
+                        &state.lambda,
+                    );
                     let x = &mut state.x[start..start + ns];
                     kernel.initial_states(&ctx, &buffers.local(&nodes), x);
                 }

@@ -78,14 +78,21 @@ fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f6
             .map(|s| s.map_or(NodeState::ground(Frame::identity()), |n| at.nodes[n.0]))
             .collect();
         let states = e_rows.len()..e_rows.len() + kernel.n_states();
+        let lambda: Vec<f64> = kernel
+            .multiplier_rows()
+            .iter()
+            .map(|&r| at.lambda[r])
+            .collect();
         let local = Local {
             nodes: &nodes,
             x: &at.x[states.clone()],
             xdot: &at.xdot[states],
+            lambda: &lambda,
         };
         let (local, _) = evaluate_owned(&kernel, &ctx, &local, None);
         add(&slots, local.as_slice());
-        e_rows.extend_from_slice(&local.as_slice()[6 * slots.len()..]);
+        let n = 6 * slots.len() + kernel.n_states();
+        e_rows.extend_from_slice(&local.as_slice()[6 * slots.len()..n]);
     }
     let (mut phi, mut psi) = (vec![], vec![]);
     for joint in &model.joints {

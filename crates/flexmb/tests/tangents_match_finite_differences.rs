@@ -91,19 +91,21 @@ fn check_element_with_states(
     x: &[f64],
     xdot: &[f64],
 ) {
-    check_states(name, kernel, model, nodes, (x, xdot), (&[], EPS));
+    check_states(name, kernel, model, nodes, (x, xdot, &[]), (&[], EPS));
 }
 
 /// [`check_element_with_states`] for an element with states `held` (local state indices)
 /// that are held values (equation `xdot = 0`): without a rate term (statics), the iteration
 /// matrix reads their equations as `x = x_start` (diagonal 1) while the residual stays
-/// `xdot`, so those diagonal entries are checked against 1 instead of a difference.
+/// `xdot`, so those diagonal entries are checked against 1 instead of a difference. The
+/// element reads the multipliers `lambda` ([`ElementKernel::multiplier_rows`]); their
+/// columns, which carry no coefficient, are checked with every coefficient.
 fn check_states(
     name: &str,
     kernel: &dyn ElementKernel,
     model: &Model,
     nodes: &[NodeState],
-    (x, xdot): (&[f64], &[f64]),
+    (x, xdot, lambda): (&[f64], &[f64], &[f64]),
     (held, eps): (&[usize], f64),
 ) {
     let group = model.group;
@@ -111,14 +113,21 @@ fn check_states(
     let nodes = &nodes[..kernel.n_slots()];
     let n6 = 6 * nodes.len();
     let n = kernel.n_local();
-    assert_eq!(n, n6 + x.len(), "{name}: local size");
+    let nx = n6 + x.len();
+    assert_eq!(n, nx + lambda.len(), "{name}: local size");
     let active: Vec<bool> = (0..n)
         .map(|i| i >= n6 || kernel.node(i / 6).is_some())
         .collect();
-    let eval = |nodes: &[NodeState], x: &[f64], xdot: &[f64]| {
-        let local = Local { nodes, x, xdot };
+    let eval_with = |nodes: &[NodeState], x: &[f64], xdot: &[f64], lambda: &[f64]| {
+        let local = Local {
+            nodes,
+            x,
+            xdot,
+            lambda,
+        };
         evaluate_owned(kernel, &ctx, &local, None).0
     };
+    let eval = |nodes: &[NodeState], x: &[f64], xdot: &[f64]| eval_with(nodes, x, xdot, lambda);
     for (what, coef) in [
         ('q', coefficients(0.0, 0.0, 1.0, 0.0, 0.0)),
         ('v', coefficients(0.0, 1.0, 0.0, 0.0, 0.0)),
@@ -126,7 +135,12 @@ fn check_states(
         ('x', coefficients(0.0, 0.0, 0.0, 1.0, 0.0)),
         ('d', coefficients(0.0, 0.0, 0.0, 0.0, 1.0)),
     ] {
-        let local = Local { nodes, x, xdot };
+        let local = Local {
+            nodes,
+            x,
+            xdot,
+            lambda,
+        };
         let (r, s) = evaluate_owned(kernel, &ctx, &local, Some(&coef));
         // the residual written with the matrix is the residual alone
         let r_alone = eval(nodes, x, xdot);
@@ -139,7 +153,18 @@ fn check_states(
             if !active[k] {
                 continue;
             }
-            let (rp, rm) = if k < n6 {
+            let moved = |v: &[f64], i: usize, e: f64| {
+                let mut v = v.to_vec();
+                v[i] += e;
+                v
+            };
+            let (rp, rm) = if k >= nx {
+                let i = k - nx;
+                (
+                    eval_with(nodes, x, xdot, &moved(lambda, i, eps)),
+                    eval_with(nodes, x, xdot, &moved(lambda, i, -eps)),
+                )
+            } else if k < n6 {
                 if matches!(what, 'x' | 'd') {
                     continue;
                 }
@@ -149,19 +174,14 @@ fn check_states(
                 )
             } else {
                 let i = k - n6;
-                let moved = |v: &[f64], e: f64| {
-                    let mut v = v.to_vec();
-                    v[i] += e;
-                    v
-                };
                 match what {
                     'x' => (
-                        eval(nodes, &moved(x, eps), xdot),
-                        eval(nodes, &moved(x, -eps), xdot),
+                        eval(nodes, &moved(x, i, eps), xdot),
+                        eval(nodes, &moved(x, i, -eps), xdot),
                     ),
                     'd' => (
-                        eval(nodes, x, &moved(xdot, eps)),
-                        eval(nodes, x, &moved(xdot, -eps)),
+                        eval(nodes, x, &moved(xdot, i, eps)),
+                        eval(nodes, x, &moved(xdot, i, -eps)),
                     ),
                     _ => continue,
                 }
@@ -860,6 +880,7 @@ fn contact_tangents_match_finite_differences() {
                     nodes: &nodes,
                     x: &x,
                     xdot: &xdot,
+                    lambda: &[],
                 };
                 let state = element.state(&ctx, &local);
                 assert!(
@@ -874,7 +895,14 @@ fn contact_tangents_match_finite_differences() {
                     contact.name, contact.friction
                 );
                 let held: Vec<usize> = (0..x.len()).collect();
-                check_states(&name, &element, &model, &nodes, (&x, &xdot), (&held, EPS));
+                check_states(
+                    &name,
+                    &element,
+                    &model,
+                    &nodes,
+                    (&x, &xdot, &[]),
+                    (&held, EPS),
+                );
             }
         }
     }
@@ -1009,7 +1037,14 @@ fn contact_tangents_match_one_sided_differences_at_the_onset() {
                 let name = format!("contact '{}' at penetration {depth:e}", contact.name);
                 let (x, xdot) = contact_states(&contact, &mut rng);
                 let held: Vec<usize> = (0..x.len()).collect();
-                check_states(&name, &element, &model, &slow, (&x, &xdot), (&held, eps));
+                check_states(
+                    &name,
+                    &element,
+                    &model,
+                    &slow,
+                    (&x, &xdot, &[]),
+                    (&held, eps),
+                );
             }
         }
     }
@@ -1422,6 +1457,7 @@ fn rotational_spring_tangents_match_finite_differences() {
                     nodes: &nodes,
                     x: &x,
                     xdot: &[0.7],
+                    lambda: &[],
                 };
                 let theta = element.angle(&ctx, &local);
                 assert!(
@@ -1495,6 +1531,7 @@ fn check_energy_gradient(
         nodes: &rest,
         x,
         xdot: &xdot,
+        lambda: &[],
     };
     let (r, _) = evaluate_owned(kernel, &ctx, &local, None);
     let energy = |nodes: &[NodeState]| {
@@ -1504,6 +1541,7 @@ fn check_energy_gradient(
                 nodes,
                 x,
                 xdot: &xdot,
+                lambda: &[],
             },
         )
     };
@@ -1682,11 +1720,7 @@ fn control_block_tangents_match_finite_differences() {
     for group in [Group::R3xSO3, Group::SE3] {
         let model = common::control_diagram(group);
         let slots = slots(&model);
-        let element = ControlElement {
-            system: &model.control,
-            model: &model,
-            slots: &slots,
-        };
+        let element = ControlElement::new(&model, &slots);
         let hold = model
             .control
             .blocks
@@ -1696,6 +1730,7 @@ fn control_block_tangents_match_finite_differences() {
             .expect("a hold");
         for _ in 0..3 {
             let nodes: Vec<NodeState> = slots
+                .nodes
                 .iter()
                 .map(|s| match s {
                     Some(_) => rng.node(group),
@@ -1705,12 +1740,14 @@ fn control_block_tangents_match_finite_differences() {
             let n = model.control.n_unknowns;
             let x: Vec<f64> = (0..n).map(|_| 0.5 * rng.next()).collect();
             let xdot: Vec<f64> = (0..n).map(|_| 0.5 * rng.next()).collect();
+            let lambda: Vec<f64> = slots.rows.iter().map(|_| 20.0 * rng.next()).collect();
+            assert_eq!(lambda.len(), 10, "the hinge's 5 rows and the slide's 5");
             check_states(
                 "control blocks",
                 &element,
                 &model,
                 &nodes,
-                (&x, &xdot),
+                (&x, &xdot, &lambda),
                 (&[hold], EPS),
             );
         }

@@ -381,11 +381,8 @@ fn load_and_joint_equations(model: &Model, at: &Point) -> Vec<f64> {
         let element = ElementRef::Load(i);
         let kernel = element.kernel(model);
         let node = kernel.node(0).unwrap();
-        let local = Local {
-            nodes: &[at.nodes[node.0]],
-            x: &[],
-            xdot: &[],
-        };
+        let slot = [at.nodes[node.0]];
+        let local = Local::nodes(&slot);
         let (local, _) = evaluate_owned(&kernel, &ctx, &local, None);
         for k in 0..6 {
             r[6 * node.0 + k] += local[k];

@@ -205,6 +205,16 @@ impl Beam {
         }
     }
 
+    /// [`Beam::state`] and the derivative of its stress resultants `C epsilon` with
+    /// respect to the nodes' variations `[w_a; w_b]` (group coordinates, tangent operators
+    /// not applied): `C P / L` (6 x 12).
+    pub fn stress_derivative(&self, nodes: &[NodeState; 2]) -> (BeamState, SMatrix<f64, 6, 12>) {
+        let st = self.state(nodes);
+        let (aa, ab) = (offset_map(&self.offset_a), offset_map(&self.offset_b));
+        let p = self.projection(&st.d, &aa, &ab);
+        (st, self.section.stiffness * p / self.length)
+    }
+
     /// Gravity force on half of the element's mass at node `end` (body frame of the node).
     fn half_weight(&self, ctx: &Context, n: &NodeState) -> Vec3 {
         n.q.r.transpose()

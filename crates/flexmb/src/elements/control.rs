@@ -91,34 +91,69 @@
 use super::pose::{c, pose, Pose};
 use super::{
     physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
-    LocalMatrix, LocalVector, StepLimit,
+    LocalMatrix, LocalVector, Mat12, StepLimit,
 };
 use crate::model::control::{BlockKind, ControlSystem, Quantity, Target};
-use crate::model::parameters::ControlWrt;
-use crate::model::{Joint, JointKind, Model, NodeId};
+use crate::model::parameters::{ControlWrt, SectionParam};
+use crate::model::{Joint, JointId, JointKind, Model, NodeId};
 use flexmb_lie::Vec3;
-use nalgebra::{DMatrix, DVector, Matrix3, RealField, RowVector6, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, RealField, RowVector6, SMatrix, Vector3};
+
+/// A row over the 12 variations of two nodes.
+type RowVector12 = SMatrix<f64, 1, 12>;
 use num_dual::Dual64;
 use std::f64::consts::PI;
 
-/// The block diagram of a model as the assembly sees it: the system and its slots.
+/// The block diagram of a model as the assembly sees it: the system, its slots and the
+/// constraint rows it reads.
 #[derive(Clone, Copy, Debug)]
 pub struct ControlElement<'m> {
     pub system: &'m ControlSystem,
     pub model: &'m Model,
     /// The nodes the measurements and actuators touch (`None`: the ground side of a joint).
     pub slots: &'m [Option<NodeId>],
+    /// The constraint rows whose multipliers the measurements of constraint forces read
+    /// ([`ElementKernel::multiplier_rows`]), joint after joint, and where each joint's
+    /// rows start among them.
+    pub rows: &'m [usize],
+    pub joint_rows: &'m [(JointId, usize)],
 }
 
-/// The slots of a model's diagram: every node a measurement or actuator touches, in the
-/// order of first use (both sides of a joint, the ground as `None`).
-pub fn slots(model: &Model) -> Vec<Option<NodeId>> {
+/// What the diagram of a model touches ([`slots`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Slots {
+    /// Every node a measurement or actuator touches, in the order of first use (both sides
+    /// of a joint, the ground as `None`).
+    pub nodes: Vec<Option<NodeId>>,
+    /// The rows of the joints whose constraint forces are measured (indices in
+    /// `State::lambda`), joint after joint.
+    pub rows: Vec<usize>,
+    /// Those joints, each with the position of its first row in `rows`.
+    pub joint_rows: Vec<(JointId, usize)>,
+}
+
+impl<'m> ControlElement<'m> {
+    /// The diagram of `model` on its [`slots`].
+    pub fn new(model: &'m Model, slots: &'m Slots) -> Self {
+        Self {
+            system: &model.control,
+            model,
+            slots: &slots.nodes,
+            rows: &slots.rows,
+            joint_rows: &slots.joint_rows,
+        }
+    }
+}
+
+/// The slots of a model's diagram and the constraint rows it reads.
+pub fn slots(model: &Model) -> Slots {
     let mut out: Vec<Option<NodeId>> = Vec::new();
     let mut add = |n: Option<NodeId>| {
         if !out.contains(&n) {
             out.push(n);
         }
     };
+    let (mut rows, mut joint_rows) = (Vec::new(), Vec::<(JointId, usize)>::new());
     for b in &model.control.blocks {
         let (quantity, target) = match &b.kind {
             BlockKind::Measure(q) => (Some(q), None),
@@ -139,6 +174,24 @@ pub fn slots(model: &Model) -> Vec<Option<NodeId>> {
                     add(j.node_a);
                     add(j.node_b);
                 }
+                Quantity::ConstraintForce { joint, .. } => {
+                    let j = &model.joints[joint.0];
+                    add(j.node_a);
+                    add(j.node_b);
+                    if !joint_rows.iter().any(|(k, _)| k == joint) {
+                        let first: usize = model.joints[..joint.0]
+                            .iter()
+                            .map(|j| crate::joints::rows(j).len())
+                            .sum();
+                        joint_rows.push((*joint, rows.len()));
+                        rows.extend(first..first + crate::joints::rows(j).len());
+                    }
+                }
+                Quantity::SectionForce { beam, .. } => {
+                    let b = &model.beams[*beam];
+                    add(Some(b.nodes[0]));
+                    add(Some(b.nodes[1]));
+                }
             }
         }
         if let Some(t) = target {
@@ -152,7 +205,11 @@ pub fn slots(model: &Model) -> Vec<Option<NodeId>> {
             }
         }
     }
-    out
+    Slots {
+        nodes: out,
+        rows,
+        joint_rows,
+    }
 }
 
 /// The scalars the residual is evaluated in: `f64`, and dual numbers for its derivatives.
@@ -277,8 +334,9 @@ impl ControlElement<'_> {
         PER_SLOT * self.slots.len() + 2 * self.system.n_unknowns
     }
 
-    /// The value of a measurement.
-    fn measure<T: Scalar>(&self, q: &Quantity, poses: &[Pose<T>], y: T) -> T {
+    /// The value of a measurement (`reaction`: the value of a measurement that is not a
+    /// function of the poses, [`Quantity::is_reaction`], from [`ControlElement::reaction`]).
+    fn measure<T: Scalar>(&self, q: &Quantity, poses: &[Pose<T>], y: T, reaction: f64) -> T {
         let node = |n: NodeId| &poses[self.slot(Some(n))];
         match q {
             Quantity::Position {
@@ -330,7 +388,147 @@ impl ControlElement<'_> {
                     }
                 }
             }
+            Quantity::ConstraintForce { .. } | Quantity::SectionForce { .. } => c(reaction),
         }
+    }
+
+    /// A measurement of a constraint force or a section force ([`Quantity::is_reaction`]):
+    /// its value and, with `coef`, its derivative in the element's local columns (node
+    /// columns in group coordinates, times `coef.k` and the tangent operators; multiplier
+    /// columns without coefficient, [`ElementKernel::multiplier_rows`]).
+    ///
+    /// A constraint force is `-B^T lambda` on the measured node, the joint's own rows `B`
+    /// and `K_c = sum_r lambda_r dB_r^T/dw` giving its derivatives; its components in the
+    /// node's frame (the rotational ones, and on SE(3) the translational ones too) turn to
+    /// inertial ones by `R`, whose variation `R tilde(theta)` adds `(R^T a) x g` on the
+    /// node's rotation columns. A section force is the beam's `C epsilon`, of derivative
+    /// `C P / L` ([`crate::elements::beam::Beam::stress_derivative`]).
+    fn reaction(
+        &self,
+        ctx: &Context,
+        local: &Local,
+        q: &Quantity,
+        coef: Option<&Coefficients>,
+    ) -> (f64, Option<DVector<f64>>) {
+        let n6 = 6 * self.slots.len();
+        let mut row = coef.map(|_| DVector::zeros(n6 + self.system.n_unknowns + self.rows.len()));
+        // the 12 node columns of a pair of slots, times c_k and the tangent operators
+        let nodes_row = |row: &mut DVector<f64>, slots: [usize; 2], d: &RowVector12, k: f64| {
+            for (end, &slot) in slots.iter().enumerate() {
+                if self.slots[slot].is_some() {
+                    let block = d.fixed_columns::<6>(6 * end) * local.nodes[slot].t * k;
+                    let mut out = row.rows_mut(6 * slot, 6);
+                    out += block.transpose();
+                }
+            }
+        };
+        match q {
+            Quantity::ConstraintForce {
+                joint,
+                axis,
+                moment,
+            } => {
+                let j = &self.model.joints[joint.0];
+                let slots = [self.slot(j.node_a), self.slot(j.node_b)];
+                let pair = [local.nodes[slots[0]], local.nodes[slots[1]]];
+                let rows = crate::joints::rows(j);
+                let first = self
+                    .joint_rows
+                    .iter()
+                    .find(|(k, _)| k == joint)
+                    .map_or(0, |&(_, f)| f);
+                let lam = &local.lambda[first..first + rows.len()];
+                let mut k = Mat12::zeros();
+                let jv = crate::joints::ConstraintKernel::evaluate(
+                    j,
+                    ctx.group,
+                    &rows,
+                    &pair,
+                    ctx.t,
+                    lam,
+                    row.as_ref().map(|_| &mut k),
+                );
+                let rb = pair[1].q.r;
+                let mut d = RowVector12::zeros();
+                let mut dl = vec![0.0; rows.len()];
+                // `a . f` for f the force (at = 6) or moment about B's origin (at = 9) of
+                // `-B^T lambda` on node B, inertial; `g` the node's generalized force part
+                let part = |at: usize| -> Vec3 {
+                    (0..rows.len()).fold(Vec3::zeros(), |acc, r| {
+                        acc + jv.b[r].fixed_rows::<3>(at) * lam[r]
+                    })
+                };
+                // components in the node's frame turn with it
+                let turns = |at: usize| at == 9 || ctx.group == flexmb_lie::Group::SE3;
+                let mut along = |at: usize, a: &Vec3, d: &mut RowVector12| {
+                    let g = part(at);
+                    let turns = turns(at);
+                    let w = if turns { rb.transpose() * a } else { *a };
+                    for c in 0..12 {
+                        d[c] -= (0..3).map(|i| w[i] * k[(at + i, c)]).sum::<f64>();
+                    }
+                    if turns {
+                        let extra = w.cross(&g);
+                        for i in 0..3 {
+                            d[9 + i] += extra[i];
+                        }
+                    }
+                    for (r, dl) in dl.iter_mut().enumerate() {
+                        *dl -= w.dot(&jv.b[r].fixed_rows::<3>(at));
+                    }
+                    -w.dot(&g)
+                };
+                let value = if *moment {
+                    // about the joint point P = x_B + R_B p: m_P = m_O - (R_B p) x f, so
+                    // a . m_P = a . m_O + ((R_B p) x a) . f, and the variation of R_B p
+                    // adds p x (R_B^T (a x f)) on B's rotation columns
+                    let p = j.frame_b.x;
+                    let r = rb * p;
+                    let f = if turns(6) { rb * part(6) } else { part(6) } * -1.0;
+                    let extra = p.cross(&(rb.transpose() * axis.cross(&f)));
+                    for i in 0..3 {
+                        d[9 + i] += extra[i];
+                    }
+                    along(9, axis, &mut d) + along(6, &r.cross(axis), &mut d)
+                } else {
+                    along(6, axis, &mut d)
+                };
+                if let (Some(row), Some(coef)) = (row.as_mut(), coef) {
+                    nodes_row(row, slots, &d, coef.k);
+                    let m0 = n6 + self.system.n_unknowns + first;
+                    row.rows_mut(m0, rows.len()).copy_from_slice(&dl);
+                }
+                (value, row)
+            }
+            Quantity::SectionForce { beam, component } => {
+                let b = &self.model.beams[*beam];
+                let slots = [self.slot(Some(b.nodes[0])), self.slot(Some(b.nodes[1]))];
+                let (st, d) = b.stress_derivative(&self.beam_pair(b, local));
+                if let (Some(row), Some(coef)) = (row.as_mut(), coef) {
+                    nodes_row(row, slots, &d.row(*component).into_owned(), coef.k);
+                }
+                (st.stress[*component], row)
+            }
+            _ => (0.0, row),
+        }
+    }
+
+    /// The kinematics of a beam element's two nodes (both are slots).
+    fn beam_pair(&self, b: &crate::model::Beam, local: &Local) -> [super::NodeState; 2] {
+        b.nodes.map(|n| local.nodes[self.slot(Some(n))])
+    }
+
+    /// The values of the diagram's [`ControlElement::reaction`] measurements, per block (0
+    /// for the others).
+    fn reactions(&self, ctx: &Context, local: &Local) -> Vec<f64> {
+        self.system
+            .blocks
+            .iter()
+            .map(|b| match &b.kind {
+                BlockKind::Measure(q) if q.is_reaction() => self.reaction(ctx, local, q, None).0,
+                _ => 0.0,
+            })
+            .collect()
     }
 
     /// The second time derivative of a position-level quantity (a node's position along an
@@ -343,7 +541,7 @@ impl ControlElement<'_> {
                     point: *point,
                     axis: *axis,
                 };
-                self.measure(&acceleration, poses, c(0.0))
+                self.measure(&acceleration, poses, c(0.0), 0.0)
             }
             Quantity::JointCoordinate { joint } => {
                 let j = &self.model.joints[joint.0];
@@ -432,7 +630,7 @@ impl ControlElement<'_> {
         &self,
         poses: &[Pose<T>],
         (x, xdot): (&[T], &[T]),
-        t: f64,
+        (t, reactions): (f64, &[f64]),
         param: &dyn Fn(usize, usize) -> T,
         phase: Phase,
     ) -> Vec<T> {
@@ -577,7 +775,9 @@ impl ControlElement<'_> {
                     state!(0, u(0) - r * xs[0] - ke * u(1), l);
                     e[y0] = ys[0] - kt * xs[0];
                 }
-                BlockKind::Measure(q) => e[y0] = ys[0] - self.measure(q, poses, ys[0]),
+                BlockKind::Measure(q) => {
+                    e[y0] = ys[0] - self.measure(q, poses, ys[0], reactions[b]);
+                }
                 BlockKind::Actuator(target) => self.actuate(target, poses, u(0), nodes),
                 BlockKind::Servo {
                     quantity,
@@ -601,7 +801,7 @@ impl ControlElement<'_> {
                             self.second_derivative(quantity, poses) - fdd
                         }
                         Phase::Accelerations => ys[0] - p(n),
-                        _ => self.measure(quantity, poses, f) - f,
+                        _ => self.measure(quantity, poses, f, 0.0) - f,
                     };
                     self.actuate(target, poses, ys[0], nodes);
                 }
@@ -618,7 +818,14 @@ impl ControlElement<'_> {
     /// The residual at `f64` and its Jacobian with respect to the variables
     /// (`[18 per slot; x; xdot]`), by one forward pass per variable (`None` columns: the
     /// slot is the ground).
-    fn jacobian(&self, ctx: &Context, local: &Local, phase: Phase) -> (DVector<f64>, DMatrix<f64>) {
+    /// `reactions`: the values of [`ControlElement::reactions`].
+    fn jacobian(
+        &self,
+        ctx: &Context,
+        local: &Local,
+        phase: Phase,
+        reactions: &[f64],
+    ) -> (DVector<f64>, DMatrix<f64>) {
         let poses: Vec<Pose<f64>> = local.nodes.iter().map(|n| pose(ctx.group, n)).collect();
         let nv = self.n_variables();
         let n = self.system.n_unknowns;
@@ -643,7 +850,13 @@ impl ControlElement<'_> {
                 .enumerate()
                 .map(|(k, p)| perturbed(p, &w[PER_SLOT * k..PER_SLOT * (k + 1)]))
                 .collect();
-            let out = self.residual(&dual, (&w[ns..ns + n], &w[ns + n..]), ctx.t, &params, phase);
+            let out = self.residual(
+                &dual,
+                (&w[ns..ns + n], &w[ns + n..]),
+                (ctx.t, reactions),
+                &params,
+                phase,
+            );
             w[j].eps = 0.0;
             for (i, o) in out.iter().enumerate() {
                 jac[(i, j)] = o.eps;
@@ -655,7 +868,7 @@ impl ControlElement<'_> {
             let out = self.residual(
                 &poses,
                 (local.x, local.xdot),
-                ctx.t,
+                (ctx.t, reactions),
                 &self.param_f64(),
                 phase,
             );
@@ -690,12 +903,9 @@ impl ControlElement<'_> {
         let ns = PER_SLOT * self.slots.len();
         let rows = 6 * self.slots.len();
         for _ in 0..30 {
-            let here = Local {
-                nodes: local.nodes,
-                x: &*x,
-                xdot: local.xdot,
-            };
-            let (value, jac) = self.jacobian(ctx, &here, Phase::Initial);
+            let here = Local { x: &*x, ..*local };
+            let reactions = self.reactions(ctx, &here);
+            let (value, jac) = self.jacobian(ctx, &here, Phase::Initial, &reactions);
             let m = unknowns.len();
             let a = DMatrix::from_fn(m, m, |i, j| jac[(rows + unknowns[i], ns + unknowns[j])]);
             let r = DVector::from_fn(m, |i, _| value[rows + unknowns[i]]);
@@ -798,13 +1008,15 @@ pub fn unsolvable_loop(model: &Model) -> Option<(usize, String)> {
         &kernel,
         &all,
         (&state.x, &state.xdot, layout.state_start[control]),
+        &state.lambda,
     );
     let local = buffers.local(&all);
     let super::Kernel::Control(element) = kernel else {
         return None;
     };
     let ctx = Context::at(model, 0.0, 1.0);
-    let (_, jac) = element.jacobian(&ctx, &local, Phase::Initial);
+    let reactions = element.reactions(&ctx, &local);
+    let (_, jac) = element.jacobian(&ctx, &local, Phase::Initial, &reactions);
     let (rows, ns) = (6 * element.slots.len(), PER_SLOT * element.slots.len());
     for blocks in loops {
         let outputs: Vec<usize> = blocks
@@ -854,6 +1066,10 @@ impl ElementKernel for ControlElement<'_> {
         self.system.is_output(i)
     }
 
+    fn multiplier_rows(&self) -> &[usize] {
+        self.rows
+    }
+
     fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
         let sys = self.system;
         for (b, block) in sys.blocks.iter().enumerate() {
@@ -890,16 +1106,29 @@ impl ElementKernel for ControlElement<'_> {
             let out = self.residual(
                 &poses,
                 (local.x, local.xdot),
-                ctx.t,
+                (ctx.t, &self.reactions(ctx, local)),
                 &self.param_f64(),
                 Phase::of(ctx),
             );
             let rp = DVector::from_column_slice(&out[..rows]);
             physical::to_group(group, local.nodes, &active, &rp, None, None, r, None);
             r.rows_mut(rows, n).copy_from_slice(&out[rows..]);
+            r.rows_mut(rows + n, self.rows.len()).fill(0.0);
             return;
         };
-        let (value, jac) = self.jacobian(ctx, local, Phase::of(ctx));
+        // the measured constraint and section forces: values and derivative rows
+        let mut reactions = vec![0.0; self.system.blocks.len()];
+        let mut reaction_rows = Vec::new();
+        for (b, block) in self.system.blocks.iter().enumerate() {
+            if let BlockKind::Measure(q) = &block.kind {
+                if q.is_reaction() {
+                    let (value, d) = self.reaction(ctx, local, q, Some(coef));
+                    reactions[b] = value;
+                    reaction_rows.extend(d.map(|d| (self.system.output_start[b], d)));
+                }
+            }
+        }
+        let (value, jac) = self.jacobian(ctx, local, Phase::of(ctx), &reactions);
         let ns = PER_SLOT * nslots;
         let rp = value.rows(0, rows).into_owned();
         let node_block = |offset: usize| {
@@ -960,6 +1189,16 @@ impl ElementKernel for ControlElement<'_> {
                 };
                 s.view_mut((rows + i, 6 * k), (1, 6)).copy_from(&block);
             }
+        }
+        // The multipliers' columns and rows: zero but for the measured constraint forces',
+        // whose output rows (e = y - m) take -dm from the joint's or beam's own kernel.
+        let nm = self.rows.len();
+        r.rows_mut(rows + n, nm).fill(0.0);
+        s.columns_mut(rows + n, nm).fill(0.0);
+        s.rows_mut(rows + n, nm).fill(0.0);
+        for (i, d) in &reaction_rows {
+            let mut out = s.row_mut(rows + i);
+            out -= d.transpose();
         }
         // A hold without a rate term (statics) keeps its value: its row reads x = x_start.
         if coef.xdot == 0.0 {
@@ -1039,6 +1278,32 @@ impl ElementParameters for ControlElement<'_> {
     ) -> DerivativeMethod {
         let p = match wrt {
             ControlWrt::Block(p) => p,
+            ControlWrt::Section(e, sp) => {
+                // sigma = C epsilon is linear in the stiffness entries: d sigma = E epsilon,
+                // E the unit symmetric matrix of the entry; the other section parameters
+                // (mass, damping) do not enter the elastic stress resultants
+                dr.fill(0.0);
+                if let SectionParam::Stiffness(i, j) = sp {
+                    let beam = &self.model.beams[e];
+                    let b = self.beam_pair(beam, local);
+                    let eps = beam.state(&b).strain;
+                    let rows = 6 * self.slots.len();
+                    for (k, block) in self.system.blocks.iter().enumerate() {
+                        if let BlockKind::Measure(Quantity::SectionForce { beam, component }) =
+                            block.kind
+                        {
+                            if beam == e {
+                                let mut d = if component == i { eps[j] } else { 0.0 };
+                                if component == j && i != j {
+                                    d += eps[i];
+                                }
+                                dr[rows + self.system.output_start[k]] = -d;
+                            }
+                        }
+                    }
+                }
+                return DerivativeMethod::Analytic;
+            }
             ControlWrt::Joint(j, jp) => {
                 // the joint's frames enter the measurements and actuators along it: central
                 // difference on copies of the model
@@ -1075,7 +1340,14 @@ impl ElementParameters for ControlElement<'_> {
                 v
             }
         };
-        let out = self.residual(&poses, (&x, &xdot), ctx.t, &params, Phase::of(ctx));
+        let reactions = self.reactions(ctx, local);
+        let out = self.residual(
+            &poses,
+            (&x, &xdot),
+            (ctx.t, &reactions),
+            &params,
+            Phase::of(ctx),
+        );
         let rows = 6 * self.slots.len();
         let d = DVector::from_fn(rows, |i, _| out[i].eps);
         physical::to_group(

@@ -221,7 +221,7 @@ pub enum ElementRef {
     /// Index in [`Model::worm_gears`].
     WormGear(usize),
     /// The model's block diagram ([`Model::control`]) and its slots ([`control::slots`]).
-    Control(Arc<Vec<Option<NodeId>>>),
+    Control(Arc<control::Slots>),
 }
 
 /// What an element sees besides its own data: the kinematics of its node slots (the
@@ -234,6 +234,8 @@ pub struct Local<'a> {
     pub x: &'a [f64],
     /// Their rates `xdot`.
     pub xdot: &'a [f64],
+    /// The multipliers the element reads ([`ElementKernel::multiplier_rows`]), unscaled.
+    pub lambda: &'a [f64],
 }
 
 impl<'a> Local<'a> {
@@ -243,6 +245,7 @@ impl<'a> Local<'a> {
             nodes,
             x: &[],
             xdot: &[],
+            lambda: &[],
         }
     }
 }
@@ -268,9 +271,18 @@ pub trait ElementKernel {
     fn is_algebraic(&self, _i: usize) -> bool {
         false
     }
-    /// Size of the local vector: `6 n_slots + n_states`.
+    /// Constraint rows (indices in `State::lambda`) whose multipliers the element reads: a
+    /// control block measuring a joint's reaction. Their values are in [`Local::lambda`]
+    /// and their columns follow the states' in the local matrix, `dr/dlambda` with no
+    /// coefficient (the multiplier unknowns are `s lambda`, `s` the row scale that the
+    /// element's rows carry). The element has no equations for them: their entries of the
+    /// local vector and their rows of the local matrix are zero.
+    fn multiplier_rows(&self) -> &[usize] {
+        &[]
+    }
+    /// Size of the local vector: `6 n_slots + n_states + n_multipliers`.
     fn n_local(&self) -> usize {
-        6 * self.n_slots() + self.n_states()
+        6 * self.n_slots() + self.n_states() + self.multiplier_rows().len()
     }
     /// Residual `[r; e]` (every entry written) and, if asked, the iteration matrix (every
     /// entry written): on node columns `m M + c C_t + k K_t T`, on state columns
@@ -331,6 +343,7 @@ pub struct LocalBuffers {
     nodes: Vec<NodeState>,
     x: Vec<f64>,
     xdot: Vec<f64>,
+    lambda: Vec<f64>,
     r: Vec<f64>,
     s: Vec<f64>,
 }
@@ -343,6 +356,7 @@ impl Default for LocalBuffers {
             nodes: Vec::new(),
             x: Vec::new(),
             xdot: Vec::new(),
+            lambda: Vec::new(),
             r: Vec::new(),
             s: Vec::new(),
         }
@@ -350,8 +364,9 @@ impl Default for LocalBuffers {
 }
 
 impl LocalBuffers {
-    /// Gathers the inputs of `kernel` from the kinematics of all nodes and from the states
-    /// and rates of all elements (`x`, `xdot`, the element's own starting at `state_start`).
+    /// Gathers the inputs of `kernel` from the kinematics of all nodes, from the states
+    /// and rates of all elements (`x`, `xdot`, the element's own starting at `state_start`)
+    /// and from the multipliers of all constraint rows (`lambda`, unscaled; empty: all zero).
     /// Slots that are consecutive nodes (a body, most beam elements) are not copied: the
     /// element reads them in `nodes`, which [`LocalBuffers::split`] and
     /// [`LocalBuffers::local`] take again.
@@ -361,6 +376,7 @@ impl LocalBuffers {
         kernel: &K,
         nodes: &[NodeState],
         (x, xdot, state_start): (&[f64], &[f64], usize),
+        lambda: &[f64],
     ) {
         let n = kernel.n_slots();
         self.in_place = match kernel.node(0) {
@@ -384,6 +400,10 @@ impl LocalBuffers {
             self.xdot
                 .extend_from_slice(&xdot[state_start..state_start + ns]);
         }
+        self.lambda.clear();
+        let rows = kernel.multiplier_rows();
+        self.lambda
+            .extend(rows.iter().map(|&r| lambda.get(r).copied().unwrap_or(0.0)));
     }
 
     /// The gathered inputs (`nodes`: those given to [`LocalBuffers::gather`]) and the local
@@ -404,6 +424,7 @@ impl LocalBuffers {
             nodes: slot_kinematics(&self.in_place, &self.nodes, nodes),
             x: &self.x,
             xdot: &self.xdot,
+            lambda: &self.lambda,
         };
         (
             local,
@@ -425,6 +446,7 @@ impl LocalBuffers {
             nodes: slot_kinematics(&self.in_place, &self.nodes, nodes),
             x: &self.x,
             xdot: &self.xdot,
+            lambda: &self.lambda,
         }
     }
 }
@@ -520,11 +542,9 @@ impl ElementRef {
             }
             ElementRef::Bushing(i) => Kernel::Bushing(&model.bushings[*i]),
             ElementRef::WormGear(i) => Kernel::WormGear(&model.worm_gears[*i]),
-            ElementRef::Control(slots) => Kernel::Control(control::ControlElement {
-                system: &model.control,
-                model,
-                slots,
-            }),
+            ElementRef::Control(slots) => {
+                Kernel::Control(control::ControlElement::new(model, slots))
+            }
         }
     }
 
@@ -678,6 +698,10 @@ impl ElementKernel for Kernel<'_> {
     #[inline]
     fn is_algebraic(&self, i: usize) -> bool {
         dispatch!(self, k => k.is_algebraic(i))
+    }
+    #[inline]
+    fn multiplier_rows(&self) -> &[usize] {
+        dispatch!(self, k => k.multiplier_rows())
     }
     #[inline]
     fn evaluate(

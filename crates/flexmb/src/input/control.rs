@@ -253,7 +253,15 @@ fn keys(ty: &str) -> Vec<&'static str> {
         "lookup" => &["points"],
         "hold" => &["period"],
         "dc_motor" => &["resistance", "inductance", "torque_constant", "back_emf"],
-        "measure" => &["quantity", "node", "point", "component", "axis", "joint"],
+        "measure" => &[
+            "quantity",
+            "node",
+            "point",
+            "component",
+            "axis",
+            "joint",
+            "beam",
+        ],
         "actuator" => &[
             "target",
             "node",
@@ -526,6 +534,19 @@ const QUANTITIES: &[&str] = &[
     "angular_velocity",
     "joint_coordinate",
     "joint_rate",
+    "constraint_force",
+    "constraint_moment",
+    "section_force",
+];
+
+/// The stress resultants of a beam section, as the `beam_stress` sensor names them.
+const SECTION: &[&str] = &[
+    "axial",
+    "shear_2",
+    "shear_3",
+    "torsion",
+    "bending_2",
+    "bending_3",
 ];
 
 /// The `quantity` of a measurement or servo (one of `allowed`) and what it is of.
@@ -546,6 +567,28 @@ fn read_quantity(
             } else {
                 Quantity::JointCoordinate { joint }
             }
+        }
+        "constraint_force" | "constraint_moment" => {
+            let f = t.req("joint")?;
+            let joint = require_joint(model, origins, &f)?;
+            let j = &model.joints[joint.0];
+            if j.node_b.is_none() {
+                return Err(f.err(format!(
+                    "joint '{}' has the ground as its node B: a constraint force is measured on node B (swap the joint's nodes)",
+                    j.name
+                )));
+            }
+            Quantity::ConstraintForce {
+                joint,
+                axis: axis(t, "")?,
+                moment: q == "constraint_moment",
+            }
+        }
+        "section_force" => {
+            let beam = super::beam::require_element(model, origins, &t.req("beam")?)?;
+            let c = t.req("component")?.choice(SECTION)?;
+            let component = SECTION.iter().position(|s| *s == c).unwrap_or(0);
+            Quantity::SectionForce { beam, component }
         }
         _ => {
             let node = require_node(model, origins, &t.req("node")?)?;

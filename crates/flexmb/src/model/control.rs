@@ -48,6 +48,29 @@ pub enum Quantity {
     JointCoordinate { joint: JointId },
     /// Its rate \[rad/s or m/s\].
     JointRate { joint: JointId },
+    /// What a joint's constraint exerts on its node B, `-B^T lambda` on that node, as the
+    /// `joint_force` and `joint_torque` sensors: `axis . f` (the force) or, with `moment`,
+    /// `axis . m` (the moment about the joint point) \[N or N m\].
+    ConstraintForce {
+        joint: JointId,
+        axis: Vec3,
+        moment: bool,
+    },
+    /// Elastic stress resultant `component` of a beam element (index in `Model::beams`),
+    /// section frame, as the `beam_stress` sensor: 0-2 forces, 3-5 moments \[N or N m\].
+    SectionForce { beam: usize, component: usize },
+}
+
+impl Quantity {
+    /// Whether the measurement reads more than its nodes' kinematics (a joint's multipliers,
+    /// a beam's section law): it is evaluated in `f64` with its derivatives from the joint's
+    /// or beam's own kernel rather than by the diagram's automatic differentiation.
+    pub fn is_reaction(&self) -> bool {
+        matches!(
+            self,
+            Quantity::ConstraintForce { .. } | Quantity::SectionForce { .. }
+        )
+    }
 }
 
 /// Where an actuator block applies its input `u`.
@@ -376,7 +399,7 @@ impl ControlSystem {
     /// Whether a measurement, actuator or servo acts along joint `j`.
     pub fn uses_joint(&self, j: JointId) -> bool {
         let along = |q: Option<&Quantity>, t: Option<&Target>| {
-            matches!(q, Some(Quantity::JointCoordinate { joint } | Quantity::JointRate { joint }) if *joint == j)
+            matches!(q, Some(Quantity::JointCoordinate { joint } | Quantity::JointRate { joint } | Quantity::ConstraintForce { joint, .. }) if *joint == j)
                 || matches!(t, Some(Target::Joint { joint }) if *joint == j)
         };
         self.blocks.iter().any(|b| match &b.kind {
@@ -386,6 +409,13 @@ impl ControlSystem {
                 quantity, target, ..
             } => along(Some(quantity), Some(target)),
             _ => false,
+        })
+    }
+
+    /// Whether a measurement reads the section forces of beam element `e`.
+    pub fn uses_beam(&self, e: usize) -> bool {
+        self.blocks.iter().any(|b| {
+            matches!(&b.kind, BlockKind::Measure(Quantity::SectionForce { beam, .. }) if *beam == e)
         })
     }
 

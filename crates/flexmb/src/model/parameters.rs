@@ -220,11 +220,13 @@ pub struct ControlParam {
 }
 
 /// What the block diagram's equations are differentiated with respect to: a block's own
-/// parameter, or a parameter of a joint its measurements or actuators act along.
+/// parameter, a parameter of a joint its measurements or actuators act along, or a section
+/// parameter of a beam element (index in `Model::beams`) whose section forces it measures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ControlWrt {
     Block(ControlParam),
     Joint(JointId, JointParam),
+    Section(usize, SectionParam),
 }
 
 /// Which curve of a nonlinear force law ([`super::ForceLaw`]).

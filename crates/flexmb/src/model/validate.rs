@@ -1235,6 +1235,45 @@ impl Model {
             Quantity::JointCoordinate { joint } | Quantity::JointRate { joint } => {
                 self.check_joint_index(i, b, *joint)
             }
+            Quantity::ConstraintForce { joint, .. } => {
+                self.check_joint_index(i, b, *joint)?;
+                let j = &self.joints[joint.0];
+                if j.node_b.is_some() {
+                    Ok(())
+                } else {
+                    Err(bad(
+                        "block",
+                        i,
+                        &b.name,
+                        "joint",
+                        format!(
+                            "joint '{}' has the ground as its node B: a constraint force is measured on node B (swap the joint's nodes)",
+                            j.name
+                        ),
+                    ))
+                }
+            }
+            Quantity::SectionForce { beam, component } => {
+                if *beam >= self.beams.len() {
+                    Err(bad(
+                        "block",
+                        i,
+                        &b.name,
+                        "beam",
+                        format!("beam element index {beam} does not exist"),
+                    ))
+                } else if *component >= 6 {
+                    Err(bad(
+                        "block",
+                        i,
+                        &b.name,
+                        "component",
+                        format!("must be 0 to 5, got {component}"),
+                    ))
+                } else {
+                    Ok(())
+                }
+            }
         }
     }
 

@@ -1017,8 +1017,8 @@ impl Simulation {
         for &e in &self.events {
             let kernel = layout.elements[e].kernel(&self.model);
             let x0 = layout.state_start[e];
-            b0.gather(&kernel, n0, (&start.x, &start.xdot, x0));
-            b1.gather(&kernel, n1, (&end.x, &end.xdot, x0));
+            b0.gather(&kernel, n0, (&start.x, &start.xdot, x0), &start.lambda);
+            b1.gather(&kernel, n1, (&end.x, &end.xdot, x0), &end.lambda);
             visit(&kernel, &ctx, &b0.local(n0), &b1.local(n1), x0);
         }
     }

@@ -847,7 +847,10 @@ impl<'a> StepFunction<'a> {
         let mut f_q = take(data, coef(0.0, 0.0, s), &|i, j| {
             j < nd && (i < nd + na || i >= so)
         });
-        let f_mu = select(data, &|i, j| i < nd && (nd..nd + na).contains(&j));
+        // (the element states' rows too: a control block measuring a constraint force)
+        let f_mu = select(data, &|i, j| {
+            (i < nd || i >= so) && (nd..nd + na).contains(&j)
+        });
         // Velocities: s C_t (and the nodal damping) and, on the velocity-level rows,
         // B / gamma'.
         let mut f_v = take(data, coef(0.0, s, 0.0), &|i, j| {

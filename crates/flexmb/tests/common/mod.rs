@@ -458,6 +458,72 @@ pub fn control_diagram(group: flexmb_lie::Group) -> flexmb::model::Model {
             vec![],
         ),
     ];
+    let mut blocks = blocks;
+    // Reactions: the hinge's and the slide's constraint forces and a moment, fed back to
+    // node a; on SE(3), a beam element between the nodes and one of its section forces.
+    let n = blocks.len();
+    let reaction = |joint: JointId, moment: bool, rng: &mut Lcg| Quantity::ConstraintForce {
+        joint,
+        axis: axis(rng),
+        moment,
+    };
+    blocks.push(measure("reaction", reaction(hinge, false, &mut rng)));
+    blocks.push(measure("reaction_moment", reaction(hinge, true, &mut rng)));
+    blocks.push(measure("slide_force", reaction(slide, false, &mut rng)));
+    let mut fed = vec![s(n), s(n + 1), s(n + 2)];
+    if group == flexmb_lie::Group::SE3 {
+        // (soft: the random configurations strain it far, and the differences of the
+        // parameter test divide its residual by their step)
+        let mut c =
+            flexmb_lie::Mat6::from_diagonal(&flexmb_lie::Vec6::new(10.0, 4.0, 5.0, 0.3, 0.4, 0.6));
+        c[(0, 4)] = 0.15;
+        c[(4, 0)] = 0.15;
+        let section = flexmb::model::BeamSection {
+            stiffness: c,
+            mass_per_length: 2.0,
+            rotary_inertia: flexmb_lie::Mat3::identity() * 0.1,
+            // (nonzero: the beam applies damping only when it is positive, so a central
+            // difference about 0 would see half of it)
+            damping_mass: 0.7,
+            damping_stiffness: 0.03,
+        };
+        m.beams.push(flexmb::model::Beam::new(
+            "link",
+            [a, b],
+            section,
+            [flexmb_lie::Mat3::identity(); 2],
+            flexmb_lie::Vec6::new(1.3, 0.0, 0.0, 0.1, 0.2, 0.5),
+            flexmb::model::BeamMass::Lumped,
+        ));
+        blocks.push(measure(
+            "bending",
+            Quantity::SectionForce {
+                beam: 0,
+                component: 4,
+            },
+        ));
+        fed.push(s(n + 3));
+    }
+    let k = fed.len();
+    blocks.push(block(
+        "reactions",
+        BlockKind::Sum {
+            signs: vec![0.01; k],
+        },
+        vec![],
+        fed,
+    ));
+    blocks.push(block(
+        "reaction_push",
+        BlockKind::Actuator(Target::Force {
+            node: a,
+            point: point(&mut rng),
+            axis: axis(&mut rng),
+            follower: false,
+        }),
+        vec![],
+        vec![s(blocks.len() - 1)],
+    ));
     m.control = ControlSystem::new(blocks);
     m
 }
