@@ -2286,6 +2286,16 @@ fn control_block_errors_are_located() {
             &["field 'block[1].joint'", "unknown joint 'spring'"],
         ),
         (
+            "quantity = \"position\"",
+            "quantity = \"section_force\"\nbeam = \"guide[0]\"",
+            &["field 'block[1].beam'", "unknown beam element 'guide[0]'"],
+        ),
+        (
+            "quantity = \"position\"",
+            "quantity = \"constraint_force\"\njoint = \"guide\"\naxis = [0.0, 0.0, 0.0]",
+            &["block[1]", "axis"],
+        ),
+        (
             "type = \"pid\"",
             "type = \"pdi\"",
             &["field 'block[3].type'", "\"pid\""],

@@ -55,6 +55,15 @@
 //! theta_g - 2 pi k`, `k` the whole number of turns nearest `(y - theta_g) / 2 pi` at the
 //! iterate, so the branch follows the output itself (no extra state).
 //!
+//! **Reactions** read more than kinematics: a joint's constraint force on its node B (the
+//! `joint_force` sensor's `-B_B^T lambda`, the moment about the joint point) depends on the
+//! joint's multipliers, which the element reads ([`ElementKernel::multiplier_rows`]) so that
+//! the measurement's row has its columns `-a . d(B^T lambda)/dlambda` next to the node
+//! columns `-a . K_c` from the joint's own kernel (`K_c = sum_r lambda_r dB_r^T/dw`, the
+//! joint's geometric stiffness); a beam element's stress resultant `C epsilon` has the node
+//! columns `C P / L` ([`crate::elements::beam`]). These rows are computed in `f64` by the
+//! joint's and beam's kernels, not by the diagram's automatic differentiation.
+//!
 //! **Actuators**: a force `u a` at a node's point `P`, `r = -[u a; (R^T (P - x)) x (R^T u
 //! a)]`; a moment `r_theta = -R^T u a`; a joint torque `u` about a revolute joint's axis `a =
 //! R_A a_z` (on node B, `-u a` on A), a force along a prismatic joint's axis at B's joint
