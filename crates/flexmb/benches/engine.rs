@@ -7,7 +7,10 @@
 //! cargo bench -p flexmb --bench engine -- chain_1000  # one case
 //! FLEXMB_THREADS=2 cargo bench -p flexmb --bench engine -- beam_10000  # on 2 threads
 //! cargo bench -p flexmb --bench engine -- threads   # the table of 1 against 2 threads
+//! FLEXMB_SPHERES_OUT=s.json cargo bench -p flexmb --bench engine -- spheres_100  # + events
 //! ```
+//! `FLEXMB_SPHERES_OUT` also writes spheres_n's events and final state (JSON) for
+//! `benches/exudyn_spheres_100.py`, the same problem in Exudyn.
 //! Each case runs in a child process so that its peak memory (VmHWM) is its own.
 //!
 //! `FLEXMB_THREADS=N` assembles on `N` threads whatever the size of the model (the size
@@ -401,11 +404,25 @@ fn spheres(n: usize) {
     s.threads = thread_count();
     let mut sim = Simulation::new(&m, s).expect("starts");
     sim.data.threads = threads();
+    // FLEXMB_SPHERES_OUT=FILE.json: also record the run's events and final state for the
+    // comparison with Exudyn (benches/exudyn_spheres_100.py); the timed figures of
+    // BENCHMARKS.md come from runs without it.
+    let out = std::env::var_os("FLEXMB_SPHERES_OUT");
+    let mut events = SphereEvents::new(r);
     let t0 = Instant::now();
     let stats = sim
-        .run(&mut |_: &flexmb::observe::Sample| Ok(()))
+        .run(&mut |sample: &flexmb::observe::Sample| {
+            if out.is_some() {
+                events.observe(sample.state);
+            }
+            Ok(())
+        })
         .expect("runs");
     let dt = t0.elapsed().as_secs_f64();
+    if let Some(path) = out {
+        let report = events.report(&sim.state, mass, stats.steps, dt);
+        std::fs::write(&path, report.to_string()).expect("writes FLEXMB_SPHERES_OUT");
+    }
     let contacts = m.contacts.len();
     println!(
         "| spheres_{n} | {contacts} | {} | {:.1} | {:.1} | {:.2} | {:.2} | {} ({} by impacts) | {:.1e} |",
@@ -418,6 +435,101 @@ fn spheres(n: usize) {
         stats.event_rejections,
         stats.smallest_step,
     );
+}
+
+/// What the comparison of `spheres_n` with Exudyn looks at, taken at the end of every
+/// accepted step (gaps interpolated linearly in time between step ends): the first contact
+/// of balls 0 and 1, their velocities when it first opens again, the landing of ball 0, how
+/// many times the ball-ball and ball-plane contacts close, and the final state.
+struct SphereEvents {
+    radius: f64,
+    last: Option<(f64, Vec<f64>, Vec<f64>)>,
+    first_contact_01: Option<f64>,
+    separation_01: Option<(f64, f64, f64)>,
+    landing_0: Option<f64>,
+    pair_closures: usize,
+    floor_closures: usize,
+}
+
+impl SphereEvents {
+    fn new(radius: f64) -> Self {
+        Self {
+            radius,
+            last: None,
+            first_contact_01: None,
+            separation_01: None,
+            landing_0: None,
+            pair_closures: 0,
+            floor_closures: 0,
+        }
+    }
+
+    /// The ball-ball gaps (pair i - 1, i) and the ball-plane gaps of `state`.
+    fn gaps(&self, state: &State) -> (Vec<f64>, Vec<f64>) {
+        let x: Vec<_> = state.q.iter().map(|f| f.x).collect();
+        let pairs = x
+            .windows(2)
+            .map(|w| (w[1] - w[0]).norm() - 2.0 * self.radius)
+            .collect();
+        let floor = x.iter().map(|p| p.z - self.radius).collect();
+        (pairs, floor)
+    }
+
+    fn observe(&mut self, state: &State) {
+        let (pairs, floor) = self.gaps(state);
+        if let Some((t_prev, pairs_prev, floor_prev)) = &self.last {
+            let crossing = |g0: f64, g1: f64| t_prev + (state.t - t_prev) * g0 / (g0 - g1);
+            for (i, (&g0, &g1)) in pairs_prev.iter().zip(&pairs).enumerate() {
+                if g0 >= 0.0 && g1 < 0.0 {
+                    self.pair_closures += 1;
+                    if i == 0 && self.first_contact_01.is_none() {
+                        self.first_contact_01 = Some(crossing(g0, g1));
+                    }
+                }
+                if i == 0 && g0 < 0.0 && g1 >= 0.0 && self.separation_01.is_none() {
+                    let (v0, v1) = (state.v[0][0], state.v[1][0]);
+                    self.separation_01 = Some((crossing(g0, g1), v0, v1));
+                }
+            }
+            for (i, (&g0, &g1)) in floor_prev.iter().zip(&floor).enumerate() {
+                if g0 >= 0.0 && g1 < 0.0 {
+                    self.floor_closures += 1;
+                    if i == 0 && self.landing_0.is_none() {
+                        self.landing_0 = Some(crossing(g0, g1));
+                    }
+                }
+            }
+        }
+        self.last = Some((state.t, pairs, floor));
+    }
+
+    /// The events and the final positions, velocities and world angular velocities about y.
+    fn report(&self, state: &State, mass: f64, steps: usize, seconds: f64) -> serde_json::Value {
+        let x: Vec<_> = state.q.iter().map(|f| [f.x.x, f.x.z]).collect();
+        let v: Vec<_> = state.v.iter().map(|v| [v[0], v[2]]).collect();
+        // R3xSO(3): v = (u inertial, Omega body); the world angular velocity is R Omega.
+        let wy: Vec<_> = state
+            .q
+            .iter()
+            .zip(&state.v)
+            .map(|(f, v)| (f.r * flexmb_lie::Vec3::new(v[3], v[4], v[5])).y)
+            .collect();
+        serde_json::json!({
+            "tool": "flexmb",
+            "t": state.t,
+            "mass": mass,
+            "steps": steps,
+            "solve_seconds": seconds,
+            "first_contact_01": self.first_contact_01,
+            "separation_01": self.separation_01,
+            "landing_0": self.landing_0,
+            "pair_closures": self.pair_closures,
+            "floor_closures": self.floor_closures,
+            "x": x,
+            "v": v,
+            "wy": wy,
+        })
+    }
 }
 
 fn run_case(case: &str) {
