@@ -383,9 +383,9 @@ fn element<'m, S: Sink>(
             scatter_states(sink, (n_slots, n_states), dof, xs, ratio, &se);
         }
         let rows = kernel.multiplier_rows();
+        let n6 = 6 * n_slots;
         if !rows.is_empty() {
             // the multipliers' columns (active rows only) of the slots' and states' rows
-            let n6 = 6 * n_slots;
             for (m, &row) in rows.iter().enumerate() {
                 let Some(k) = layout.row_unknown[row] else {
                     continue;
@@ -400,6 +400,20 @@ fn element<'m, S: Sink>(
                 for i in 0..n_states {
                     sink.entry(xs + i, c, se.get(n6 + i, j) * ratio);
                 }
+            }
+        }
+        // the other elements' states it reads: their columns, likewise
+        let first = n6 + n_states + rows.len();
+        for (m, &g) in kernel.state_reads().iter().enumerate() {
+            let (c, j) = (layout.state_offset() + g, first + m);
+            for ka in 0..n_slots {
+                let Some(a) = dof(ka) else { continue };
+                for i in 0..6 {
+                    sink.entry(a + i, c, se.get(6 * ka + i, j));
+                }
+            }
+            for i in 0..n_states {
+                sink.entry(xs + i, c, se.get(n6 + i, j) * ratio);
             }
         }
     }

@@ -209,7 +209,15 @@ fn visit(
                 contact: c,
                 effective_mass: crate::elements::contact::effective_mass(model, c.node_a, c.node_b),
             };
-            element_term(at, (&element, ElementItem::Contact(i)), Wrt::Own(p), sink)
+            let method = element_term(at, (&element, ElementItem::Contact(i)), Wrt::Own(p), sink);
+            // the block diagram measuring the contact's force
+            if model.control.uses_contact(i) && !at.point.x.is_empty() {
+                let slots = crate::elements::control::slots(model);
+                let element = crate::elements::control::ControlElement::new(model, &slots);
+                let wrt = Wrt::Own(ControlWrt::Contact(i, p));
+                element_term(at, (&element, ElementItem::Control), wrt, sink);
+            }
+            method
         }
         ParamKind::Joint(j, p) => {
             let joint = &model.joints[j.0];

@@ -565,3 +565,69 @@ block = "both"
         "the sum reads them"
     );
 }
+
+#[test]
+fn a_measured_contact_force_is_the_contacts_normal_force() {
+    // The dropped ball of examples/ball_drop.toml (4.11 kg, Lankarani-Nikravesh, e = 0.8,
+    // 0.1 m free fall) with its contact force along z measured by a block: through the
+    // impacts (resolved by the step control) the measurement equals the contact's normal
+    // force (the `contact` sensor, computed apart from the blocks), and once the ball rests
+    // (the bounces die out geometrically: 0.8^2 of the height each time) it carries the
+    // weight, m g = 40.32 N.
+    let text = r#"flexmb = 1
+[model]
+group = "R3xSO3"
+gravity = [0.0, 0.0, -9.81]
+[solver]
+analysis = "dynamic"
+t_end = 2.5
+h = 1e-2
+rho_inf = 0.9
+output_interval = 0.01
+[[body]]
+name = "ball"
+mass = 4.11
+position = [0.0, 0.0, 0.15]
+inertia = [4.11e-3, 4.11e-3, 4.11e-3]
+[[contact]]
+name = "floor"
+node_b = "ball"
+a = { shape = "plane", point = [0.0, 0.0, 0.0], normal = [0.0, 0.0, 1.0] }
+b = { shape = "sphere", center = [0.0, 0.0, 0.15], radius = 0.05 }
+law = "lankarani_nikravesh"
+hertz = { young = [210e9, 210e9], poisson = [0.3, 0.3] }
+restitution = 0.8
+[[block]]
+name = "fz"
+type = "measure"
+quantity = "contact_force"
+contact = "floor"
+component = "z"
+[[sensor]]
+name = "fz"
+type = "block"
+block = "fz"
+[[sensor]]
+name = "normal_force"
+type = "contact"
+contact = "floor"
+component = "normal_force"
+"#;
+    let h = run_text(text, "contact_force.toml");
+    let mut peak: f64 = 0.0;
+    for (t, v) in &h.rows {
+        let (fz, normal) = (v[0], v[1]);
+        peak = peak.max(fz);
+        assert!(
+            (fz - normal).abs() <= 1e-9 * (1.0 + normal.abs()),
+            "t = {t}: measured {fz} N against the normal force {normal} N"
+        );
+    }
+    let weight = 4.11 * 9.81;
+    let last = h.rows.last().expect("outputs").1[0];
+    assert!(
+        (last - weight).abs() < 1e-3 * weight,
+        "at rest the contact carries the weight: {last} N against {weight} N"
+    );
+    assert!(peak > 10.0 * weight, "impacts: peak {peak} N");
+}

@@ -2296,6 +2296,11 @@ fn control_block_errors_are_located() {
             &["block[1]", "axis"],
         ),
         (
+            "quantity = \"position\"",
+            "quantity = \"contact_force\"\ncontact = \"floor\"",
+            &["field 'block[1].contact'", "unknown contact 'floor'"],
+        ),
+        (
             "type = \"pid\"",
             "type = \"pdi\"",
             &["field 'block[3].type'", "\"pid\""],

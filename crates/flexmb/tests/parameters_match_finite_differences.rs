@@ -83,11 +83,15 @@ fn equations(model: &Model, at: &Point) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f6
             .iter()
             .map(|&r| at.lambda[r])
             .collect();
+        let read = |v: &[f64]| -> Vec<f64> { kernel.state_reads().iter().map(|&i| v[i]).collect() };
+        let (read_x, read_xdot) = (read(&at.x), read(&at.xdot));
         let local = Local {
             nodes: &nodes,
             x: &at.x[states.clone()],
             xdot: &at.xdot[states],
             lambda: &lambda,
+            read_x: &read_x,
+            read_xdot: &read_xdot,
         };
         let (local, _) = evaluate_owned(&kernel, &ctx, &local, None);
         add(&slots, local.as_slice());

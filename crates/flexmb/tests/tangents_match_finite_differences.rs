@@ -91,21 +91,38 @@ fn check_element_with_states(
     x: &[f64],
     xdot: &[f64],
 ) {
-    check_states(name, kernel, model, nodes, (x, xdot, &[]), (&[], EPS));
+    check_states(
+        name,
+        kernel,
+        model,
+        nodes,
+        (x, xdot, &Reads::default()),
+        (&[], EPS),
+    );
+}
+
+/// What an element reads besides its nodes and states: multipliers, other elements' states
+/// and their rates.
+#[derive(Default)]
+struct Reads {
+    lambda: Vec<f64>,
+    x: Vec<f64>,
+    xdot: Vec<f64>,
 }
 
 /// [`check_element_with_states`] for an element with states `held` (local state indices)
 /// that are held values (equation `xdot = 0`): without a rate term (statics), the iteration
 /// matrix reads their equations as `x = x_start` (diagonal 1) while the residual stays
 /// `xdot`, so those diagonal entries are checked against 1 instead of a difference. The
-/// element reads the multipliers `lambda` ([`ElementKernel::multiplier_rows`]); their
-/// columns, which carry no coefficient, are checked with every coefficient.
+/// element reads the multipliers `reads.lambda` ([`ElementKernel::multiplier_rows`]; their
+/// columns carry no coefficient and are checked with every coefficient) and other elements'
+/// states `reads.x`, `reads.xdot` ([`ElementKernel::state_reads`]; checked like its own).
 fn check_states(
     name: &str,
     kernel: &dyn ElementKernel,
     model: &Model,
     nodes: &[NodeState],
-    (x, xdot, lambda): (&[f64], &[f64], &[f64]),
+    (x, xdot, reads): (&[f64], &[f64], &Reads),
     (held, eps): (&[usize], f64),
 ) {
     let group = model.group;
@@ -114,20 +131,23 @@ fn check_states(
     let n6 = 6 * nodes.len();
     let n = kernel.n_local();
     let nx = n6 + x.len();
-    assert_eq!(n, nx + lambda.len(), "{name}: local size");
+    let nl = nx + reads.lambda.len();
+    assert_eq!(n, nl + reads.x.len(), "{name}: local size");
     let active: Vec<bool> = (0..n)
         .map(|i| i >= n6 || kernel.node(i / 6).is_some())
         .collect();
-    let eval_with = |nodes: &[NodeState], x: &[f64], xdot: &[f64], lambda: &[f64]| {
+    let eval_with = |nodes: &[NodeState], x: &[f64], xdot: &[f64], reads: &Reads| {
         let local = Local {
             nodes,
             x,
             xdot,
-            lambda,
+            lambda: &reads.lambda,
+            read_x: &reads.x,
+            read_xdot: &reads.xdot,
         };
         evaluate_owned(kernel, &ctx, &local, None).0
     };
-    let eval = |nodes: &[NodeState], x: &[f64], xdot: &[f64]| eval_with(nodes, x, xdot, lambda);
+    let eval = |nodes: &[NodeState], x: &[f64], xdot: &[f64]| eval_with(nodes, x, xdot, reads);
     for (what, coef) in [
         ('q', coefficients(0.0, 0.0, 1.0, 0.0, 0.0)),
         ('v', coefficients(0.0, 1.0, 0.0, 0.0, 0.0)),
@@ -139,7 +159,9 @@ fn check_states(
             nodes,
             x,
             xdot,
-            lambda,
+            lambda: &reads.lambda,
+            read_x: &reads.x,
+            read_xdot: &reads.xdot,
         };
         let (r, s) = evaluate_owned(kernel, &ctx, &local, Some(&coef));
         // the residual written with the matrix is the residual alone
@@ -158,12 +180,26 @@ fn check_states(
                 v[i] += e;
                 v
             };
-            let (rp, rm) = if k >= nx {
+            // the inputs read, one moved
+            let read = |f: &dyn Fn(&mut Reads)| {
+                let mut r = Reads {
+                    lambda: reads.lambda.clone(),
+                    x: reads.x.clone(),
+                    xdot: reads.xdot.clone(),
+                };
+                f(&mut r);
+                eval_with(nodes, x, xdot, &r)
+            };
+            let (rp, rm) = if k >= nl {
+                let i = k - nl;
+                match what {
+                    'x' => (read(&|r| r.x[i] += eps), read(&|r| r.x[i] -= eps)),
+                    'd' => (read(&|r| r.xdot[i] += eps), read(&|r| r.xdot[i] -= eps)),
+                    _ => continue,
+                }
+            } else if k >= nx {
                 let i = k - nx;
-                (
-                    eval_with(nodes, x, xdot, &moved(lambda, i, eps)),
-                    eval_with(nodes, x, xdot, &moved(lambda, i, -eps)),
-                )
+                (read(&|r| r.lambda[i] += eps), read(&|r| r.lambda[i] -= eps))
             } else if k < n6 {
                 if matches!(what, 'x' | 'd') {
                     continue;
@@ -880,7 +916,7 @@ fn contact_tangents_match_finite_differences() {
                     nodes: &nodes,
                     x: &x,
                     xdot: &xdot,
-                    lambda: &[],
+                    ..Local::nodes(&nodes)
                 };
                 let state = element.state(&ctx, &local);
                 assert!(
@@ -900,7 +936,7 @@ fn contact_tangents_match_finite_differences() {
                     &element,
                     &model,
                     &nodes,
-                    (&x, &xdot, &[]),
+                    (&x, &xdot, &Reads::default()),
                     (&held, EPS),
                 );
             }
@@ -1042,7 +1078,7 @@ fn contact_tangents_match_one_sided_differences_at_the_onset() {
                     &element,
                     &model,
                     &slow,
-                    (&x, &xdot, &[]),
+                    (&x, &xdot, &Reads::default()),
                     (&held, eps),
                 );
             }
@@ -1457,7 +1493,7 @@ fn rotational_spring_tangents_match_finite_differences() {
                     nodes: &nodes,
                     x: &x,
                     xdot: &[0.7],
-                    lambda: &[],
+                    ..Local::nodes(&nodes)
                 };
                 let theta = element.angle(&ctx, &local);
                 assert!(
@@ -1531,7 +1567,7 @@ fn check_energy_gradient(
         nodes: &rest,
         x,
         xdot: &xdot,
-        lambda: &[],
+        ..Local::nodes(&rest)
     };
     let (r, _) = evaluate_owned(kernel, &ctx, &local, None);
     let energy = |nodes: &[NodeState]| {
@@ -1541,7 +1577,7 @@ fn check_energy_gradient(
                 nodes,
                 x,
                 xdot: &xdot,
-                lambda: &[],
+                ..Local::nodes(nodes)
             },
         )
     };
@@ -1742,12 +1778,21 @@ fn control_block_tangents_match_finite_differences() {
             let xdot: Vec<f64> = (0..n).map(|_| 0.5 * rng.next()).collect();
             let lambda: Vec<f64> = slots.rows.iter().map(|_| 20.0 * rng.next()).collect();
             assert_eq!(lambda.len(), 10, "the hinge's 5 rows and the slide's 5");
+            // the contact's impact velocity and bristles
+            let reads = Reads {
+                lambda,
+                x: vec![0.7, 1e-3 * rng.next(), 1e-3 * rng.next(), 1e-3 * rng.next()],
+                xdot: (0..4)
+                    .map(|k| if k == 0 { 0.0 } else { 0.05 * rng.next() })
+                    .collect(),
+            };
+            assert_eq!(slots.states.len(), 4, "the contact's states");
             check_states(
                 "control blocks",
                 &element,
                 &model,
                 &nodes,
-                (&x, &xdot, &lambda),
+                (&x, &xdot, &reads),
                 (&[hold], EPS),
             );
         }

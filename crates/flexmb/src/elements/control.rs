@@ -61,8 +61,12 @@
 //! the measurement's row has its columns `-a . d(B^T lambda)/dlambda` next to the node
 //! columns `-a . K_c` from the joint's own kernel (`K_c = sum_r lambda_r dB_r^T/dw`, the
 //! joint's geometric stiffness); a beam element's stress resultant `C epsilon` has the node
-//! columns `C P / L` ([`crate::elements::beam`]). These rows are computed in `f64` by the
-//! joint's and beam's kernels, not by the diagram's automatic differentiation.
+//! columns `C P / L` ([`crate::elements::beam`]); a contact's force on its node B is minus
+//! its residual rows there, whose derivatives, node columns and the columns of the
+//! contact's states (read like the multipliers, [`ElementKernel::state_reads`]), come from
+//! the contact's own iteration matrix with the same coefficients. These rows are computed
+//! in `f64` by the joint's, beam's and contact's kernels, not by the diagram's automatic
+//! differentiation.
 //!
 //! **Actuators**: a force `u a` at a node's point `P`, `r = -[u a; (R^T (P - x)) x (R^T u
 //! a)]`; a moment `r_theta = -R^T u a`; a joint torque `u` about a revolute joint's axis `a =
@@ -126,6 +130,11 @@ pub struct ControlElement<'m> {
     /// rows start among them.
     pub rows: &'m [usize],
     pub joint_rows: &'m [(JointId, usize)],
+    /// The contacts' states that the measurements of contact forces read
+    /// ([`ElementKernel::state_reads`]), contact after contact, and for each contact where
+    /// its states start among them and its effective mass.
+    pub states: &'m [usize],
+    pub contacts: &'m [(usize, usize, f64)],
 }
 
 /// What the diagram of a model touches ([`slots`]).
@@ -139,6 +148,10 @@ pub struct Slots {
     pub rows: Vec<usize>,
     /// Those joints, each with the position of its first row in `rows`.
     pub joint_rows: Vec<(JointId, usize)>,
+    /// The states (indices in `State::x`) of the contacts whose forces are measured.
+    pub states: Vec<usize>,
+    /// Those contacts: index, position of the first state in `states`, effective mass.
+    pub contacts: Vec<(usize, usize, f64)>,
 }
 
 impl<'m> ControlElement<'m> {
@@ -150,6 +163,8 @@ impl<'m> ControlElement<'m> {
             slots: &slots.nodes,
             rows: &slots.rows,
             joint_rows: &slots.joint_rows,
+            states: &slots.states,
+            contacts: &slots.contacts,
         }
     }
 }
@@ -163,6 +178,7 @@ pub fn slots(model: &Model) -> Slots {
         }
     };
     let (mut rows, mut joint_rows) = (Vec::new(), Vec::<(JointId, usize)>::new());
+    let (mut states, mut contacts) = (Vec::new(), Vec::<(usize, usize, f64)>::new());
     for b in &model.control.blocks {
         let (quantity, target) = match &b.kind {
             BlockKind::Measure(q) => (Some(q), None),
@@ -201,6 +217,17 @@ pub fn slots(model: &Model) -> Slots {
                     add(Some(b.nodes[0]));
                     add(Some(b.nodes[1]));
                 }
+                Quantity::ContactForce { contact, .. } => {
+                    let c = &model.contacts[*contact];
+                    add(c.node_a);
+                    add(c.node_b);
+                    if !contacts.iter().any(|(k, ..)| k == contact) {
+                        let first = super::ElementItem::Contact(*contact).state_start(model);
+                        let mass = super::contact::effective_mass(model, c.node_a, c.node_b);
+                        contacts.push((*contact, states.len(), mass));
+                        states.extend(first..first + c.n_states());
+                    }
+                }
             }
         }
         if let Some(t) = target {
@@ -218,6 +245,26 @@ pub fn slots(model: &Model) -> Slots {
         nodes: out,
         rows,
         joint_rows,
+        states,
+        contacts,
+    }
+}
+
+/// The inputs of a measured contact's element, taken from the diagram's.
+struct ContactInputs {
+    nodes: [super::NodeState; 2],
+    x: Vec<f64>,
+    xdot: Vec<f64>,
+}
+
+impl ContactInputs {
+    fn local(&self) -> Local<'_> {
+        Local {
+            nodes: &self.nodes,
+            x: &self.x,
+            xdot: &self.xdot,
+            ..Local::nodes(&self.nodes)
+        }
     }
 }
 
@@ -397,7 +444,9 @@ impl ControlElement<'_> {
                     }
                 }
             }
-            Quantity::ConstraintForce { .. } | Quantity::SectionForce { .. } => c(reaction),
+            Quantity::ConstraintForce { .. }
+            | Quantity::SectionForce { .. }
+            | Quantity::ContactForce { .. } => c(reaction),
         }
     }
 
@@ -420,7 +469,7 @@ impl ControlElement<'_> {
         coef: Option<&Coefficients>,
     ) -> (f64, Option<DVector<f64>>) {
         let n6 = 6 * self.slots.len();
-        let mut row = coef.map(|_| DVector::zeros(n6 + self.system.n_unknowns + self.rows.len()));
+        let mut row = coef.map(|_| DVector::zeros(self.n_local()));
         // the 12 node columns of a pair of slots, times c_k and the tangent operators
         let nodes_row = |row: &mut DVector<f64>, slots: [usize; 2], d: &RowVector12, k: f64| {
             for (end, &slot) in slots.iter().enumerate() {
@@ -518,8 +567,71 @@ impl ControlElement<'_> {
                 }
                 (st.stress[*component], row)
             }
+            Quantity::ContactForce { contact, axis } => {
+                let (element, local_c, slots, first) = self.contact_local(*contact, local);
+                let (r, sc) = super::evaluate_owned(&element, ctx, &local_c.local(), coef);
+                let rb = local_c.nodes[1].q.r;
+                let g = Vec3::new(r[6], r[7], r[8]);
+                let turns = ctx.group == flexmb_lie::Group::SE3;
+                let w = if turns { rb.transpose() * axis } else { *axis };
+                if let (Some(row), Some(coef)) = (row.as_mut(), coef) {
+                    // the contact's own rows of node B (coefficients and tangents applied)
+                    let d = |c: usize| -(0..3).map(|i| w[i] * sc[(6 + i, c)]).sum::<f64>();
+                    let extra = w.cross(&g) * coef.k;
+                    for (end, &slot) in slots.iter().enumerate() {
+                        if self.slots[slot].is_some() {
+                            for c in 0..6 {
+                                row[6 * slot + c] += d(6 * end + c);
+                            }
+                        }
+                    }
+                    if turns {
+                        let t = local_c.nodes[1].t.fixed_view::<3, 6>(3, 0).into_owned();
+                        let mut out = row.rows_mut(6 * slots[1], 6);
+                        out += (extra.transpose() * t).transpose();
+                    }
+                    let s0 = n6 + self.system.n_unknowns + self.rows.len() + first;
+                    for i in 0..element.n_states() {
+                        row[s0 + i] = d(12 + i);
+                    }
+                }
+                (-w.dot(&g), row)
+            }
             _ => (0.0, row),
         }
+    }
+
+    /// The contact element of a measured contact force, its inputs from the diagram's
+    /// (its nodes' slots, its states among the states read), the two slots and the position
+    /// of its states among those read.
+    fn contact_local(
+        &self,
+        contact: usize,
+        local: &Local,
+    ) -> (
+        super::contact::ContactElement<'_>,
+        ContactInputs,
+        [usize; 2],
+        usize,
+    ) {
+        let c = &self.model.contacts[contact];
+        let &(_, first, effective_mass) = self
+            .contacts
+            .iter()
+            .find(|(k, ..)| *k == contact)
+            .expect("a measured contact has its states among those read");
+        let slots = [self.slot(c.node_a), self.slot(c.node_b)];
+        let n = c.n_states();
+        let inputs = ContactInputs {
+            nodes: slots.map(|k| local.nodes[k]),
+            x: local.read_x[first..first + n].to_vec(),
+            xdot: local.read_xdot[first..first + n].to_vec(),
+        };
+        let element = super::contact::ContactElement {
+            contact: c,
+            effective_mass,
+        };
+        (element, inputs, slots, first)
     }
 
     /// The kinematics of a beam element's two nodes (both are slots).
@@ -1079,6 +1191,10 @@ impl ElementKernel for ControlElement<'_> {
         self.rows
     }
 
+    fn state_reads(&self) -> &[usize] {
+        self.states
+    }
+
     fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
         let sys = self.system;
         for (b, block) in sys.blocks.iter().enumerate() {
@@ -1122,7 +1238,8 @@ impl ElementKernel for ControlElement<'_> {
             let rp = DVector::from_column_slice(&out[..rows]);
             physical::to_group(group, local.nodes, &active, &rp, None, None, r, None);
             r.rows_mut(rows, n).copy_from_slice(&out[rows..]);
-            r.rows_mut(rows + n, self.rows.len()).fill(0.0);
+            r.rows_mut(rows + n, self.rows.len() + self.states.len())
+                .fill(0.0);
             return;
         };
         // the measured constraint and section forces: values and derivative rows
@@ -1199,9 +1316,10 @@ impl ElementKernel for ControlElement<'_> {
                 s.view_mut((rows + i, 6 * k), (1, 6)).copy_from(&block);
             }
         }
-        // The multipliers' columns and rows: zero but for the measured constraint forces',
-        // whose output rows (e = y - m) take -dm from the joint's or beam's own kernel.
-        let nm = self.rows.len();
+        // The columns and rows of the multipliers and other states read: zero but for the
+        // measured reactions', whose output rows (e = y - m) take -dm from the joint's,
+        // beam's or contact's own kernel.
+        let nm = self.rows.len() + self.states.len();
         r.rows_mut(rows + n, nm).fill(0.0);
         s.columns_mut(rows + n, nm).fill(0.0);
         s.rows_mut(rows + n, nm).fill(0.0);
@@ -1312,6 +1430,32 @@ impl ElementParameters for ControlElement<'_> {
                     }
                 }
                 return DerivativeMethod::Analytic;
+            }
+            ControlWrt::Contact(i, cp) => {
+                // the contact's own derivative of its force on node B, along each measuring
+                // block's direction (dm/dp = -a . dg/dp, so de/dp = a . dg/dp)
+                dr.fill(0.0);
+                let (element, inputs, ..) = self.contact_local(i, local);
+                let mut d = DVector::zeros(element.n_local());
+                let method =
+                    element.parameter_derivative(ctx, cp, &inputs.local(), &mut d.as_view_mut());
+                let dg = Vec3::new(d[6], d[7], d[8]);
+                let rb = inputs.nodes[1].q.r;
+                let rows = 6 * self.slots.len();
+                for (k, block) in self.system.blocks.iter().enumerate() {
+                    if let BlockKind::Measure(Quantity::ContactForce { contact, axis }) =
+                        &block.kind
+                    {
+                        if *contact == i {
+                            let w = match ctx.group {
+                                flexmb_lie::Group::SE3 => rb.transpose() * axis,
+                                flexmb_lie::Group::R3xSO3 => *axis,
+                            };
+                            dr[rows + self.system.output_start[k]] = w.dot(&dg);
+                        }
+                    }
+                }
+                return method;
             }
             ControlWrt::Joint(j, jp) => {
                 // the joint's frames enter the measurements and actuators along it: central

@@ -236,6 +236,10 @@ pub struct Local<'a> {
     pub xdot: &'a [f64],
     /// The multipliers the element reads ([`ElementKernel::multiplier_rows`]), unscaled.
     pub lambda: &'a [f64],
+    /// The other elements' states the element reads ([`ElementKernel::state_reads`]) and
+    /// their rates.
+    pub read_x: &'a [f64],
+    pub read_xdot: &'a [f64],
 }
 
 impl<'a> Local<'a> {
@@ -246,6 +250,8 @@ impl<'a> Local<'a> {
             x: &[],
             xdot: &[],
             lambda: &[],
+            read_x: &[],
+            read_xdot: &[],
         }
     }
 }
@@ -280,9 +286,20 @@ pub trait ElementKernel {
     fn multiplier_rows(&self) -> &[usize] {
         &[]
     }
-    /// Size of the local vector: `6 n_slots + n_states + n_multipliers`.
+    /// Other elements' states (indices in `State::x`) that the element reads: a control
+    /// block measuring a contact's force reads the contact's impact velocity and bristles.
+    /// Their values and rates are in [`Local::read_x`], [`Local::read_xdot`]; their columns
+    /// follow the multipliers' in the local matrix, with the coefficients of state columns
+    /// (`x dr/dx + xdot dr/dxdot`; none is algebraic). No equations, as for the multipliers.
+    fn state_reads(&self) -> &[usize] {
+        &[]
+    }
+    /// Size of the local vector: `6 n_slots + n_states + n_multipliers + n_state_reads`.
     fn n_local(&self) -> usize {
-        6 * self.n_slots() + self.n_states() + self.multiplier_rows().len()
+        6 * self.n_slots()
+            + self.n_states()
+            + self.multiplier_rows().len()
+            + self.state_reads().len()
     }
     /// Residual `[r; e]` (every entry written) and, if asked, the iteration matrix (every
     /// entry written): on node columns `m M + c C_t + k K_t T`, on state columns
@@ -344,6 +361,8 @@ pub struct LocalBuffers {
     x: Vec<f64>,
     xdot: Vec<f64>,
     lambda: Vec<f64>,
+    read_x: Vec<f64>,
+    read_xdot: Vec<f64>,
     r: Vec<f64>,
     s: Vec<f64>,
 }
@@ -357,6 +376,8 @@ impl Default for LocalBuffers {
             x: Vec::new(),
             xdot: Vec::new(),
             lambda: Vec::new(),
+            read_x: Vec::new(),
+            read_xdot: Vec::new(),
             r: Vec::new(),
             s: Vec::new(),
         }
@@ -404,6 +425,11 @@ impl LocalBuffers {
         let rows = kernel.multiplier_rows();
         self.lambda
             .extend(rows.iter().map(|&r| lambda.get(r).copied().unwrap_or(0.0)));
+        let reads = kernel.state_reads();
+        self.read_x.clear();
+        self.read_xdot.clear();
+        self.read_x.extend(reads.iter().map(|&i| x[i]));
+        self.read_xdot.extend(reads.iter().map(|&i| xdot[i]));
     }
 
     /// The gathered inputs (`nodes`: those given to [`LocalBuffers::gather`]) and the local
@@ -425,6 +451,8 @@ impl LocalBuffers {
             x: &self.x,
             xdot: &self.xdot,
             lambda: &self.lambda,
+            read_x: &self.read_x,
+            read_xdot: &self.read_xdot,
         };
         (
             local,
@@ -447,6 +475,8 @@ impl LocalBuffers {
             x: &self.x,
             xdot: &self.xdot,
             lambda: &self.lambda,
+            read_x: &self.read_x,
+            read_xdot: &self.read_xdot,
         }
     }
 }
@@ -702,6 +732,10 @@ impl ElementKernel for Kernel<'_> {
     #[inline]
     fn multiplier_rows(&self) -> &[usize] {
         dispatch!(self, k => k.multiplier_rows())
+    }
+    #[inline]
+    fn state_reads(&self) -> &[usize] {
+        dispatch!(self, k => k.state_reads())
     }
     #[inline]
     fn evaluate(

@@ -1635,7 +1635,7 @@ fn read_ropes(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
 
 /// The index of the item that `f` names among `names` (e.g. the springs), or an error with
 /// the closest name and the list.
-fn item_named<'n, I: Iterator<Item = &'n str>>(
+pub(super) fn item_named<'n, I: Iterator<Item = &'n str>>(
     f: &Field<'_>,
     names: impl Fn() -> I,
     what: &str,

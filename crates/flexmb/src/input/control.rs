@@ -261,6 +261,7 @@ fn keys(ty: &str) -> Vec<&'static str> {
             "axis",
             "joint",
             "beam",
+            "contact",
         ],
         "actuator" => &[
             "target",
@@ -537,6 +538,7 @@ const QUANTITIES: &[&str] = &[
     "constraint_force",
     "constraint_moment",
     "section_force",
+    "contact_force",
 ];
 
 /// The stress resultants of a beam section, as the `beam_stress` sensor names them.
@@ -582,6 +584,22 @@ fn read_quantity(
                 joint,
                 axis: axis(t, "")?,
                 moment: q == "constraint_moment",
+            }
+        }
+        "contact_force" => {
+            let f = t.req("contact")?;
+            let names = || model.contacts.iter().map(|c| c.name.as_str());
+            let contact = super::build::item_named(&f, names, "contact", "contacts")?;
+            let c = &model.contacts[contact];
+            if c.node_b.is_none() {
+                return Err(f.err(format!(
+                    "contact '{}' has the ground as its node B: a contact force is measured on node B",
+                    c.name
+                )));
+            }
+            Quantity::ContactForce {
+                contact,
+                axis: axis(t, "")?,
             }
         }
         "section_force" => {

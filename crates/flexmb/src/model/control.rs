@@ -59,16 +59,21 @@ pub enum Quantity {
     /// Elastic stress resultant `component` of a beam element (index in `Model::beams`),
     /// section frame, as the `beam_stress` sensor: 0-2 forces, 3-5 moments \[N or N m\].
     SectionForce { beam: usize, component: usize },
+    /// What a contact (index in `Model::contacts`) exerts on its node B, normal force and
+    /// friction, as `axis . f` \[N\].
+    ContactForce { contact: usize, axis: Vec3 },
 }
 
 impl Quantity {
     /// Whether the measurement reads more than its nodes' kinematics (a joint's multipliers,
-    /// a beam's section law): it is evaluated in `f64` with its derivatives from the joint's
-    /// or beam's own kernel rather than by the diagram's automatic differentiation.
+    /// a beam's section law, a contact's law and states): it is evaluated in `f64` with its derivatives from the joint's
+    /// beam's or contact's own kernel rather than by the diagram's automatic differentiation.
     pub fn is_reaction(&self) -> bool {
         matches!(
             self,
-            Quantity::ConstraintForce { .. } | Quantity::SectionForce { .. }
+            Quantity::ConstraintForce { .. }
+                | Quantity::SectionForce { .. }
+                | Quantity::ContactForce { .. }
         )
     }
 }
@@ -416,6 +421,13 @@ impl ControlSystem {
     pub fn uses_beam(&self, e: usize) -> bool {
         self.blocks.iter().any(|b| {
             matches!(&b.kind, BlockKind::Measure(Quantity::SectionForce { beam, .. }) if *beam == e)
+        })
+    }
+
+    /// Whether a measurement reads the force of contact `i`.
+    pub fn uses_contact(&self, i: usize) -> bool {
+        self.blocks.iter().any(|b| {
+            matches!(&b.kind, BlockKind::Measure(Quantity::ContactForce { contact, .. }) if *contact == i)
         })
     }
 

@@ -221,12 +221,15 @@ pub struct ControlParam {
 
 /// What the block diagram's equations are differentiated with respect to: a block's own
 /// parameter, a parameter of a joint its measurements or actuators act along, or a section
-/// parameter of a beam element (index in `Model::beams`) whose section forces it measures.
+/// parameter of a beam element (index in `Model::beams`) whose section forces it measures, or
+/// of a contact whose force it measures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ControlWrt {
     Block(ControlParam),
     Joint(JointId, JointParam),
     Section(usize, SectionParam),
+    /// A law parameter of a contact (index in `Model::contacts`) whose force it measures.
+    Contact(usize, ContactParam),
 }
 
 /// Which curve of a nonlinear force law ([`super::ForceLaw`]).

@@ -1253,6 +1253,26 @@ impl Model {
                     ))
                 }
             }
+            Quantity::ContactForce { contact, .. } => match self.contacts.get(*contact) {
+                None => Err(bad(
+                    "block",
+                    i,
+                    &b.name,
+                    "contact",
+                    format!("contact index {contact} does not exist"),
+                )),
+                Some(c) if c.node_b.is_none() => Err(bad(
+                    "block",
+                    i,
+                    &b.name,
+                    "contact",
+                    format!(
+                        "contact '{}' has the ground as its node B: a contact force is measured on node B",
+                        c.name
+                    ),
+                )),
+                Some(_) => Ok(()),
+            },
             Quantity::SectionForce { beam, component } => {
                 if *beam >= self.beams.len() {
                     Err(bad(

@@ -470,7 +470,51 @@ pub fn control_diagram(group: flexmb_lie::Group) -> flexmb::model::Model {
     blocks.push(measure("reaction", reaction(hinge, false, &mut rng)));
     blocks.push(measure("reaction_moment", reaction(hinge, true, &mut rng)));
     blocks.push(measure("slide_force", reaction(slide, false, &mut rng)));
-    let mut fed = vec![s(n), s(n + 1), s(n + 2)];
+    // A contact always closed at the random configurations of the tests: a sphere of radius
+    // 3 on b against the plane z = 0 of a (the nodes lie within about 1 of each other),
+    // with bristle friction (three states besides the impact velocity).
+    use flexmb::model::contact::{Bristles, Contact, ContactLaw, ContactShape, Dissipation};
+    m.contacts.push(Contact {
+        name: "touch".into(),
+        node_a: Some(a),
+        node_b: Some(b),
+        shape_a: ContactShape::Plane {
+            point: flexmb_lie::Vec3::zeros(),
+            normal: flexmb_lie::Vec3::z(),
+        },
+        shape_b: ContactShape::Sphere {
+            center: flexmb_lie::Vec3::zeros(),
+            radius: 3.0,
+            inside: false,
+        },
+        law: ContactLaw {
+            dissipation: Dissipation::LankaraniNikravesh,
+            // (soft: its force at the tests' deep penetrations stays of order 1, so that
+            // the parameter test's differences keep their digits)
+            stiffness: 0.05,
+            exponent: 1.5,
+            restitution: 0.7,
+            min_impact_velocity: 1e-3,
+        },
+        friction: Some(flexmb::model::contact::Friction {
+            coefficient: 0.4,
+            stiction_velocity: 0.3,
+            viscous: 0.2,
+            bristles: Some(Bristles {
+                stiffness: 300.0,
+                damping: 2.0,
+                static_coefficient: 0.6,
+            }),
+        }),
+    });
+    blocks.push(measure(
+        "contact_force",
+        Quantity::ContactForce {
+            contact: 0,
+            axis: axis(&mut rng),
+        },
+    ));
+    let mut fed = vec![s(n), s(n + 1), s(n + 2), s(n + 3)];
     if group == flexmb_lie::Group::SE3 {
         // (soft: the random configurations strain it far, and the differences of the
         // parameter test divide its residual by their step)
@@ -502,7 +546,7 @@ pub fn control_diagram(group: flexmb_lie::Group) -> flexmb::model::Model {
                 component: 4,
             },
         ));
-        fed.push(s(n + 3));
+        fed.push(s(n + 4));
     }
     let k = fed.len();
     blocks.push(block(
