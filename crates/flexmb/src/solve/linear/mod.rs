@@ -66,11 +66,13 @@
 //! rejects well-posed systems whose unknowns differ in scale by many orders: the
 //! force of a non-collocated servo constraint ([`crate::elements::control`])
 //! enters the equilibrium rows, which are scaled by `1/(beta' m) ~ h^2`, while
-//! its own row holds no entry in its column; its pivot is about
-//! `h^3 k/m` times the largest entry of the matrix (`k/m` the stiffness over
-//! mass through which the force reaches the prescribed coordinate: 2e-14 at
-//! `h = 1e-3` on `examples/servo_noncollocated.toml`), but `h k/m`
-//! (2e-8) times the largest entry of its own column. A singular matrix
+//! its own row holds no entry in its column; on
+//! `examples/servo_noncollocated.toml` its pivot is 1.6e-12, 5.0e-14 and 1.6e-15
+//! times the largest entry of the matrix at `h` = 2e-3, 1e-3 and 5e-4 (as `h^5`),
+//! but 8.0e-7, 1.0e-7 and 1.3e-8 times the largest entry of its own column (as
+//! `h^3`: the force reaches the prescribed coordinate through the spring, whose
+//! entries in the scaled matrix are `h^2` times the masses', and the servo's
+//! position-level row weighs `h`). A singular matrix
 //! (redundant rows, a node without mass) still leaves a pivot at the rounding
 //! level of its column, or zero. [`LinearSolver::min_pivot_ratio`] stays
 //! relative to the whole matrix on the dense and sparse backends.
