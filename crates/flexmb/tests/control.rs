@@ -331,17 +331,25 @@ fn noncollocated_servo_gives_the_inverse_dynamics_input_of_a_mass_spring_mass() 
             .iter()
             .map(|&(t, x)| (x - x1(t)).abs())
             .fold(0.0, f64::max);
-        eprintln!("h {h}: input error {err:.3e} (first five steps {start:.3e}), x1 error {err_x1:.3e}");
+        eprintln!(
+            "h {h}: input error {err:.3e} (first five steps {start:.3e}), x1 error {err_x1:.3e}"
+        );
         assert!(start < 0.05, "start-up error of u at h = {h}: {start:e}");
         errors.push(err);
         errors_x1.push(err_x1);
     }
     let order = common::order(&hs, &errors);
     let order_x1 = common::order(&hs, &errors_x1);
-    eprintln!("non-collocated servo: input errors {errors:?}, order {order:.2}; x1 order {order_x1:.2}");
+    eprintln!(
+        "non-collocated servo: input errors {errors:?}, order {order:.2}; x1 order {order_x1:.2}"
+    );
     // |u| up to 1.43 N
     assert!(errors[2] < 1e-4, "input error at h = 2e-3: {:e}", errors[2]);
-    assert!(errors_x1[2] < 3e-7, "x1 error at h = 2e-3: {:e}", errors_x1[2]);
+    assert!(
+        errors_x1[2] < 3e-7,
+        "x1 error at h = 2e-3: {:e}",
+        errors_x1[2]
+    );
     assert!((order - 2.0).abs() < 0.2, "order {order}");
     assert!((order_x1 - 2.0).abs() < 0.1, "x1 order {order_x1}");
 }
