@@ -73,6 +73,51 @@
 //! R_A a_z` (on node B, `-u a` on A), a force along a prismatic joint's axis at B's joint
 //! point (its reaction on A at the same point). `follower`: `a` turns with the node.
 //!
+//! **Servo constraints** (Blajer & Kołodziejczyk 2004): the output `u` of a servo block is
+//! the input along its target that makes a position-level quantity `c(q)` (a node's
+//! position along an axis, a joint coordinate) follow `f(t)`:
+//!
+//! ```text
+//! nodes:   r = -L(q) u                 (u along the target, as an actuator's)
+//! output:  e = c(q) - f(t)             (position level, like a joint's Phi, times h as
+//!                                       every state row)
+//! ```
+//!
+//! The index of these equations is the relative degree `r` of `c` with respect to `u`
+//! plus one. A collocated servo (the target acts along `c`) has `r = 2`: index 3, like a
+//! joint's drive, and the consistent initial accelerations write its row at acceleration
+//! level, `c'' - f'' = 0`, which gives `u(0)`. A non-collocated servo reaches `c` through
+//! other bodies; on two carts joined by a spring `k`, the force on cart 1 and `c = x2`,
+//! `m2 x2'' = k (x1 - x2 + l)` and `m1 x1'' = u - k (x1 - x2 + l)` give `r = 4`, index 5,
+//! and the input `u = (m1 + m2) x2'' + (m1 m2 / k) x2''''` (the two-car example, Altmann &
+//! Heiland 2017). Its row is the same position-level row, discretized as it stands (no
+//! index reduction); in the initial accelerations it reads `u = initial` (the user's
+//! `u(0)`), since `u` appears only in the fourth derivative of `c`. The consequences,
+//! measured on `examples/servo_noncollocated.toml` (`tests/control.rs`, docs/model-format.md
+//! "Servo constraints"):
+//!
+//! * the pivot of `u` in the iteration matrix is `h^5` of its largest entry (the equilibrium
+//!   rows are scaled by `1/(beta' m)`, the spring enters them `h^2` below the masses, the
+//!   row weighs `h`) but `h^3` of its own column: the linear solver's singularity rule is
+//!   relative to the column ([`crate::solve::linear`]), which partial pivoting makes
+//!   invariant to the unit of `u`. No further scaling of the row or of `u` is needed at the
+//!   step sizes where round-off allows the problem at all (below);
+//! * `rho_inf = 0` (the error of `u` at `h = 1e-3`: 7e-5 N, against 0.1 N at `rho_inf =
+//!   0.5` and 8 N at 0.9, |u| <= 1.43 N);
+//! * after a start-up layer of five steps (an error of 0.04 N whatever `h`, from the start
+//!   `a_0 = vdot_0`), `u` and the motion converge at second order; round-off, amplified by
+//!   negative powers of `h`, bounds the accuracy of `u` from below (7e-5 N at `h = 1e-3`,
+//!   growing below), and its Newton corrections (3e-10 N at `h = 1e-3`, as `h^-7`): the
+//!   step's Newton judges a servo's force with the joints' multipliers, whose corrections
+//!   that stop halving after the configuration has converged are taken for round-off
+//!   ([`crate::solve::dynamics`]);
+//! * inconsistent initial conditions (the hidden constraints `c^(k)(0) = f^(k)(0)`,
+//!   `k < r`, and `u(0)`) are not checked: `rho_inf = 0` corrects them within five steps
+//!   by impulses of `u`.
+//!
+//! Seifried & Blajer (2013) analyse the servo-constraint problems of underactuated
+//! multibody systems, flat and non-flat, and their numerical solution strategies.
+//!
 //! **Iteration matrix and parameter derivatives.** The residual is one function, generic
 //! over the scalar type, of the slots' physical variations (configuration `x + dx`, `R (I +
 //! tilde(theta))`, velocities and accelerations), the states and their rates. Its
@@ -100,6 +145,12 @@
 //!   Methods Appl. Mech. Engrg. 190 (2000) 305-319.
 //! - K. J. Åström, T. Hägglund, Advanced PID Control, ISA, 2006 (filtered derivative,
 //!   anti-windup by back-calculation).
+//! - W. Blajer, K. Kołodziejczyk, A geometric approach to solving problems of control
+//!   constraints, Multibody Syst. Dyn. 11 (2004).
+//! - R. Seifried, W. Blajer, Analysis of servo-constraint problems for underactuated
+//!   multibody systems, Mech. Sci. 4 (2013) 113-129.
+//! - R. Altmann, J. Heiland, Simulation of multibody systems with servo constraints through
+//!   optimal control, Multibody Syst. Dyn. 40 (2017) 75-98.
 
 use super::pose::{c, pose, Pose};
 use super::{

@@ -505,12 +505,6 @@ fn read_kind(
         "servo" => {
             let quantity = read_quantity(t, model, origins, &["position", "joint_coordinate"])?;
             let target = read_target(t, model, origins, "target_")?;
-            if !ControlSystem::collocated(&quantity, &target) {
-                return Err(t.key_err(
-                    "target",
-                    "a servo's target must act along the quantity it prescribes (a force on the same node along the same axis, or the same joint): non-collocated servo constraints are of higher index and not supported yet",
-                ));
-            }
             let function = read_function(&t.req("function")?)?;
             let params = vec![number_or(t, "initial", 0.0)?];
             let kind = BlockKind::Servo {

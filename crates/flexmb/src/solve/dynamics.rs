@@ -785,7 +785,7 @@ impl Simulation {
         }
         if self.stats.multiplier_floor_steps > 0 {
             notes.push(format!(
-                "at {} steps the multipliers (joint reactions) could not be converged below {:.2e} times their tolerance (rtol times the largest force of the model): round-off of an ill-conditioned constraint system; positions and velocities are converged",
+                "at {} steps the multipliers (joint reactions and servo forces) could not be converged below {:.2e} times their tolerance (rtol times the largest force of the model; atol and rtol for a servo force): round-off of an ill-conditioned constraint system; positions and velocities are converged",
                 self.stats.multiplier_floor_steps, self.stats.multiplier_floor
             ));
         }
@@ -1173,6 +1173,7 @@ impl Simulation {
         );
         self.state.t = t_new;
         let max_mu = force_scale(model, &self.data, &it.saved, &self.settings) * start.scale;
+        let servo_forces = servo_forces(model, &self.data.layout);
         let mut sys = StepSystem {
             model,
             start,
@@ -1186,6 +1187,7 @@ impl Simulation {
             b_start: &it.b_start,
             mu_floor: &mut it.mu_floor,
             max_mu,
+            servo_forces: &servo_forces,
             previous: &mut it.previous,
         };
         sys.reset_zeta(self.data.layout.n_active);
@@ -1224,6 +1226,8 @@ struct StepSystem<'a> {
     mu_floor: &'a mut Vec<f64>,
     /// Scaled force scale of the multipliers' tolerance ([`force_scale`]).
     max_mu: f64,
+    /// The states that are the forces of servo constraints ([`servo_forces`]).
+    servo_forces: &'a [usize],
     previous: &'a mut Previous,
 }
 
@@ -1323,7 +1327,49 @@ impl NonlinearSystem for StepSystem<'_> {
             0.0
         };
         let states = &dx[layout.block(Block::States)];
-        let (x, worst_x) = weighted_norm(states, &self.state.x, &|_| newton.atol, newton.rtol);
+        let (mut x, mut worst_x) =
+            weighted_norm(states, &self.state.x, &|_| newton.atol, newton.rtol);
+        if !self.servo_forces.is_empty() {
+            // A servo's force is a constraint force: judged with the multipliers, whose
+            // corrections that stop halving with the exact matrix are taken for round-off
+            // once the configuration has converged (`NewtonSolver`). A non-collocated
+            // servo's needs it: the round-off of its correction grows as h^-7 on the
+            // two-car example (flexmb::elements::control, "Servo constraints").
+            let weight = |i: usize| newton.atol + newton.rtol * self.state.x[i].abs();
+            let (mut sum_x, mut sum_s, mut worst_s) = (0.0, 0.0, (0.0, 0));
+            for (i, d) in states.iter().enumerate() {
+                let e = (d / weight(i)).powi(2);
+                if self.servo_forces.contains(&i) {
+                    sum_s += e;
+                    if e > worst_s.0 || !e.is_finite() {
+                        worst_s = (e, i);
+                    }
+                } else {
+                    sum_x += e;
+                }
+            }
+            let (ns, nx) = (
+                self.servo_forces.len(),
+                states.len() - self.servo_forces.len(),
+            );
+            x = (sum_x / nx.max(1) as f64).sqrt();
+            if x == 0.0 || self.servo_forces.contains(&worst_x) {
+                worst_x = (0..states.len())
+                    .filter(|i| !self.servo_forces.contains(i))
+                    .max_by(|&a, &b| {
+                        (states[a] / weight(a))
+                            .abs()
+                            .total_cmp(&(states[b] / weight(b)).abs())
+                    })
+                    .unwrap_or(0);
+            }
+            let servo = (sum_s / ns as f64).sqrt();
+            let total = (mu * mu * na as f64 + sum_s) / (na + ns) as f64;
+            if servo > mu {
+                worst_mu = layout.state_offset() + worst_s.1;
+            }
+            mu = total.sqrt();
+        }
         let worst = if x > q.max(mu) {
             layout.state_offset() + worst_x
         } else if q >= mu {
@@ -1385,6 +1431,26 @@ fn force_scale(model: &Model, data: &Data, saved: &State, settings: &DynamicSett
         .fold(0.0, f64::max);
     let lambda = saved.lambda.iter().fold(0.0f64, |m, l| m.max(l.abs()));
     lambda.max(nodal)
+}
+
+/// The states of `layout` that are the forces of servo constraints (the outputs of servo
+/// blocks, indices among the states).
+fn servo_forces(model: &Model, layout: &Layout) -> Vec<usize> {
+    let system = &model.control;
+    let Some(e) = layout
+        .elements
+        .iter()
+        .position(|e| matches!(e, crate::elements::ElementRef::Control(_)))
+    else {
+        return Vec::new();
+    };
+    system
+        .blocks
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| matches!(b.kind, crate::model::control::BlockKind::Servo { .. }))
+        .map(|(b, _)| layout.state_start[e] + system.output_start[b])
+        .collect()
 }
 
 /// Round-off floor of each active scaled multiplier, `1000 eps L D_k` (`L` the size of the

@@ -457,6 +457,31 @@ pub fn control_diagram(group: flexmb_lie::Group) -> flexmb::model::Model {
             vec![0.5],
             vec![],
         ),
+        // non-collocated: a force on node a prescribes the position of node b
+        block(
+            "servo_far",
+            BlockKind::Servo {
+                quantity: Quantity::Position {
+                    node: b,
+                    point: point(&mut rng),
+                    axis: axis(&mut rng),
+                },
+                target: Target::Force {
+                    node: a,
+                    point: point(&mut rng),
+                    axis: axis(&mut rng),
+                    follower: false,
+                },
+                function: TimeFunction::Sine {
+                    amplitude: 0.2,
+                    frequency: 0.6,
+                    phase: 0.4,
+                    offset: 0.1,
+                },
+            },
+            vec![-0.7],
+            vec![],
+        ),
     ];
     let mut blocks = blocks;
     // Reactions: the hinge's and the slide's constraint forces and a moment, fed back to

@@ -51,12 +51,31 @@
 //!
 //! After the numeric factorization every pivot `u_kk` (diagonal of `U`) is
 //! checked; the factorization is rejected with [`LinearError::Singular`] if a
-//! pivot is exactly zero, non-finite, or `|u_kk| <= PIVOT_TOLERANCE * max_ij
-//! |a_ij|` (with [`PIVOT_TOLERANCE`] `= 1e-13`, relative to the largest
-//! absolute entry of the assembled matrix). A matrix with a non-finite entry
-//! is rejected as well. The reported column is the unknown (column of `A`)
-//! whose elimination produced the bad pivot; it is `None` when no single
-//! unknown can be blamed (all-zero matrix).
+//! pivot is exactly zero, non-finite, or `|u_kk| <= PIVOT_TOLERANCE * max_i
+//! |a_ik|` (with [`PIVOT_TOLERANCE`] `= 1e-13`, relative to the largest
+//! absolute entry of the pivot's own column of the assembled matrix, as the
+//! block LU does). A matrix with a non-finite entry is rejected as well. The
+//! reported column is the unknown (column of `A`) whose elimination produced
+//! the bad pivot; it is `None` when no single unknown can be blamed (all-zero
+//! matrix).
+//!
+//! The rule is relative to the column because partial pivoting is: scaling a
+//! column of `A` (choosing another unit for one unknown) scales its pivot by the
+//! same factor and changes neither the row interchanges nor the solution, so it
+//! must not change the verdict either. A rule relative to the whole matrix
+//! rejects well-posed systems whose unknowns differ in scale by many orders: the
+//! force of a non-collocated servo constraint ([`crate::elements::control`])
+//! enters the equilibrium rows, which are scaled by `1/(beta' m) ~ h^2`, while
+//! its own row holds no entry in its column; on
+//! `examples/servo_noncollocated.toml` its pivot is 1.6e-12, 5.0e-14 and 1.6e-15
+//! times the largest entry of the matrix at `h` = 2e-3, 1e-3 and 5e-4 (as `h^5`),
+//! but 8.0e-7, 1.0e-7 and 1.3e-8 times the largest entry of its own column (as
+//! `h^3`: the force reaches the prescribed coordinate through the spring, whose
+//! entries in the scaled matrix are `h^2` times the masses', and the servo's
+//! position-level row weighs `h`). A singular matrix
+//! (redundant rows, a node without mass) still leaves a pivot at the rounding
+//! level of its column, or zero. [`LinearSolver::min_pivot_ratio`] stays
+//! relative to the whole matrix on the dense and sparse backends.
 //!
 //! Faer's numeric LU routines do not report small or zero pivots themselves
 //! (they divide by them and carry on), which is why the check is done here on
@@ -154,6 +173,8 @@ pub const REJECTIONS_BEFORE_GENERAL: usize = 3;
 struct DenseLu {
     /// Column-major `n x n` matrix, overwritten by its LU factors.
     lu: Vec<f64>,
+    /// The largest `|a_ij|` of each column `j` of the assembled matrix (`n`).
+    column_max: Vec<f64>,
     perm_fwd: Vec<usize>,
     perm_inv: Vec<usize>,
     mem: MemBuffer,
@@ -250,6 +271,7 @@ impl LinearSolver {
                 ]);
                 let dense = DenseLu {
                     lu: vec![0.0; n * n],
+                    column_max: vec![0.0; n],
                     perm_fwd: (0..n).collect(),
                     perm_inv: (0..n).collect(),
                     mem: MemBuffer::new(req),
@@ -320,8 +342,10 @@ impl LinearSolver {
 
     /// `min_k |u_kk| / max_ij |a_ij|` of the last successful factorization
     /// (`None` before any; the block LU divides each pivot by the largest entry of its
-    /// own column instead, see [`block`]). A cheap conditioning indicator: values close to
-    /// [`PIVOT_TOLERANCE`] announce a nearly singular iteration matrix.
+    /// own column instead, see [`block`]). A cheap conditioning indicator: a sudden fall
+    /// announces a nearly singular iteration matrix (the singularity rule itself compares
+    /// each pivot with its own column, so a matrix whose unknowns differ in scale by many
+    /// orders is accepted with a ratio below [`PIVOT_TOLERANCE`]).
     pub fn min_pivot_ratio(&self) -> Option<f64> {
         self.factorized.then_some(self.min_pivot_ratio)
     }
@@ -455,6 +479,11 @@ impl DenseLu {
                 .find(|&&s| !self.lu[s].is_finite())
                 .map(|&s| s / n)
         })?;
+        self.column_max.fill(0.0);
+        for &s in slots {
+            let m = &mut self.column_max[s / n];
+            *m = m.max(self.lu[s].abs());
+        }
         let stack = MemStack::new(&mut self.mem);
         dense_factor::lu_in_place(
             MatMut::from_column_major_slice_mut(&mut self.lu, n, n),
@@ -467,7 +496,7 @@ impl DenseLu {
         let mut min_ratio = f64::INFINITY;
         for k in 0..n {
             let pivot = self.lu[k + k * n];
-            min_ratio = check_pivot(pivot, max_abs, k, min_ratio)?;
+            min_ratio = check_pivot(pivot, (self.column_max[k], max_abs), k, min_ratio)?;
         }
         Ok(min_ratio)
     }
@@ -559,6 +588,7 @@ impl SparseLu {
         // Column j of U holds the pivot of the j-th eliminated column (the
         // original column col_perm[j]) as its entry in row j.
         let u = self.lu.u_factor_unsorted();
+        let a_col_ptr = self.pattern.col_ptr();
         let mut min_ratio = f64::INFINITY;
         for j in 0..n {
             let pivot = u
@@ -568,7 +598,10 @@ impl SparseLu {
                 .rev()
                 .find(|(&i, _)| i == j)
                 .map_or(0.0, |(_, &v)| v);
-            min_ratio = check_pivot(pivot, max_abs, col_perm.arrays().0[j], min_ratio)?;
+            let column = col_perm.arrays().0[j];
+            let col = &self.values[a_col_ptr[column]..a_col_ptr[column + 1]];
+            let column_max = col.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            min_ratio = check_pivot(pivot, (column_max, max_abs), column, min_ratio)?;
         }
         Ok(min_ratio)
     }
@@ -626,16 +659,17 @@ fn check_max_abs(
     }
 }
 
-/// Applies the singularity rule to one pivot; returns the updated minimum of
-/// `|pivot| / max_abs`.
+/// Applies the singularity rule to one pivot of the column whose largest entry is
+/// `column_max`; returns the updated minimum of `|pivot| / max_abs` (`max_abs` the
+/// largest entry of the matrix).
 fn check_pivot(
     pivot: f64,
-    max_abs: f64,
+    (column_max, max_abs): (f64, f64),
     column: usize,
     min_ratio: f64,
 ) -> Result<f64, LinearError> {
     let abs = pivot.abs();
-    if !pivot.is_finite() || abs <= PIVOT_TOLERANCE * max_abs {
+    if !pivot.is_finite() || abs <= PIVOT_TOLERANCE * column_max {
         return Err(LinearError::Singular {
             column: Some(column),
         });
