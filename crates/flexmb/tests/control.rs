@@ -635,11 +635,11 @@ block = "both"
 #[test]
 fn a_measured_contact_force_is_the_contacts_normal_force() {
     // The dropped ball of examples/ball_drop.toml (4.11 kg, Lankarani-Nikravesh, e = 0.8,
-    // 0.1 m free fall) with its contact force along z measured by a block: through the
-    // impacts (resolved by the step control) the measurement equals the contact's normal
-    // force (the `contact` sensor, computed apart from the blocks), and once the ball rests
-    // (the bounces die out geometrically: 0.8^2 of the height each time) it carries the
-    // weight, m g = 40.32 N.
+    // 0.1 m free fall) with its contact force along z measured by a block, every step an
+    // output: through the impacts (resolved by the step control) the measurement equals the
+    // contact's normal force (the `contact` sensor, computed apart from the blocks), and once
+    // the ball rests (the bounces die out geometrically: 0.8^2 of the height each time) it
+    // carries the weight, m g = 40.32 N.
     let text = r#"flexmb = 1
 [model]
 group = "R3xSO3"
@@ -649,7 +649,9 @@ analysis = "dynamic"
 t_end = 2.5
 h = 1e-2
 rho_inf = 0.9
-output_interval = 0.01
+output_interval = 0
+rtol = 1e-10
+atol = 1e-14
 [[body]]
 name = "ball"
 mass = 4.11
@@ -680,20 +682,33 @@ contact = "floor"
 component = "normal_force"
 "#;
     let h = run_text(text, "contact_force.toml");
-    let mut peak: f64 = 0.0;
-    for (t, v) in &h.rows {
+    // The measurement is the force the step applied. The sensor evaluates the contact after
+    // the step, when the impact velocity of a contact that closed in it has been stored
+    // (the damping term then changes): the two agree on the steps that start closed.
+    let (mut peak, mut worst, mut compared) = (0.0f64, 0.0f64, 0);
+    for pair in h.rows.windows(2) {
+        let (t, v) = &pair[1];
         let (fz, normal) = (v[0], v[1]);
         peak = peak.max(fz);
-        assert!(
-            (fz - normal).abs() <= 1e-9 * (1.0 + normal.abs()),
-            "t = {t}: measured {fz} N against the normal force {normal} N"
-        );
+        if pair[0].1[1] > 0.0 {
+            compared += 1;
+            worst = worst.max((fz - normal).abs() / (1.0 + normal.abs()));
+            assert!(
+                (fz - normal).abs() <= 1e-8 * (1.0 + normal.abs()),
+                "t = {t}: measured {fz} N against the normal force {normal} N"
+            );
+        }
     }
+    assert!(compared > 100, "{compared} steps in contact compared");
+    println!(
+        "measured against the normal force: worst relative {worst:.1e} over {compared} steps, peak {peak:.0} N"
+    );
     let weight = 4.11 * 9.81;
     let last = h.rows.last().expect("outputs").1[0];
     assert!(
         (last - weight).abs() < 1e-3 * weight,
         "at rest the contact carries the weight: {last} N against {weight} N"
     );
+    // every step is an output: the impacts' peaks are among them
     assert!(peak > 10.0 * weight, "impacts: peak {peak} N");
 }
