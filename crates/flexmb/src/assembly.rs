@@ -382,30 +382,10 @@ fn element<'m, S: Sink>(
         if n_states > 0 {
             scatter_states(sink, (n_slots, n_states), dof, xs, ratio, &se);
         }
-        let rows = kernel.multiplier_rows();
+        // the columns of what it reads (no equations of its own): local column `j` to
+        // unknown `c`, on its slots' and states' rows
         let n6 = 6 * n_slots;
-        if !rows.is_empty() {
-            // the multipliers' columns (active rows only) of the slots' and states' rows
-            for (m, &row) in rows.iter().enumerate() {
-                let Some(k) = layout.row_unknown[row] else {
-                    continue;
-                };
-                let (c, j) = (layout.n_dofs + k, n6 + n_states + m);
-                for ka in 0..n_slots {
-                    let Some(a) = dof(ka) else { continue };
-                    for i in 0..6 {
-                        sink.entry(a + i, c, se.get(6 * ka + i, j));
-                    }
-                }
-                for i in 0..n_states {
-                    sink.entry(xs + i, c, se.get(n6 + i, j) * ratio);
-                }
-            }
-        }
-        // the other elements' states it reads: their columns, likewise
-        let first = n6 + n_states + rows.len();
-        for (m, &g) in kernel.state_reads().iter().enumerate() {
-            let (c, j) = (layout.state_offset() + g, first + m);
+        let mut column = |c: usize, j: usize| {
             for ka in 0..n_slots {
                 let Some(a) = dof(ka) else { continue };
                 for i in 0..6 {
@@ -415,6 +395,17 @@ fn element<'m, S: Sink>(
             for i in 0..n_states {
                 sink.entry(xs + i, c, se.get(n6 + i, j) * ratio);
             }
+        };
+        // the multipliers of the active rows, then the other elements' states
+        let rows = kernel.multiplier_rows();
+        for (m, &row) in rows.iter().enumerate() {
+            if let Some(k) = layout.row_unknown[row] {
+                column(layout.n_dofs + k, n6 + n_states + m);
+            }
+        }
+        let first = n6 + n_states + rows.len();
+        for (m, &g) in kernel.state_reads().iter().enumerate() {
+            column(layout.state_offset() + g, first + m);
         }
     }
     kernel

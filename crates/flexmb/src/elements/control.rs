@@ -501,17 +501,20 @@ impl ControlElement<'_> {
         }
     }
 
-    /// A measurement of a constraint force or a section force ([`Quantity::is_reaction`]):
+    /// A measurement of a constraint, section or contact force ([`Quantity::is_reaction`]):
     /// its value and, with `coef`, its derivative in the element's local columns (node
-    /// columns in group coordinates, times `coef.k` and the tangent operators; multiplier
-    /// columns without coefficient, [`ElementKernel::multiplier_rows`]).
+    /// columns in group coordinates, times the coefficients and the tangent operators;
+    /// multiplier columns without coefficient, [`ElementKernel::multiplier_rows`]; the
+    /// columns of the states read, [`ElementKernel::state_reads`]).
     ///
     /// A constraint force is `-B^T lambda` on the measured node, the joint's own rows `B`
     /// and `K_c = sum_r lambda_r dB_r^T/dw` giving its derivatives; its components in the
     /// node's frame (the rotational ones, and on SE(3) the translational ones too) turn to
     /// inertial ones by `R`, whose variation `R tilde(theta)` adds `(R^T a) x g` on the
     /// node's rotation columns. A section force is the beam's `C epsilon`, of derivative
-    /// `C P / L` ([`crate::elements::beam::Beam::stress_derivative`]).
+    /// `C P / L` ([`crate::elements::beam::Beam::stress_derivative`]). A contact force is
+    /// minus the contact's residual rows of node B, differentiated by the contact's own
+    /// iteration matrix with the same coefficients (and the same turn of its components).
     fn reaction(
         &self,
         ctx: &Context,

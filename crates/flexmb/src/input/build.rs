@@ -1652,17 +1652,21 @@ pub(super) fn item_named<'n, I: Iterator<Item = &'n str>>(
     })
 }
 
+/// The stress resultants of a beam section (the `beam_strain` and `beam_stress` sensors'
+/// and the `section_force` measurement's components).
+pub(super) const SECTION_COMPONENTS: &[&str] = &[
+    "axial",
+    "shear_2",
+    "shear_3",
+    "torsion",
+    "bending_2",
+    "bending_3",
+];
+
 fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
     const XYZ: &[&str] = &["x", "y", "z"];
     const WXYZ: &[&str] = &["w", "x", "y", "z"];
-    const BEAM: &[&str] = &[
-        "axial",
-        "shear_2",
-        "shear_3",
-        "torsion",
-        "bending_2",
-        "bending_3",
-    ];
+    const BEAM: &[&str] = SECTION_COMPONENTS;
     let mut names = HashMap::new();
     for t in top.items("sensor")? {
         t.check_keys(SENSOR_KEYS)?;

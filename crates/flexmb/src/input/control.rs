@@ -10,7 +10,7 @@ use super::reader::{name_list, suggestion, Field, Result, Table, QUOTED};
 use crate::model::clip;
 use crate::model::control::{Block, BlockKind, ControlSystem, Quantity, Signal, Target};
 use crate::model::limits::MAX_PHYSICAL;
-use crate::model::{Model, TimeFunction};
+use crate::model::{Model, NodeId, TimeFunction};
 use flexmb_lie::Vec3;
 use std::collections::HashMap;
 
@@ -535,15 +535,7 @@ const QUANTITIES: &[&str] = &[
     "contact_force",
 ];
 
-/// The stress resultants of a beam section, as the `beam_stress` sensor names them.
-const SECTION: &[&str] = &[
-    "axial",
-    "shear_2",
-    "shear_3",
-    "torsion",
-    "bending_2",
-    "bending_3",
-];
+
 
 /// The `quantity` of a measurement or servo (one of `allowed`) and what it is of.
 fn read_quantity(
@@ -568,12 +560,7 @@ fn read_quantity(
             let f = t.req("joint")?;
             let joint = require_joint(model, origins, &f)?;
             let j = &model.joints[joint.0];
-            if j.node_b.is_none() {
-                return Err(f.err(format!(
-                    "joint '{}' has the ground as its node B: a constraint force is measured on node B (swap the joint's nodes)",
-                    j.name
-                )));
-            }
+            on_node_b(&f, "joint", &j.name, j.node_b)?;
             Quantity::ConstraintForce {
                 joint,
                 axis: axis(t, "")?,
@@ -585,12 +572,7 @@ fn read_quantity(
             let names = || model.contacts.iter().map(|c| c.name.as_str());
             let contact = super::build::item_named(&f, names, "contact", "contacts")?;
             let c = &model.contacts[contact];
-            if c.node_b.is_none() {
-                return Err(f.err(format!(
-                    "contact '{}' has the ground as its node B: a contact force is measured on node B",
-                    c.name
-                )));
-            }
+            on_node_b(&f, "contact", &c.name, c.node_b)?;
             Quantity::ContactForce {
                 contact,
                 axis: axis(t, "")?,
@@ -598,8 +580,9 @@ fn read_quantity(
         }
         "section_force" => {
             let beam = super::beam::require_element(model, origins, &t.req("beam")?)?;
-            let c = t.req("component")?.choice(SECTION)?;
-            let component = SECTION.iter().position(|s| *s == c).unwrap_or(0);
+            let names = super::build::SECTION_COMPONENTS;
+            let c = t.req("component")?.choice(names)?;
+            let component = names.iter().position(|s| *s == c).unwrap_or(0);
             Quantity::SectionForce { beam, component }
         }
         _ => {
@@ -618,6 +601,16 @@ fn read_quantity(
             }
         }
     })
+}
+
+/// A force measured on node B of a joint or contact (`what`, named `name`): B is a node.
+fn on_node_b(f: &Field<'_>, what: &str, name: &str, node_b: Option<NodeId>) -> Result<()> {
+    match node_b {
+        Some(_) => Ok(()),
+        None => Err(f.err(format!(
+            "{what} '{name}' has the ground as its node B: its force is measured on node B (swap its nodes)"
+        ))),
+    }
 }
 
 /// A joint a measurement or actuator acts along: revolute, cylindrical or prismatic.
