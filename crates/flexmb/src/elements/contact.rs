@@ -26,7 +26,8 @@
 //! ```text
 //! F_n = max(0, K delta^n (1 + chi(e) deltadot / v_imp)),
 //! chi = 3 (1 - e^2) / 4 (Lankarani-Nikravesh),   3 (1 - e) / 2 (Hunt-Crossley),
-//!       8 (1 - e) / (5 e) (Flores),   the root of R(chi, n) = e (exact restitution),
+//!       8 (1 - e) / (5 e) (Flores),
+//!       the root in (0, 1/e) of chi (1 + e) = ln((1 + chi) / (1 - chi e)) (exact restitution),
 //! ```
 //!
 //! `K` the Hertz stiffness (`4/3 E* sqrt(R*)` for two spheres, `1/E* = (1 - nu_1^2)/E_1 +
@@ -52,13 +53,13 @@
 //! this equation with `R = e` ([`crate::model::contact::exact_restitution_factor`]:
 //! safeguarded Newton iterations in the bracket `(0, 1/e)`, `dchi/de` by the implicit
 //! function theorem, exact). Its `chi` (1.4328, 0.37315, 0.07893 for e = 0.5, 0.8, 0.95)
-//! lies between Hunt & Crossley's and Flores et al.'s; `tests/contact.rs` checks that the
-//! law restitutes `e` by integrating the impact numerically. This is Hunt & Crossley's form
-//! with `chi` chosen for the exact restitution; published exact relations for this form
-//! (e.g. Carvalho & Martins 2019, Mech. Mach. Theory 139) could not be consulted here, and
-//! the relation above is derived as stated. An impact in a model rebounds at `e` up to what
-//! the isolated impact leaves out (gravity and other forces during the contact, the
-//! approach speed of the step that closes it).
+//! lies between Hunt & Crossley's and Flores et al.'s for these `e`; `tests/contact.rs`
+//! checks that the law restitutes `e` by integrating the impact numerically. This is Hunt &
+//! Crossley's form with `chi` chosen for the exact restitution, and the relation is derived
+//! here as stated: the published work on exact restitution for this form could not be
+//! consulted to check what it proposes, so none is cited. An impact in a model rebounds at
+//! `e` up to what the isolated impact leaves out (gravity and other forces during the
+//! contact, the approach speed of the step that closes it).
 //!
 //! **Impact velocity.** `v_imp` is the element's one state `x`, a held value: its equation is
 //! `e = xdot = 0` (in statics, where rates are absent, `x` keeps its value), and between
