@@ -1583,6 +1583,11 @@ fn contact_errors_are_located() {
             &["field 'contact[0].law'", "\"flores\""],
         ),
         (
+            "law = \"lankarani_nikravesh\"",
+            "law = \"hertz\"",
+            &["field 'contact[0].law'", "\"exact_restitution\""],
+        ),
+        (
             "restitution = 0.8",
             "restitution = 0.8\nstiffnes = 1.0",
             &["contact[0]", "stiffnes"],
@@ -1590,6 +1595,27 @@ fn contact_errors_are_located() {
     ] {
         assert_contains(&edit(from, to), parts);
     }
+    // The law of the exact restitution keeps the located error on e (and takes e = 1).
+    let exact = good.replace(
+        "law = \"lankarani_nikravesh\"",
+        "law = \"exact_restitution\"",
+    );
+    for bad in ["0.0", "1.01", "-0.5", "nan"] {
+        let text = exact.replace("restitution = 0.8", &format!("restitution = {bad}"));
+        let e = parse_model_str(&text, "ball.toml", &[]).expect_err(bad);
+        assert_contains(
+            &e.to_string(),
+            &["ball.toml:41:", "field 'contact[0].restitution'"],
+        );
+    }
+    let text = exact.replace("restitution = 0.8", "restitution = 1.0");
+    let file = parse_model_str(&text, "ball.toml", &[]).expect("e = 1");
+    let law = &file.model.contacts[0].law;
+    assert_eq!(
+        law.dissipation.factor(law.restitution),
+        0.0,
+        "e = 1: no dissipation"
+    );
     let good = good.replace(hertz, "stiffness = 3e10");
     let plane_b = good.replace(
         "b = { shape = \"sphere\", center = [0.0, 0.0, 0.15], radius = 0.05 }",
@@ -1860,6 +1886,13 @@ fn gear_errors_name_the_key() {
             "backlash =",
             "gear[0].backlash",
             "must be >= 0",
+        ),
+        (
+            "backlash = 1e-4",
+            "backlash = 1e-4\nlocate_impacts = 1",
+            "locate_impacts =",
+            "gear[0].locate_impacts",
+            "a boolean",
         ),
         (
             "module = 0.003",

@@ -596,6 +596,15 @@ fn contacts(group: Group) -> Model {
             Dissipation::HuntCrossley,
             1.0,
         ),
+        // chi(e) of the exact restitution: its derivative in e
+        (
+            "ab_exact",
+            Some(a),
+            b,
+            sphere(0.1),
+            Dissipation::ExactRestitution,
+            1.3,
+        ),
     ];
     for (name, node_a, node_b, shape_a, dissipation, exponent) in pairs {
         // the second floor contact with bristles (LuGre)
@@ -1121,4 +1130,43 @@ fn parameter_derivatives_match_finite_differences_on_control_blocks() {
         .iter()
         .all(|k| !k.starts_with("control")));
     println!("worst relative error {:.2e}", seen.worst);
+}
+
+#[test]
+fn exact_restitution_factor_derivative_matches_finite_differences() {
+    // chi(e) of the law of the exact restitution (`law = "exact_restitution"`): the root of
+    // G(chi, e) = chi (1 + e) - ln(1 + chi) + ln(1 - chi e) = 0 in (0, 1/e), its derivative by
+    // the implicit function theorem against central differences of the root solve itself.
+    use flexmb::model::contact::exact_restitution_factor;
+    let mut worst = 0.0f64;
+    for e in [0.05, 0.3, 0.5, 0.7, 0.8, 0.95, 0.999] {
+        let (chi, dchi_de) = exact_restitution_factor(e);
+        // the root, to round-off: G's Newton correction relative to chi (G evaluated as
+        // written here, its terms of size chi cancelling to one of size chi^2 (1 - e^2))
+        let g = chi * (1.0 + e) - chi.ln_1p() + (-chi * e).ln_1p();
+        let g_chi = 1.0 + e - 1.0 / (1.0 + chi) - e / (1.0 - chi * e);
+        let correction = (g / g_chi / chi).abs();
+        let round_off = 10.0 * f64::EPSILON / (chi * (1.0 - e * e));
+        assert!(
+            chi > 0.0 && chi * e < 1.0 && correction < 1e-13 + round_off,
+            "e = {e}: chi {chi}, G {g}, correction {correction}"
+        );
+        let h = 1e-6 * e.min(1.0 - e);
+        let fd =
+            (exact_restitution_factor(e + h).0 - exact_restitution_factor(e - h).0) / (2.0 * h);
+        let error = (dchi_de - fd).abs() / fd.abs();
+        println!("e = {e}: chi {chi:.6}, dchi/de {dchi_de:.6} (differences {fd:.6})");
+        worst = worst.max(error);
+        assert!(error < 1e-6, "e = {e}: dchi/de {dchi_de} vs {fd}");
+    }
+    // e = 1: no dissipation, and the limit of the derivative (Hunt & Crossley's slope)
+    let (chi, dchi_de) = exact_restitution_factor(1.0);
+    let h = 1e-6;
+    let one_sided = (chi - exact_restitution_factor(1.0 - h).0) / h;
+    assert_eq!(chi, 0.0);
+    assert!(
+        (dchi_de - one_sided).abs() < 1e-5,
+        "{dchi_de} vs {one_sided}"
+    );
+    println!("worst relative error {worst:.2e}");
 }

@@ -818,7 +818,8 @@ fn contacts(nodes: &[NodeState; 2], rng: &mut Lcg, depth: f64) -> Vec<Contact> {
             Dissipation::LankaraniNikravesh,
             Dissipation::HuntCrossley,
             Dissipation::Flores,
-        ][k % 3];
+            Dissipation::ExactRestitution,
+        ][k % 4];
         for friction in [
             None,
             // sliding (Coulomb)

@@ -1426,13 +1426,7 @@ impl ElementKernel for ControlElement<'_> {
                 };
                 StepLimit::Next(after)
             };
-            limit = Some(match (limit, this) {
-                (Some(StepLimit::Retry(a)), StepLimit::Retry(b)) => StepLimit::Retry(a.min(b)),
-                (Some(StepLimit::Retry(a)), _) => StepLimit::Retry(a),
-                (_, StepLimit::Retry(b)) => StepLimit::Retry(b),
-                (Some(StepLimit::Next(a)), StepLimit::Next(b)) => StepLimit::Next(a.min(b)),
-                (None, l) => l,
-            });
+            limit = StepLimit::stricter(limit, Some(this));
         }
         limit
     }

@@ -40,6 +40,7 @@ pub mod bushing;
 pub mod contact;
 pub mod control;
 pub mod gear;
+pub mod impact;
 pub mod load;
 pub mod physical;
 pub mod pose;
@@ -349,6 +350,20 @@ pub enum StepLimit {
     Next(f64),
 }
 
+impl StepLimit {
+    /// The stricter of two requests: a retry before any limit on the next steps, the
+    /// shorter of two of a kind.
+    pub fn stricter(a: Option<StepLimit>, b: Option<StepLimit>) -> Option<StepLimit> {
+        use StepLimit::{Next, Retry};
+        match (a, b) {
+            (Some(Retry(x)), Some(Retry(y))) => Some(Retry(x.min(y))),
+            (Some(Retry(x)), _) | (_, Some(Retry(x))) => Some(Retry(x)),
+            (Some(Next(x)), Some(Next(y))) => Some(Next(x.min(y))),
+            (l, None) | (None, l) => l,
+        }
+    }
+}
+
 /// Reused storage for one element's [`Local`] inputs and its local vector and matrix.
 #[derive(Clone, Debug)]
 pub struct LocalBuffers {
@@ -584,6 +599,7 @@ impl ElementRef {
     pub fn has_events(&self, model: &Model) -> bool {
         match self {
             ElementRef::Contact(..) => true,
+            ElementRef::Gear(i) => model.gears[*i].has_events(),
             ElementRef::Control(_) => model.control.has_holds(),
             _ => false,
         }

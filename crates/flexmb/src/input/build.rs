@@ -1997,6 +1997,7 @@ fn read_gears(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
             "stiffness_table",
             "transmission_error",
             "mesh_phase",
+            "locate_impacts",
         ])?;
         let (name, [node_a, node_b], centers) =
             read_wheels(&t, &mut names, "gear", model, origins)?;
@@ -2054,6 +2055,9 @@ fn read_gears(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
         }
         if let Some(f) = t.field("mesh_phase") {
             gear.mesh_phase = f.f64_in(-MAX_ANGLE, MAX_ANGLE)?;
+        }
+        if let Some(f) = t.field("locate_impacts") {
+            gear.locate_impacts = f.bool()?;
         }
         origins.gears.push(Origin::of(&t));
     }

@@ -43,12 +43,20 @@ pub(super) fn read_contacts(
         let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
         let shape_a = read_shape(model, node_a, &t.req("a")?.table()?)?;
         let shape_b = read_shape(model, node_b, &t.req("b")?.table()?)?;
-        let dissipation =
-            match t.opt_choice("law", &["lankarani_nikravesh", "hunt_crossley", "flores"])? {
-                Some("hunt_crossley") => Dissipation::HuntCrossley,
-                Some("flores") => Dissipation::Flores,
-                _ => Dissipation::LankaraniNikravesh,
-            };
+        let dissipation = match t.opt_choice(
+            "law",
+            &[
+                "lankarani_nikravesh",
+                "hunt_crossley",
+                "flores",
+                "exact_restitution",
+            ],
+        )? {
+            Some("hunt_crossley") => Dissipation::HuntCrossley,
+            Some("flores") => Dissipation::Flores,
+            Some("exact_restitution") => Dissipation::ExactRestitution,
+            _ => Dissipation::LankaraniNikravesh,
+        };
         let stiffness = match (t.field("stiffness"), t.field("hertz")) {
             (Some(f), None) => physical(&f)?,
             (None, Some(f)) => {

@@ -88,6 +88,9 @@ pub enum Dissipation {
     HuntCrossley,
     /// Flores, Machado, Silva & Martins (2011): `chi = 8 (1 - e) / (5 e)`.
     Flores,
+    /// `chi(e)` such that the law's own restitution is `e`: the root in `(0, 1/e)` of
+    /// `chi (1 + e) = ln((1 + chi) / (1 - chi e))` ([`exact_restitution_factor`]).
+    ExactRestitution,
 }
 
 impl Dissipation {
@@ -99,6 +102,12 @@ impl Dissipation {
             Dissipation::LankaraniNikravesh => k(0.75) * (T::one() - e * e),
             Dissipation::HuntCrossley => k(1.5) * (T::one() - e),
             Dissipation::Flores => k(1.6) * (T::one() - e) / e,
+            Dissipation::ExactRestitution => {
+                // the root at e's value, and its exact first derivative for forward AD
+                let e0: f64 = e.to_subset_unchecked();
+                let (chi, dchi_de) = exact_restitution_factor(e0);
+                k(chi) + (e - k(e0)) * k(dchi_de)
+            }
         }
     }
 
@@ -108,8 +117,70 @@ impl Dissipation {
             Dissipation::LankaraniNikravesh => "lankarani_nikravesh",
             Dissipation::HuntCrossley => "hunt_crossley",
             Dissipation::Flores => "flores",
+            Dissipation::ExactRestitution => "exact_restitution",
         }
     }
+}
+
+/// The hysteresis factor `chi` for which the law `F = K delta^n (1 + chi deltadot / v) >= 0`
+/// restitutes exactly `e` in an isolated impact at speed `v`, and `dchi/de`.
+///
+/// With `w = delta^(n+1) / (n + 1)` the impact `m* deltaddot = -F` reads `m* deltadot
+/// d(deltadot)/dw = -K (1 + chi deltadot / v)`, independent of `n`; integrated from
+/// `deltadot = v` at `w = 0` (onset) back to `w = 0` (release, `deltadot = -e v`), and `1 + chi
+/// deltadot / v > 0` throughout (so the force is never clipped), it gives
+///
+/// ```text
+/// G(chi, e) = chi (1 + e) - ln(1 + chi) + ln(1 - chi e) = 0,    0 < chi < 1 / e,
+/// ```
+///
+/// (`chi = 0` is a root for every `e` and is not the one: `G ~ chi^2 (1 - e^2) / 2` near
+/// it). The root is bracketed in `(0, 1/e)` (`G > 0` below it, `G -> -inf` at `1/e`) and found
+/// by safeguarded Newton iterations; `dchi/de = -G_e / G_chi`, `G_e = -chi^2 e / (1 - chi e)`,
+/// `G_chi = 1 + e - 1 / (1 + chi) - e / (1 - chi e)`. At `e = 1`, `chi = 0` and `dchi/de =
+/// -3/2` (the limit: Hunt & Crossley's `3 (1 - e) / 2` to first order). `e` in `(0, 1]`.
+pub fn exact_restitution_factor(e: f64) -> (f64, f64) {
+    if e >= 1.0 {
+        return (0.0, -1.5);
+    }
+    // G = phi(chi) - phi(-chi e), phi(x) = x - ln(1 + x), by its series for small |x| (the
+    // two terms nearly cancel when e is near 1)
+    let phi = |x: f64| {
+        if x.abs() < 0.05 {
+            (2..20)
+                .rev()
+                .fold(0.0, |acc, k| x * (acc + (-1.0f64).powi(k) / k as f64))
+                * x
+        } else {
+            x - x.ln_1p()
+        }
+    };
+    let g = |x: f64| phi(x) - phi(-x * e);
+    let g_chi = |x: f64| x / (1.0 + x) - e * e * x / (1.0 - x * e);
+    let (mut lo, mut hi) = (0.0f64, 1.0 / e);
+    // start from Flores et al.'s factor, inside the bracket
+    let mut x = (1.6 * (1.0 - e) / e).min(0.5 / e);
+    for _ in 0..200 {
+        let value = g(x);
+        if value > 0.0 {
+            lo = x;
+        } else {
+            hi = x;
+        }
+        let newton = x - value / g_chi(x);
+        let next = if newton > lo && newton < hi {
+            newton
+        } else {
+            0.5 * (lo + hi)
+        };
+        let done = (next - x).abs() <= 1e-15 * x || hi - lo <= 1e-15 * hi;
+        x = next;
+        if done {
+            break;
+        }
+    }
+    let g_e = -x * x * e / (1.0 - x * e);
+    (x, -g_e / g_chi(x))
 }
 
 /// The normal force law `F = K delta^n (1 + chi(e) deltadot / v_impact)`, `F >= 0`.

@@ -463,6 +463,14 @@ pub struct GearPair {
     pub center_distance: f64,
     /// Axial offset `z_a . (C_b - C_a)` at t = 0 \[m\] (derived from the frames).
     pub axial_offset: f64,
+    /// With backlash, the dynamic step control locates the impacts of the flanks
+    /// ([`crate::elements::impact`]); `false` leaves the step to the nominal size and Newton.
+    #[serde(default = "locate_impacts_default")]
+    pub locate_impacts: bool,
+}
+
+fn locate_impacts_default() -> bool {
+    true
 }
 
 /// Cross-section properties of a beam, in the section frame (x along the beam axis, y and z
@@ -1065,6 +1073,7 @@ impl Model {
             mesh_phase: 0.0,
             center_distance: d.norm(),
             axial_offset: axis.normalize().dot(&d),
+            locate_impacts: true,
         });
         self.gears.len() - 1
     }
