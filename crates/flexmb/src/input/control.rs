@@ -535,8 +535,6 @@ const QUANTITIES: &[&str] = &[
     "contact_force",
 ];
 
-
-
 /// The `quantity` of a measurement or servo (one of `allowed`) and what it is of.
 fn read_quantity(
     t: &Table<'_>,
