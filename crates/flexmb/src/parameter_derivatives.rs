@@ -137,6 +137,18 @@ fn element_term<E: ElementParameters>(
     method
 }
 
+/// The block diagram's term: the derivative with respect to a block's parameter, or to a
+/// parameter of a joint, beam element or contact it measures or acts along. None in a point
+/// without states (the constraint forces alone, [`constraint_force_derivative`]).
+fn control_term(at: &At, wrt: ControlWrt, sink: &mut dyn FnMut(Piece)) -> DerivativeMethod {
+    if at.point.x.is_empty() {
+        return DerivativeMethod::Analytic;
+    }
+    let slots = crate::elements::control::slots(at.model);
+    let element = crate::elements::control::ControlElement::new(at.model, &slots);
+    element_term(at, (&element, ElementItem::Control), Wrt::Own(wrt), sink)
+}
+
 /// Visits the local terms of the derivative with respect to `id`. `rows` and `starts` as
 /// from [`joints::row_table`] (may be empty if `id` is not a joint parameter).
 fn visit(
@@ -170,11 +182,8 @@ fn visit(
                 let beam = (&model.beams[e], ElementItem::Beam(e));
                 method = element_term(at, beam, Wrt::Own(p), sink);
                 // the block diagram measuring the element's section forces
-                if model.control.uses_beam(e) && !at.point.x.is_empty() {
-                    let slots = crate::elements::control::slots(model);
-                    let element = crate::elements::control::ControlElement::new(model, &slots);
-                    let wrt = Wrt::Own(ControlWrt::Section(e, p));
-                    element_term(at, (&element, ElementItem::Control), wrt, sink);
+                if model.control.uses_beam(e) {
+                    control_term(at, ControlWrt::Section(e, p), sink);
                 }
             }
             method
@@ -211,11 +220,8 @@ fn visit(
             };
             let method = element_term(at, (&element, ElementItem::Contact(i)), Wrt::Own(p), sink);
             // the block diagram measuring the contact's force
-            if model.control.uses_contact(i) && !at.point.x.is_empty() {
-                let slots = crate::elements::control::slots(model);
-                let element = crate::elements::control::ControlElement::new(model, &slots);
-                let wrt = Wrt::Own(ControlWrt::Contact(i, p));
-                element_term(at, (&element, ElementItem::Control), wrt, sink);
+            if model.control.uses_contact(i) {
+                control_term(at, ControlWrt::Contact(i, p), sink);
             }
             method
         }
@@ -226,14 +232,9 @@ fn visit(
             let (t, lambda) = (at.point.t, &at.point.lambda[start..start + rows.len()]);
             let (d, method) = joint.parameter_derivative(model, rows, p, &nodes, t, lambda);
             sink(Piece::Joint(j.0, &d));
-            // the block diagram along the joint (not in a point without states: the
-            // constraint forces alone, `constraint_force_derivative`)
-            let control = model.control.uses_joint(j);
-            if control && !at.point.x.is_empty() {
-                let slots = crate::elements::control::slots(model);
-                let element = crate::elements::control::ControlElement::new(model, &slots);
-                let wrt = Wrt::Own(ControlWrt::Joint(j, p));
-                element_term(at, (&element, ElementItem::Control), wrt, sink);
+            // the block diagram along the joint
+            if model.control.uses_joint(j) {
+                control_term(at, ControlWrt::Joint(j, p), sink);
             }
             method
         }
@@ -270,16 +271,7 @@ fn visit(
             Wrt::Own(p),
             sink,
         ),
-        ParamKind::Control(p) => {
-            let slots = crate::elements::control::slots(model);
-            let element = crate::elements::control::ControlElement::new(model, &slots);
-            element_term(
-                at,
-                (&element, ElementItem::Control),
-                Wrt::Own(ControlWrt::Block(p)),
-                sink,
-            )
-        }
+        ParamKind::Control(p) => control_term(at, ControlWrt::Block(p), sink),
     }
 }
 

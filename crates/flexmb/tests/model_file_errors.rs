@@ -2342,6 +2342,26 @@ fn control_block_errors_are_located() {
     ] {
         assert_contains(&edit(from, to), parts);
     }
+    // A force measured on a joint whose node B is the ground: located on the block's joint
+    // (the check of the model, mapped to the file).
+    let grounded = good
+        .replace(
+            "node_b = \"mass\"\nposition",
+            "node_a = \"mass\"\nnode_b = \"ground\"\nposition",
+        )
+        .replace(
+            "quantity = \"position\"",
+            "quantity = \"constraint_force\"\njoint = \"guide\"",
+        );
+    let e = parse_model_str(&grounded, "pid.toml", &[]).expect_err("node B is the ground");
+    assert_contains(
+        &e.to_string(),
+        &[
+            "pid.toml:",
+            "field 'block[1].joint'",
+            "joint 'guide' has the ground as its node B",
+        ],
+    );
     // An algebraic loop whose gain is 1 (e = r - x, x = x + e: singular) is located on it;
     // one of gain 1/2 is solved.
     let with_loop = |gain: &str| {

@@ -255,12 +255,10 @@ pub fn slots(model: &Model) -> Slots {
                     add(j.node_a);
                     add(j.node_b);
                     if !joint_rows.iter().any(|(k, _)| k == joint) {
-                        let first: usize = model.joints[..joint.0]
-                            .iter()
-                            .map(|j| crate::joints::rows(j).len())
-                            .sum();
+                        let (table, starts, _) = crate::joints::row_table(model);
+                        let first = starts[joint.0];
                         joint_rows.push((*joint, rows.len()));
-                        rows.extend(first..first + crate::joints::rows(j).len());
+                        rows.extend(first..first + table[joint.0].len());
                     }
                 }
                 Quantity::SectionForce { beam, .. } => {
@@ -302,18 +300,17 @@ pub fn slots(model: &Model) -> Slots {
 }
 
 /// The inputs of a measured contact's element, taken from the diagram's.
-struct ContactInputs {
+struct ContactInputs<'a> {
     nodes: [super::NodeState; 2],
-    x: Vec<f64>,
-    xdot: Vec<f64>,
+    x: &'a [f64],
+    xdot: &'a [f64],
 }
 
-impl ContactInputs {
+impl ContactInputs<'_> {
     fn local(&self) -> Local<'_> {
         Local {
-            nodes: &self.nodes,
-            x: &self.x,
-            xdot: &self.xdot,
+            x: self.x,
+            xdot: self.xdot,
             ..Local::nodes(&self.nodes)
         }
     }
@@ -658,13 +655,13 @@ impl ControlElement<'_> {
     /// The contact element of a measured contact force, its inputs from the diagram's
     /// (its nodes' slots, its states among the states read), the two slots and the position
     /// of its states among those read.
-    fn contact_local(
+    fn contact_local<'l>(
         &self,
         contact: usize,
-        local: &Local,
+        local: &Local<'l>,
     ) -> (
         super::contact::ContactElement<'_>,
-        ContactInputs,
+        ContactInputs<'l>,
         [usize; 2],
         usize,
     ) {
@@ -678,8 +675,8 @@ impl ControlElement<'_> {
         let n = c.n_states();
         let inputs = ContactInputs {
             nodes: slots.map(|k| local.nodes[k]),
-            x: local.read_x[first..first + n].to_vec(),
-            xdot: local.read_xdot[first..first + n].to_vec(),
+            x: &local.read_x[first..first + n],
+            xdot: &local.read_xdot[first..first + n],
         };
         let element = super::contact::ContactElement {
             contact: c,

@@ -10,7 +10,7 @@ use super::reader::{name_list, suggestion, Field, Result, Table, QUOTED};
 use crate::model::clip;
 use crate::model::control::{Block, BlockKind, ControlSystem, Quantity, Signal, Target};
 use crate::model::limits::MAX_PHYSICAL;
-use crate::model::{Model, NodeId, TimeFunction};
+use crate::model::{Model, TimeFunction};
 use flexmb_lie::Vec3;
 use std::collections::HashMap;
 
@@ -557,8 +557,6 @@ fn read_quantity(
         "constraint_force" | "constraint_moment" => {
             let f = t.req("joint")?;
             let joint = require_joint(model, origins, &f)?;
-            let j = &model.joints[joint.0];
-            on_node_b(&f, "joint", &j.name, j.node_b)?;
             Quantity::ConstraintForce {
                 joint,
                 axis: axis(t, "")?,
@@ -569,8 +567,6 @@ fn read_quantity(
             let f = t.req("contact")?;
             let names = || model.contacts.iter().map(|c| c.name.as_str());
             let contact = super::build::item_named(&f, names, "contact", "contacts")?;
-            let c = &model.contacts[contact];
-            on_node_b(&f, "contact", &c.name, c.node_b)?;
             Quantity::ContactForce {
                 contact,
                 axis: axis(t, "")?,
@@ -599,16 +595,6 @@ fn read_quantity(
             }
         }
     })
-}
-
-/// A force measured on node B of a joint or contact (`what`, named `name`): B is a node.
-fn on_node_b(f: &Field<'_>, what: &str, name: &str, node_b: Option<NodeId>) -> Result<()> {
-    match node_b {
-        Some(_) => Ok(()),
-        None => Err(f.err(format!(
-            "{what} '{name}' has the ground as its node B: its force is measured on node B (swap its nodes)"
-        ))),
-    }
 }
 
 /// A joint a measurement or actuator acts along: revolute, cylindrical or prismatic.

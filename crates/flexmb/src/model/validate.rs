@@ -1225,6 +1225,21 @@ impl Model {
         q: &super::control::Quantity,
     ) -> Result<(), ModelError> {
         use super::control::Quantity;
+        // a force measured on node B of a joint or contact (`what`, named `name`)
+        let on_node_b = |field, what: &str, name: &str, node_b: Option<NodeId>| {
+            match node_b {
+            Some(_) => Ok(()),
+            None => Err(bad(
+                "block",
+                i,
+                &b.name,
+                field,
+                format!(
+                    "{what} '{name}' has the ground as its node B: its force is measured on node B (swap its nodes)"
+                ),
+            )),
+        }
+        };
         match q {
             Quantity::Position { node, .. }
             | Quantity::Velocity { node, .. }
@@ -1238,20 +1253,7 @@ impl Model {
             Quantity::ConstraintForce { joint, .. } => {
                 self.check_joint_index(i, b, *joint)?;
                 let j = &self.joints[joint.0];
-                if j.node_b.is_some() {
-                    Ok(())
-                } else {
-                    Err(bad(
-                        "block",
-                        i,
-                        &b.name,
-                        "joint",
-                        format!(
-                            "joint '{}' has the ground as its node B: a constraint force is measured on node B (swap the joint's nodes)",
-                            j.name
-                        ),
-                    ))
-                }
+                on_node_b("joint", "joint", &j.name, j.node_b)
             }
             Quantity::ContactForce { contact, .. } => match self.contacts.get(*contact) {
                 None => Err(bad(
@@ -1261,17 +1263,7 @@ impl Model {
                     "contact",
                     format!("contact index {contact} does not exist"),
                 )),
-                Some(c) if c.node_b.is_none() => Err(bad(
-                    "block",
-                    i,
-                    &b.name,
-                    "contact",
-                    format!(
-                        "contact '{}' has the ground as its node B: a contact force is measured on node B",
-                        c.name
-                    ),
-                )),
-                Some(_) => Ok(()),
+                Some(c) => on_node_b("contact", "contact", &c.name, c.node_b),
             },
             Quantity::SectionForce { beam, component } => {
                 if *beam >= self.beams.len() {

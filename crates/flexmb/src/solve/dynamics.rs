@@ -1437,19 +1437,14 @@ fn force_scale(model: &Model, data: &Data, saved: &State, settings: &DynamicSett
 /// blocks, indices among the states).
 fn servo_forces(model: &Model, layout: &Layout) -> Vec<usize> {
     let system = &model.control;
-    let Some(e) = layout
-        .elements
-        .iter()
-        .position(|e| matches!(e, crate::elements::ElementRef::Control(_)))
-    else {
-        return Vec::new();
-    };
+    // the diagram is the last element (`ElementItem::all`): its unknowns end the states
+    let start = layout.n_states - system.n_unknowns;
     system
         .blocks
         .iter()
         .enumerate()
         .filter(|(_, b)| matches!(b.kind, crate::model::control::BlockKind::Servo { .. }))
-        .map(|(b, _)| layout.state_start[e] + system.output_start[b])
+        .map(|(b, _)| start + system.output_start[b])
         .collect()
 }
 
