@@ -63,9 +63,28 @@ fn best<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
 fn costs(case: &str, file: &str, counts: &[usize], expression: &str, prefix: &str) {
     println!("| case | n_p | forward [ms] | direct [ms] | direct / forward | adjoint [ms] | adjoint / forward | fd / forward | direct-adjoint |");
     println!("|---|---|---|---|---|---|---|---|---|");
-    for &n in counts {
+    // `FLEXMB_NP=n` measures one count only (for profiling).
+    let only: Option<usize> = std::env::var("FLEXMB_NP")
+        .ok()
+        .map(|v| v.parse().expect("FLEXMB_NP"));
+    for &n in counts.iter().filter(|&&n| only.is_none_or(|o| o == n)) {
         let p = problem(file, &[], expression, prefix, n);
         let (forward, _) = best(3, || sensitivity::criteria_values(&p).expect("run"));
+        // `FLEXMB_METHOD=direct|adjoint` runs that method only (for profiling).
+        if let Ok(method) = std::env::var("FLEXMB_METHOD") {
+            let t0 = Instant::now();
+            match method.as_str() {
+                "direct" => drop(sensitivity::direct(&p).expect("direct")),
+                "adjoint" => drop(sensitivity::adjoint(&p, &mut |_, _| {}).expect("adjoint")),
+                _ => panic!("FLEXMB_METHOD: direct or adjoint"),
+            }
+            let ms = t0.elapsed().as_secs_f64() * 1e3;
+            println!(
+                "{case}, {n} parameters, {method}: {ms:.1} ms ({:.2} forward runs)",
+                ms / (forward * 1e3)
+            );
+            continue;
+        }
         let (direct, d) = best(3, || sensitivity::direct(&p).expect("direct"));
         let (adjoint, a) = best(3, || {
             sensitivity::adjoint(&p, &mut |_, _| {}).expect("adjoint")

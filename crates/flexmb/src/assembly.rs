@@ -472,17 +472,21 @@ fn joint<S: Sink>(p: &Pass, j: usize, out: JointRows, sink: &mut S) {
         let active = [dofs[0].is_some(), dofs[1].is_some()];
         let lam = &it.lambda[start..start + rows.len()];
         let mut k = Mat12::zeros();
+        // `K_c` enters the matrix only through the stiffness coefficient: a matrix of
+        // masses or velocities alone (initial accelerations, the step Jacobian's
+        // partials) needs the rows `B` but not the joint's second derivatives.
+        let stiffness = S::MATRIX && sc.coef.k != 0.0;
         let jv = joint.evaluate(
             model.group,
             rows,
             &nodes,
             it.t,
             lam,
-            S::MATRIX.then_some(&mut k),
+            stiffness.then_some(&mut k),
         );
         out.phi.copy_from_slice(&jv.phi[..rows.len()]);
         out.b.copy_from_slice(&jv.b[..rows.len()]);
-        if S::MATRIX {
+        if stiffness {
             // c_k K_c T, column block by column block
             s = k * sc.coef.k;
             crate::elements::physical::apply_tangent_full(&nodes, &active, &mut s, &sc.coef, &k);

@@ -538,8 +538,6 @@ pub struct JacobianPattern {
     pub n: usize,
     /// `(row, column)`.
     pub positions: Vec<(usize, usize)>,
-    /// Position of each entry of the iteration matrix's pattern.
-    of_pattern: Vec<usize>,
     /// Positions of the first of the six entries of each node block `(row, 6 n..6 n + 6)`,
     /// with the node.
     blocks: Vec<(usize, usize)>,
@@ -548,6 +546,51 @@ pub struct JacobianPattern {
     zeta: Vec<(usize, usize, usize, usize)>,
     /// The layout's groups of unknowns, for the block LU ([`Layout::groups`]).
     pub groups: crate::solve::linear::Groups,
+    /// Which entries of the iteration matrix's pattern each partial derivative takes
+    /// ([`Selection`]), as `(entry, position)`.
+    selections: [Vec<(u32, u32)>; Selection::COUNT],
+    /// Positions in the velocity-level rows (stabilized form), which `F_v` divides by
+    /// `gamma'`.
+    velocity_positions: Vec<u32>,
+}
+
+/// The partial derivatives of [`Partials`] taken from an assembly of the iteration matrix,
+/// each a selection of its entries by row and column.
+#[derive(Clone, Copy)]
+enum Selection {
+    /// `F_q`: position-level rows (and the element states') against the configuration.
+    Configuration,
+    /// `F_mu`: the equilibrium rows (and the element states') against the multipliers.
+    Multipliers,
+    /// `F_v`: every row but the position-level ones against the velocities.
+    Velocities,
+    /// `F_vd`: equilibrium and element-state rows against the accelerations.
+    Accelerations,
+    /// `F_x`, `F_xd`: every row against the element states.
+    States,
+}
+
+impl Selection {
+    const COUNT: usize = 5;
+    const ALL: [Selection; Self::COUNT] = [
+        Selection::Configuration,
+        Selection::Multipliers,
+        Selection::Velocities,
+        Selection::Accelerations,
+        Selection::States,
+    ];
+
+    /// Whether entry `(i, j)` of the iteration matrix of `layout` belongs to this partial.
+    fn takes(self, layout: &Layout, i: usize, j: usize) -> bool {
+        let (nd, na, so) = (layout.n_dofs, layout.n_active, layout.state_offset());
+        match self {
+            Selection::Configuration => j < nd && (i < nd + na || i >= so),
+            Selection::Multipliers => (i < nd || i >= so) && (nd..nd + na).contains(&j),
+            Selection::Velocities => j < nd && (i < nd || i >= nd + na),
+            Selection::Accelerations => (i < nd || i >= so) && j < nd,
+            Selection::States => j >= so,
+        }
+    }
 }
 
 impl JacobianPattern {
@@ -577,7 +620,7 @@ impl JacobianPattern {
                 .binary_search(p)
                 .expect("a position of the pattern")
         };
-        let of_pattern = pattern.iter().map(find).collect();
+        let of_pattern: Vec<usize> = pattern.iter().map(find).collect();
         let mut blocks = Vec::new();
         let mut zeta = Vec::new();
         for (k, &(i, j)) in positions.iter().enumerate() {
@@ -592,14 +635,39 @@ impl JacobianPattern {
                 }
             }
         }
+        let selections = Selection::ALL.map(|sel| {
+            pattern
+                .iter()
+                .zip(&of_pattern)
+                .enumerate()
+                .filter(|(_, (&(i, j), _))| sel.takes(layout, i, j))
+                .map(|(e, (_, &k))| (e as u32, k as u32))
+                .collect()
+        });
+        let so = layout.state_offset();
+        let velocity_positions = (positions.iter().enumerate())
+            .filter(|(_, &(i, _))| i >= nd + layout.n_active && i < so)
+            .map(|(k, _)| k as u32)
+            .collect();
         Self {
             n: layout.n_unknowns(),
             positions,
-            of_pattern,
             blocks,
             zeta,
             groups: layout.groups(),
+            selections,
+            velocity_positions,
         }
+    }
+
+    /// The entries of `values` (on the iteration matrix's pattern) that `selection` takes,
+    /// summed on the Jacobian's positions.
+    fn select(&self, selection: Selection, values: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.positions.len()];
+        for &(e, k) in &self.selections[selection as usize] {
+            out[k as usize] += values[e as usize];
+        }
+        out
     }
 
     /// The position of `(row, column)`.
@@ -806,32 +874,15 @@ impl<'a> StepFunction<'a> {
             n.t = Mat6::identity();
         }
         let layout = self.layout;
-        let (nd, na) = (layout.n_dofs, layout.n_active);
         let s = self.step.scale;
         let pattern = self.pattern(data);
         let mut sc = self.step.scaling(0.0);
-        // The entries of the last assembly where `keep`, on the step Jacobian's positions;
-        // `take` assembles with the coefficients `coef` first.
-        let select = |data: &crate::Data, keep: &dyn Fn(usize, usize) -> bool| {
-            let mut out = vec![0.0; pattern.positions.len()];
-            for ((&(i, j), &v), &k) in data
-                .pattern
-                .iter()
-                .zip(&data.values)
-                .zip(&pattern.of_pattern)
-            {
-                if keep(i, j) {
-                    out[k] += v;
-                }
-            }
-            out
+        // The partial `selection` of an assembly with the coefficients `coef`.
+        let mut take = |data: &mut crate::Data, coef: Coefficients, selection: Selection| {
+            sc.coef = coef;
+            self.assemble(data, &nodes, &end, &sc, true);
+            pattern.select(selection, &data.values)
         };
-        let mut take =
-            |data: &mut crate::Data, coef: Coefficients, keep: &dyn Fn(usize, usize) -> bool| {
-                sc.coef = coef;
-                self.assemble(data, &nodes, &end, &sc, true);
-                select(data, keep)
-            };
         let coef = |m, c, k| Coefficients {
             m,
             c,
@@ -840,30 +891,18 @@ impl<'a> StepFunction<'a> {
             xdot: 0.0,
             y: 0.0,
         };
-        // The rows of the element states come after the velocity-level rows.
-        let so = layout.state_offset();
         // Position-level rows against the configuration: s (K_t + K_c) and B; the
-        // multipliers' columns B^T of the same assembly (they carry no coefficient).
-        let mut f_q = take(data, coef(0.0, 0.0, s), &|i, j| {
-            j < nd && (i < nd + na || i >= so)
-        });
-        // (the element states' rows too: a control block measuring a constraint force)
-        let f_mu = select(data, &|i, j| {
-            (i < nd || i >= so) && (nd..nd + na).contains(&j)
-        });
+        // multipliers' columns B^T of the same assembly (they carry no coefficient; the
+        // element states' rows too: a control block measuring a constraint force).
+        let mut f_q = take(data, coef(0.0, 0.0, s), Selection::Configuration);
+        let f_mu = pattern.select(Selection::Multipliers, &data.values);
         // Velocities: s C_t (and the nodal damping) and, on the velocity-level rows,
         // B / gamma'.
-        let mut f_v = take(data, coef(0.0, s, 0.0), &|i, j| {
-            j < nd && (i < nd || i >= nd + na)
-        });
-        for (v, &(i, _)) in f_v.iter_mut().zip(&pattern.positions) {
-            if i >= nd + na && i < so {
-                *v /= self.step.gp;
-            }
+        let mut f_v = take(data, coef(0.0, s, 0.0), Selection::Velocities);
+        for &k in &pattern.velocity_positions {
+            f_v[k as usize] /= self.step.gp;
         }
-        let f_vd = take(data, coef(s, 0.0, 0.0), &|i, j| {
-            (i < nd || i >= so) && j < nd
-        });
+        let f_vd = take(data, coef(s, 0.0, 0.0), Selection::Accelerations);
         let (f_x, f_xd) = if layout.n_states > 0 {
             let x = Coefficients {
                 x: s,
@@ -875,8 +914,8 @@ impl<'a> StepFunction<'a> {
                 ..coef(0.0, 0.0, 0.0)
             };
             (
-                take(data, x, &|_, j| j >= so),
-                take(data, xd, &|_, j| j >= so),
+                take(data, x, Selection::States),
+                take(data, xd, Selection::States),
             )
         } else {
             (Vec::new(), Vec::new())
