@@ -48,11 +48,12 @@
 use crate::elements::rotational_spring::RotationalSpringElement;
 use crate::elements::spring::{SpringElement, SpringElementParam};
 use crate::elements::{
-    Context, DerivativeMethod, ElementItem, ElementParameters, LocalBuffers, NodeState,
+    Context, DerivativeMethod, ElementItem, ElementKernel, ElementParameters, LocalBuffers,
+    NodeState,
 };
 use crate::joints::parameters::{ConstraintParameters, JointDerivative};
 use crate::joints::{self, Row};
-use crate::model::parameters::ControlWrt;
+use crate::model::parameters::{ControlWrt, SectionParam};
 use crate::model::{Model, NodeId, ParamId, ParamKind, Parameters};
 use nalgebra::DVector;
 
@@ -416,7 +417,12 @@ pub fn residual_derivative_transpose_for(
     );
     assert_eq!(grad.len(), params.len(), "grad: one per parameter");
     let at = At { model, point };
-    for &id in ids {
+    // A beam's section parameters, batched element by element ([`beam_section_vjp`]).
+    let (sections, ids) = beam_sections(model, params, ids);
+    for (item, ps) in &sections {
+        beam_section_vjp(&at, params, (*item, ps), w.r, grad);
+    }
+    for &id in &ids {
         let mut sum = 0.0;
         let mut sink = |piece: Piece| match piece {
             Piece::Element(slots, x_start, d) => {
@@ -444,6 +450,71 @@ pub fn residual_derivative_transpose_for(
     }
 }
 
+/// The section parameters of `ids` grouped by beam (those of a beam whose elements a control
+/// block measures excepted), and the other parameters.
+#[allow(clippy::type_complexity)]
+fn beam_sections(
+    model: &Model,
+    params: &Parameters,
+    ids: &[ParamId],
+) -> (Vec<(usize, Vec<(SectionParam, ParamId)>)>, Vec<ParamId>) {
+    let mut sections: Vec<(usize, Vec<(SectionParam, ParamId)>)> = Vec::new();
+    let mut rest = Vec::new();
+    for &id in ids {
+        match params.kind(id) {
+            ParamKind::Beam(item, p)
+                if !params
+                    .beam_elements(item)
+                    .iter()
+                    .any(|&e| model.control.uses_beam(e)) =>
+            {
+                match sections.iter_mut().find(|(i, _)| *i == item) {
+                    Some((_, ps)) => ps.push((p, id)),
+                    None => sections.push((item, vec![(p, id)])),
+                }
+            }
+            _ => rest.push(id),
+        }
+    }
+    (sections, rest)
+}
+
+/// `grad[id] = w_r . dR/dp` for section parameters `ps` of beam `item`: each element's
+/// kinematics gathered once and its derivatives taken together
+/// ([`ElementParameters::parameter_vjp`]).
+fn beam_section_vjp(
+    at: &At,
+    params: &Parameters,
+    (item, ps): (usize, &[(SectionParam, ParamId)]),
+    w_r: &[f64],
+    grad: &mut [f64],
+) {
+    let ctx = at.context();
+    let p = at.point;
+    let which: Vec<SectionParam> = ps.iter().map(|&(s, _)| s).collect();
+    let mut buffers = LocalBuffers::default();
+    let mut out = vec![0.0; ps.len()];
+    for &id in ps.iter().map(|(_, id)| id) {
+        grad[id.0 as usize] = 0.0;
+    }
+    for &e in params.beam_elements(item) {
+        let beam = &at.model.beams[e];
+        let state_start = ElementItem::Beam(e).state_start(at.model);
+        buffers.gather(beam, p.nodes, (p.x, p.xdot, state_start), p.lambda);
+        let local = buffers.local(p.nodes);
+        let mut w = [0.0; 12];
+        for (k, slot) in [beam.node(0), beam.node(1)].iter().enumerate() {
+            if let Some(n) = slot {
+                w[6 * k..6 * k + 6].copy_from_slice(&w_r[6 * n.0..6 * n.0 + 6]);
+            }
+        }
+        beam.parameter_vjp(&ctx, &which, &local, &w, &mut out);
+        for (&(_, id), o) in ps.iter().zip(&out) {
+            grad[id.0 as usize] += o;
+        }
+    }
+}
+
 /// `dD/dp`: the derivative of the diagonal nodal masses and inertias `D`
 /// ([`crate::Data::nodal_mass`]: bodies' masses and mean inertias about their nodes, the
 /// lumped halves of beam elements) with respect to one parameter, as `(node, dD_node)`
@@ -454,7 +525,7 @@ pub fn nodal_mass_derivative(
     params: &Parameters,
     id: ParamId,
 ) -> Vec<(NodeId, flexmb_lie::Vec6)> {
-    use crate::model::parameters::{BodyParam, SectionParam};
+    use crate::model::parameters::BodyParam;
     use flexmb_lie::Vec6;
     let split = |m: f64, j: f64| Vec6::new(m, m, m, j, j, j);
     match params.kind(id) {

@@ -99,7 +99,7 @@ use super::{
 use crate::model::parameters::SectionParam;
 use crate::model::{Beam, BeamMass, NodeId};
 use flexmb_lie::{se3, so3::hat, Frame, Mat3, Mat6, Vec3, Vec6};
-use nalgebra::SMatrix;
+use nalgebra::{DVector, SMatrix, SVector};
 
 /// `blockdiag(O^T, O^T)`: maps a node variation to a section-frame variation.
 fn offset_map(o: &Mat3) -> Mat6 {
@@ -484,6 +484,46 @@ impl ElementParameters for Beam {
         };
         dr.copy_from(&d);
         DerivativeMethod::Analytic
+    }
+
+    /// The stiffness entries share the strain and the projection `P`: with
+    /// `dr/dC_ij = P^T E_ij eps` (`E_ij` the unit symmetric matrix, `eps` the strain plus
+    /// `beta P v / L` with stiffness-proportional damping), `w . dr/dC_ij = (P w)_i eps_j +
+    /// (P w)_j eps_i` (one term for `i = j`); the other parameters one at a time.
+    fn parameter_vjp(
+        &self,
+        ctx: &Context,
+        ps: &[SectionParam],
+        local: &Local,
+        w: &[f64],
+        out: &mut [f64],
+    ) {
+        let nodes = pair(local);
+        let mut shared: Option<(Vec6, Vec6)> = None;
+        let mut d = DVector::zeros(self.n_local());
+        for (&p, o) in ps.iter().zip(out) {
+            let SectionParam::Stiffness(i, j) = p else {
+                *o = super::parameter_dot(self, ctx, p, local, w, &mut d);
+                continue;
+            };
+            let (pw, eps) = shared.get_or_insert_with(|| {
+                let st = self.state(nodes);
+                let (aa, ab) = (offset_map(&self.offset_a), offset_map(&self.offset_b));
+                let pm = self.projection(&st.d, &aa, &ab);
+                let beta = self.section.damping_stiffness;
+                let eps = if beta > 0.0 {
+                    st.strain + pm * stack(nodes, 'v') * (beta / self.length)
+                } else {
+                    st.strain
+                };
+                (pm * SVector::<f64, 12>::from_column_slice(&w[..12]), eps)
+            });
+            *o = if i == j {
+                pw[i] * eps[i]
+            } else {
+                pw[i] * eps[j] + pw[j] * eps[i]
+            };
+        }
     }
 
     fn gravity_derivative(&self, ctx: &Context, k: usize, local: &Local, dr: &mut LocalVector) {

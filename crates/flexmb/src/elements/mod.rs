@@ -832,6 +832,36 @@ pub trait ElementParameters: ElementKernel {
     fn gravity_derivative(&self, _ctx: &Context, _k: usize, _local: &Local, dr: &mut LocalVector) {
         dr.fill(0.0);
     }
+    /// `out[k] = w . d[r; e]/dp_k` for the parameters `ps` (`w`: the local weights, 6 per
+    /// slot then one per state): the transposed products of an adjoint. The default takes
+    /// the derivatives one at a time; an element whose derivatives share work overrides it.
+    fn parameter_vjp(
+        &self,
+        ctx: &Context,
+        ps: &[Self::Param],
+        local: &Local,
+        w: &[f64],
+        out: &mut [f64],
+    ) {
+        let mut d = DVector::zeros(self.n_local());
+        for (&p, o) in ps.iter().zip(out) {
+            *o = parameter_dot(self, ctx, p, local, w, &mut d);
+        }
+    }
+}
+
+/// `w . d[r; e]/dp` of one parameter (`d`: scratch of the element's local size), the
+/// entries past `w` (the multipliers an element reads: no equations) left out.
+pub fn parameter_dot<E: ElementParameters + ?Sized>(
+    element: &E,
+    ctx: &Context,
+    p: E::Param,
+    local: &Local,
+    w: &[f64],
+    d: &mut DVector<f64>,
+) -> f64 {
+    element.parameter_derivative(ctx, p, local, &mut d.as_view_mut());
+    w.iter().zip(d.iter()).map(|(a, b)| a * b).sum()
 }
 
 /// Relative step of [`central_difference`]: about the cube root of the machine epsilon,
