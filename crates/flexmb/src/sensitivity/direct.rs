@@ -101,10 +101,10 @@ impl Direct<'_> {
                 format!("step {} (t = {t:.6e} s)", record.index)
             })
             .map_err(|e| e.to_string())?;
-        for (k, &id) in p.design.iter().enumerate() {
+        let starts = f.start_jvp_many(x, &self.tangents, &mut self.data);
+        for ((k, &id), mut rhs) in p.design.iter().enumerate().zip(starts) {
             let ds = &self.tangents[k];
             self.dp[id.0 as usize] = 1.0;
-            let mut rhs = f.start_jvp(x, ds, &mut self.data);
             let dr = f.parameter_jvp(x, &p.params, &self.dp, &mut self.data);
             for (a, b) in rhs.iter_mut().zip(&dr) {
                 *a = -(*a + b);

@@ -1342,40 +1342,69 @@ impl<'a> StepFunction<'a> {
 
     /// `(dR/ds_n) ds` at `x`.
     pub fn start_jvp(&self, x: &[f64], ds: &StateTangent, data: &mut crate::Data) -> Vec<f64> {
+        self.start_jvp_many(x, std::slice::from_ref(ds), data)
+            .pop()
+            .expect("one product")
+    }
+
+    /// [`StepFunction::start_jvp`] for several tangents at once: the partial derivatives are
+    /// read once for all of them (the direct method's `n_p` right-hand sides of a step).
+    pub fn start_jvp_many(
+        &self,
+        x: &[f64],
+        ds: &[StateTangent],
+        data: &mut crate::Data,
+    ) -> Vec<Vec<f64>> {
         let p = self.partials(x, data);
         let [c1, c2, c3, c4, c5] = self.start_coefficients();
-        let n = ds.q.len();
-        // The configuration moves by G dq_n + T d(B_n^T zeta)/dq_n dq_n.
+        let (n, np, nd) = (self.start.q.len(), ds.len(), self.layout.n_dofs);
+        // The moves of the end of the step, unknown by unknown with the tangents contiguous
+        // (`w[j np + k]`): the configuration G dq_n + T (d(B_n^T zeta)/dq_n dq_n + dc_n),
+        // the velocities and the accelerations.
+        let (mut w, mut dv, mut dvd) = (vec![0.0; nd * np], vec![0.0; nd * np], vec![0.0; nd * np]);
         let mut kz = vec![Vec6::zeros(); n];
-        for &(i, j, v) in &p.k_zeta {
-            kz[i / 6][i % 6] += v * ds.q[j / 6][j % 6];
-        }
-        let w: Vec<Vec6> = (0..n)
-            .map(|i| {
+        for (k, ds) in ds.iter().enumerate() {
+            kz.iter_mut().for_each(|v| *v = Vec6::zeros());
+            for &(i, j, v) in &p.k_zeta {
+                kz[i / 6][i % 6] += v * ds.q[j / 6][j % 6];
+            }
+            for i in 0..n {
                 let dc = self.commutator_jvp(i, &p.end.v[i], &ds.v[i], &ds.a[i]);
-                p.g[i] * ds.q[i] + p.t[i] * (kz[i] + dc)
-            })
-            .collect();
-        let dv: Vec<Vec6> = (0..n).map(|i| ds.v[i] * c1 + ds.a[i] * c2).collect();
-        let dvd: Vec<Vec6> = (0..n)
-            .map(|i| ds.v[i] * c3 + ds.a[i] * c4 + ds.vdot[i] * c5)
-            .collect();
-        let mut out = vec![0.0; self.layout.n_unknowns()];
-        for (m, d) in [(&p.f_q, &w), (&p.f_v, &dv), (&p.f_vd, &dvd)] {
-            for (i, j, v) in p.entries(m) {
-                out[i] += v * d[j / 6][j % 6];
+                let wi = p.g[i] * ds.q[i] + p.t[i] * (kz[i] + dc);
+                let dvi = ds.v[i] * c1 + ds.a[i] * c2;
+                let dvdi = ds.v[i] * c3 + ds.a[i] * c4 + ds.vdot[i] * c5;
+                for c in 0..6 {
+                    let at = (6 * i + c) * np + k;
+                    (w[at], dv[at], dvd[at]) = (wi[c], dvi[c], dvdi[c]);
+                }
+            }
+        }
+        // F_q w + F_v dv + F_vd dvd in one pass over the node columns
+        let mut out = vec![0.0; self.layout.n_unknowns() * np];
+        for (k, &(i, j)) in p.pattern.positions.iter().enumerate() {
+            let (fq, fv, fvd) = (p.f_q[k], p.f_v[k], p.f_vd[k]);
+            if j < nd && (fq != 0.0 || fv != 0.0 || fvd != 0.0) {
+                let o = &mut out[i * np..(i + 1) * np];
+                let (a, b, c) = (&w[j * np..], &dv[j * np..], &dvd[j * np..]);
+                for t in 0..np {
+                    o[t] += fq * a[t] + fv * b[t] + fvd * c[t];
+                }
             }
         }
         // States: x_{n+1} = x_n + dx; xdot_{n+1} = d_w w_n + d_xd xdot_n at fixed dx.
         let (d_w, d_xd) = self.state_start_coefficients();
         let so = self.layout.state_offset();
-        for (i, j, v) in p.entries(&p.f_x) {
-            out[i] += v * ds.x[j - so];
+        for (t, ds) in ds.iter().enumerate() {
+            for (i, j, v) in p.entries(&p.f_x) {
+                out[i * np + t] += v * ds.x[j - so];
+            }
+            for (i, j, v) in p.entries(&p.f_xd) {
+                out[i * np + t] += v * (d_w * ds.w[j - so] + d_xd * ds.xdot[j - so]);
+            }
         }
-        for (i, j, v) in p.entries(&p.f_xd) {
-            out[i] += v * (d_w * ds.w[j - so] + d_xd * ds.xdot[j - so]);
-        }
-        out
+        (0..np)
+            .map(|t| out.iter().skip(t).step_by(np).copied().collect())
+            .collect()
     }
 
     /// Coefficients of `xdot_{n+1}` in `w_n` and `xdot_n` at fixed `dx = x_{n+1} - x_n`:
@@ -1393,14 +1422,22 @@ impl<'a> StepFunction<'a> {
         let p = self.partials(x, data);
         let [c1, c2, c3, c4, c5] = self.start_coefficients();
         let n = self.start.q.len();
-        let transpose = |m: &[f64]| {
-            let mut g = vec![Vec6::zeros(); n];
-            for (i, j, v) in p.entries(m) {
-                g[j / 6][j % 6] += v * w[i];
+        // F_q^T w, F_v^T w and F_vd^T w in one pass (the three share the node columns)
+        let (mut gq, mut gv, mut gvd) = (
+            vec![Vec6::zeros(); n],
+            vec![Vec6::zeros(); n],
+            vec![Vec6::zeros(); n],
+        );
+        let nd = self.layout.n_dofs;
+        for (k, &(i, j)) in p.pattern.positions.iter().enumerate() {
+            let wi = w[i];
+            if j < nd && wi != 0.0 {
+                let (node, c) = (j / 6, j % 6);
+                gq[node][c] += p.f_q[k] * wi;
+                gv[node][c] += p.f_v[k] * wi;
+                gvd[node][c] += p.f_vd[k] * wi;
             }
-            g
-        };
-        let (gq, gv, gvd) = (transpose(&p.f_q), transpose(&p.f_v), transpose(&p.f_vd));
+        }
         let tg: Vec<Vec6> = (0..n).map(|i| p.t[i].transpose() * gq[i]).collect();
         let mut q: Vec<Vec6> = (0..n).map(|i| p.g[i].transpose() * gq[i]).collect();
         for &(i, j, v) in &p.k_zeta {
