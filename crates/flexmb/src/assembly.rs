@@ -232,6 +232,47 @@ pub fn assemble(model: &Model, data: &mut Data, it: &Iterate, sc: &Scaling, matr
     }
 }
 
+/// The matrix of the elements alone, once per coefficient set: `out[s]` (on the pattern,
+/// overwritten) gets every element's entries with the coefficients `coefs[s]` (the other
+/// fields of `sc` shared) and the last entries of [`assemble`] (nodal damping, diagonal and,
+/// in the stabilized formulation, the velocity-level rows `B` of the last [`assemble`] at
+/// the same iterate, kept in `data`); the joints' entries are zero. Where the joints have no
+/// terms (the matrices of velocities, accelerations and element states: `K_c` comes with
+/// the stiffness coefficient, `B` has none), this is the full matrix at the cost of the
+/// elements: the step Jacobian's partial derivatives. Sequential; the residual of `data` is
+/// left as it was.
+pub fn assemble_elements(
+    model: &Model,
+    data: &mut Data,
+    it: &Iterate,
+    sc: &Scaling,
+    coefs: &[Coefficients],
+    out: &mut [Vec<f64>],
+) {
+    let n = data.values.len();
+    let Data {
+        layout,
+        b_rows,
+        nodal_mass,
+        local,
+        ..
+    } = data;
+    let layout: &Layout = layout;
+    for (&coef, values) in coefs.iter().zip(out.iter_mut()) {
+        values.clear();
+        values.resize(n, 0.0);
+        let pass = Pass::new(model, layout, it, &Scaling { coef, ..*sc });
+        let mut sink = Values { values, pos: 0 };
+        for e in 0..layout.elements.len() {
+            element(&pass, e, local, &mut sink);
+        }
+        let mut count = Count(0);
+        tail(&pass, nodal_mass, b_rows, &mut count);
+        sink.pos = n - count.0;
+        tail(&pass, nodal_mass, b_rows, &mut sink);
+    }
+}
+
 /// The sparsity pattern of the iteration matrix of `layout`: the traversal of [`assemble`]
 /// with no kernel evaluated.
 pub fn pattern(model: &Model, layout: &Layout) -> Vec<(usize, usize)> {

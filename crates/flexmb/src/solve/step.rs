@@ -826,15 +826,24 @@ impl<'a> StepFunction<'a> {
                 && data.layout.stabilized == self.layout.stabilized,
             "the data must be built for the step function's layout"
         );
-        let it = crate::assembly::Iterate {
+        let it = self.iterate(nodes, end);
+        crate::assembly::assemble(self.model, data, &it, sc, matrix);
+    }
+
+    /// The assembly's iterate at the end of the step with `nodes`' kinematics.
+    fn iterate<'i>(
+        &'i self,
+        nodes: &'i [NodeState],
+        end: &'i State,
+    ) -> crate::assembly::Iterate<'i> {
+        crate::assembly::Iterate {
             nodes,
             t: end.t,
             lambda: &end.lambda,
             b_start: &self.b_start,
             x: &end.x,
             xdot: &end.xdot,
-        };
-        crate::assembly::assemble(self.model, data, &it, sc, matrix);
+        }
     }
 
     /// The step residual `R(x; s_n, p, h)` (`n_unknowns`).
@@ -877,12 +886,6 @@ impl<'a> StepFunction<'a> {
         let s = self.step.scale;
         let pattern = self.pattern(data);
         let mut sc = self.step.scaling(0.0);
-        // The partial `selection` of an assembly with the coefficients `coef`.
-        let mut take = |data: &mut crate::Data, coef: Coefficients, selection: Selection| {
-            sc.coef = coef;
-            self.assemble(data, &nodes, &end, &sc, true);
-            pattern.select(selection, &data.values)
-        };
         let coef = |m, c, k| Coefficients {
             m,
             c,
@@ -894,16 +897,14 @@ impl<'a> StepFunction<'a> {
         // Position-level rows against the configuration: s (K_t + K_c) and B; the
         // multipliers' columns B^T of the same assembly (they carry no coefficient; the
         // element states' rows too: a control block measuring a constraint force).
-        let mut f_q = take(data, coef(0.0, 0.0, s), Selection::Configuration);
+        sc.coef = coef(0.0, 0.0, s);
+        self.assemble(data, &nodes, &end, &sc, true);
+        let mut f_q = pattern.select(Selection::Configuration, &data.values);
         let f_mu = pattern.select(Selection::Multipliers, &data.values);
-        // Velocities: s C_t (and the nodal damping) and, on the velocity-level rows,
-        // B / gamma'.
-        let mut f_v = take(data, coef(0.0, s, 0.0), Selection::Velocities);
-        for &k in &pattern.velocity_positions {
-            f_v[k as usize] /= self.step.gp;
-        }
-        let f_vd = take(data, coef(s, 0.0, 0.0), Selection::Accelerations);
-        let (f_x, f_xd) = if layout.n_states > 0 {
+        // The other partials have no joint terms: the elements alone, once per coefficient
+        // set (sequential), or full assemblies on the threads.
+        let mut sets = vec![coef(0.0, s, 0.0), coef(s, 0.0, 0.0)];
+        if layout.n_states > 0 {
             let x = Coefficients {
                 x: s,
                 y: s,
@@ -913,10 +914,29 @@ impl<'a> StepFunction<'a> {
                 xdot: s,
                 ..coef(0.0, 0.0, 0.0)
             };
-            (
-                take(data, x, Selection::States),
-                take(data, xd, Selection::States),
-            )
+            sets.extend([x, xd]);
+        }
+        let mut values = vec![Vec::new(); sets.len()];
+        if data.threads.pool().is_some() {
+            for (coef, v) in sets.iter().zip(&mut values) {
+                sc.coef = *coef;
+                self.assemble(data, &nodes, &end, &sc, true);
+                v.clone_from(&data.values);
+            }
+        } else {
+            let it = self.iterate(&nodes, &end);
+            crate::assembly::assemble_elements(self.model, data, &it, &sc, &sets, &mut values);
+        }
+        let select = |k: usize, selection| pattern.select(selection, &values[k]);
+        // Velocities: s C_t (and the nodal damping) and, on the velocity-level rows,
+        // B / gamma'.
+        let mut f_v = select(0, Selection::Velocities);
+        for &k in &pattern.velocity_positions {
+            f_v[k as usize] /= self.step.gp;
+        }
+        let f_vd = select(1, Selection::Accelerations);
+        let (f_x, f_xd) = if layout.n_states > 0 {
+            (select(2, Selection::States), select(3, Selection::States))
         } else {
             (Vec::new(), Vec::new())
         };
