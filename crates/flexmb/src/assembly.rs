@@ -142,6 +142,33 @@ impl Sink for Values<'_> {
     }
 }
 
+/// Entries summed into other positions: entry `e` of the traversal goes to `out[dest[e]]`,
+/// or nowhere where `dest[e]` is [`Selected::NONE`] (a selection of the matrix's entries on
+/// another matrix's positions).
+pub struct Selected<'a> {
+    pub dest: &'a [u32],
+    pub out: &'a mut [f64],
+    pub pos: usize,
+}
+
+impl Selected<'_> {
+    /// The destination of an entry left out.
+    pub const NONE: u32 = u32::MAX;
+}
+
+impl Sink for Selected<'_> {
+    const EVALUATE: bool = true;
+    const MATRIX: bool = true;
+    #[inline]
+    fn entry(&mut self, _: usize, _: usize, v: f64) {
+        let d = self.dest[self.pos];
+        if d != Self::NONE {
+            self.out[d as usize] += v;
+        }
+        self.pos += 1;
+    }
+}
+
 /// Residual only.
 pub struct NoMatrix;
 
@@ -232,22 +259,21 @@ pub fn assemble(model: &Model, data: &mut Data, it: &Iterate, sc: &Scaling, matr
     }
 }
 
-/// The matrix of the elements alone, once per coefficient set: `out[s]` (on the pattern,
-/// overwritten) gets every element's entries with the coefficients `coefs[s]` (the other
-/// fields of `sc` shared) and the last entries of [`assemble`] (nodal damping, diagonal and,
-/// in the stabilized formulation, the velocity-level rows `B` of the last [`assemble`] at
-/// the same iterate, kept in `data`); the joints' entries are zero. Where the joints have no
-/// terms (the matrices of velocities, accelerations and element states: `K_c` comes with
-/// the stiffness coefficient, `B` has none), this is the full matrix at the cost of the
-/// elements: the step Jacobian's partial derivatives. Sequential; the residual of `data` is
-/// left as it was.
+/// The matrix of the elements alone, once per coefficient set: `sinks[s]` gets every
+/// element's entries with the coefficients `coefs[s]` (the other fields of `sc` shared) and
+/// the last entries of [`assemble`] (nodal damping, diagonal and, in the stabilized
+/// formulation, the velocity-level rows `B` of the last [`assemble`] at the same iterate,
+/// kept in `data`), not the joints'. Where the joints have no terms (the matrices of
+/// velocities, accelerations and element states: `K_c` comes with the stiffness
+/// coefficient, `B` has none), this is the full matrix at the cost of the elements: the step
+/// Jacobian's partial derivatives. Sequential; the residual of `data` is left as it was.
 pub fn assemble_elements(
     model: &Model,
     data: &mut Data,
     it: &Iterate,
     sc: &Scaling,
     coefs: &[Coefficients],
-    out: &mut [Vec<f64>],
+    sinks: &mut [Selected],
 ) {
     let n = data.values.len();
     let Data {
@@ -258,18 +284,16 @@ pub fn assemble_elements(
         ..
     } = data;
     let layout: &Layout = layout;
-    for (&coef, values) in coefs.iter().zip(out.iter_mut()) {
-        values.clear();
-        values.resize(n, 0.0);
+    for (&coef, sink) in coefs.iter().zip(sinks.iter_mut()) {
         let pass = Pass::new(model, layout, it, &Scaling { coef, ..*sc });
-        let mut sink = Values { values, pos: 0 };
+        sink.pos = 0;
         for e in 0..layout.elements.len() {
-            element(&pass, e, local, &mut sink);
+            element(&pass, e, local, sink);
         }
         let mut count = Count(0);
         tail(&pass, nodal_mass, b_rows, &mut count);
         sink.pos = n - count.0;
-        tail(&pass, nodal_mass, b_rows, &mut sink);
+        tail(&pass, nodal_mass, b_rows, sink);
     }
 }
 

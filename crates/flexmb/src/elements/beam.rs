@@ -314,34 +314,47 @@ impl ElementKernel for BeamElement<'_> {
         let Some((coef, s)) = s else {
             return;
         };
-        let mut geometric = SMatrix::<f64, 12, 6>::zeros();
-        geometric
-            .fixed_view_mut::<6, 6>(0, 0)
-            .copy_from(&(aa.transpose() * se3::tangent_inv_transpose_derivative(&(-st.d), &sigma)));
-        geometric
-            .fixed_view_mut::<6, 6>(6, 0)
-            .copy_from(&(ab.transpose() * se3::tangent_inv_transpose_derivative(&st.d, &sigma)));
-        let mut k = p.transpose() * c_over_l * p + geometric * p;
-        let mut c_t = mm * alpha;
-        if beta > 0.0 {
-            // d(P v)/dd at fixed v, then through P to the node variations
-            let va = aa * v.fixed_rows::<6>(0);
-            let vb = ab * v.fixed_rows::<6>(6);
-            let ddot = tangent_inv_derivative(&(-st.d), &va) + tangent_inv_derivative(&st.d, &vb);
-            k += p.transpose() * c_over_l * beta * ddot * p;
-            c_t += p.transpose() * c_over_l * beta * p;
+        // (each part only when its coefficient asks for it: the step Jacobian's partial
+        // derivatives take them one at a time)
+        let mut k = Mat12::zeros();
+        if coef.k != 0.0 {
+            let mut geometric = SMatrix::<f64, 12, 6>::zeros();
+            geometric.fixed_view_mut::<6, 6>(0, 0).copy_from(
+                &(aa.transpose() * se3::tangent_inv_transpose_derivative(&(-st.d), &sigma)),
+            );
+            geometric.fixed_view_mut::<6, 6>(6, 0).copy_from(
+                &(ab.transpose() * se3::tangent_inv_transpose_derivative(&st.d, &sigma)),
+            );
+            k = p.transpose() * c_over_l * p + geometric * p;
+            if beta > 0.0 {
+                // d(P v)/dd at fixed v, then through P to the node variations
+                let va = aa * v.fixed_rows::<6>(0);
+                let vb = ab * v.fixed_rows::<6>(6);
+                let ddot =
+                    tangent_inv_derivative(&(-st.d), &va) + tangent_inv_derivative(&st.d, &vb);
+                k += p.transpose() * c_over_l * beta * ddot * p;
+            }
+            for end in 0..2 {
+                // gravity in the node frame turns with the node: d(-R^T w)/dtheta = -tilde(R^T w)
+                let mut kb = k.fixed_view_mut::<3, 3>(6 * end, 6 * end + 3);
+                kb -= hat(&weights[end]);
+            }
         }
-        for end in 0..2 {
-            let adt = se3::ad(&nodes[end].v).transpose();
-            let rows = adt * mm.fixed_rows::<6>(6 * end);
-            let mut cr = c_t.fixed_rows_mut::<6>(6 * end);
-            cr -= rows;
-            let pe = momentum.fixed_rows::<6>(6 * end).into_owned();
-            let mut cb = c_t.fixed_view_mut::<6, 6>(6 * end, 6 * end);
-            cb -= momentum_jacobian(&pe);
-            // gravity in the node frame turns with the node: d(-R^T w)/dtheta = -tilde(R^T w)
-            let mut kb = k.fixed_view_mut::<3, 3>(6 * end, 6 * end + 3);
-            kb -= hat(&weights[end]);
+        let mut c_t = Mat12::zeros();
+        if coef.c != 0.0 {
+            c_t = mm * alpha;
+            if beta > 0.0 {
+                c_t += p.transpose() * c_over_l * beta * p;
+            }
+            for end in 0..2 {
+                let adt = se3::ad(&nodes[end].v).transpose();
+                let rows = adt * mm.fixed_rows::<6>(6 * end);
+                let mut cr = c_t.fixed_rows_mut::<6>(6 * end);
+                cr -= rows;
+                let pe = momentum.fixed_rows::<6>(6 * end).into_owned();
+                let mut cb = c_t.fixed_view_mut::<6, 6>(6 * end, 6 * end);
+                cb -= momentum_jacobian(&pe);
+            }
         }
         let mut s = s.fixed::<12>();
         s.copy_from(&(mm * coef.m + c_t * coef.c + k * coef.k));

@@ -546,9 +546,9 @@ pub struct JacobianPattern {
     zeta: Vec<(usize, usize, usize, usize)>,
     /// The layout's groups of unknowns, for the block LU ([`Layout::groups`]).
     pub groups: crate::solve::linear::Groups,
-    /// Which entries of the iteration matrix's pattern each partial derivative takes
-    /// ([`Selection`]), as `(entry, position)`.
-    selections: [Vec<(u32, u32)>; Selection::COUNT],
+    /// Where each entry of the iteration matrix's pattern goes in each partial derivative
+    /// ([`Selection`]): a position, or [`crate::assembly::Selected::NONE`].
+    selections: [Vec<u32>; Selection::COUNT],
     /// Positions in the velocity-level rows (stabilized form), which `F_v` divides by
     /// `gamma'`.
     velocity_positions: Vec<u32>,
@@ -636,12 +636,11 @@ impl JacobianPattern {
             }
         }
         let selections = Selection::ALL.map(|sel| {
-            pattern
-                .iter()
-                .zip(&of_pattern)
-                .enumerate()
-                .filter(|(_, (&(i, j), _))| sel.takes(layout, i, j))
-                .map(|(e, (_, &k))| (e as u32, k as u32))
+            (pattern.iter().zip(&of_pattern))
+                .map(|(&(i, j), &k)| match sel.takes(layout, i, j) {
+                    true => k as u32,
+                    false => crate::assembly::Selected::NONE,
+                })
                 .collect()
         });
         let so = layout.state_offset();
@@ -664,10 +663,26 @@ impl JacobianPattern {
     /// summed on the Jacobian's positions.
     fn select(&self, selection: Selection, values: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; self.positions.len()];
-        for &(e, k) in &self.selections[selection as usize] {
-            out[k as usize] += values[e as usize];
+        use crate::assembly::Sink;
+        let mut sink = self.sink(selection, &mut out);
+        for &v in values {
+            sink.entry(0, 0, v);
         }
         out
+    }
+
+    /// A sink of the iteration matrix's entries that sums those of `selection` into `out`
+    /// (on these positions).
+    fn sink<'s>(
+        &'s self,
+        selection: Selection,
+        out: &'s mut [f64],
+    ) -> crate::assembly::Selected<'s> {
+        crate::assembly::Selected {
+            dest: &self.selections[selection as usize],
+            out,
+            pos: 0,
+        }
     }
 
     /// The position of `(row, column)`.
@@ -916,30 +931,36 @@ impl<'a> StepFunction<'a> {
             };
             sets.extend([x, xd]);
         }
-        let mut values = vec![Vec::new(); sets.len()];
+        let which = [
+            Selection::Velocities,
+            Selection::Accelerations,
+            Selection::States,
+            Selection::States,
+        ];
+        let mut out = vec![vec![0.0; pattern.positions.len()]; sets.len()];
         if data.threads.pool().is_some() {
-            for (coef, v) in sets.iter().zip(&mut values) {
+            for ((coef, o), &w) in sets.iter().zip(&mut out).zip(&which) {
                 sc.coef = *coef;
                 self.assemble(data, &nodes, &end, &sc, true);
-                v.clone_from(&data.values);
+                *o = pattern.select(w, &data.values);
             }
         } else {
             let it = self.iterate(&nodes, &end);
-            crate::assembly::assemble_elements(self.model, data, &it, &sc, &sets, &mut values);
+            let mut sinks: Vec<_> = (out.iter_mut().zip(&which))
+                .map(|(o, &w)| pattern.sink(w, o))
+                .collect();
+            crate::assembly::assemble_elements(self.model, data, &it, &sc, &sets, &mut sinks);
         }
-        let select = |k: usize, selection| pattern.select(selection, &values[k]);
+        let mut out = out.into_iter();
         // Velocities: s C_t (and the nodal damping) and, on the velocity-level rows,
         // B / gamma'.
-        let mut f_v = select(0, Selection::Velocities);
+        let mut f_v = out.next().expect("velocities");
         for &k in &pattern.velocity_positions {
             f_v[k as usize] /= self.step.gp;
         }
-        let f_vd = select(1, Selection::Accelerations);
-        let (f_x, f_xd) = if layout.n_states > 0 {
-            (select(2, Selection::States), select(3, Selection::States))
-        } else {
-            (Vec::new(), Vec::new())
-        };
+        let f_vd = out.next().expect("accelerations");
+        let f_x = out.next().unwrap_or_default();
+        let f_xd = out.next().unwrap_or_default();
         if layout.stabilized {
             self.velocity_rows_configuration(&nodes, &end, &pattern, &mut f_q);
         }
