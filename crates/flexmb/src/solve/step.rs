@@ -885,8 +885,10 @@ impl<'a> StepFunction<'a> {
         partials
     }
 
-    /// [`StepFunction::partials`], assembled: three assemblies of the iteration matrix with
-    /// one coefficient at a time (five with element states).
+    /// [`StepFunction::partials`], assembled: the iteration matrix with the stiffness
+    /// coefficient alone (`F_q`, `F_mu`), then the elements alone once per other coefficient
+    /// (velocities, accelerations, and the element states' two): the joints have no terms
+    /// there but their rows `B`, which the tail takes from the first assembly.
     fn compute_partials(&self, x: &[f64], data: &mut crate::Data) -> Partials {
         let (end, mut nodes, total) = self.end_nodes(x);
         let group = self.model.group;
