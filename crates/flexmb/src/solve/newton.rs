@@ -148,6 +148,10 @@ pub const MAX_BLOCKS: usize = 4;
 pub struct Convergence {
     /// Weighted norms of the previous correction (`None` before the first).
     previous: Option<[f64; MAX_BLOCKS]>,
+    /// The contraction rate of the last correction over the blocks whose previous correction
+    /// was outside the tolerance (above 1; `None` if none was), what judges a reused matrix
+    /// ([`Self::matrix_rate`]).
+    matrix_rate: Option<f64>,
     /// Judge corrections from the exact matrix on their size alone (no rate estimate).
     pub exact_by_size: bool,
 }
@@ -169,14 +173,18 @@ impl Convergence {
         let mut norms = [0.0; MAX_BLOCKS];
         norms[..blocks.len()].copy_from_slice(blocks);
         let dx = norms.iter().fold(0.0f64, |m, &v| m.max(v));
-        let theta = self.previous.map(|previous| {
-            norms
-                .iter()
-                .zip(previous)
-                .filter(|(&now, _)| now > NEGLIGIBLE)
-                .map(|(&now, before)| now / before)
-                .fold(0.0f64, |m, v| m.max(v))
-        });
+        let rate = |outside: bool| {
+            self.previous.and_then(|previous| {
+                norms
+                    .iter()
+                    .zip(previous)
+                    .filter(|(&now, before)| now > NEGLIGIBLE && (!outside || *before > 1.0))
+                    .map(|(&now, before)| now / before)
+                    .reduce(f64::max)
+            })
+        };
+        let theta = rate(false).or(self.previous.map(|_| 0.0));
+        self.matrix_rate = rate(true);
         self.previous = Some(norms);
         if dx == 0.0 {
             return Verdict::Converged { estimate: 0.0 };
@@ -202,6 +210,18 @@ impl Convergence {
             }
             theta => Verdict::Continue { theta },
         }
+    }
+
+    /// The contraction rate that says whether a reused matrix still converges fast enough:
+    /// that of the last correction over the blocks whose previous correction was outside the
+    /// tolerance (`None` when none was). A block whose correction was already within the
+    /// tolerance (the predictor's multipliers, or every block of a step predicted well) is
+    /// then moved by the others' corrections through the coupling of the equations and by
+    /// round-off, ratios that say little of the matrix (the heavy top on R3xSO(3): its dense
+    /// matrix was rebuilt at every step); its rate counts from the next correction on. The
+    /// acceptance test keeps the rate of every block.
+    pub fn matrix_rate(&self) -> Option<f64> {
+        self.matrix_rate
     }
 }
 
@@ -489,7 +509,9 @@ const STALE_ITERATIONS: usize = 3;
 /// The matrix is reused while its key (e.g. the step size) and regularization are those
 /// of the factorized one; it is rebuilt when the contraction rate exceeds
 /// [`NewtonSettings::max_contraction`] (for a large sparse matrix only from the third
-/// iteration, or above 1: the first rate carries the predictor's error), after
+/// iteration, or above 1: the first rate carries the predictor's error; with an exact
+/// matrix, the first rate only of the blocks the predictor left outside the tolerance,
+/// [`Convergence::matrix_rate`]), after
 /// [`NewtonSettings::max_jacobian_age`] solves, and, for dense (small) systems, at the next
 /// solve after one that needed more than 3 iterations with it.
 pub struct NewtonSolver {
@@ -701,10 +723,22 @@ impl NewtonSolver {
                         // moves looks slow (a 1000-link chain: multipliers 0.37 -> 0.26, truly
                         // converging at 0.007); only a first rate above 1 rebuilds it, later
                         // rates above the threshold do. A small (dense) matrix is cheap to
-                        // rebuild at once.
+                        // rebuild at once, on the first rate of the blocks the predictor left
+                        // outside the tolerance ([`Convergence::matrix_rate`]) when a fresh
+                        // matrix is exact; from the third correction on, or with an
+                        // approximate matrix (the stabilized form, which accepts on rates
+                        // alone: a gear mesh under a driven pinion stalls its zeta there at a
+                        // rate of 1), every block's rate counts.
                         let dense = data.solver.backend() == Backend::Dense;
-                        if dense || iteration >= 3 || theta > 1.0 {
-                            refresh = true;
+                        let rate = if iteration >= 3 || !sys.exact_matrix() {
+                            Some(theta)
+                        } else {
+                            convergence.matrix_rate()
+                        };
+                        if let Some(rate) = rate.filter(|&t| t > newton.max_contraction) {
+                            if dense || iteration >= 3 || rate > 1.0 {
+                                refresh = true;
+                            }
                         }
                     } else if iteration >= self.policy.diverge_after
                         && theta > self.policy.divergence_rate
