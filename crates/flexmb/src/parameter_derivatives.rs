@@ -450,15 +450,17 @@ pub fn residual_derivative_transpose_for(
     }
 }
 
+/// A beam (its index among the beams of [`Parameters`]) and some of its section parameters.
+type SectionGroup = (usize, Vec<(SectionParam, ParamId)>);
+
 /// The section parameters of `ids` grouped by beam (those of a beam whose elements a control
 /// block measures excepted), and the other parameters.
-#[allow(clippy::type_complexity)]
 fn beam_sections(
     model: &Model,
     params: &Parameters,
     ids: &[ParamId],
-) -> (Vec<(usize, Vec<(SectionParam, ParamId)>)>, Vec<ParamId>) {
-    let mut sections: Vec<(usize, Vec<(SectionParam, ParamId)>)> = Vec::new();
+) -> (Vec<SectionGroup>, Vec<ParamId>) {
+    let mut sections: Vec<SectionGroup> = Vec::new();
     let mut rest = Vec::new();
     for &id in ids {
         match params.kind(id) {

@@ -662,8 +662,8 @@ impl JacobianPattern {
     /// The entries of `values` (on the iteration matrix's pattern) that `selection` takes,
     /// summed on the Jacobian's positions.
     fn select(&self, selection: Selection, values: &[f64]) -> Vec<f64> {
-        let mut out = vec![0.0; self.positions.len()];
         use crate::assembly::Sink;
+        let mut out = vec![0.0; self.positions.len()];
         let mut sink = self.sink(selection, &mut out);
         for &v in values {
             sink.entry(0, 0, v);
