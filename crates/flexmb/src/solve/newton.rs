@@ -509,8 +509,8 @@ const STALE_ITERATIONS: usize = 3;
 /// The matrix is reused while its key (e.g. the step size) and regularization are those
 /// of the factorized one; it is rebuilt when the contraction rate exceeds
 /// [`NewtonSettings::max_contraction`] (for a large sparse matrix only from the third
-/// iteration, or above 1: the first rate carries the predictor's error; with an exact
-/// matrix, the first rate only of the blocks the predictor left outside the tolerance,
+/// iteration, or above 1: the first rate carries the predictor's error; where a fresh
+/// matrix is exact, the first rate only of the blocks the predictor left outside the tolerance,
 /// [`Convergence::matrix_rate`]), after
 /// [`NewtonSettings::max_jacobian_age`] solves, and, for dense (small) systems, at the next
 /// solve after one that needed more than 3 iterations with it.
@@ -728,9 +728,10 @@ impl NewtonSolver {
                         // matrix is exact; from the third correction on, or with an
                         // approximate matrix (the stabilized form, which accepts on rates
                         // alone: a gear mesh under a driven pinion stalls its zeta there at a
-                        // rate of 1), every block's rate counts.
+                        // rate of 1; a regularized one), every block's rate counts.
                         let dense = data.solver.backend() == Backend::Dense;
-                        let rate = if iteration >= 3 || !sys.exact_matrix() {
+                        let exact_when_fresh = sys.exact_matrix() && regularization == 0.0;
+                        let rate = if iteration >= 3 || !exact_when_fresh {
                             Some(theta)
                         } else {
                             convergence.matrix_rate()
