@@ -1381,6 +1381,7 @@ impl NonlinearSystem for StepSystem<'_> {
             blocks: [q, mu, zeta, x],
             n: 4,
             multipliers: Some(1),
+            stabilization: layout.stabilized.then_some(2),
             worst,
         }
     }

@@ -300,6 +300,10 @@ pub struct Norms {
     /// other blocks alone where the multipliers cannot be converged (see
     /// [`MultiplierLimit`]).
     pub multipliers: Option<usize>,
+    /// The block of the stabilization unknowns `zeta` (the velocity-level multipliers of the
+    /// stabilized form), if any: where the multipliers are undetermined (a regularized
+    /// matrix), so are they along the same rows, and the solve is accepted without them too.
+    pub stabilization: Option<usize>,
     /// Index (in the Newton vector) of the unknown with the largest weighted correction.
     pub worst: usize,
 }
@@ -310,17 +314,25 @@ impl Norms {
         self.blocks[..self.n].iter().fold(0.0f64, |m, &v| m.max(v))
     }
 
-    /// The block norms without the multipliers'.
-    fn configuration(&self) -> ([f64; MAX_BLOCKS], usize) {
+    /// The block norms without the multipliers' (and, when `undetermined`, without the
+    /// stabilization unknowns').
+    fn configuration(&self, undetermined: bool) -> ([f64; MAX_BLOCKS], usize) {
         let mut out = [0.0; MAX_BLOCKS];
         let mut n = 0;
         for (k, &v) in self.blocks[..self.n].iter().enumerate() {
-            if Some(k) != self.multipliers {
+            let zeta = undetermined && Some(k) == self.stabilization;
+            if Some(k) != self.multipliers && !zeta {
                 out[n] = v;
                 n += 1;
             }
         }
         (out, n)
+    }
+
+    /// Whether the stabilization unknowns' correction is within their tolerance (true
+    /// without them).
+    fn stabilization_within(&self) -> bool {
+        self.stabilization.is_none_or(|k| self.blocks[k] <= 1.0)
     }
 
     fn multiplier_norm(&self) -> f64 {
@@ -417,7 +429,9 @@ impl NewtonError {
 /// were): the solve is accepted on the other blocks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MultiplierLimit {
-    /// A singular configuration (regularized matrix): the equations do not determine them.
+    /// A singular configuration (regularized matrix): the equations do not determine them,
+    /// nor, in the stabilized form, the stabilization unknowns along the same rows, which
+    /// are then judged on the size of their correction alone (within the tolerance).
     Undetermined,
     /// Round-off of an ill-conditioned system: with the exact matrix, their corrections no
     /// longer halve.
@@ -677,7 +691,7 @@ impl NewtonSolver {
                 info.iterations += 1;
                 let exact = fresh && regularization == 0.0 && sys.exact_matrix();
                 let verdict = convergence.update(&norms.blocks[..norms.n], exact);
-                let (blocks, n) = norms.configuration();
+                let (blocks, n) = norms.configuration(regularization > 0.0);
                 let configuration_converged = matches!(
                     configuration.update(&blocks[..n], exact),
                     Verdict::Converged { .. }
@@ -696,7 +710,10 @@ impl NewtonSolver {
                     None
                 };
                 previous_mu = Some(mu);
-                let limit = limit.filter(|_| configuration_converged);
+                // (the stabilization unknowns left out of the configuration when undetermined
+                // must still have moved by less than their tolerance)
+                let limit =
+                    limit.filter(|_| configuration_converged && norms.stabilization_within());
                 let theta = match (verdict, limit) {
                     (Verdict::Continue { theta }, None) => theta,
                     (verdict, limit) => {
@@ -817,7 +834,7 @@ impl NewtonSolver {
                 solver.solve_in_place(dx);
                 let norms = sys.norms(data);
                 let error = if undetermined {
-                    let (blocks, n) = norms.configuration();
+                    let (blocks, n) = norms.configuration(regularization > 0.0);
                     blocks[..n].iter().fold(0.0f64, |m, &v| m.max(v))
                 } else {
                     norms.max()
