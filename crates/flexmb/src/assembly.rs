@@ -284,15 +284,22 @@ pub fn assemble_elements(
         ..
     } = data;
     let layout: &Layout = layout;
+    // where the tail's entries start (the same for every coefficient set)
+    let mut count = Count(0);
+    tail(
+        &Pass::new(model, layout, it, sc),
+        nodal_mass,
+        b_rows,
+        &mut count,
+    );
+    let tail_start = n - count.0;
     for (&coef, sink) in coefs.iter().zip(sinks.iter_mut()) {
         let pass = Pass::new(model, layout, it, &Scaling { coef, ..*sc });
         sink.pos = 0;
         for e in 0..layout.elements.len() {
             element(&pass, e, local, sink);
         }
-        let mut count = Count(0);
-        tail(&pass, nodal_mass, b_rows, &mut count);
-        sink.pos = n - count.0;
+        sink.pos = tail_start;
         tail(&pass, nodal_mass, b_rows, sink);
     }
 }

@@ -322,37 +322,42 @@ fn growth_rate(h: &History, x0: f64, t0: f64, t1: f64) -> f64 {
     peaks.iter().map(|p| (p.0 - mt) * (p.1 - my)).sum::<f64>() / stt
 }
 
-#[test]
-fn single_mesh_parametric_resonance_grows_at_the_mathieu_rate() {
+/// The single-mesh Mathieu run (stabilized form, no damping, stiffness fluctuation eps =
+/// 0.2) at mesh frequency `ratio` times `2 omega_n` and step `h`: the growth rate of the
+/// transmission error over 1-6 ms, and the rate expected at the centre of the first
+/// instability zone, `eps omega_n / 4` (module documentation; Nayfeh & Mook 1979).
+fn mathieu_growth(ratio: f64, h: f64) -> (f64, f64) {
     let (_, rb) = base_radii();
     let (k, m) = (4e8, J_B / (rb * rb));
     let wn = (k / m).sqrt();
-    let eps = 0.2;
+    let (step, out) = (
+        format!("solver.h={h}"),
+        format!("solver.output_interval={h}"),
+    );
+    let history = constant_speed(
+        ratio * 2.0 * wn / Z_A,
+        &[
+            "gear.mesh.stiffness_variation=[[0.2, 0.0]]",
+            "gear.mesh.damping=0",
+            "solver.rho_inf=1.0",
+            "solver.t_end=0.006",
+            &step,
+            &out,
+        ],
+    );
     let x0 = 2.0 / rb / k;
-    let run = |ratio: f64| {
-        let omega = ratio * 2.0 * wn / Z_A;
-        constant_speed(
-            omega,
-            &[
-                "gear.mesh.stiffness_variation=[[0.2, 0.0]]",
-                "gear.mesh.damping=0",
-                "solver.rho_inf=1.0",
-                "solver.t_end=0.006",
-                "solver.h=5e-6",
-                "solver.output_interval=5e-6",
-            ],
-        )
-    };
+    (growth_rate(&history, x0, 0.001, 0.006), 0.2 * wn / 4.0)
+}
+
+#[test]
+fn single_mesh_parametric_resonance_grows_at_the_mathieu_rate() {
     // Centre of the first instability zone: growth eps omega_n / 4.
-    let centre = run(1.0);
-    let rate = growth_rate(&centre, x0, 0.001, 0.006);
-    let expected = eps * wn / 4.0;
+    let (rate, expected) = mathieu_growth(1.0, 5e-6);
     println!("omega_m = 2 omega_n: growth {rate:.1} 1/s vs eps omega_n / 4 = {expected:.1} 1/s");
     assert!((rate - expected).abs() < 0.05 * expected);
     // Outside the zone (its half-width is eps / 4 = 5 % of 2 omega_n): bounded.
     for ratio in [0.85, 1.15] {
-        let h = run(ratio);
-        let rate = growth_rate(&h, x0, 0.001, 0.006);
+        let (rate, _) = mathieu_growth(ratio, 5e-6);
         println!("omega_m = {ratio} 2 omega_n: growth {rate:.1} 1/s");
         assert!(rate.abs() < 0.1 * expected, "ratio {ratio}: growth {rate}");
     }
@@ -366,30 +371,9 @@ fn single_mesh_parametric_resonance_grows_at_the_mathieu_rate() {
 /// multipliers are, and the growth rates are those of h = 5e-6.
 #[test]
 fn parametric_resonance_runs_at_smaller_steps_with_undetermined_stabilization() {
-    let (_, rb) = base_radii();
-    let (k, m) = (4e8, J_B / (rb * rb));
-    let wn = (k / m).sqrt();
-    let x0 = 2.0 / rb / k;
-    let expected = 0.2 * wn / 4.0;
-    for (ratio, h) in [(1.0, "4e-6"), (1.15, "3e-6")] {
-        let omega = ratio * 2.0 * wn / Z_A;
-        let (step, out) = (
-            format!("solver.h={h}"),
-            format!("solver.output_interval={h}"),
-        );
-        let history = constant_speed(
-            omega,
-            &[
-                "gear.mesh.stiffness_variation=[[0.2, 0.0]]",
-                "gear.mesh.damping=0",
-                "solver.rho_inf=1.0",
-                "solver.t_end=0.006",
-                &step,
-                &out,
-            ],
-        );
-        let rate = growth_rate(&history, x0, 0.001, 0.006);
-        println!("omega_m = {ratio} 2 omega_n, h = {h}: growth {rate:.1} 1/s");
+    for (ratio, h) in [(1.0, 4e-6), (1.15, 3e-6)] {
+        let (rate, expected) = mathieu_growth(ratio, h);
+        println!("omega_m = {ratio} 2 omega_n, h = {h:e}: growth {rate:.1} 1/s");
         if ratio == 1.0 {
             assert!((rate - expected).abs() < 0.05 * expected, "{rate}");
         } else {

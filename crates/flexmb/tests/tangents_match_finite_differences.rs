@@ -110,6 +110,21 @@ struct Reads {
     xdot: Vec<f64>,
 }
 
+impl Reads {
+    /// The local inputs of an element at `nodes` with states `x`, rates `xdot` and these
+    /// reads.
+    fn local<'a>(&'a self, nodes: &'a [NodeState], x: &'a [f64], xdot: &'a [f64]) -> Local<'a> {
+        Local {
+            nodes,
+            x,
+            xdot,
+            lambda: &self.lambda,
+            read_x: &self.x,
+            read_xdot: &self.xdot,
+        }
+    }
+}
+
 /// [`check_element_with_states`] for an element with states `held` (local state indices)
 /// that are held values (equation `xdot = 0`): without a rate term (statics), the iteration
 /// matrix reads their equations as `x = x_start` (diagonal 1) while the residual stays
@@ -137,15 +152,7 @@ fn check_states(
         .map(|i| i >= n6 || kernel.node(i / 6).is_some())
         .collect();
     let eval_with = |nodes: &[NodeState], x: &[f64], xdot: &[f64], reads: &Reads| {
-        let local = Local {
-            nodes,
-            x,
-            xdot,
-            lambda: &reads.lambda,
-            read_x: &reads.x,
-            read_xdot: &reads.xdot,
-        };
-        evaluate_owned(kernel, &ctx, &local, None).0
+        evaluate_owned(kernel, &ctx, &reads.local(nodes, x, xdot), None).0
     };
     let eval = |nodes: &[NodeState], x: &[f64], xdot: &[f64]| eval_with(nodes, x, xdot, reads);
     for (what, coef) in [
@@ -155,15 +162,7 @@ fn check_states(
         ('x', coefficients(0.0, 0.0, 0.0, 1.0, 0.0)),
         ('d', coefficients(0.0, 0.0, 0.0, 0.0, 1.0)),
     ] {
-        let local = Local {
-            nodes,
-            x,
-            xdot,
-            lambda: &reads.lambda,
-            read_x: &reads.x,
-            read_xdot: &reads.xdot,
-        };
-        let (r, s) = evaluate_owned(kernel, &ctx, &local, Some(&coef));
+        let (r, s) = evaluate_owned(kernel, &ctx, &reads.local(nodes, x, xdot), Some(&coef));
         // the residual written with the matrix is the residual alone
         let r_alone = eval(nodes, x, xdot);
         assert!(
