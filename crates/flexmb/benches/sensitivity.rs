@@ -61,8 +61,8 @@ fn best<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
 }
 
 fn costs(case: &str, file: &str, counts: &[usize], expression: &str, prefix: &str) {
-    println!("| case | n_p | forward [ms] | direct [ms] | direct / forward | adjoint [ms] | adjoint / forward | fd / forward | direct-adjoint |");
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("| case | n_p | forward [ms] | direct [ms] | direct / forward | adjoint [ms] | adjoint / forward | adjoint, workspace kept / forward | fd / forward | direct-adjoint |");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     // `FLEXMB_NP=n` measures one count only (for profiling).
     let only: Option<usize> = std::env::var("FLEXMB_NP")
         .ok()
@@ -70,18 +70,28 @@ fn costs(case: &str, file: &str, counts: &[usize], expression: &str, prefix: &st
     for &n in counts.iter().filter(|&&n| only.is_none_or(|o| o == n)) {
         let p = problem(file, &[], expression, prefix, n);
         let (forward, _) = best(3, || sensitivity::criteria_values(&p).expect("run"));
-        // `FLEXMB_METHOD=direct|adjoint` runs that method only (for profiling).
+        // `FLEXMB_METHOD=direct|adjoint|adjoint_kept` runs that method only (for
+        // profiling; `adjoint_kept`: the second of two calls with one workspace).
         if let Ok(method) = std::env::var("FLEXMB_METHOD") {
-            let t0 = Instant::now();
-            match method.as_str() {
-                "direct" => drop(sensitivity::direct(&p).expect("direct")),
-                "adjoint" => drop(sensitivity::adjoint(&p, &mut |_, _| {}).expect("adjoint")),
-                _ => panic!("FLEXMB_METHOD: direct or adjoint"),
+            let mut workspace = sensitivity::Workspace::default();
+            let adjoint = |w: &mut sensitivity::Workspace| {
+                sensitivity::adjoint_in(&p, w, &mut |_, _| {}).expect("adjoint")
+            };
+            if method == "adjoint_kept" {
+                adjoint(&mut workspace);
             }
+            let t0 = Instant::now();
+            let stats = match method.as_str() {
+                "direct" => sensitivity::direct(&p).expect("direct").stats,
+                "adjoint" | "adjoint_kept" => adjoint(&mut workspace).stats,
+                _ => panic!("FLEXMB_METHOD: direct, adjoint or adjoint_kept"),
+            };
             let ms = t0.elapsed().as_secs_f64() * 1e3;
             println!(
-                "{case}, {n} parameters, {method}: {ms:.1} ms ({:.2} forward runs)",
-                ms / (forward * 1e3)
+                "{case}, {n} parameters, {method}: {ms:.1} ms ({:.2} forward runs; forward run {:.2}, sweep {:.2})",
+                ms / (forward * 1e3),
+                stats.forward_seconds / forward,
+                stats.sweep_seconds / forward,
             );
             continue;
         }
@@ -89,18 +99,25 @@ fn costs(case: &str, file: &str, counts: &[usize], expression: &str, prefix: &st
         let (adjoint, a) = best(3, || {
             sensitivity::adjoint(&p, &mut |_, _| {}).expect("adjoint")
         });
+        // An optimizer's repeated calls: the workspace (scratch, symbolic analysis,
+        // trajectory storage) kept from the first call.
+        let mut workspace = sensitivity::Workspace::default();
+        let (kept, _) = best(4, || {
+            sensitivity::adjoint_in(&p, &mut workspace, &mut |_, _| {}).expect("adjoint")
+        });
         let scale = d.gradients[0].iter().fold(1e-300f64, |m, v| m.max(v.abs()));
         let agree = d.gradients[0]
             .iter()
             .zip(&a.gradients[0])
             .fold(0.0f64, |m, (x, y)| m.max((x - y).abs() / scale));
         println!(
-            "| {case} | {n} | {:.1} | {:.1} | {:.2} | {:.1} | {:.2} | {} | {agree:.1e} |",
+            "| {case} | {n} | {:.1} | {:.1} | {:.2} | {:.1} | {:.2} | {:.2} | {} | {agree:.1e} |",
             forward * 1e3,
             direct * 1e3,
             direct / forward,
             adjoint * 1e3,
             adjoint / forward,
+            kept / forward,
             2 * n + 1
         );
     }

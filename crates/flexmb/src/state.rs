@@ -9,7 +9,7 @@ use flexmb_lie::{Frame, Group, Vec6};
 ///
 /// Shapes: `q, v, vdot, a` have one entry per node (`n_nodes`); `lambda` one per constraint
 /// row of every joint, in joint order (`n_rows`, rows removed as redundant stay 0).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct State {
     pub t: f64,
     /// Node configurations on the group.
@@ -31,6 +31,36 @@ pub struct State {
     /// Their algorithmic rates `w` of the first-order generalized-alpha scheme.
     #[serde(default)]
     pub w: Vec<f64>,
+}
+
+/// `clone_from` reuses the vectors' storage: the step saves its start this way at every
+/// step (the derived `clone_from` allocates a new state each time).
+impl Clone for State {
+    fn clone(&self) -> Self {
+        Self {
+            t: self.t,
+            q: self.q.clone(),
+            v: self.v.clone(),
+            vdot: self.vdot.clone(),
+            a: self.a.clone(),
+            lambda: self.lambda.clone(),
+            x: self.x.clone(),
+            xdot: self.xdot.clone(),
+            w: self.w.clone(),
+        }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        self.t = source.t;
+        self.q.clone_from(&source.q);
+        self.v.clone_from(&source.v);
+        self.vdot.clone_from(&source.vdot);
+        self.a.clone_from(&source.a);
+        self.lambda.clone_from(&source.lambda);
+        self.x.clone_from(&source.x);
+        self.xdot.clone_from(&source.xdot);
+        self.w.clone_from(&source.w);
+    }
 }
 
 impl State {

@@ -70,7 +70,7 @@ impl Backward<'_> {
         let f = StepFunction::new(&p.model, self.layout, &step.start, settings, step.h);
         let x = &step.unknowns;
         let (pattern, values) = f.jacobian_values(x, self.data);
-        let t = step.end.t;
+        let t = step.t_end();
         self.matrix
             .factorize(&pattern, &values, &|| {
                 format!("step {} (t = {t:.6e} s)", step.index)
@@ -94,12 +94,14 @@ impl Backward<'_> {
 }
 
 /// What the adjoint keeps between calls on problems of one structure (an optimizer's
-/// iterations): the scratch data of the layout, with the step Jacobian's positions, and the
-/// factorization's symbolic analysis.
+/// iterations): the scratch data of the layout, with the step Jacobian's positions, the
+/// factorization's symbolic analysis, and the storage of the trajectory's steps (within
+/// the memory budget).
 #[derive(Default)]
 pub struct Workspace {
     data: Option<Data>,
     matrix: StepMatrix,
+    steps: Vec<TrajectoryStep>,
 }
 
 impl Workspace {
@@ -153,7 +155,7 @@ pub fn adjoint_in(
     // than that (steps shortened for output times or after failures) drops the steps it
     // kept and sweeps from the checkpoints instead.
     let state = state_bytes(&sim.state);
-    let step_bytes = 2 * state + 8 * layout.n_unknowns() + 64;
+    let step_bytes = state + 8 * layout.n_unknowns() + 64;
     let expected = ((settings.t_end / settings.h).ceil() as usize).max(1) + 1;
     let budget = problem.memory_budget;
     let memory_bytes = state + 8 * (sim.data.pattern.len() + 6 * layout.n_unknowns()) + 256;
@@ -178,24 +180,31 @@ pub fn adjoint_in(
         layout: &layout,
         redundant: layout.redundant_rows(),
         history: History::default(),
-        steps: Some(Vec::new()),
+        steps: Some(std::mem::take(&mut workspace.steps)),
         most_steps: budget.saturating_sub(checkpoints_bytes) / step_bytes,
         count: 0,
     };
     problem
         .criteria
         .record(&problem.model, &layout, &sim.state, &mut forward.history);
+    let clock = std::time::Instant::now();
     sim.run(&mut Observers(vec![&mut trajectory, &mut forward]))?;
+    let forward_seconds = clock.elapsed().as_secs_f64();
     let n_steps = forward.count;
     let history = forward.history;
     let mut stats = Stats {
         forward_runs: 1,
         steps: n_steps,
+        forward_seconds,
         ..Stats::default()
     };
     let n_c = problem.criteria.len();
     workspace.data(&problem.model, &layout, &sim.data.threads)?;
-    let Workspace { data, matrix } = workspace;
+    let Workspace {
+        data,
+        matrix,
+        steps: kept,
+    } = workspace;
     let mut back = Backward {
         problem,
         layout: &layout,
@@ -208,6 +217,7 @@ pub fn adjoint_in(
         index: problem.design_index(),
         scratch: (*problem.model).clone(),
     };
+    let clock = std::time::Instant::now();
     back.point(n_steps, &sim.state);
     let mut done = 0;
     let mut visit = |step: &TrajectoryStep| -> Result<(), String> {
@@ -217,12 +227,13 @@ pub fn adjoint_in(
         Ok(())
     };
     let checkpoints = trajectory.checkpoints() * memory_bytes;
-    match &forward.steps {
+    match forward.steps {
         Some(steps) => {
-            stats.trajectory_bytes = checkpoints + steps.len() * step_bytes;
-            for step in steps.iter().rev() {
+            stats.trajectory_bytes = checkpoints + n_steps * step_bytes;
+            for step in steps[..n_steps].iter().rev() {
                 visit(step).map_err(crate::SolveError::Output)?;
             }
+            *kept = steps;
         }
         None => {
             stats.checkpoints = trajectory.checkpoints();
@@ -231,6 +242,7 @@ pub fn adjoint_in(
             trajectory.backward(&mut visit)?;
         }
     }
+    stats.sweep_seconds = clock.elapsed().as_secs_f64();
     let mut gradients = back.pbars;
     for (c, g) in gradients.iter_mut().enumerate() {
         for (k, ds) in tangents.iter().enumerate() {

@@ -149,6 +149,9 @@ pub struct History {
     pub values: Vec<Vec<f64>>,
     /// Last unwrapped angle per sensor.
     last_angle: Vec<Option<f64>>,
+    /// Storage reused by [`CriteriaSet::record`] from point to point.
+    nodes: Vec<crate::elements::NodeState>,
+    buffers: crate::elements::LocalBuffers,
 }
 
 impl History {
@@ -192,14 +195,14 @@ impl CriteriaSet {
     /// Records the sensor values of the next point of a run.
     pub fn record(&self, model: &Model, layout: &Layout, state: &State, history: &mut History) {
         history.last_angle.resize(self.n_sensors, None);
-        let nodes = crate::sensors::node_states(state);
-        let mut buffers = Default::default();
+        crate::sensors::node_states_into(state, &mut history.nodes);
+        let (nodes, buffers) = (&history.nodes, &mut history.buffers);
         let mut values = vec![0.0; self.n_variables()];
         for (r, reference) in self.references.iter().enumerate() {
             values[self.n_sensors + r] = reference.at(state.t);
         }
         for &k in &self.used {
-            let mut v = crate::sensors::sensor_value(model, layout, k, &nodes, state, &mut buffers);
+            let mut v = crate::sensors::sensor_value(model, layout, k, nodes, state, buffers);
             if let SensorKind::JointCoordinate { joint } = model.sensors[k].kind {
                 if crate::joints::coordinate_is_angle(&model.joints[joint.0]) {
                     let last = history.last_angle[k];

@@ -265,6 +265,12 @@ pub struct Stats {
     /// Peak bytes of the trajectory kept (adjoint, estimated from the sizes of the stored
     /// vectors).
     pub trajectory_bytes: usize,
+    /// Wall time of the adjoint's forward run, recording included \[s\] (0 for the other
+    /// methods).
+    pub forward_seconds: f64,
+    /// Wall time of the adjoint's backward sweep, recomputation from checkpoints included
+    /// \[s\] (0 for the other methods).
+    pub sweep_seconds: f64,
 }
 
 /// The fourth-order central difference `(8 (f(e) - f(-e)) - (f(2e) - f(-2e))) / (12 e)` of
@@ -335,6 +341,8 @@ struct Recorder<'a> {
     redundant: Vec<usize>,
     history: History,
     /// Every step, while kept: `None` from the start, or once more than `most_steps` came.
+    /// The first `count` are this run's; the slots beyond are storage of an earlier run,
+    /// overwritten in place (an optimizer's [`Workspace`]: no new memory to fault in).
     steps: Option<Vec<TrajectoryStep>>,
     most_steps: usize,
     count: usize,
@@ -354,22 +362,21 @@ impl Observer for Recorder<'_> {
         }
         p.criteria
             .record(&p.model, self.layout, record.end, &mut self.history);
-        if self
-            .steps
-            .as_ref()
-            .is_some_and(|s| s.len() >= self.most_steps)
-        {
+        if self.count >= self.most_steps {
             self.steps = None;
         }
         if let Some(steps) = &mut self.steps {
-            steps.push(TrajectoryStep {
-                index: record.index,
-                h: record.info.h,
-                start: record.start.clone(),
-                unknowns: record.unknowns.to_vec(),
-                redundant_rows: record.redundant_rows.to_vec(),
-                end: record.end.clone(),
-            });
+            if steps.len() == self.count {
+                steps.push(TrajectoryStep::default());
+            }
+            let step = &mut steps[self.count];
+            step.index = record.index;
+            step.h = record.info.h;
+            step.start.clone_from(record.start);
+            step.unknowns.clear();
+            step.unknowns.extend_from_slice(record.unknowns);
+            step.redundant_rows.clear();
+            step.redundant_rows.extend_from_slice(record.redundant_rows);
         }
         self.count += 1;
         Ok(())

@@ -1,6 +1,7 @@
 //! The trajectory of a dynamic run, kept for a backward sweep (a discrete adjoint runs the
 //! steps in reverse and needs, at each, the start `s_n`, the step size and the converged
-//! unknowns `x_{n+1}` of [`super::step::StepFunction`]).
+//! unknowns `x_{n+1}` of [`super::step::StepFunction`]; the end `s_{n+1}` is the next step's
+//! start, or the run's last state, and is not kept twice).
 //!
 //! Keeping every step costs memory in proportion to the run. A [`Trajectory`] keeps the
 //! [`Memory`] of the simulation every `every` steps (checkpointing in the sense of Griewank
@@ -18,7 +19,7 @@ use crate::state::State;
 use std::sync::Arc;
 
 /// One step of a trajectory.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct TrajectoryStep {
     /// Number of the step in the run (1 for the first).
     pub index: usize,
@@ -31,8 +32,13 @@ pub struct TrajectoryStep {
     /// The constraint rows left out as redundant in the step (with the model, they give
     /// the layout of `unknowns`).
     pub redundant_rows: Vec<usize>,
-    /// The state at the end, `s_{n+1}`.
-    pub end: State,
+}
+
+impl TrajectoryStep {
+    /// The time at the end of the step.
+    pub fn t_end(&self) -> f64 {
+        self.start.t + self.h
+    }
 }
 
 /// The steps of a run, kept as checkpoints every `every` steps (an [`Observer`]).
@@ -98,7 +104,6 @@ impl Trajectory {
                 start,
                 unknowns: unknowns.to_vec(),
                 redundant_rows: redundant_rows.to_vec(),
-                end: sim.state.clone(),
             });
         }
         Ok(out)
