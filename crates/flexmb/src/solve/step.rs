@@ -1112,21 +1112,21 @@ impl<'a> StepFunction<'a> {
         let p = self.partials(x, data);
         let pattern = &p.pattern;
         let step = &self.step;
-        let mut out = vec![0.0; pattern.positions.len()];
-        for (k, v) in out.iter_mut().enumerate() {
-            *v = p.f_v[k] * step.gp + p.f_vd[k] * step.bp + p.f_mu[k];
-        }
+        let (gp, bp, cx) = (step.gp, step.bp, step.cx);
+        let mut out: Vec<f64> = (p.f_v.iter().zip(&p.f_vd).zip(&p.f_mu))
+            .map(|((v, vd), mu)| v * gp + vd * bp + mu)
+            .collect();
         if self.layout.n_states > 0 {
-            for (k, v) in out.iter_mut().enumerate() {
-                *v += p.f_x[k] + p.f_xd[k] * step.cx;
+            for ((o, x), xd) in out.iter_mut().zip(&p.f_x).zip(&p.f_xd) {
+                *o += x + xd * cx;
             }
         }
         // F_q T, node block by node block of each row: (F_q T)_k = sum_c F_q,c T(c, k).
         let mut fqt = Vec::with_capacity(pattern.blocks.len());
         // The increments' columns take F_q T (I + E) (module documentation).
         for &(k, n) in &pattern.blocks {
-            let row = p.t[n].transpose() * Vec6::from_column_slice(&p.f_q[k..k + 6]);
-            let columns = p.e.get(n).map_or(row, |e| e.transpose() * row);
+            let row = p.t[n].tr_mul(&Vec6::from_column_slice(&p.f_q[k..k + 6]));
+            let columns = p.e.get(n).map_or(row, |e| e.tr_mul(&row));
             for c in 0..6 {
                 out[k + c] += columns[c];
             }
@@ -1471,14 +1471,14 @@ impl<'a> StepFunction<'a> {
             vec![Vec6::zeros(); n],
             vec![Vec6::zeros(); n],
         );
-        let nd = self.layout.n_dofs;
-        for (k, &(i, j)) in p.pattern.positions.iter().enumerate() {
-            let wi = w[i];
-            if j < nd && wi != 0.0 {
-                let (node, c) = (j / 6, j % 6);
-                gq[node][c] += p.f_q[k] * wi;
-                gv[node][c] += p.f_v[k] * wi;
-                gvd[node][c] += p.f_vd[k] * wi;
+        // Node block by node block (every node column is in one).
+        for &(k, node) in &p.pattern.blocks {
+            let wi = w[p.pattern.positions[k].0];
+            if wi != 0.0 {
+                let at = |f: &[f64]| Vec6::from_column_slice(&f[k..k + 6]) * wi;
+                gq[node] += at(&p.f_q);
+                gv[node] += at(&p.f_v);
+                gvd[node] += at(&p.f_vd);
             }
         }
         let tg: Vec<Vec6> = (0..n).map(|i| p.t[i].transpose() * gq[i]).collect();
