@@ -282,3 +282,66 @@ fn heavy_top_keeps_its_matrix_when_its_multipliers_start_within_the_tolerance() 
     assert!(stats.factorizations < stats.steps / 2, "{stats:?}");
     assert!(verify.max_error <= 1.0, "{verify:?}");
 }
+
+/// The adaptive predictor (`[solver] predictor = "adaptive"`): on the heavy top, whose
+/// accelerations and multipliers are smooth over three steps, it takes both quadratic and
+/// saves Newton iterations (2.49 per step against 3.00 with the linear one, which has 2.4
+/// times the factorizations), and the steps stay within the tolerance of full Newton.
+#[test]
+fn adaptive_predictor_saves_iterations_on_the_heavy_top() {
+    let run = |predictor: &str| {
+        let set: Vec<String> = [
+            "solver.h=1.25e-4",
+            "solver.rho_inf=0.6",
+            "solver.t_end=0.1",
+            predictor,
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        let file = read_model_file(&example("heavy_top_r3so3.toml"), &set).expect("reads");
+        let Analysis::Dynamic(mut settings) = file.analysis else {
+            unreachable!()
+        };
+        settings.verify = true;
+        let mut sim = Simulation::new(&file.model, settings).expect("starts");
+        sim.run(&mut |_: &flexmb::observe::Sample| Ok(()))
+            .expect("runs");
+        let verify = sim.verification.clone().expect("verify was on");
+        assert!(verify.max_error <= 1.0, "{predictor}: {verify:?}");
+        let s = sim.stats;
+        println!(
+            "{predictor}: {:.2} iterations per step, {} factorizations",
+            s.newton_iterations as f64 / s.steps as f64,
+            s.factorizations
+        );
+        (s.newton_iterations as f64 / s.steps as f64, sim.state)
+    };
+    let (linear, end_linear) = run("solver.predictor=linear");
+    let (adaptive, end_adaptive) = run("solver.predictor=adaptive");
+    assert!(adaptive < linear - 0.3, "{adaptive} against {linear}");
+    // Both within the tolerance of the same solution (rtol 1e-6 on the increments).
+    let moved = (end_linear.q[0].x - end_adaptive.q[0].x).norm();
+    assert!(moved < 1e-6, "end positions {moved:e} apart");
+}
+
+/// The predictor's extrapolation weights reproduce polynomials of their order exactly on
+/// uneven steps: linear through two points, quadratic through three.
+#[test]
+fn extrapolation_weights_are_exact_for_their_order() {
+    use flexmb::solve::step::Extrapolation;
+    let (h, h1, h2) = (0.3, 0.5, 0.2);
+    let (t1, t0, t_1, t_2) = (h, 0.0, -h1, -h1 - h2);
+    let quadratic = |t: f64| 1.5 - 2.0 * t + 0.7 * t * t;
+    let linear = |t: f64| 1.5 - 2.0 * t;
+    let q = Extrapolation::weights(h, h1, h2);
+    let l = Extrapolation::weights(h, h1, 0.0);
+    let at = |w: [f64; 3], f: &dyn Fn(f64) -> f64| w[0] * f(t0) + w[1] * f(t_1) + w[2] * f(t_2);
+    assert!((at(q, &quadratic) - quadratic(t1)).abs() < 1e-14);
+    assert!((at(l, &linear) - linear(t1)).abs() < 1e-14);
+    assert_eq!(l[2], 0.0);
+    // Equal steps: 3, -3, 1 and 2, -1.
+    let e = Extrapolation::weights(1.0, 1.0, 1.0);
+    assert!((e[0] - 3.0).abs() < 1e-15 && (e[1] + 3.0).abs() < 1e-15 && (e[2] - 1.0).abs() < 1e-15);
+    assert_eq!(Extrapolation::weights(1.0, 1.0, 0.0), [2.0, -1.0, 0.0]);
+}

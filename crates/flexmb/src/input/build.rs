@@ -352,6 +352,7 @@ const SOLVER_DYNAMIC_KEYS: &[&str] = &[
     "newmark_gamma",
     "lie_update",
     "lie_update_sigma",
+    "predictor",
 ];
 /// Keys of `[solver]` that only a static analysis has.
 const SOLVER_STATIC_KEYS: &[&str] = &[
@@ -532,6 +533,9 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
             None => 1.0 / 12.0,
         };
         s.lie_update = crate::solve::LieUpdate::Commutator { sigma };
+    }
+    if let Some(f) = t.field("predictor") {
+        s.adaptive_predictor = f.choice(&["linear", "adaptive"])? == "adaptive";
     }
     let scheme = t
         .field("scheme")

@@ -165,6 +165,12 @@ pub struct DynamicSettings {
     /// stay sequential.
     #[serde(default)]
     pub threads: usize,
+    /// The predictor extrapolates the accelerations and the multipliers each linearly or
+    /// quadratically, whichever predicted the last step better (index 3; the stabilized
+    /// form stays linear); `false`: linearly (`BENCHMARKS.md`, "A quadratic predictor where
+    /// it predicts better").
+    #[serde(default)]
+    pub adaptive_predictor: bool,
 }
 
 impl DynamicSettings {
@@ -280,6 +286,7 @@ impl DynamicSettings {
             load_scale: 1.0,
             verify: false,
             threads: 0,
+            adaptive_predictor: false,
         }
     }
 }
@@ -474,6 +481,95 @@ pub(crate) struct Previous {
     h: f64,
     vdot: Vec<Vec6>,
     lambda: Vec<f64>,
+    /// The start of the step before (`h2 = 0` when there is none).
+    #[serde(default)]
+    h2: f64,
+    #[serde(default)]
+    vdot2: Vec<Vec6>,
+    #[serde(default)]
+    lambda2: Vec<f64>,
+    /// Whether the accelerations and the multipliers are extrapolated quadratically (else
+    /// linearly): the order that predicted the last step better ([`Previous::choose`]).
+    #[serde(default)]
+    quadratic: [bool; 2],
+}
+
+impl Previous {
+    /// The predictor of a step of size `h` from `start` (`None` without a previous step).
+    fn extrapolation(&self, h: f64) -> Option<step::Extrapolation<'_>> {
+        (self.h > 0.0).then(|| {
+            let order = |quadratic: bool| {
+                let h2 = if quadratic { self.h2 } else { 0.0 };
+                step::Extrapolation::weights(h, self.h, h2)
+            };
+            step::Extrapolation {
+                weights: [order(self.quadratic[0]), order(self.quadratic[1])],
+                vdot: [&self.vdot, &self.vdot2],
+                lambda: [&self.lambda, &self.lambda2],
+            }
+        })
+    }
+
+    /// After an accepted step of size `h` from `start` to `end`: for the accelerations and
+    /// for the multipliers apart, the order (linear or quadratic) whose prediction of `end`
+    /// was the closer, by a factor 2 (the quadratic needs two earlier points; `quadratic`
+    /// false keeps the linear one), then the start becomes the last earlier point. Accelerations and
+    /// multipliers that are smooth over three steps are predicted an order better;
+    /// multipliers that carry the configuration's error within its tolerance times
+    /// `1 / h^2` (index 3), and quantities that jump (an impact), keep the linear
+    /// extrapolation, which amplifies that noise less.
+    fn choose_and_shift(&mut self, h: f64, start: &State, end: &State, quadratic: bool) {
+        if !quadratic || self.h == 0.0 {
+            self.quadratic = [false; 2];
+        } else if self.h2 > 0.0 {
+            let lin = step::Extrapolation::weights(h, self.h, 0.0);
+            let quad = step::Extrapolation::weights(h, self.h, self.h2);
+            let miss = |w: &[f64; 3], y1: f64, y0: f64, y_1: f64, y_2: f64| {
+                (y1 - (w[0] * y0 + w[1] * y_1 + w[2] * y_2)).powi(2)
+            };
+            let (mut lin_v, mut quad_v) = (0.0, 0.0);
+            for i in 0..end.vdot.len() {
+                for c in 0..6 {
+                    let y = (
+                        end.vdot[i][c],
+                        start.vdot[i][c],
+                        self.vdot[i][c],
+                        self.vdot2[i][c],
+                    );
+                    lin_v += miss(&lin, y.0, y.1, y.2, y.3);
+                    quad_v += miss(&quad, y.0, y.1, y.2, y.3);
+                }
+            }
+            let (mut lin_l, mut quad_l) = (0.0, 0.0);
+            for r in 0..end.lambda.len() {
+                let y = (
+                    end.lambda[r],
+                    start.lambda[r],
+                    self.lambda[r],
+                    self.lambda2[r],
+                );
+                lin_l += miss(&lin, y.0, y.1, y.2, y.3);
+                quad_l += miss(&quad, y.0, y.1, y.2, y.3);
+            }
+            // An order changes when the other predicted at least twice as well (in the
+            // squared error): a near tie keeps the order, so that round-off (a model
+            // scaled by 1e7) does not flip it.
+            let keep = |current: bool, lin: f64, quad: f64| match current {
+                true => lin >= 0.5 * quad,
+                false => quad < 0.5 * lin,
+            };
+            self.quadratic = [
+                keep(self.quadratic[0], lin_v, quad_v),
+                keep(self.quadratic[1], lin_l, quad_l),
+            ];
+        }
+        self.h2 = self.h;
+        std::mem::swap(&mut self.vdot, &mut self.vdot2);
+        std::mem::swap(&mut self.lambda, &mut self.lambda2);
+        self.h = h;
+        self.vdot.clone_from(&start.vdot);
+        self.lambda.clone_from(&start.lambda);
+    }
 }
 
 /// Step-size control and the output schedule of a run.
@@ -716,6 +812,8 @@ impl Simulation {
                 .all(|v| v.len() == data.layout.n_states)
             && (c.previous.h == 0.0
                 || (c.previous.vdot.len() == n && c.previous.lambda.len() == rows))
+            && (c.previous.h2 == 0.0
+                || (c.previous.vdot2.len() == n && c.previous.lambda2.len() == rows))
             && (!holds_values || c.mu_floor.len() == data.layout.n_active);
         if !consistent {
             return Err(SolveError::Checkpoint(
@@ -1157,17 +1255,13 @@ impl Simulation {
                 &mut it.b_start,
             );
         }
-        let extrapolate = (it.previous.h > 0.0).then_some((
-            it.previous.h,
-            &it.previous.vdot[..],
-            &it.previous.lambda[..],
-        ));
+        let extrapolate = it.previous.extrapolation(h);
         step::predict(
             &self.params,
             &start.first,
             h,
             &it.saved,
-            extrapolate,
+            extrapolate.as_ref(),
             &mut self.state,
             &mut it.increments,
         );
@@ -1196,9 +1290,13 @@ impl Simulation {
             Ok(info) => {
                 sys.finish(&self.data.layout, &self.data.threads);
                 let it = &mut self.integrator;
-                it.previous.h = h;
-                it.previous.vdot.clone_from(&it.saved.vdot);
-                it.previous.lambda.clone_from(&it.saved.lambda);
+                // The stabilized form keeps the linear predictor: there the approximate
+                // matrix's rates, measured from a closer start, look slower and rebuild it
+                // (the Bricard mechanism, index 2: a factorization at every step with
+                // either quantity quadratic, against 177 in 10 000 steps).
+                let quadratic = self.settings.adaptive_predictor && !self.data.layout.stabilized;
+                it.previous
+                    .choose_and_shift(h, &it.saved, &self.state, quadratic);
                 Ok(info)
             }
             Err(failure) => {

@@ -187,9 +187,9 @@ impl Start {
     }
 }
 
-/// Predictor: `vdot_{n+1} = vdot_n` (or its linear extrapolation from the previous step
-/// `(h_prev, vdot_{n-1}, lambda_{n-1})` when given: a closer start saves Newton iterations;
-/// the solution does not depend on it), `lambda_{n+1}` likewise, and the `v` and increment
+/// Predictor: `vdot_{n+1} = vdot_n` (or its extrapolation from one or two earlier steps
+/// when given, [`Extrapolation`]: a closer start saves Newton iterations; the solution does
+/// not depend on it), `lambda_{n+1}` likewise, and the `v` and increment
 /// that the scheme gives for them. Writes `state.v`, `state.vdot`, `state.lambda` (`state`
 /// holds `s_n` on entry) and `dq`; the element states: `xdot_{n+1} = xdot_n` and the `x`
 /// the first-order scheme gives for it (`state.x`, `state.xdot`).
@@ -199,35 +199,77 @@ pub fn predict(
     first: &FirstOrderParameters,
     h: f64,
     start: &State,
-    extrapolate: Option<(f64, &[Vec6], &[f64])>,
+    extrapolate: Option<&Extrapolation>,
     state: &mut State,
     dq: &mut Vec<f64>,
 ) {
     let n = start.q.len();
     dq.clear();
     dq.resize(6 * n, 0.0);
-    let ratio = extrapolate.map_or(0.0, |(h_prev, _, _)| h / h_prev);
     for i in 0..n {
         let (v0, vd0, a0) = (start.v[i], start.vdot[i], start.a[i]);
-        let vd1 = match extrapolate {
-            Some((_, vdot_prev, _)) if ratio > 0.0 => vd0 + (vd0 - vdot_prev[i]) * ratio,
-            _ => vd0,
-        };
+        let vd1 = extrapolate.map_or(vd0, |e| {
+            Extrapolation::at(&e.weights[0], vd0, |k| e.vdot[k][i])
+        });
         let a1 = (vd0 * p.alpha_f + vd1 * (1.0 - p.alpha_f) - a0 * p.alpha_m) / (1.0 - p.alpha_m);
         state.vdot[i] = vd1;
         state.v[i] = v0 + a0 * (h * (1.0 - p.gamma)) + a1 * (h * p.gamma);
         let inc = v0 * h + a0 * (h * h * (0.5 - p.beta)) + a1 * (h * h * p.beta);
         dq[6 * i..6 * i + 6].copy_from_slice(inc.as_slice());
     }
-    if let Some((_, _, lambda_prev)) = extrapolate.filter(|_| ratio > 0.0) {
-        for (k, l) in state.lambda.iter_mut().enumerate() {
-            *l += (*l - lambda_prev[k]) * ratio;
+    if let Some(e) = extrapolate {
+        for (r, l) in state.lambda.iter_mut().enumerate() {
+            *l = Extrapolation::at(&e.weights[1], *l, |k| e.lambda[k][r]);
         }
     }
     for i in 0..start.x.len() {
         let w1 = first.rate(start.xdot[i], start.xdot[i], start.w[i]);
         state.xdot[i] = start.xdot[i];
         state.x[i] = start.x[i] + first.increment(h, start.w[i], w1);
+    }
+}
+
+/// Polynomial extrapolation of the accelerations and multipliers to the end of a step
+/// from the start and one or two earlier points: `y_{n+1} = w_0 y_n + w_1 y_{n-1} +
+/// w_2 y_{n-2}` (Lagrange weights at `t_n + h` through `t_n`, `t_n - h_1`,
+/// `t_n - h_1 - h_2`).
+pub struct Extrapolation<'a> {
+    /// The weights of the accelerations and of the multipliers.
+    pub weights: [[f64; 3]; 2],
+    /// `vdot` at `t_{n-1}` and `t_{n-2}` (the second unused when its weight is 0).
+    pub vdot: [&'a [Vec6]; 2],
+    pub lambda: [&'a [f64]; 2],
+}
+
+impl Extrapolation<'_> {
+    /// Linear through `t_n - h_1` (`h_2 = 0`) or quadratic through `t_n - h_1 - h_2` too.
+    pub fn weights(h: f64, h1: f64, h2: f64) -> [f64; 3] {
+        if h2 == 0.0 {
+            let r = h / h1;
+            return [1.0 + r, -r, 0.0];
+        }
+        let h12 = h1 + h2;
+        [
+            (h + h1) * (h + h12) / (h1 * h12),
+            -h * (h + h12) / (h1 * h2),
+            h * (h + h1) / (h12 * h2),
+        ]
+    }
+
+    /// The value extrapolated with `weights` from `y_n` and the earlier points
+    /// `earlier(k)`.
+    #[inline]
+    fn at<T>(weights: &[f64; 3], y_n: T, earlier: impl Fn(usize) -> T) -> T
+    where
+        T: std::ops::Mul<f64, Output = T> + std::ops::Add<Output = T>,
+    {
+        let [w0, w1, w2] = *weights;
+        let y = y_n * w0 + earlier(0) * w1;
+        if w2 == 0.0 {
+            y
+        } else {
+            y + earlier(1) * w2
+        }
     }
 }
 
