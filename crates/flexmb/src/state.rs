@@ -60,6 +60,7 @@ impl Clone for State {
         self.x.clone_from(&source.x);
         self.xdot.clone_from(&source.xdot);
         self.w.clone_from(&source.w);
+        debug_assert!(self == source, "every field of the state is copied");
     }
 }
 

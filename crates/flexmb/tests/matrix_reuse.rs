@@ -249,16 +249,11 @@ fn every_example_passes_verify_and_matches_full_newton() {
 }
 
 /// The heavy top on R3xSO(3) (examples/heavy_top_r3so3.toml, rho_inf = 0.6, h = 1.25e-4,
-/// 0.1 s): its multipliers, extrapolated from smooth values, start within the tolerance,
-/// and their next correction (moved by the increments' through the coupling) once made the
-/// dense matrix look stale and rebuilt it at every step (800 factorizations in 800 steps).
-/// The reuse test judges a matrix on the blocks the predictor left outside the tolerance
-/// (`Convergence::matrix_rate`): far fewer rebuilds, and verify still finds every step within
-/// the tolerance.
-#[test]
-fn heavy_top_keeps_its_matrix_when_its_multipliers_start_within_the_tolerance() {
+/// 0.1 s) with `extra` settings, run with verify on.
+fn heavy_top_verified(extra: &[&str]) -> Simulation {
     let set: Vec<String> = ["solver.h=1.25e-4", "solver.rho_inf=0.6", "solver.t_end=0.1"]
         .iter()
+        .chain(extra)
         .map(|s| s.to_string())
         .collect();
     let file = read_model_file(&example("heavy_top_r3so3.toml"), &set).expect("example reads");
@@ -269,6 +264,19 @@ fn heavy_top_keeps_its_matrix_when_its_multipliers_start_within_the_tolerance() 
     let mut sim = Simulation::new(&file.model, settings).expect("starts");
     sim.run(&mut |_: &flexmb::observe::Sample| Ok(()))
         .expect("runs");
+    sim
+}
+
+/// The heavy top on R3xSO(3) (examples/heavy_top_r3so3.toml, rho_inf = 0.6, h = 1.25e-4,
+/// 0.1 s): its multipliers, extrapolated from smooth values, start within the tolerance,
+/// and their next correction (moved by the increments' through the coupling) once made the
+/// dense matrix look stale and rebuilt it at every step (800 factorizations in 800 steps).
+/// The reuse test judges a matrix on the blocks the predictor left outside the tolerance
+/// (`Convergence::matrix_rate`): far fewer rebuilds, and verify still finds every step within
+/// the tolerance.
+#[test]
+fn heavy_top_keeps_its_matrix_when_its_multipliers_start_within_the_tolerance() {
+    let sim = heavy_top_verified(&[]);
     let stats = sim.stats;
     let verify = sim.verification.clone().expect("verify was on");
     println!(
@@ -290,23 +298,7 @@ fn heavy_top_keeps_its_matrix_when_its_multipliers_start_within_the_tolerance() 
 #[test]
 fn adaptive_predictor_saves_iterations_on_the_heavy_top() {
     let run = |predictor: &str| {
-        let set: Vec<String> = [
-            "solver.h=1.25e-4",
-            "solver.rho_inf=0.6",
-            "solver.t_end=0.1",
-            predictor,
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
-        let file = read_model_file(&example("heavy_top_r3so3.toml"), &set).expect("reads");
-        let Analysis::Dynamic(mut settings) = file.analysis else {
-            unreachable!()
-        };
-        settings.verify = true;
-        let mut sim = Simulation::new(&file.model, settings).expect("starts");
-        sim.run(&mut |_: &flexmb::observe::Sample| Ok(()))
-            .expect("runs");
+        let sim = heavy_top_verified(&[predictor]);
         let verify = sim.verification.clone().expect("verify was on");
         assert!(verify.max_error <= 1.0, "{predictor}: {verify:?}");
         let s = sim.stats;

@@ -88,17 +88,8 @@ struct Taken {
 impl Taken {
     /// Copies `sample` into the buffers of an earlier output step.
     fn fill(&mut self, sample: &Sample, sensors: Vec<f64>) {
-        let (from, to) = (sample.state, &mut self.state);
-        to.t = from.t;
-        to.q.clone_from(&from.q);
-        to.v.clone_from(&from.v);
-        to.vdot.clone_from(&from.vdot);
-        to.a.clone_from(&from.a);
-        to.lambda.clone_from(&from.lambda);
-        to.x.clone_from(&from.x);
-        to.xdot.clone_from(&from.xdot);
-        to.w.clone_from(&from.w);
-        debug_assert!(to == from, "every field of the state is copied");
+        // (`State::clone_from` reuses the vectors)
+        self.state.clone_from(sample.state);
         self.at = sample.at;
         self.sensors = sensors;
     }
