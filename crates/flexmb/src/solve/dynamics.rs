@@ -489,13 +489,14 @@ pub(crate) struct Previous {
     #[serde(default)]
     lambda2: Vec<f64>,
     /// Whether the accelerations and the multipliers are extrapolated quadratically (else
-    /// linearly): the order that predicted the last step better ([`Previous::choose`]).
+    /// linearly): the order that predicted the last step better
+    /// ([`Previous::choose_and_shift`]).
     #[serde(default)]
     quadratic: [bool; 2],
 }
 
 impl Previous {
-    /// The predictor of a step of size `h` from `start` (`None` without a previous step).
+    /// The predictor of a step of size `h` (`None` without a previous step).
     fn extrapolation(&self, h: f64) -> Option<step::Extrapolation<'_>> {
         (self.h > 0.0).then(|| {
             let order = |quadratic: bool| {
@@ -512,10 +513,10 @@ impl Previous {
 
     /// After an accepted step of size `h` from `start` to `end`: for the accelerations and
     /// for the multipliers apart, the order (linear or quadratic) whose prediction of `end`
-    /// was the closer, by a factor 2 (the quadratic needs two earlier points; `quadratic`
-    /// false keeps the linear one), then the start becomes the last earlier point. Accelerations and
-    /// multipliers that are smooth over three steps are predicted an order better;
-    /// multipliers that carry the configuration's error within its tolerance times
+    /// was the closer by a factor 2 (the quadratic needs two earlier points; `quadratic`
+    /// false keeps the linear one); then the start becomes the last earlier point.
+    /// Accelerations and multipliers that are smooth over three steps are predicted an order
+    /// better; multipliers that carry the configuration's error within its tolerance times
     /// `1 / h^2` (index 3), and quantities that jump (an impact), keep the linear
     /// extrapolation, which amplifies that noise less.
     fn choose_and_shift(&mut self, h: f64, start: &State, end: &State, quadratic: bool) {
@@ -524,33 +525,27 @@ impl Previous {
         } else if self.h2 > 0.0 {
             let lin = step::Extrapolation::weights(h, self.h, 0.0);
             let quad = step::Extrapolation::weights(h, self.h, self.h2);
-            let miss = |w: &[f64; 3], y1: f64, y0: f64, y_1: f64, y_2: f64| {
-                (y1 - (w[0] * y0 + w[1] * y_1 + w[2] * y_2)).powi(2)
+            // Squared misses of both orders over the points `(y_{n+1}, y_n, y_{n-1}, y_{n-2})`.
+            let misses = |points: &mut dyn Iterator<Item = [f64; 4]>| {
+                let miss = |w: &[f64; 3], y: &[f64; 4]| {
+                    (y[0] - (w[0] * y[1] + w[1] * y[2] + w[2] * y[3])).powi(2)
+                };
+                points.fold((0.0, 0.0), |(l, q), y| {
+                    (l + miss(&lin, &y), q + miss(&quad, &y))
+                })
             };
-            let (mut lin_v, mut quad_v) = (0.0, 0.0);
-            for i in 0..end.vdot.len() {
-                for c in 0..6 {
-                    let y = (
-                        end.vdot[i][c],
-                        start.vdot[i][c],
-                        self.vdot[i][c],
-                        self.vdot2[i][c],
-                    );
-                    lin_v += miss(&lin, y.0, y.1, y.2, y.3);
-                    quad_v += miss(&quad, y.0, y.1, y.2, y.3);
-                }
-            }
-            let (mut lin_l, mut quad_l) = (0.0, 0.0);
-            for r in 0..end.lambda.len() {
-                let y = (
+            let (vdot, vdot2) = (&self.vdot, &self.vdot2);
+            let (lin_v, quad_v) = misses(&mut (0..end.vdot.len()).flat_map(|i| {
+                (0..6).map(move |c| [end.vdot[i][c], start.vdot[i][c], vdot[i][c], vdot2[i][c]])
+            }));
+            let (lin_l, quad_l) = misses(&mut (0..end.lambda.len()).map(|r| {
+                [
                     end.lambda[r],
                     start.lambda[r],
                     self.lambda[r],
                     self.lambda2[r],
-                );
-                lin_l += miss(&lin, y.0, y.1, y.2, y.3);
-                quad_l += miss(&quad, y.0, y.1, y.2, y.3);
-            }
+                ]
+            }));
             // An order changes when the other predicted at least twice as well (in the
             // squared error): a near tie keeps the order, so that round-off (a model
             // scaled by 1e7) does not flip it.

@@ -257,18 +257,21 @@ impl Extrapolation<'_> {
     }
 
     /// The value extrapolated with `weights` from `y_n` and the earlier points
-    /// `earlier(k)`.
+    /// `earlier(k)` (the linear one as `y_n + r (y_n - y_{n-1})`, `r = h / h_1`, the
+    /// rounding of the linear predictor before the quadratic one existed).
     #[inline]
     fn at<T>(weights: &[f64; 3], y_n: T, earlier: impl Fn(usize) -> T) -> T
     where
-        T: std::ops::Mul<f64, Output = T> + std::ops::Add<Output = T>,
+        T: Copy
+            + std::ops::Mul<f64, Output = T>
+            + std::ops::Add<Output = T>
+            + std::ops::Sub<Output = T>,
     {
         let [w0, w1, w2] = *weights;
-        let y = y_n * w0 + earlier(0) * w1;
         if w2 == 0.0 {
-            y
+            y_n + (y_n - earlier(0)) * -w1
         } else {
-            y + earlier(1) * w2
+            y_n * w0 + earlier(0) * w1 + earlier(1) * w2
         }
     }
 }
