@@ -228,11 +228,14 @@ pub fn adjoint_in(
     };
     let checkpoints = trajectory.checkpoints() * memory_bytes;
     match forward.steps {
-        Some(steps) => {
+        Some(mut steps) => {
             stats.trajectory_bytes = checkpoints + n_steps * step_bytes;
             for step in steps[..n_steps].iter().rev() {
                 visit(step).map_err(crate::SolveError::Output)?;
             }
+            // Kept for the next call, without the slots of an earlier, longer run (the
+            // storage held stays what this run's budget allowed).
+            steps.truncate(n_steps);
             *kept = steps;
         }
         None => {
