@@ -525,10 +525,11 @@ impl Previous {
         } else if self.h2 > 0.0 {
             let lin = step::Extrapolation::weights(h, self.h, 0.0);
             let quad = step::Extrapolation::weights(h, self.h, self.h2);
-            // Squared misses of both orders over the points `(y_{n+1}, y_n, y_{n-1}, y_{n-2})`.
+            // Squared misses of both predictions (`step::predict`'s own arithmetic) over
+            // the points `(y_{n+1}, y_n, y_{n-1}, y_{n-2})`.
             let misses = |points: &mut dyn Iterator<Item = [f64; 4]>| {
                 let miss = |w: &[f64; 3], y: &[f64; 4]| {
-                    (y[0] - (w[0] * y[1] + w[1] * y[2] + w[2] * y[3])).powi(2)
+                    (y[0] - step::Extrapolation::at(w, y[1], |k| y[2 + k])).powi(2)
                 };
                 points.fold((0.0, 0.0), |(l, q), y| {
                     (l + miss(&lin, &y), q + miss(&quad, &y))

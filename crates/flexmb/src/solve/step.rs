@@ -260,7 +260,7 @@ impl Extrapolation<'_> {
     /// `earlier(k)` (the linear one as `y_n + r (y_n - y_{n-1})`, `r = h / h_1`, the
     /// rounding of the linear predictor before the quadratic one existed).
     #[inline]
-    fn at<T>(weights: &[f64; 3], y_n: T, earlier: impl Fn(usize) -> T) -> T
+    pub(crate) fn at<T>(weights: &[f64; 3], y_n: T, earlier: impl Fn(usize) -> T) -> T
     where
         T: Copy
             + std::ops::Mul<f64, Output = T>
@@ -1526,8 +1526,8 @@ impl<'a> StepFunction<'a> {
                 gvd[node] += at(&p.f_vd);
             }
         }
-        let tg: Vec<Vec6> = (0..n).map(|i| p.t[i].transpose() * gq[i]).collect();
-        let mut q: Vec<Vec6> = (0..n).map(|i| p.g[i].transpose() * gq[i]).collect();
+        let tg: Vec<Vec6> = (0..n).map(|i| p.t[i].tr_mul(&gq[i])).collect();
+        let mut q: Vec<Vec6> = (0..n).map(|i| p.g[i].tr_mul(&gq[i])).collect();
         for &(i, j, v) in &p.k_zeta {
             q[j / 6][j % 6] += v * tg[i / 6][i % 6];
         }
@@ -1704,13 +1704,13 @@ impl<'a> StepFunction<'a> {
         // The cotangent of the total increments, T^T qbar_{n+1}.
         let mut tbar = vec![0.0; nd];
         for i in 0..n {
-            let t = p.t[i].transpose() * bar.q[i];
+            let t = p.t[i].tr_mul(&bar.q[i]);
             tbar[6 * i..6 * i + 6].copy_from_slice(t.as_slice());
             let a = bar.a[i];
-            let moved = p.e.get(i).map_or(t, |e| e.transpose() * t);
+            let moved = p.e.get(i).map_or(t, |e| e.tr_mul(&t));
             let dq = moved + bar.v[i] * self.step.gp + bar.vdot[i] * self.step.bp + a / bh2;
             xbar[6 * i..6 * i + 6].copy_from_slice(dq.as_slice());
-            start.q[i] = p.g[i].transpose() * bar.q[i];
+            start.q[i] = p.g[i].tr_mul(&bar.q[i]);
             start.v[i] = bar.v[i] * c1 + bar.vdot[i] * c3 - a * (h / bh2);
             start.a[i] = bar.v[i] * c2 + bar.vdot[i] * c4 - a * ((0.5 - ga.beta) / ga.beta);
             start.vdot[i] = bar.vdot[i] * c5;
