@@ -129,6 +129,56 @@ impl Group {
         }
     }
 
+    /// `d/dt [T(w(t))] x` along `w' = x`: the derivative of the tangent operator in the
+    /// direction `x` applied to `x`, what `v = T(w) w'` adds to `vdot = T(w) w''` when `w`
+    /// moves with velocity `x`. R3xSO(3): the rotation part's closed form,
+    /// [`so3::tangent_rate`]. SE(3): from the series `T(w) = sum_k (-1)^k / (k+1)! ad(w)^k`
+    /// (`dexp_{-w}`), whose derivative is `sum_k c_k sum_{j<k} ad(w)^j ad(x) ad(w)^{k-1-j}`:
+    /// with `y_i = ad(x) ad(w)^i x` it is `sum_j ad(w)^j g_j`, `g_j = sum_i c_{i+j+1} y_i`,
+    /// summed by Horner's rule. The series is truncated where its remainder is below
+    /// round-off relative to its first term (`|w|` up to a few radians; step increments
+    /// are far below).
+    pub fn tangent_rate(self, w: &Vec6, x: &Vec6) -> Vec6 {
+        if self == Group::R3xSO3 {
+            let ((_, theta), (_, omega)) = (split(w), split(x));
+            return join(&crate::Vec3::zeros(), &so3::tangent_rate(&theta, &omega));
+        }
+        const MAX: usize = 40;
+        let a = self.ad(w);
+        let norm = w.norm();
+        // c_k = (-1)^k / (k+1)!, and the terms k = 1..=n: the k-th is bounded by
+        // |w|^(k-1) k / (k+1)! |x|^2, relative to the first nonzero one (k = 2,
+        // |w| |x|^2 / 6) by r_k = 6 k |w|^(k-2) / (k+1)!; n is the last k with r_k above
+        // round-off.
+        let mut c = [0.0; MAX + 1];
+        c[0] = 1.0;
+        let mut n = 2;
+        let mut p = 1.0 / 6.0; // |w|^(k-2) / (k+1)! at k = 2
+        for k in 1..=MAX {
+            c[k] = -c[k - 1] / (k + 1) as f64;
+            if k > 2 {
+                p *= norm / (k + 1) as f64;
+                if 6.0 * k as f64 * p < 1e-17 {
+                    break;
+                }
+                n = k;
+            }
+        }
+        let ax = self.ad(x);
+        let mut y = [Vec6::zeros(); MAX];
+        let mut u = *x;
+        for yi in y.iter_mut().take(n) {
+            *yi = ax * u;
+            u = a * u;
+        }
+        let mut sum = Vec6::zeros();
+        for j in (0..n).rev() {
+            let g: Vec6 = (0..n - j).fold(Vec6::zeros(), |g, i| g + y[i] * c[i + j + 1]);
+            sum = a * sum + g;
+        }
+        sum
+    }
+
     /// Name used in model files and outputs.
     pub fn name(self) -> &'static str {
         match self {

@@ -329,3 +329,44 @@ pub fn tangent_inv_transpose_derivative(x: &Vec3, m: &Vec3) -> Mat3 {
     let (eta, eta1, _) = eta_derivatives(x.norm_squared());
     tangent_inv_transpose_derivative_with(x, m, eta, eta1)
 }
+
+/// Taylor coefficients (in `p^2`) of the tangent operator's derivative coefficients
+/// `b'/p = (sin p / p - 2 b)/p^2 = sum_{k>=1} (-1)^k 2k p^(2k-2) / (2k+2)!` and
+/// `c'/p = (b - 3 c)/p^2 = sum_{k>=1} (-1)^k 2k p^(2k-2) / (2k+3)!`
+/// (`b = (1 - cos p)/p^2`, `c = (p - sin p)/p^3`); twelve terms reach round-off below
+/// [`SERIES_MAX`].
+const fn rate_series(offset: usize) -> [f64; 12] {
+    let mut out = [0.0; 12];
+    let mut k = 1;
+    while k <= 12 {
+        let mut f = 1.0;
+        let mut i = 2;
+        while i <= 2 * k + offset {
+            f *= i as f64;
+            i += 1;
+        }
+        let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+        out[k - 1] = sign * (2 * k) as f64 / f;
+        k += 1;
+    }
+    out
+}
+const B_RATE: [f64; 12] = rate_series(2);
+const C_RATE: [f64; 12] = rate_series(3);
+
+/// `d/dt [T(theta(t))] x` along `theta' = x` (see [`crate::Group::tangent_rate`]):
+/// with `T = I - b tilde(theta) + c tilde(theta)^2` and `p' = theta . x / p`,
+/// `(theta . x) (-(b'/p) theta x x + (c'/p) theta x (theta x x)) + c x x (theta x x)`.
+pub fn tangent_rate(theta: &Vec3, x: &Vec3) -> Vec3 {
+    let p2 = theta.norm_squared();
+    let (_, b, c) = coefficients(p2);
+    let (db, dc) = if p2 < SERIES_MAX {
+        (horner(&B_RATE, p2), horner(&C_RATE, p2))
+    } else {
+        let (a, _, _) = coefficients(p2);
+        ((a - 2.0 * b) / p2, (b - 3.0 * c) / p2)
+    };
+    let tx = theta.cross(x);
+    let s = theta.dot(x);
+    (tx * -db + theta.cross(&tx) * dc) * s + x.cross(&tx) * c
+}

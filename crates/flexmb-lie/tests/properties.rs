@@ -413,3 +413,32 @@ fn se3_tangent_matches_its_power_series_at_all_angles() {
         }
     }
 }
+
+#[test]
+fn tangent_rate_matches_central_differences_of_the_tangent() {
+    // d/ds [T(w + s x) x] at s = 0, on both groups, from increments of a step (1e-3) to
+    // large angles, translations of metres.
+    let mut rng = Lcg(41);
+    let eps = 1e-6;
+    for g in groups() {
+        for &angle in &[0.0, 1e-8, 1e-3, 0.02, 0.3, 1.0, 1.49, 1.51, 2.5] {
+            for _ in 0..6 {
+                let theta = rotation(&mut rng, angle);
+                let u = rng.vec3(2.0);
+                let w = Vec6::new(u.x, u.y, u.z, theta.x, theta.y, theta.z);
+                let x = rng.vec6(3.0, 5.0);
+                let rate = g.tangent_rate(&w, &x);
+                let fd =
+                    (g.tangent(&(w + x * eps)) * x - g.tangent(&(w - x * eps)) * x) / (2.0 * eps);
+                let err = (rate - fd).norm();
+                assert!(
+                    err < 1e-7 * x.norm_squared(),
+                    "{g:?} angle {angle}: {rate:?} against {fd:?} ({err:e})"
+                );
+            }
+        }
+        // T(0) = I and dT/dt at 0 along x applied to x is -ad(x) x / 2 = 0.
+        let x = rng.vec6(1.0, 1.0);
+        assert!(g.tangent_rate(&Vec6::zeros(), &x).norm() < 1e-16);
+    }
+}

@@ -31,6 +31,7 @@ const CASES: &[&str] = &[
     "heavy_top_se3",
     "heavy_top_r3so3",
     "heavy_top_updates",
+    "lie_updates_other",
     "chain_10",
     "chain_100",
     "chain_1000",
@@ -101,8 +102,9 @@ fn heavy_top(file: &str) {
 fn heavy_top_updates() {
     println!("| update, group | h [s] | steps | error x_G(1 s) [m] | solve time [ms] | time/step [us] | Newton it./step |");
     println!("|---|---|---|---|---|---|---|");
-    let updates: [(&str, &[&str]); 3] = [
+    let updates: [(&str, &[&str]); 4] = [
         ("bruls_cardona", &[]),
+        ("lie_algebra", &["solver.lie_update=lie_algebra"]),
         ("commutator 1/12", &["solver.lie_update=commutator"]),
         (
             "commutator 0.2",
@@ -119,6 +121,81 @@ fn heavy_top_updates() {
             ("SE(3)", "heavy_top.toml"),
         ] {
             heavy_top_rows(&format!("{name}, {group}"), file, set, &steps);
+        }
+    }
+}
+
+/// The configuration updates on other problems (BENCHMARKS.md, "Error constant: variants
+/// compared"): the largest node position error at the end against the same model at h/32
+/// with the Brüls-Cardona update, rho_inf = 0.6. The asymmetric top is the heavy top with
+/// the inertia (0.234375, 0.46875, 0.35) kg m^2 about its centre of mass.
+fn lie_updates_other() {
+    let updates: [(&str, &[&str]); 4] = [
+        ("bruls_cardona", &[]),
+        ("lie_algebra", &["solver.lie_update=lie_algebra"]),
+        ("commutator 1/12", &["solver.lie_update=commutator"]),
+        (
+            "commutator 0.2",
+            &[
+                "solver.lie_update=commutator",
+                "solver.lie_update_sigma=0.2",
+            ],
+        ),
+    ];
+    let asymmetric = "body.top.inertia=[0.234375, 0.46875, 0.35]";
+    let cases: [(&str, &str, &str, f64, [f64; 2]); 6] = [
+        (
+            "asymmetric top",
+            "heavy_top_r3so3.toml",
+            "R3xSO3",
+            1.0,
+            [2.5e-4, 1.25e-4],
+        ),
+        (
+            "asymmetric top",
+            "heavy_top_r3so3.toml",
+            "SE3",
+            1.0,
+            [2.5e-4, 1.25e-4],
+        ),
+        ("chain_10", "chain_10.toml", "SE3", 1.0, [1e-3, 5e-4]),
+        ("chain_10", "chain_10.toml", "R3xSO3", 1.0, [1e-3, 5e-4]),
+        ("Bricard", "bricard.toml", "SE3", 2.0, [1e-3, 5e-4]),
+        ("Bricard", "bricard.toml", "R3xSO3", 2.0, [1e-3, 5e-4]),
+    ];
+    print!("| model, group | h [s] |");
+    for (name, _) in updates {
+        print!(" {name} |");
+    }
+    println!();
+    println!("|---|---|---|---|---|---|");
+    for (name, file, group, t_end, steps) in cases {
+        let base = |h: f64| {
+            let mut o = vec![
+                format!("model.group={group}"),
+                format!("solver.h={h}"),
+                "solver.rho_inf=0.6".to_string(),
+                format!("solver.t_end={t_end}"),
+                "solver.output_interval=0".to_string(),
+            ];
+            if name == "asymmetric top" {
+                o.push(asymmetric.to_string());
+            }
+            o
+        };
+        let reference = solve(file, &base(steps[1] / 32.0)).state;
+        for h in steps {
+            print!("| {name}, {group} | {h:.3e} |");
+            for (_, set) in updates {
+                let mut o = base(h);
+                o.extend(set.iter().map(|s| s.to_string()));
+                let end = solve(file, &o).state;
+                let error = (end.q.iter().zip(&reference.q))
+                    .map(|(a, b)| (a.x - b.x).norm())
+                    .fold(0.0, f64::max);
+                print!(" {error:.3e} |");
+            }
+            println!();
         }
     }
 }
@@ -540,6 +617,7 @@ fn run_case(case: &str) {
         "heavy_top_se3" => heavy_top("heavy_top.toml"),
         "heavy_top_r3so3" => heavy_top("heavy_top_r3so3.toml"),
         "heavy_top_updates" => heavy_top_updates(),
+        "lie_updates_other" => lie_updates_other(),
         c if c.starts_with("chain_") => chain(c[6..].parse().expect("chain size")),
         c if c.starts_with("springs_") => springs(c[8..].parse().expect("chain size")),
         c if c.starts_with("spheres_") => spheres(c[8..].parse().expect("number of balls")),
@@ -628,7 +706,7 @@ fn main() {
             println!("\n| case | steps | solve time [ms] | time/step [us] | time/step/spring [us] | Newton it./step |");
             println!("|---|---|---|---|---|---|");
         }
-        if *case == "heavy_top_updates" {
+        if *case == "heavy_top_updates" || *case == "lie_updates_other" {
             println!();
         }
         if *case == "spheres_100" {

@@ -490,6 +490,26 @@ fn a_parameter_that_breaks_the_initial_conditions_is_refused() {
 }
 
 #[test]
+fn the_lie_algebra_update_is_refused_by_the_direct_and_adjoint_methods() {
+    // Its step has no Jacobian yet (solve::step, "Lie algebra update"): an error naming the
+    // setting, not a gradient of another scheme.
+    let p = problem(
+        "heavy_top_sensitivity.toml",
+        &["solver.t_end=0.01", "solver.lie_update=lie_algebra"],
+        &["body.top.mass"],
+        &[("x", CriterionKind::Terminal, "com_x")],
+    );
+    for e in [
+        sensitivity::direct(&p).expect_err("refused").to_string(),
+        sensitivity::adjoint(&p, &mut |_, _| {})
+            .expect_err("refused")
+            .to_string(),
+    ] {
+        assert!(e.contains("lie_algebra"), "{e}");
+    }
+}
+
+#[test]
 fn references_from_csv_enter_criteria() {
     // A reference signal r(t) = 2 t read from a CSV file: the integral of (t - r)^2 over
     // [0, T] is T^3 / 3 exactly under the trapezoidal rule only at the samples, so check it

@@ -519,7 +519,7 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
     }
     let lie_update = t
         .field("lie_update")
-        .map(|f| f.choice(&["bruls_cardona", "commutator"]))
+        .map(|f| f.choice(&["bruls_cardona", "commutator", "lie_algebra"]))
         .transpose()?;
     if t.has("lie_update_sigma") && lie_update != Some("commutator") {
         return Err(t.key_err(
@@ -533,6 +533,9 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
             None => 1.0 / 12.0,
         };
         s.lie_update = crate::solve::LieUpdate::Commutator { sigma };
+    }
+    if lie_update == Some("lie_algebra") {
+        s.lie_update = crate::solve::LieUpdate::LieAlgebra;
     }
     if let Some(f) = t.field("predictor") {
         s.adaptive_predictor = f.choice(&["linear", "adaptive"])? == "adaptive";

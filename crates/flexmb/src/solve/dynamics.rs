@@ -84,6 +84,12 @@ pub enum LieUpdate {
     /// also cancels part of the scheme's own error for fast rotation (step module
     /// documentation; `BENCHMARKS.md`, "Error constant: variants compared").
     Commutator { sigma: f64 },
+    /// The scheme's relations applied to the local coordinates `Theta` of each step,
+    /// `q(t) = q_n exp(Theta(t))`, with `v = T(Theta) Theta'` and the algorithmic
+    /// accelerations carried from one step's chart to the next (the Lie algebra approach of
+    /// Arnold, Cardona & Brüls 2016; step module documentation, "Lie algebra update").
+    /// Dynamics only: sensitivities are not available for it.
+    LieAlgebra,
 }
 
 /// The member of the generalized-alpha family to use.
@@ -1258,6 +1264,7 @@ impl Simulation {
             h,
             &it.saved,
             extrapolate.as_ref(),
+            start.in_chart().then_some(model.group),
             &mut self.state,
             &mut it.increments,
         );
@@ -1356,6 +1363,7 @@ impl NonlinearSystem for StepSystem<'_> {
     fn assemble(&mut self, data: &mut Data, matrix: bool, regularization: f64) {
         self.update_total(&data.layout);
         step::kinematics(
+            &self.start,
             self.model.group,
             self.saved,
             self.state,
@@ -1394,7 +1402,7 @@ impl NonlinearSystem for StepSystem<'_> {
         step::correct(
             &data.layout,
             &data.correction,
-            &self.start,
+            (&self.start, self.model.group, self.total),
             self.dq,
             self.zeta,
             self.state,
@@ -1481,11 +1489,25 @@ impl NonlinearSystem for StepSystem<'_> {
     }
 
     fn exact_matrix(&self) -> bool {
+        if self.start.in_chart() {
+            // The Lie algebra update: the matrix omits the derivatives of T in
+            // `v = T Theta'` and `vdot = T Theta'' + (d/dt T) Theta'` ([`Self::near_exact_matrix`]).
+            return false;
+        }
         // The stabilized form's iteration matrix is an approximation: it omits the O(h)
         // derivative of B(q) v with respect to q, the equilibrium rows' dependence on zeta
         // (through q), and the T in B T B(q_n)^T ([`step::StepFunction::jacobian`] has them
         // all). Index 3: the matrix is exact.
         self.b_start.is_empty()
+    }
+
+    fn near_exact_matrix(&self) -> bool {
+        // The Lie algebra update's matrix, in right-trivialized corrections, has `gamma'`
+        // and `beta'` where the Jacobian has `gamma' + P_v T^-1` and `beta' + P_a T^-1`,
+        // `P_v = d((d/dt T) Theta')/d Theta'`-like terms of size |v| and |v|^2 + |vdot|
+        // (step module documentation): a contraction of order h^2 |v|^2 on inertia, and
+        // beta h |v| / (2 gamma) on damping.
+        self.start.in_chart() && self.b_start.is_empty() || self.exact_matrix()
     }
 
     fn restart(&mut self) {
@@ -1500,6 +1522,7 @@ impl NonlinearSystem for StepSystem<'_> {
             self.start.h,
             self.saved,
             None,
+            self.start.in_chart().then_some(self.model.group),
             self.state,
             self.dq,
         );

@@ -366,6 +366,13 @@ pub trait NonlinearSystem {
     fn exact_matrix(&self) -> bool {
         true
     }
+    /// Whether a fresh matrix is exact or so close to it that its own contraction is far
+    /// below [`NewtonSettings::max_contraction`]: a reused one is then rebuilt on the rates
+    /// of the blocks outside the tolerance, as an exact one ([`Convergence::matrix_rate`]).
+    /// Its iterates are still accepted on measured rates unless [`Self::exact_matrix`].
+    fn near_exact_matrix(&self) -> bool {
+        self.exact_matrix()
+    }
     /// Puts the iterate back to its start, for a second attempt with a fresh matrix.
     fn restart(&mut self) {}
 }
@@ -747,7 +754,7 @@ impl NewtonSolver {
                         // alone: a gear mesh under a driven pinion stalls its zeta there at a
                         // rate of 1; a regularized one), every block's rate counts.
                         let dense = data.solver.backend() == Backend::Dense;
-                        let exact_when_fresh = sys.exact_matrix() && regularization == 0.0;
+                        let exact_when_fresh = sys.near_exact_matrix() && regularization == 0.0;
                         let rate = if iteration >= 3 || !exact_when_fresh {
                             Some(theta)
                         } else {
