@@ -90,7 +90,7 @@
 //! damping, and its iterates are accepted on measured rates. Measured
 //! (`BENCHMARKS.md`, "Error constant: variants compared"): on R3xSO(3) where the rotation
 //! part is all it changes, 7 to 9 times less error on the heavy and asymmetric tops, as
-//! robust as Brüls-Cardona; on SE(3) 2 to 4 times less error, but a flexible beam turning
+//! robust as Brüls-Cardona; on SE(3) 1.6 to 4 times less error, but a flexible beam turning
 //! fast (the spin-up at `h = 0.01 s`, `rho_inf = 0.8`) grows an unstable mode, through the
 //! translation-rotation coupling of `T` on SE(3).
 //!
