@@ -26,11 +26,13 @@
 //! * T. D. Barfoot, "State Estimation for Robotics", 2017, Sect. 7.1 (closed forms of the
 //!   SE(3) Jacobians, used here in the right-trivialized form).
 
+mod chart;
 mod frame;
 mod group;
 pub mod se3;
 pub mod so3;
 
+pub use chart::Chart;
 pub use frame::Frame;
 pub use group::Group;
 pub use se3::tangent_inv_transpose_derivative;

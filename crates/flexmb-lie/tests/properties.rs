@@ -442,3 +442,46 @@ fn tangent_rate_matches_central_differences_of_the_tangent() {
         assert!(g.tangent_rate(&Vec6::zeros(), &x).norm() < 1e-16);
     }
 }
+
+#[test]
+fn charts_read_velocities_and_accelerations_as_their_maps_say() {
+    // For each chart C around q_n: M(theta) is the right-trivialized differential of
+    // q_n o C (central differences of log((q_n o C(theta))^-1 q_n o C(theta + e d)) / e),
+    // inverse_map inverts it, and along the straight line theta + s x (Theta'' = 0) the
+    // body velocity M x changes at the rate N(theta, x).
+    use flexmb_lie::Chart;
+    let mut rng = Lcg(43);
+    let eps = 1e-6;
+    let charts = [
+        (Chart::Exponential(Group::R3xSO3), Group::R3xSO3),
+        (Chart::Exponential(Group::SE3), Group::SE3),
+        (Chart::TranslationRotation, Group::SE3),
+    ];
+    for (chart, group) in charts {
+        for &angle in &[0.0, 1e-3, 0.05, 0.8, 2.0] {
+            for _ in 0..5 {
+                let q_n = Frame::new(rng.vec3(2.0), so3::exp(&rng.vec3(1.5)));
+                let w = rotation(&mut rng, angle);
+                let u = rng.vec3(1.0);
+                let theta = Vec6::new(u.x, u.y, u.z, w.x, w.y, w.z);
+                let (d, x) = (rng.vec6(1.0, 1.0), rng.vec6(3.0, 5.0));
+                let p = chart.point(&q_n, &theta);
+                let moved = |e: f64| group.difference(&p, &chart.point(&q_n, &(theta + d * e)));
+                let fd = (moved(eps) - moved(-eps)) / (2.0 * eps);
+                let m = chart.map(&theta);
+                assert!((m * d - fd).norm() < 1e-7, "{chart:?} angle {angle}: M");
+                assert!((chart.inverse_map(&theta) * m - Mat6::identity()).norm() < 1e-12);
+                let v = |s: f64| chart.map(&(theta + x * s)) * x;
+                let rate = (v(eps) - v(-eps)) / (2.0 * eps);
+                let n = chart.rate(&theta, &x);
+                assert!(
+                    (n - rate).norm() < 1e-7 * x.norm_squared(),
+                    "{chart:?} angle {angle}: N {n:?} against {rate:?}"
+                );
+            }
+        }
+        let q_n = Frame::new(rng.vec3(1.0), so3::exp(&rng.vec3(1.0)));
+        assert!(frame_close(&chart.point(&q_n, &Vec6::zeros()), &q_n, 1e-15));
+        assert_eq!(chart.map(&Vec6::zeros()), Mat6::identity());
+    }
+}

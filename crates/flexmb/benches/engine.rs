@@ -102,9 +102,10 @@ fn heavy_top(file: &str) {
 fn heavy_top_updates() {
     println!("| update, group | h [s] | steps | error x_G(1 s) [m] | solve time [ms] | time/step [us] | Newton it./step |");
     println!("|---|---|---|---|---|---|---|");
-    let updates: [(&str, &[&str]); 4] = [
+    let updates: [(&str, &[&str]); 5] = [
         ("bruls_cardona", &[]),
         ("lie_algebra", &["solver.lie_update=lie_algebra"]),
+        ("lie_algebra_r3xso3", &["solver.lie_update=lie_algebra_r3xso3"]),
         ("commutator 1/12", &["solver.lie_update=commutator"]),
         (
             "commutator 0.2",
@@ -130,9 +131,10 @@ fn heavy_top_updates() {
 /// with the Brüls-Cardona update, rho_inf = 0.6. The asymmetric top is the heavy top with
 /// the inertia (0.234375, 0.46875, 0.35) kg m^2 about its centre of mass.
 fn lie_updates_other() {
-    let updates: [(&str, &[&str]); 4] = [
+    let updates: [(&str, &[&str]); 5] = [
         ("bruls_cardona", &[]),
         ("lie_algebra", &["solver.lie_update=lie_algebra"]),
+        ("lie_algebra_r3xso3", &["solver.lie_update=lie_algebra_r3xso3"]),
         ("commutator 1/12", &["solver.lie_update=commutator"]),
         (
             "commutator 0.2",
@@ -168,7 +170,7 @@ fn lie_updates_other() {
         print!(" {name} |");
     }
     println!();
-    println!("|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|");
     for (name, file, group, t_end, steps) in cases {
         let base = |h: f64| {
             let mut o = vec![

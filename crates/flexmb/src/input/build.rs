@@ -519,7 +519,14 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
     }
     let lie_update = t
         .field("lie_update")
-        .map(|f| f.choice(&["bruls_cardona", "commutator", "lie_algebra"]))
+        .map(|f| {
+            f.choice(&[
+                "bruls_cardona",
+                "commutator",
+                "lie_algebra",
+                "lie_algebra_r3xso3",
+            ])
+        })
         .transpose()?;
     if t.has("lie_update_sigma") && lie_update != Some("commutator") {
         return Err(t.key_err(
@@ -534,8 +541,10 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
         };
         s.lie_update = crate::solve::LieUpdate::Commutator { sigma };
     }
-    if lie_update == Some("lie_algebra") {
-        s.lie_update = crate::solve::LieUpdate::LieAlgebra;
+    match lie_update {
+        Some("lie_algebra") => s.lie_update = crate::solve::LieUpdate::LieAlgebra,
+        Some("lie_algebra_r3xso3") => s.lie_update = crate::solve::LieUpdate::LieAlgebraR3xSO3,
+        _ => {}
     }
     if let Some(f) = t.field("predictor") {
         s.adaptive_predictor = f.choice(&["linear", "adaptive"])? == "adaptive";

@@ -310,9 +310,9 @@ fn pick(index: &[Option<usize>], full: &[f64], out: &mut [f64], sign: f64) {
 /// The simulation of a problem and its consistent start, with the tangents `ds_0/dp_k`.
 fn start(problem: &Problem) -> Result<(crate::Simulation, Vec<StateTangent>), SensitivityError> {
     let settings = *problem.dynamic()?;
-    if settings.lie_update == crate::solve::LieUpdate::LieAlgebra {
+    if settings.lie_update.in_chart() {
         return Err(SensitivityError::Unsupported(
-            "the direct and adjoint methods differentiate the bruls_cardona and commutator updates; [solver] lie_update = \"lie_algebra\" has no step Jacobian yet (the fd method works with it)".into(),
+            "the direct and adjoint methods differentiate the bruls_cardona and commutator updates; [solver] lie_update = \"lie_algebra\" or \"lie_algebra_r3xso3\" has no step Jacobian yet (the fd method works with it)".into(),
         ));
     }
     let mut ids = problem.design.clone();

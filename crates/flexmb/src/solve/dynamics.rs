@@ -90,6 +90,18 @@ pub enum LieUpdate {
     /// Arnold, Cardona & Brüls 2016; step module documentation, "Lie algebra update").
     /// Dynamics only: sensitivities are not available for it.
     LieAlgebra,
+    /// The same with the local coordinates of R3xSO(3) on either group:
+    /// `q(t) = q_n o (Theta_u, exp(Theta_w))`, on SE(3) the translation in the frame of
+    /// `q_n` and the rotation vector apart ([`flexmb_lie::Chart::TranslationRotation`]);
+    /// identical to [`LieUpdate::LieAlgebra`] on R3xSO(3).
+    LieAlgebraR3xSO3,
+}
+
+impl LieUpdate {
+    /// Whether the step's relations act on local coordinates (the Lie algebra updates).
+    pub fn in_chart(self) -> bool {
+        matches!(self, LieUpdate::LieAlgebra | LieUpdate::LieAlgebraR3xSO3)
+    }
 }
 
 /// The member of the generalized-alpha family to use.
@@ -1264,7 +1276,7 @@ impl Simulation {
             h,
             &it.saved,
             extrapolate.as_ref(),
-            start.in_chart().then_some(model.group),
+            start.chart(model.group),
             &mut self.state,
             &mut it.increments,
         );
@@ -1522,7 +1534,7 @@ impl NonlinearSystem for StepSystem<'_> {
             self.start.h,
             self.saved,
             None,
-            self.start.in_chart().then_some(self.model.group),
+            self.start.chart(self.model.group),
             self.state,
             self.dq,
         );

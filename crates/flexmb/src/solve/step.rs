@@ -109,7 +109,7 @@ use crate::joints::ConstraintKernel;
 use crate::model::Model;
 use crate::parallel::Threads;
 use crate::state::State;
-use flexmb_lie::{Group, Mat6, Vec6};
+use flexmb_lie::{Chart, Group, Mat6, Vec6};
 use std::cell::RefCell;
 use std::rc::Rc;
 use std::sync::Arc;
@@ -195,7 +195,17 @@ impl Start {
     /// `Theta''` (the Lie algebra update), mapped to the nodes' by [`kinematics`] and at
     /// the end of the step by [`finish`].
     pub fn in_chart(&self) -> bool {
-        self.lie_update == super::LieUpdate::LieAlgebra
+        self.lie_update.in_chart()
+    }
+
+    /// The local coordinates of the Lie algebra updates on `group` (`None` for the others).
+    pub fn chart(&self, group: Group) -> Option<Chart> {
+        use super::LieUpdate::{LieAlgebra, LieAlgebraR3xSO3};
+        match (self.lie_update, group) {
+            (LieAlgebraR3xSO3, Group::SE3) => Some(Chart::TranslationRotation),
+            (LieAlgebra | LieAlgebraR3xSO3, _) => Some(Chart::Exponential(group)),
+            _ => None,
+        }
     }
 
     /// `I + E`, `E = sigma h^2 gamma' ad(v_n)`: how the total increment moves with `dq`
@@ -246,7 +256,7 @@ pub fn predict(
     h: f64,
     start: &State,
     extrapolate: Option<&Extrapolation>,
-    chart: Option<Group>,
+    chart: Option<Chart>,
     state: &mut State,
     dq: &mut Vec<f64>,
 ) {
@@ -254,7 +264,8 @@ pub fn predict(
     dq.clear();
     dq.resize(6 * n, 0.0);
     let scheme = |vd1: Vec6, i: usize| {
-        let (v0, vd0, a0) = (start.v[i], start.vdot[i], start.a[i]);
+        let (vd0, a0) = chart_start(chart, start, i);
+        let v0 = start.v[i];
         let a1 = (vd0 * p.alpha_f + vd1 * (1.0 - p.alpha_f) - a0 * p.alpha_m) / (1.0 - p.alpha_m);
         let v1 = v0 + a0 * (h * (1.0 - p.gamma)) + a1 * (h * p.gamma);
         let inc = v0 * h + a0 * (h * h * (0.5 - p.beta)) + a1 * (h * h * p.beta);
@@ -266,8 +277,15 @@ pub fn predict(
             Extrapolation::at(&e.weights[0], vd0, |k| e.vdot[k][i])
         });
         let (mut v1, mut inc) = scheme(vd1, i);
-        if let Some(group) = chart {
-            vd1 = group.tangent_inv(&inc) * (vd1 - group.tangent_rate(&inc, &v1));
+        if let Some(chart) = chart {
+            vd1 = chart.inverse_map(&inc) * (vd1 - chart.rate(&inc, &v1));
+            if chart == Chart::TranslationRotation {
+                // The body-frame translation acceleration turns with the body; the chart's,
+                // the point's acceleration in the frame of `q_n`, does not: predicted
+                // constant.
+                let (theta2, _) = chart_start(Some(chart), start, i);
+                vd1.fixed_rows_mut::<3>(0).copy_from(&theta2.fixed_rows::<3>(0));
+            }
             (v1, inc) = scheme(vd1, i);
         }
         state.vdot[i] = vd1;
@@ -283,6 +301,21 @@ pub fn predict(
         let w1 = first.rate(start.xdot[i], start.xdot[i], start.w[i]);
         state.xdot[i] = start.xdot[i];
         state.x[i] = start.x[i] + first.increment(h, start.w[i], w1);
+    }
+}
+
+/// `Theta''_n` and `a_n` of node `i` in the step's chart: `vdot_n - N(0, v_n)` and
+/// `a_n - N(0, v_n)` ([`Chart::rate`]; zero for the exponential chart); `vdot_n` and `a_n`
+/// otherwise.
+#[inline]
+fn chart_start(chart: Option<Chart>, start: &State, i: usize) -> (Vec6, Vec6) {
+    let (vd0, a0) = (start.vdot[i], start.a[i]);
+    match chart {
+        Some(c @ Chart::TranslationRotation) => {
+            let n0 = c.rate(&Vec6::zeros(), &start.v[i]);
+            (vd0 - n0, a0 - n0)
+        }
+        _ => (vd0, a0),
     }
 }
 
@@ -417,21 +450,22 @@ pub fn kinematics(
     nodes: &mut [NodeState],
     threads: &Threads,
 ) {
-    let chart = step.in_chart();
+    let chart = step.chart(group);
     threads.for_each(nodes, |i, node| {
         let inc = Vec6::from_column_slice(&total[6 * i..6 * i + 6]);
-        node.q = group.integrate(&start.q[i], &inc);
-        if chart {
+        if let Some(chart) = chart {
             // The corrections are right-trivialized (`q exp(total) exp(dx)`, [`correct`]):
             // the tangent operator of the iteration matrix is the identity.
-            let t = group.tangent(&inc);
-            node.v = t * state.v[i];
-            node.vdot = t * state.vdot[i] + group.tangent_rate(&inc, &state.v[i]);
+            let m = chart.map(&inc);
+            node.q = chart.point(&start.q[i], &inc);
+            node.v = m * state.v[i];
+            node.vdot = m * state.vdot[i] + chart.rate(&inc, &state.v[i]);
             if tangents {
                 node.t = Mat6::identity();
             }
             return;
         }
+        node.q = group.integrate(&start.q[i], &inc);
         node.v = state.v[i];
         node.vdot = state.vdot[i];
         if tangents {
@@ -454,7 +488,7 @@ pub fn correct(
     zeta: &mut [f64],
     state: &mut State,
 ) {
-    let chart = start.in_chart();
+    let chart = start.chart(group);
     let nd = layout.n_dofs;
     if layout.stabilized {
         let na = layout.n_active;
@@ -464,8 +498,8 @@ pub fn correct(
     }
     for i in 0..layout.n_nodes {
         let mut d = Vec6::from_column_slice(&dx[6 * i..6 * i + 6]);
-        if chart {
-            d = group.tangent_inv(&Vec6::from_column_slice(&total[6 * i..6 * i + 6])) * d;
+        if let Some(chart) = chart {
+            d = chart.inverse_map(&Vec6::from_column_slice(&total[6 * i..6 * i + 6])) * d;
         }
         for k in 0..6 {
             dq[6 * i + k] += d[k];
@@ -501,27 +535,31 @@ pub fn finish(
     for i in 0..start.x.len() {
         state.w[i] = step.first.rate(start.xdot[i], state.xdot[i], start.w[i]);
     }
+    let chart = step.chart(group);
     threads.for_each(&mut state.q, |i, q| {
         let inc = Vec6::from_column_slice(&total[6 * i..6 * i + 6]);
-        *q = group.integrate(&start.q[i], &inc);
+        *q = match chart {
+            Some(chart) => chart.point(&start.q[i], &inc),
+            None => group.integrate(&start.q[i], &inc),
+        };
         q.orthonormalize();
     });
     for i in 0..start.q.len() {
-        state.a[i] = (start.vdot[i] * p.alpha_f + state.vdot[i] * (1.0 - p.alpha_f)
-            - start.a[i] * p.alpha_m)
+        let (vd0, a0) = chart_start(chart, start, i);
+        state.a[i] = (vd0 * p.alpha_f + state.vdot[i] * (1.0 - p.alpha_f) - a0 * p.alpha_m)
             / (1.0 - p.alpha_m);
     }
-    if step.in_chart() {
+    if let Some(chart) = chart {
         // From the step's chart to the nodes' velocities and the next step's chart: with
-        // `X = Theta'_{n+1}` and `D = (d/dt T) X`, `v = T X`, `vdot = T Theta'' + D`, and
-        // `a` as a second derivative, `T a + D` (module documentation).
+        // `X = Theta'_{n+1}` and `N = N(Theta, X)`, `v = M X`, `vdot = M Theta'' + N`, and
+        // `a` as a second derivative, `M a + N` (module documentation).
         for i in 0..start.q.len() {
             let inc = Vec6::from_column_slice(&total[6 * i..6 * i + 6]);
-            let t = group.tangent(&inc);
-            let d = group.tangent_rate(&inc, &state.v[i]);
-            state.v[i] = t * state.v[i];
-            state.vdot[i] = t * state.vdot[i] + d;
-            state.a[i] = t * state.a[i] + d;
+            let m = chart.map(&inc);
+            let n = chart.rate(&inc, &state.v[i]);
+            state.v[i] = m * state.v[i];
+            state.vdot[i] = m * state.vdot[i] + n;
+            state.a[i] = m * state.a[i] + n;
         }
     }
 }
@@ -845,7 +883,7 @@ impl<'a> StepFunction<'a> {
         h: f64,
     ) -> Self {
         assert!(
-            settings.lie_update != super::LieUpdate::LieAlgebra,
+            !settings.lie_update.in_chart(),
             "StepFunction implements the bruls_cardona and commutator updates only"
         );
         let params = settings.scheme.parameters(settings.rho_inf);
