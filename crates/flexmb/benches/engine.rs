@@ -105,7 +105,10 @@ fn heavy_top_updates() {
     let updates: [(&str, &[&str]); 5] = [
         ("bruls_cardona", &[]),
         ("lie_algebra", &["solver.lie_update=lie_algebra"]),
-        ("lie_algebra_r3xso3", &["solver.lie_update=lie_algebra_r3xso3"]),
+        (
+            "lie_algebra_r3xso3",
+            &["solver.lie_update=lie_algebra_r3xso3"],
+        ),
         ("commutator 1/12", &["solver.lie_update=commutator"]),
         (
             "commutator 0.2",
@@ -134,7 +137,10 @@ fn lie_updates_other() {
     let updates: [(&str, &[&str]); 5] = [
         ("bruls_cardona", &[]),
         ("lie_algebra", &["solver.lie_update=lie_algebra"]),
-        ("lie_algebra_r3xso3", &["solver.lie_update=lie_algebra_r3xso3"]),
+        (
+            "lie_algebra_r3xso3",
+            &["solver.lie_update=lie_algebra_r3xso3"],
+        ),
         ("commutator 1/12", &["solver.lie_update=commutator"]),
         (
             "commutator 0.2",

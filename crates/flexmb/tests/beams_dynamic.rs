@@ -233,3 +233,24 @@ fn rayleigh_damping_gives_the_modal_damping_ratio() {
         "zeta {zeta}"
     );
 }
+
+/// The Lie algebra updates on a fast-turning flexible beam (the spin-up example, h = 0.01 s,
+/// rho_inf = 0.8): with the SE(3) exponential as local coordinates a mode grows from
+/// t = 14.5 s (hundreds of rejected steps, BENCHMARKS.md "The Lie algebra update"); with
+/// R3xSO(3)'s (`lie_algebra_r3xso3`) the run is as smooth as the default's and its tip
+/// follows the default's.
+#[test]
+fn spin_up_runs_smoothly_with_r3xso3_local_coordinates() {
+    let end = |set: &[&str]| {
+        let run = common::run("spin_up.toml", set);
+        let tip = (run.last("tip_x"), run.last("tip_y"));
+        (tip, run.stats.rejected_steps, run.stats.steps)
+    };
+    let (reference, _, _) = end(&["solver.t_end=20"]);
+    let (tip, rejected, steps) = end(&["solver.t_end=20", "solver.lie_update=lie_algebra_r3xso3"]);
+    println!("tip {tip:?} against {reference:?}, {rejected} rejected in {steps} steps");
+    assert_eq!(rejected, 0);
+    assert_eq!(steps, 2000);
+    let d = (tip.0 - reference.0).hypot(tip.1 - reference.1);
+    assert!(d < 1e-3, "tip {tip:?} against {reference:?}");
+}

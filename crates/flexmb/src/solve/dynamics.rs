@@ -1514,11 +1514,12 @@ impl NonlinearSystem for StepSystem<'_> {
     }
 
     fn near_exact_matrix(&self) -> bool {
-        // The Lie algebra update's matrix, in right-trivialized corrections, has `gamma'`
-        // and `beta'` where the Jacobian has `gamma' + P_v T^-1` and `beta' + P_a T^-1`,
-        // `P_v = d((d/dt T) Theta')/d Theta'`-like terms of size |v| and |v|^2 + |vdot|
-        // (step module documentation): a contraction of order h^2 |v|^2 on inertia, and
-        // beta h |v| / (2 gamma) on damping.
+        // The Lie algebra updates' matrix, in right-trivialized corrections, has `gamma'`
+        // and `beta'` where the Jacobian also has the derivatives of `M` and `N` (step
+        // module documentation), of size |v| and |v|^2 + |vdot|: a contraction of order
+        // h^2 |v|^2 on inertia and beta h |v| / (2 gamma) on damping for the exponential
+        // chart, of order h |v| in R3xSO(3)'s chart on SE(3). The stabilized form's matrix
+        // is approximate anyway, and keeps its rule.
         self.start.in_chart() && self.b_start.is_empty() || self.exact_matrix()
     }
 

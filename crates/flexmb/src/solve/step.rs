@@ -60,39 +60,45 @@
 //! on the increments' columns, and `dc_n = sigma h^2 (ad(v_n) dv_{n+1} - ad(v_{n+1}) dv_n)`
 //! with `dv_{n+1}` from the start at fixed `dq`.
 //!
-//! **Lie algebra update** (`lie_algebra`; Arnold, Cardona & Brüls 2016, "A Lie algebra
-//! approach to Lie group time integration of constrained systems", CISM Courses and
-//! Lectures 565, Springer; the chapter was not retrieved, so what follows is this
-//! module's reading of its title idea, derived here). The scheme's relations above are
-//! applied to the local coordinates `Theta` of the step, `q(t) = q_n exp(Theta(t))`,
-//! `Theta(t_n) = 0`, a vector space where generalized-alpha is the linear scheme: the
-//! relations' `dq` is `Theta_{n+1}` (plus `B^T zeta`), their `v` and `vdot` are
-//! `Theta'_{n+1}` and `Theta''_{n+1}`, and the node velocities follow from
-//! `d/dt (q_n exp(Theta)) = q tilde(T(Theta) Theta')`:
+//! **Lie algebra updates** (`lie_algebra`, `lie_algebra_r3xso3`; after Arnold, Cardona &
+//! Brüls 2016, "A Lie algebra approach to Lie group time integration of constrained
+//! systems", CISM Courses and Lectures 565, Springer; the chapter was not retrieved, so
+//! what follows is this module's reading of its idea, derived here). The scheme's
+//! relations above are applied to local coordinates `Theta` of the step,
+//! `q(t) = q_n o C(Theta(t))`, `Theta(t_n) = 0`, a vector space where generalized-alpha is
+//! the linear scheme: the relations' `dq` is `Theta_{n+1}` (plus `B^T zeta`), their `v`
+//! and `vdot` are `Theta'_{n+1}` and `Theta''_{n+1}`, and the nodes' follow from the chart
+//! ([`flexmb_lie::Chart`]: `C` the group's exponential for `lie_algebra`, R3xSO(3)'s for
+//! `lie_algebra_r3xso3`, which on SE(3) reads the translation in the frame of `q_n`):
 //!
 //! ```text
-//! v_{n+1}    = T(Theta) Theta'_{n+1}
-//! vdot_{n+1} = T(Theta) Theta''_{n+1} + D(Theta, Theta'_{n+1}),   D(Theta, X) = (d/ds T(Theta + s X))|_0 X
+//! v_{n+1}    = M(Theta) Theta'_{n+1}
+//! vdot_{n+1} = M(Theta) Theta''_{n+1} + N(Theta, Theta'_{n+1})
 //! ```
 //!
-//! ([`flexmb_lie::Group::tangent_rate`]). At the start of a step `T(0) = I` and
-//! `D(0, X) = 0` (`D = -ad(X) X / 2 + O(Theta)`), so `Theta'_n = v_n`, `Theta''_n = vdot_n`.
-//! The algorithmic accelerations live in the chart of their step; with
-//! `exp(Theta_old(t)) = exp(Theta_{n+1}) exp(Theta_new(t))` and `Theta_new(t_{n+1}) = 0`,
-//! differentiating twice gives `Theta''_new = T(Theta_{n+1}) Theta''_old +
-//! D(Theta_{n+1}, Theta'_old)` at `t_{n+1}`, and `a_{n+1}` is carried to the next chart
-//! the same way, `a <- T a + D`, which keeps its `O(h^2)` consistency with `vdot`. The
-//! predictor takes its `vdot_{n+1}` to the chart, `Theta'' = T^-1 (vdot - D)` at the
-//! increment the scheme gives for it. Newton's node corrections are right-trivialized,
-//! `q exp(total) exp(dx)` (`dq += T(total)^-1 dx`), so that the iteration matrix keeps
-//! `gamma'`, `beta'` and an identity tangent operator: it omits the derivatives of `T` and
-//! `D`, a contraction of order `h^2 |v|^2` on inertia terms and `beta h |v| / (2 gamma)` on
-//! damping, and its iterates are accepted on measured rates. Measured
-//! (`BENCHMARKS.md`, "Error constant: variants compared"): on R3xSO(3) where the rotation
-//! part is all it changes, 7 to 9 times less error on the heavy and asymmetric tops, as
-//! robust as Brüls-Cardona; on SE(3) 1.6 to 4 times less error, but a flexible beam turning
-//! fast (the spin-up at `h = 0.01 s`, `rho_inf = 0.8`) grows an unstable mode, through the
-//! translation-rotation coupling of `T` on SE(3).
+//! (exponential chart: `M = T`, `N = (d/ds T(Theta + s X))|_0 X`,
+//! [`flexmb_lie::Group::tangent_rate`]). At the start of a step `M(0) = I`, so
+//! `Theta'_n = v_n` and `Theta''_n = vdot_n - N(0, v_n)` (`N(0, X) = 0` for the
+//! exponential, `(-X_w x X_u, 0)` for R3xSO(3)'s chart on SE(3)). The algorithmic
+//! accelerations live in the chart of their step; `a_{n+1}` is kept as
+//! `M a_{n+1} + N(Theta, Theta'_{n+1})`, the map of a second derivative, and the next
+//! step subtracts its `N(0, v_{n+1})` as it does from `vdot`: both charts read the same
+//! `vdot` at `t_{n+1}`, so that `Theta''_new = M Theta''_old + N(Theta, X) - N(0, v)`
+//! there, and `a` keeps its `O(h^2)` consistency with it. The predictor takes its
+//! `vdot_{n+1}` to the chart, `Theta'' = M^-1 (vdot - N)` at the increment the scheme
+//! gives for it (on SE(3) in R3xSO(3)'s chart, the translation part kept at its start
+//! value: the body-frame translation acceleration turns with the body, the chart's does
+//! not). Newton's node corrections are right-trivialized, `q o C(total) exp(dx)`
+//! (`dq += M(total)^-1 dx`), so that the iteration matrix keeps `gamma'`, `beta'` and an
+//! identity tangent operator: it omits the derivatives of `M` and `N` (a contraction of
+//! order `h^2 |v|^2` on inertia terms and `beta h |v| / (2 gamma)` on damping for the
+//! exponential chart, of order `h |v|` on SE(3) in R3xSO(3)'s), and its iterates are
+//! accepted on measured rates. Measured (`BENCHMARKS.md`, "The Lie algebra update"): 7 to
+//! 9 times less error on the R3xSO(3) heavy and asymmetric tops, as robust as
+//! Brüls-Cardona; on SE(3) the exponential chart gains 1.6 to 4 times but a flexible
+//! beam turning fast (the spin-up at `h = 0.01 s`, `rho_inf = 0.8`) grows an unstable
+//! mode, through the translation-rotation coupling of `T`, while R3xSO(3)'s chart gives
+//! the SE(3) tops the R3xSO(3) errors and runs the spin-up smoothly.
 //!
 //! The Newton iteration of [`super::dynamics`] builds the same relations incrementally
 //! ([`predict`], [`correct`], [`finish`]); [`StepFunction`] evaluates them from `x`
@@ -245,9 +251,9 @@ impl Start {
 /// holds `s_n` on entry) and `dq`; the element states: `xdot_{n+1} = xdot_n` and the `x`
 /// the first-order scheme gives for it (`state.x`, `state.xdot`).
 ///
-/// In the Lie algebra update (`chart` the group) the predicted `vdot_{n+1}` is taken to the
-/// step's chart, `Theta'' = T^-1 (vdot - (d/dt T) Theta')` at the increment and `Theta'`
-/// that the scheme gives for it.
+/// In the Lie algebra updates (`chart` their local coordinates) the predicted `vdot_{n+1}`
+/// is taken to the step's chart, `Theta'' = M^-1 (vdot - N)` at the increment and `Theta'`
+/// that the scheme gives for it (module documentation).
 #[inline]
 #[allow(clippy::too_many_arguments)]
 pub fn predict(
@@ -284,7 +290,8 @@ pub fn predict(
                 // the point's acceleration in the frame of `q_n`, does not: predicted
                 // constant.
                 let (theta2, _) = chart_start(Some(chart), start, i);
-                vd1.fixed_rows_mut::<3>(0).copy_from(&theta2.fixed_rows::<3>(0));
+                vd1.fixed_rows_mut::<3>(0)
+                    .copy_from(&theta2.fixed_rows::<3>(0));
             }
             (v1, inc) = scheme(vd1, i);
         }
@@ -436,8 +443,8 @@ pub fn commutator_correction(
 /// Node kinematics of the iterate: `q = q_n exp(total)`, `v` and `vdot` from `state` and,
 /// when `tangents`, the tangent operators `T(total)` (otherwise left as they are); node by
 /// node on `threads`.
-/// In the Lie algebra update `state` holds `Theta'` and `Theta''`, and the nodes take
-/// `v = T Theta'` and `vdot = T Theta'' + (d/dt T) Theta'` ([`Start::in_chart`]).
+/// In the Lie algebra updates `state` holds `Theta'` and `Theta''`, and the nodes take
+/// `q = q_n o C(total)`, `v = M Theta'` and `vdot = M Theta'' + N` ([`Start::chart`]).
 #[inline]
 #[allow(clippy::too_many_arguments)]
 pub fn kinematics(
@@ -476,8 +483,8 @@ pub fn kinematics(
 
 /// Applies a Newton correction `dx`: `dq += dx`, `v += gamma' dx`, `vdot += beta' dx`,
 /// `lambda += dmu / s`, `zeta += dzeta` in the stabilized formulation, and on the element
-/// states `x += dx`, `xdot += c_x dx`. In the Lie algebra update the node corrections are
-/// right-trivialized, `q exp(total) exp(dx)`: `dq` moves by `T(total)^-1 dx` and `v`,
+/// states `x += dx`, `xdot += c_x dx`. In the Lie algebra updates the node corrections are
+/// right-trivialized, `q o C(total) exp(dx)`: `dq` moves by `M(total)^-1 dx` and `v`,
 /// `vdot` (there `Theta'`, `Theta''`) with it.
 #[inline]
 pub fn correct(
@@ -521,7 +528,9 @@ pub fn correct(
 
 /// End of the step: `q_{n+1} = q_n exp(total)` (re-orthonormalized), the algorithmic
 /// acceleration `a_{n+1} = (alpha_f vdot_n + (1 - alpha_f) vdot_{n+1} - alpha_m a_n) /
-/// (1 - alpha_m)` and the states' algorithmic rates `w_{n+1}` likewise.
+/// (1 - alpha_m)` and the states' algorithmic rates `w_{n+1}` likewise. In the Lie algebra
+/// updates `q_{n+1} = q_n o C(total)`, and `v`, `vdot` and `a` leave the chart
+/// (`M X`, `M Theta'' + N`, `M a + N`; module documentation).
 #[inline]
 pub fn finish(
     step: &Start,
