@@ -97,29 +97,31 @@ fn heavy_top(file: &str) {
     heavy_top_rows(file, file, &[], &steps);
 }
 
+/// The configuration updates compared (`[solver] lie_update`), each with its overrides.
+const UPDATES: [(&str, &[&str]); 5] = [
+    ("bruls_cardona", &[]),
+    ("lie_algebra", &["solver.lie_update=lie_algebra"]),
+    (
+        "lie_algebra_r3xso3",
+        &["solver.lie_update=lie_algebra_r3xso3"],
+    ),
+    ("commutator 1/12", &["solver.lie_update=commutator"]),
+    (
+        "commutator 0.2",
+        &[
+            "solver.lie_update=commutator",
+            "solver.lie_update_sigma=0.2",
+        ],
+    ),
+];
+
 /// The configuration updates of the generalized-alpha step compared on the heavy top
 /// (BENCHMARKS.md, "Error constant: variants compared"): each update on both groups.
 fn heavy_top_updates() {
     println!("| update, group | h [s] | steps | error x_G(1 s) [m] | solve time [ms] | time/step [us] | Newton it./step |");
     println!("|---|---|---|---|---|---|---|");
-    let updates: [(&str, &[&str]); 5] = [
-        ("bruls_cardona", &[]),
-        ("lie_algebra", &["solver.lie_update=lie_algebra"]),
-        (
-            "lie_algebra_r3xso3",
-            &["solver.lie_update=lie_algebra_r3xso3"],
-        ),
-        ("commutator 1/12", &["solver.lie_update=commutator"]),
-        (
-            "commutator 0.2",
-            &[
-                "solver.lie_update=commutator",
-                "solver.lie_update_sigma=0.2",
-            ],
-        ),
-    ];
     let steps = [1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5];
-    for (name, set) in updates {
+    for (name, set) in UPDATES {
         for (group, file) in [
             ("R3xSO(3)", "heavy_top_r3so3.toml"),
             ("SE(3)", "heavy_top.toml"),
@@ -134,22 +136,6 @@ fn heavy_top_updates() {
 /// with the Brüls-Cardona update, rho_inf = 0.6. The asymmetric top is the heavy top with
 /// the inertia (0.234375, 0.46875, 0.35) kg m^2 about its centre of mass.
 fn lie_updates_other() {
-    let updates: [(&str, &[&str]); 5] = [
-        ("bruls_cardona", &[]),
-        ("lie_algebra", &["solver.lie_update=lie_algebra"]),
-        (
-            "lie_algebra_r3xso3",
-            &["solver.lie_update=lie_algebra_r3xso3"],
-        ),
-        ("commutator 1/12", &["solver.lie_update=commutator"]),
-        (
-            "commutator 0.2",
-            &[
-                "solver.lie_update=commutator",
-                "solver.lie_update_sigma=0.2",
-            ],
-        ),
-    ];
     let asymmetric = "body.top.inertia=[0.234375, 0.46875, 0.35]";
     let cases: [(&str, &str, &str, f64, [f64; 2]); 6] = [
         (
@@ -172,7 +158,7 @@ fn lie_updates_other() {
         ("Bricard", "bricard.toml", "R3xSO3", 2.0, [1e-3, 5e-4]),
     ];
     print!("| model, group | h [s] |");
-    for (name, _) in updates {
+    for (name, _) in UPDATES {
         print!(" {name} |");
     }
     println!();
@@ -194,7 +180,7 @@ fn lie_updates_other() {
         let reference = solve(file, &base(steps[1] / 32.0)).state;
         for h in steps {
             print!("| {name}, {group} | {h:.3e} |");
-            for (_, set) in updates {
+            for (_, set) in UPDATES {
                 let mut o = base(h);
                 o.extend(set.iter().map(|s| s.to_string()));
                 let end = solve(file, &o).state;
