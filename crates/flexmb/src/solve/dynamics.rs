@@ -1502,8 +1502,8 @@ impl NonlinearSystem for StepSystem<'_> {
 
     fn exact_matrix(&self) -> bool {
         if self.start.in_chart() {
-            // The Lie algebra update: the matrix omits the derivatives of T in
-            // `v = T Theta'` and `vdot = T Theta'' + (d/dt T) Theta'` ([`Self::near_exact_matrix`]).
+            // The Lie algebra updates: the matrix omits the derivatives of `M` and `N` in
+            // `v = M Theta'` and `vdot = M Theta'' + N` ([`Self::near_exact_matrix`]).
             return false;
         }
         // The stabilized form's iteration matrix is an approximation: it omits the O(h)

@@ -882,8 +882,8 @@ impl<'a> StepFunction<'a> {
     /// simulation with `settings` and the unknowns of `layout`.
     ///
     /// # Panics
-    /// With the Lie algebra update ([`super::LieUpdate::LieAlgebra`]), which this function
-    /// does not implement (the sensitivity analyses refuse it with an error first).
+    /// With the Lie algebra updates ([`super::LieUpdate::in_chart`]), which this function
+    /// does not implement (the sensitivity analyses refuse them with an error first).
     pub fn new(
         model: &'a Model,
         layout: &'a Layout,
