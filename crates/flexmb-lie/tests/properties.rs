@@ -425,7 +425,7 @@ fn tangent_rate_matches_central_differences_of_the_tangent() {
             for _ in 0..6 {
                 let theta = rotation(&mut rng, angle);
                 let u = rng.vec3(2.0);
-                let w = Vec6::new(u.x, u.y, u.z, theta.x, theta.y, theta.z);
+                let w = flexmb_lie::join(&u, &theta);
                 let x = rng.vec6(3.0, 5.0);
                 let rate = g.tangent_rate(&w, &x);
                 let fd =
@@ -463,7 +463,7 @@ fn charts_read_velocities_and_accelerations_as_their_maps_say() {
                 let q_n = Frame::new(rng.vec3(2.0), so3::exp(&rng.vec3(1.5)));
                 let w = rotation(&mut rng, angle);
                 let u = rng.vec3(1.0);
-                let theta = Vec6::new(u.x, u.y, u.z, w.x, w.y, w.z);
+                let theta = flexmb_lie::join(&u, &w);
                 let (d, x) = (rng.vec6(1.0, 1.0), rng.vec6(3.0, 5.0));
                 let p = chart.point(&q_n, &theta);
                 let moved = |e: f64| group.difference(&p, &chart.point(&q_n, &(theta + d * e)));

@@ -534,18 +534,18 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
             "only allowed with lie_update = \"commutator\"".to_string(),
         ));
     }
-    if lie_update == Some("commutator") {
-        let sigma = match t.field("lie_update_sigma") {
-            Some(f) => f.f64()?,
-            None => 1.0 / 12.0,
-        };
-        s.lie_update = crate::solve::LieUpdate::Commutator { sigma };
-    }
-    match lie_update {
-        Some("lie_algebra") => s.lie_update = crate::solve::LieUpdate::LieAlgebra,
-        Some("lie_algebra_r3xso3") => s.lie_update = crate::solve::LieUpdate::LieAlgebraR3xSO3,
-        _ => {}
-    }
+    use crate::solve::LieUpdate;
+    s.lie_update = match lie_update {
+        Some("commutator") => LieUpdate::Commutator {
+            sigma: match t.field("lie_update_sigma") {
+                Some(f) => f.f64()?,
+                None => 1.0 / 12.0,
+            },
+        },
+        Some("lie_algebra") => LieUpdate::LieAlgebra,
+        Some("lie_algebra_r3xso3") => LieUpdate::LieAlgebraR3xSO3,
+        _ => LieUpdate::BrulsCardona,
+    };
     if let Some(f) = t.field("predictor") {
         s.adaptive_predictor = f.choice(&["linear", "adaptive"])? == "adaptive";
     }

@@ -1519,8 +1519,9 @@ impl NonlinearSystem for StepSystem<'_> {
         // module documentation), of size |v| and |v|^2 + |vdot|: a contraction of order
         // h^2 |v|^2 on inertia and beta h |v| / (2 gamma) on damping for the exponential
         // chart, of order h |v| in R3xSO(3)'s chart on SE(3). The stabilized form's matrix
-        // is approximate anyway, and keeps its rule.
-        self.start.in_chart() && self.b_start.is_empty() || self.exact_matrix()
+        // is approximate anyway, and keeps its rule: near exact is index 3, whatever the
+        // update.
+        self.b_start.is_empty()
     }
 
     fn restart(&mut self) {

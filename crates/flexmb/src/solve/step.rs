@@ -269,31 +269,32 @@ pub fn predict(
     let n = start.q.len();
     dq.clear();
     dq.resize(6 * n, 0.0);
-    let scheme = |vd1: Vec6, i: usize| {
-        let (vd0, a0) = chart_start(chart, start, i);
-        let v0 = start.v[i];
-        let a1 = (vd0 * p.alpha_f + vd1 * (1.0 - p.alpha_f) - a0 * p.alpha_m) / (1.0 - p.alpha_m);
-        let v1 = v0 + a0 * (h * (1.0 - p.gamma)) + a1 * (h * p.gamma);
-        let inc = v0 * h + a0 * (h * h * (0.5 - p.beta)) + a1 * (h * h * p.beta);
-        (v1, inc)
-    };
     for i in 0..n {
+        let v0 = start.v[i];
+        // `vdot_n` and `a_n` in the step's chart (themselves outside the Lie algebra updates)
+        let (vd0c, a0) = chart_start(chart, start, i);
+        let scheme = |vd1: Vec6| {
+            let a1 =
+                (vd0c * p.alpha_f + vd1 * (1.0 - p.alpha_f) - a0 * p.alpha_m) / (1.0 - p.alpha_m);
+            let v1 = v0 + a0 * (h * (1.0 - p.gamma)) + a1 * (h * p.gamma);
+            let inc = v0 * h + a0 * (h * h * (0.5 - p.beta)) + a1 * (h * h * p.beta);
+            (v1, inc)
+        };
         let vd0 = start.vdot[i];
         let mut vd1 = extrapolate.map_or(vd0, |e| {
             Extrapolation::at(&e.weights[0], vd0, |k| e.vdot[k][i])
         });
-        let (mut v1, mut inc) = scheme(vd1, i);
+        let (mut v1, mut inc) = scheme(vd1);
         if let Some(chart) = chart {
             vd1 = chart.inverse_map(&inc) * (vd1 - chart.rate(&inc, &v1));
             if chart == Chart::TranslationRotation {
                 // The body-frame translation acceleration turns with the body; the chart's,
                 // the point's acceleration in the frame of `q_n`, does not: predicted
                 // constant.
-                let (theta2, _) = chart_start(Some(chart), start, i);
                 vd1.fixed_rows_mut::<3>(0)
-                    .copy_from(&theta2.fixed_rows::<3>(0));
+                    .copy_from(&vd0c.fixed_rows::<3>(0));
             }
-            (v1, inc) = scheme(vd1, i);
+            (v1, inc) = scheme(vd1);
         }
         state.vdot[i] = vd1;
         state.v[i] = v1;
