@@ -28,10 +28,23 @@ const CASES: &[&str] = &[
 /// The example `file` with one criterion `expression` (integral) and the first `n` design
 /// parameters of `prefix` (paths starting with it, in registry order).
 fn problem(file: &str, set: &[&str], expression: &str, prefix: &str, n: usize) -> Problem {
+    problem_on(file, set, expression, prefix, n, thread_count())
+}
+
+/// [`problem`] on `threads` threads.
+fn problem_on(
+    file: &str,
+    set: &[&str],
+    expression: &str,
+    prefix: &str,
+    n: usize,
+    threads: usize,
+) -> Problem {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../examples")
         .join(file);
-    let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
+    let mut set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
+    set.push(format!("solver.threads={threads}"));
     let f = read_model_file(&path, &set).expect("model");
     let model = Arc::new(f.model);
     let params = Parameters::new(&model);
@@ -45,6 +58,11 @@ fn problem(file: &str, set: &[&str], expression: &str, prefix: &str, n: usize) -
         Criterion::new(&model, &[], "J", CriterionKind::Integral, expression).expect("criterion");
     let criteria = CriteriaSet::new(&model, Vec::new(), vec![c]);
     Problem::new(model, f.analysis, design, criteria)
+}
+
+/// The number of threads of this run: `FLEXMB_THREADS`, else one.
+fn thread_count() -> usize {
+    std::env::var("FLEXMB_THREADS").map_or(1, |n| n.parse().expect("FLEXMB_THREADS: a number"))
 }
 
 /// Seconds of the fastest of `runs` calls of `f`.

@@ -336,6 +336,48 @@ fn a_kept_workspace_gives_the_gradients_of_a_fresh_one() {
     );
 }
 
+/// Both methods with their steps' Jacobians prepared on two threads give the gradients of
+/// the sequential methods, bit for bit (the same operations in the same order); the adjoint
+/// with a fresh workspace and with one kept from an earlier call.
+#[test]
+fn jacobians_on_two_threads_give_the_gradients_of_one_thread() {
+    let design = ["body.link1.mass", "body.link5.inertia.2", "joint.j3.position.0"];
+    let criteria = [
+        ("tip", CriterionKind::Terminal, "tip_x"),
+        ("energy", CriterionKind::Integral, "sq(tip_y)"),
+    ];
+    let on = |threads: usize| {
+        let set = ["solver.t_end=0.05".to_string(), format!("solver.threads={threads}")];
+        let set: Vec<&str> = set.iter().map(String::as_str).collect();
+        problem("chain_10.toml", &set, &design, &criteria)
+    };
+    let sequential = sensitivity::adjoint(&on(1), &mut |_, _| {}).expect("one thread");
+    assert_eq!(sequential.stats.jacobian_threads, 1);
+    let p = on(2);
+    let mut workspace = sensitivity::Workspace::default();
+    for call in 0..2 {
+        let mut done = 0;
+        let parallel = sensitivity::adjoint_in(&p, &mut workspace, &mut |d, n| {
+            assert_eq!(d, done + 1, "the steps reported in order");
+            assert!(d <= n);
+            done = d;
+        })
+        .expect("two threads");
+        assert_eq!(done, parallel.stats.steps);
+        assert_eq!(parallel.stats.jacobian_threads, 2, "call {call}");
+        assert_eq!(parallel.gradients, sequential.gradients, "call {call}");
+        assert_eq!(parallel.values, sequential.values);
+    }
+    let direct = sensitivity::direct(&on(1)).expect("direct, one thread");
+    assert_eq!(direct.stats.jacobian_threads, 1);
+    assert!(difference(&direct, &sequential, 1e-300) < 1e-8);
+    let parallel = sensitivity::direct(&p).expect("direct, two threads");
+    assert_eq!(parallel.stats.jacobian_threads, 2);
+    assert_eq!(parallel.gradients, direct.gradients);
+    assert_eq!(parallel.values, direct.values);
+    assert_eq!(parallel.stats.steps, direct.stats.steps);
+}
+
 #[test]
 fn variable_step_sizes() {
     // t_end = 0.2045 with h = 1e-2: the step control shortens steps to land on the output

@@ -3,6 +3,7 @@
 
 use super::criteria::{weight, History};
 use super::matrix::StepMatrix;
+use super::pipeline::{self, prepare, Prepared};
 use super::{pick, state_bytes, Gradients, Problem, SensitivityError, Stats};
 use crate::data::Layout;
 use crate::observe::Observers;
@@ -63,23 +64,31 @@ impl Backward<'_> {
         }
     }
 
-    /// Step `n` backward: `sbar_n` to `sbar_{n-1}`.
+    /// Step `n` backward: `sbar_n` to `sbar_{n-1}`, the step prepared here.
     fn step(&mut self, step: &TrajectoryStep) -> Result<(), String> {
+        let settings = self.problem.dynamic().map_err(|e| e.to_string())?;
+        let matrix = std::mem::take(self.matrix);
+        let prepared = prepare(&self.problem.model, self.layout, settings, step, self.data, matrix)?;
+        *self.matrix = self.finish(prepared)?;
+        Ok(())
+    }
+
+    /// Step `n` backward with its prepared Jacobian; gives the factorization's storage back.
+    fn finish(&mut self, prepared: Prepared<&TrajectoryStep>) -> Result<StepMatrix, String> {
         let p = self.problem;
         let settings = p.dynamic().map_err(|e| e.to_string())?;
-        let f = StepFunction::new(&p.model, self.layout, &step.start, settings, step.h);
+        let Prepared {
+            step,
+            partials,
+            mut matrix,
+        } = prepared;
+        let f = StepFunction::new(&p.model, self.layout, &step.start, settings, step.h)
+            .with_partials(partials);
         let x = &step.unknowns;
-        let (pattern, values) = f.jacobian_values(x, self.data);
-        let t = step.t_end();
-        self.matrix
-            .factorize(&pattern, &values, &|| {
-                format!("step {} (t = {t:.6e} s)", step.index)
-            })
-            .map_err(|e| e.to_string())?;
         for c in 0..self.bars.len() {
             let (mut mu, mut start, pe) =
                 f.end_vjp(x, &self.bars[c], Some((&p.params, &p.design)), self.data);
-            self.matrix.solve_transpose(&mut mu);
+            matrix.solve_transpose(&mut mu);
             start.add_scaled(-1.0, &f.start_vjp(x, &mu, self.data));
             let pr = f.parameter_vjp_for(x, &p.params, &p.design, &mu, self.data);
             pick(&self.index, &pr, &mut self.pbars[c], -1.0);
@@ -89,7 +98,7 @@ impl Backward<'_> {
             self.bars[c] = start;
         }
         self.point(step.index - 1, &step.start);
-        Ok(())
+        Ok(matrix)
     }
 }
 
@@ -102,6 +111,8 @@ pub struct Workspace {
     data: Option<Data>,
     matrix: StepMatrix,
     steps: Vec<TrajectoryStep>,
+    /// The scratch of the threads that prepare the sweep's steps ahead of it.
+    sweepers: Vec<Option<Data>>,
 }
 
 impl Workspace {
@@ -112,22 +123,31 @@ impl Workspace {
         layout: &Layout,
         threads: &crate::parallel::Threads,
     ) -> Result<&mut Data, SensitivityError> {
-        let fits = self.data.as_ref().is_some_and(|d| {
-            d.layout.active_rows == layout.active_rows
-                && d.layout.stabilized == layout.stabilized
-                && d.layout.n_unknowns() == layout.n_unknowns()
-        });
-        if fits {
-            let data = self.data.as_mut().expect("kept");
-            // The nodal masses are the model's (its parameters may have moved).
-            data.nodal_mass = crate::data::nodal_mass(model);
-        } else {
-            let data = Data::new(model, layout.clone()).map_err(crate::SolveError::from)?;
-            self.data = Some(data.with_threads(threads.clone()));
+        if !refit(&mut self.data, model, layout)? {
+            self.data = self.data.take().map(|d| d.with_threads(threads.clone()));
             self.matrix = StepMatrix::default();
         }
         Ok(self.data.as_mut().expect("set above"))
     }
+}
+
+/// Makes `kept` scratch data for `layout` of `model`: kept if it has that layout (with the
+/// model's nodal masses: its parameters may have moved), built otherwise (then `false`).
+fn refit(
+    kept: &mut Option<Data>,
+    model: &crate::Model,
+    layout: &Layout,
+) -> Result<bool, SensitivityError> {
+    let fits = kept.as_ref().is_some_and(|d| {
+        d.layout.active_rows == layout.active_rows
+            && d.layout.stabilized == layout.stabilized
+            && d.layout.n_unknowns() == layout.n_unknowns()
+    });
+    match kept {
+        Some(data) if fits => data.nodal_mass = crate::data::nodal_mass(model),
+        _ => *kept = Some(Data::new(model, layout.clone()).map_err(crate::SolveError::from)?),
+    }
+    Ok(fits)
 }
 
 /// The criteria of `problem` and their gradients by the discrete adjoint. `progress` is
@@ -196,6 +216,7 @@ pub fn adjoint_in(
         forward_runs: 1,
         steps: n_steps,
         forward_seconds,
+        jacobian_threads: 1,
         ..Stats::default()
     };
     let n_c = problem.criteria.len();
@@ -204,6 +225,7 @@ pub fn adjoint_in(
         data,
         matrix,
         steps: kept,
+        sweepers,
     } = workspace;
     let mut back = Backward {
         problem,
@@ -220,8 +242,7 @@ pub fn adjoint_in(
     let clock = std::time::Instant::now();
     back.point(n_steps, &sim.state);
     let mut done = 0;
-    let mut visit = |step: &TrajectoryStep| -> Result<(), String> {
-        back.step(step)?;
+    let mut progress = |_: &TrajectoryStep| -> Result<(), String> {
         done += 1;
         progress(done, n_steps);
         Ok(())
@@ -230,9 +251,35 @@ pub fn adjoint_in(
     match forward.steps {
         Some(mut steps) => {
             stats.trajectory_bytes = checkpoints + n_steps * step_bytes;
-            for step in steps[..n_steps].iter().rev() {
-                visit(step).map_err(crate::SolveError::Output)?;
+            let steps_run = &steps[..n_steps];
+            let workers = crate::parallel::resolve(settings.threads).min(n_steps);
+            if workers > 1 && layout.n_unknowns() >= pipeline::PARALLEL_FROM {
+                stats.jacobian_threads = workers;
+                sweepers.resize_with(workers, || None);
+                for kept in sweepers.iter_mut() {
+                    refit(kept, &problem.model, &layout)?;
+                }
+                let scratch: Vec<&mut Data> = sweepers.iter_mut().flatten().collect();
+                pipeline::run(
+                    &problem.model,
+                    &layout,
+                    settings,
+                    scratch,
+                    steps_run.iter().rev(),
+                    &mut |prepared| {
+                        let step = prepared.step;
+                        let matrix = back.finish(prepared)?;
+                        progress(step)?;
+                        Ok(matrix)
+                    },
+                )
+            } else {
+                steps_run.iter().rev().try_for_each(|step| {
+                    back.step(step)?;
+                    progress(step)
+                })
             }
+            .map_err(crate::SolveError::Output)?;
             // Kept for the next call, without the slots of an earlier, longer run (the
             // storage held stays what this run's budget allowed).
             steps.truncate(n_steps);
@@ -242,7 +289,10 @@ pub fn adjoint_in(
             stats.checkpoints = trajectory.checkpoints();
             stats.recomputed_steps = n_steps;
             stats.trajectory_bytes = checkpoints + every * step_bytes;
-            trajectory.backward(&mut visit)?;
+            trajectory.backward(&mut |step: &TrajectoryStep| {
+                back.step(step)?;
+                progress(step)
+            })?;
         }
     }
     stats.sweep_seconds = clock.elapsed().as_secs_f64();

@@ -3,17 +3,22 @@
 
 use super::criteria::{CriterionKind, History};
 use super::matrix::StepMatrix;
+use super::pipeline::{self, Prepared};
 use super::{Gradients, Problem, SensitivityError, Stats};
 use crate::data::Layout;
 use crate::observe::{Observer, Sample, StepRecord};
 use crate::solve::step::{StateTangent, StepFunction};
+use crate::solve::trajectory::TrajectoryStep;
+use crate::solve::Simulation;
+use std::borrow::Borrow;
+use std::sync::mpsc::{sync_channel, SyncSender};
 use crate::state::State;
 use crate::{Data, Model};
 
 /// The direct method's observer of a run.
 struct Direct<'a> {
     problem: &'a Problem,
-    layout: Layout,
+    layout: &'a Layout,
     data: Data,
     matrix: StepMatrix,
     /// `ds_n/dp_k`.
@@ -39,14 +44,14 @@ impl Direct<'_> {
     fn point(&mut self, state: &State) {
         let p = self.problem;
         let criteria = &p.criteria;
-        criteria.record(&p.model, &self.layout, state, &mut self.history);
+        criteria.record(&p.model, self.layout, state, &mut self.history);
         let n = self.history.t.len() - 1;
         let values = &self.history.values[n];
         let (ones, index) = (&self.ones, &self.index);
         let mut now = vec![vec![0.0; p.design.len()]; criteria.len()];
         let grads = criteria.point_gradients(
             &p.model,
-            &self.layout,
+            self.layout,
             state,
             values,
             ones,
@@ -80,19 +85,12 @@ impl Direct<'_> {
         self.last = now;
     }
 
+    /// Step `n` on the run's thread: its Jacobian prepared here, then [`Direct::advance`].
     fn step(&mut self, record: &StepRecord) -> Result<(), String> {
-        let p = self.problem;
-        if record.redundant_rows != self.redundant.as_slice() {
-            return Err(super::reselected(record.start.t));
-        }
+        self.check(record.redundant_rows, record.start.t)?;
         let settings = &record.simulation.settings;
-        let f = StepFunction::new(
-            &p.model,
-            &self.layout,
-            record.start,
-            settings,
-            record.info.h,
-        );
+        let p = self.problem;
+        let f = StepFunction::new(&p.model, self.layout, record.start, settings, record.info.h);
         let x = record.unknowns;
         let (pattern, values) = f.jacobian_values(x, &mut self.data);
         let t = record.end.t;
@@ -101,6 +99,24 @@ impl Direct<'_> {
                 format!("step {} (t = {t:.6e} s)", record.index)
             })
             .map_err(|e| e.to_string())?;
+        let mut matrix = std::mem::take(&mut self.matrix);
+        self.advance(&f, x, &mut matrix, record.end);
+        self.matrix = matrix;
+        Ok(())
+    }
+
+    /// A run that changes the rows left out as redundant is refused.
+    fn check(&self, redundant: &[usize], t: f64) -> Result<(), String> {
+        if redundant != self.redundant.as_slice() {
+            return Err(super::reselected(t));
+        }
+        Ok(())
+    }
+
+    /// The tangents carried through step `f` with its Jacobian factorized in `matrix`, and
+    /// the criteria's derivatives at its `end`.
+    fn advance(&mut self, f: &StepFunction, x: &[f64], matrix: &mut StepMatrix, end: &State) {
+        let p = self.problem;
         let starts = f.start_jvp_many(x, &self.tangents, &mut self.data);
         for ((k, &id), mut rhs) in p.design.iter().enumerate().zip(starts) {
             let ds = &self.tangents[k];
@@ -109,14 +125,54 @@ impl Direct<'_> {
             for (a, b) in rhs.iter_mut().zip(&dr) {
                 *a = -(*a + b);
             }
-            self.matrix.solve(&mut rhs);
+            matrix.solve(&mut rhs);
             let next = f.end_jvp(x, &rhs, ds, Some((&p.params, &self.dp)), &mut self.data);
             self.dp[id.0 as usize] = 0.0;
             self.tangents[k] = next;
         }
         self.steps += 1;
-        self.point(record.end);
+        self.point(end);
+    }
+}
+
+/// A step of the run with its end, copied for the thread of the tangents.
+struct OwnedStep {
+    step: TrajectoryStep,
+    end: State,
+}
+
+impl Borrow<TrajectoryStep> for OwnedStep {
+    fn borrow(&self) -> &TrajectoryStep {
+        &self.step
+    }
+}
+
+/// The run's observer when the tangents are carried on other threads: each step is copied
+/// to them.
+struct Handover(SyncSender<OwnedStep>);
+
+impl Observer for Handover {
+    fn output(&mut self, _: &Sample) -> Result<(), String> {
         Ok(())
+    }
+    fn wants_steps(&self) -> bool {
+        true
+    }
+    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
+        let step = OwnedStep {
+            step: TrajectoryStep {
+                index: record.index,
+                h: record.info.h,
+                start: record.start.clone(),
+                unknowns: record.unknowns.to_vec(),
+                redundant_rows: record.redundant_rows.to_vec(),
+            },
+            end: record.end.clone(),
+        };
+        // The tangents' thread stopped on an error, which is the one reported.
+        self.0
+            .send(step)
+            .map_err(|_| "the sensitivity analysis stopped".to_string())
     }
 }
 
@@ -142,7 +198,7 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
         data: Data::new(&problem.model, layout.clone())
             .map_err(crate::SolveError::from)?
             .with_threads(sim.data.threads.clone()),
-        layout,
+        layout: &layout,
         matrix: StepMatrix::default(),
         tangents,
         history: History::default(),
@@ -156,7 +212,14 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
         index: problem.design_index(),
     };
     obs.point(&sim.state.clone());
-    sim.run(&mut obs)?;
+    let workers = crate::parallel::resolve(sim.settings.threads);
+    let jacobian_threads = if workers > 1 && obs.layout.n_unknowns() >= pipeline::PARALLEL_FROM {
+        obs = on_threads(&mut sim, obs, workers)?;
+        workers
+    } else {
+        sim.run(&mut obs)?;
+        1
+    };
     for (c, crit) in problem.criteria.criteria.iter().enumerate() {
         if crit.kind == CriterionKind::Terminal {
             obs.gradients[c].clone_from(&obs.last[c]);
@@ -169,8 +232,61 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
         stats: Stats {
             forward_runs: 1,
             steps: obs.steps,
+            jacobian_threads,
             ..Stats::default()
         },
         warnings: sim.warnings,
+    })
+}
+
+/// Runs `sim` with the tangents of `obs` carried on another thread, the steps' Jacobians
+/// prepared on `workers` more ([`pipeline`]); gives `obs` back at the end of the run.
+fn on_threads<'a>(
+    sim: &mut Simulation,
+    mut obs: Direct<'a>,
+    workers: usize,
+) -> Result<Direct<'a>, SensitivityError> {
+    let (p, layout) = (obs.problem, obs.layout);
+    let settings = sim.settings.clone();
+    let mut scratch = Vec::with_capacity(workers);
+    for _ in 0..workers {
+        scratch.push(Data::new(&p.model, layout.clone()).map_err(crate::SolveError::from)?);
+    }
+    let (tx, rx) = sync_channel::<OwnedStep>(pipeline::AHEAD);
+    std::thread::scope(|scope| {
+        let chain = scope.spawn(|| {
+            let scratch = scratch.iter_mut().collect();
+            let done = pipeline::run(
+                &p.model,
+                layout,
+                &settings,
+                scratch,
+                rx.into_iter(),
+                &mut |prepared| {
+                    let Prepared {
+                        step,
+                        partials,
+                        mut matrix,
+                    } = prepared;
+                    let s = &step.step;
+                    obs.check(&s.redundant_rows, s.start.t)?;
+                    let f = StepFunction::new(&p.model, layout, &s.start, &settings, s.h)
+                        .with_partials(partials);
+                    obs.advance(&f, &s.unknowns, &mut matrix, &step.end);
+                    Ok(matrix)
+                },
+            );
+            done.map(|()| obs)
+        });
+        let mut handover = Handover(tx);
+        let run = sim.run(&mut handover);
+        // The end of the steps: the tangents' thread finishes those it has.
+        drop(handover);
+        let chain = chain.join().expect("the tangents' thread does not panic");
+        match (run, chain) {
+            (_, Err(e)) => Err(SensitivityError::from(crate::SolveError::Output(e))),
+            (Err(e), _) => Err(e.into()),
+            (Ok(_), Ok(obs)) => Ok(obs),
+        }
     })
 }

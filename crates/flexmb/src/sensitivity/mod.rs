@@ -58,6 +58,7 @@ pub mod sensor_derivative;
 mod adjoint;
 mod direct;
 mod finite_differences;
+mod pipeline;
 pub(crate) mod statics;
 
 pub use adjoint::{adjoint, adjoint_in, Workspace};
@@ -271,6 +272,9 @@ pub struct Stats {
     /// Wall time of the adjoint's backward sweep, recomputation from checkpoints included
     /// \[s\] (0 for the other methods).
     pub sweep_seconds: f64,
+    /// Threads that computed the steps' exact Jacobians and their factorizations (1: the
+    /// thread of the run; 0 for the methods without them: finite differences, statics).
+    pub jacobian_threads: usize,
 }
 
 /// The fourth-order central difference `(8 (f(e) - f(-e)) - (f(2e) - f(-2e))) / (12 e)` of

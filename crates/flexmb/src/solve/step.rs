@@ -117,7 +117,6 @@ use crate::parallel::Threads;
 use crate::state::State;
 use flexmb_lie::{Chart, Group, Mat6, Vec6};
 use std::cell::RefCell;
-use std::rc::Rc;
 use std::sync::Arc;
 
 /// The fixed numbers of one step: scheme, size, scaling and loading.
@@ -664,11 +663,17 @@ pub struct StepFunction<'a> {
     cache: RefCell<Option<Cached>>,
 }
 
+/// The partial derivatives a [`StepFunction`] keeps, taken out of it
+/// ([`StepFunction::take_partials`]) to be handed to a step function of the same step made
+/// elsewhere ([`StepFunction::with_partials`]): a sensitivity analysis prepares its steps'
+/// Jacobians on other threads.
+pub struct KeptPartials(Option<Cached>);
+
 /// Partial derivatives and where they were taken: the unknowns and the step's numbers.
 struct Cached {
     x: Vec<f64>,
     step: Start,
-    partials: Rc<Partials>,
+    partials: Arc<Partials>,
 }
 
 /// Partial derivatives of the residual at the end of the step with respect to its
@@ -929,6 +934,19 @@ impl<'a> StepFunction<'a> {
         self
     }
 
+    /// The partial derivatives kept at the last unknowns asked for, taken out.
+    pub fn take_partials(&self) -> KeptPartials {
+        KeptPartials(self.cache.borrow_mut().take())
+    }
+
+    /// This step function with the partial derivatives `kept` of another of the same step
+    /// (used where they were taken: at the same unknowns and step numbers; recomputed
+    /// elsewhere).
+    pub fn with_partials(self, kept: KeptPartials) -> Self {
+        *self.cache.borrow_mut() = kept.0;
+        self
+    }
+
     /// The predictor of the step (no extrapolation): `vdot_{n+1} = vdot_n`,
     /// `mu = s lambda_n`, `zeta = 0`.
     pub fn predict(&self) -> Vec<f64> {
@@ -1065,17 +1083,17 @@ impl<'a> StepFunction<'a> {
 
     /// The partial derivatives at the end of the step (see [`Partials`]), kept for the next
     /// call at the same `x` with the same [`StepFunction::step`].
-    fn partials(&self, x: &[f64], data: &mut crate::Data) -> Rc<Partials> {
+    fn partials(&self, x: &[f64], data: &mut crate::Data) -> Arc<Partials> {
         if let Some(c) = &*self.cache.borrow() {
             if c.x.as_slice() == x && c.step == self.step {
-                return Rc::clone(&c.partials);
+                return Arc::clone(&c.partials);
             }
         }
-        let partials = Rc::new(self.compute_partials(x, data));
+        let partials = Arc::new(self.compute_partials(x, data));
         *self.cache.borrow_mut() = Some(Cached {
             x: x.to_vec(),
             step: self.step,
-            partials: Rc::clone(&partials),
+            partials: Arc::clone(&partials),
         });
         partials
     }

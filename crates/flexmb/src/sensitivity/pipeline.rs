@@ -1,0 +1,124 @@
+//! The steps' exact Jacobians prepared ahead on worker threads and handed over in order.
+//!
+//! Both methods need, at every step, the exact step Jacobian `J_x = dR/dx` at the converged
+//! unknowns, factorized, and then a chain of products that runs step after step (the direct
+//! method's tangents forward, the adjoint's cotangents backward). The Jacobian of a step
+//! depends on that step alone (its start `s_{n-1}`, its unknowns `x_n`), not on the chain:
+//! `W` workers prepare the steps `k = w, w + W, ...` of the sequence (step function, partial
+//! derivatives, factorization), each with its own scratch [`Data`] and factorizations, at
+//! most [`AHEAD`] steps ahead of the chain; the calling thread takes them in order and runs
+//! the chain. The operations on each step are those of the sequential code, so the results
+//! are the same, bit for bit (`tests/sensitivity.rs`).
+
+use super::matrix::StepMatrix;
+use crate::data::Layout;
+use crate::solve::step::{KeptPartials, StepFunction};
+use crate::solve::trajectory::TrajectoryStep;
+use crate::solve::DynamicSettings;
+use crate::{Data, Model};
+use std::borrow::Borrow;
+use std::sync::mpsc::{channel, sync_channel, Receiver};
+
+/// Steps a worker prepares ahead of the chain (each holds the step's partial derivatives
+/// and factorization: about 1 MB for chain_100).
+pub const AHEAD: usize = 2;
+
+/// Unknowns from which the steps are prepared on several threads when the setting allows
+/// them (below, a step's Jacobian costs little against the hand-over between threads;
+/// BENCHMARKS.md, "Sensitivity analysis").
+pub const PARALLEL_FROM: usize = 100;
+
+/// A step made ready for the chain: the step, its exact Jacobian's partial derivatives at
+/// the converged unknowns (for [`StepFunction::with_partials`]) and the Jacobian factorized.
+pub struct Prepared<S> {
+    pub step: S,
+    pub partials: KeptPartials,
+    pub matrix: StepMatrix,
+}
+
+/// Prepares `step` with the scratch `data` and the factorization's storage `matrix`.
+pub fn prepare<S: Borrow<TrajectoryStep>>(
+    model: &Model,
+    layout: &Layout,
+    settings: &DynamicSettings,
+    step: S,
+    data: &mut Data,
+    mut matrix: StepMatrix,
+) -> Result<Prepared<S>, String> {
+    let s: &TrajectoryStep = step.borrow();
+    let f = StepFunction::new(model, layout, &s.start, settings, s.h);
+    let (pattern, values) = f.jacobian_values(&s.unknowns, data);
+    let t = s.t_end();
+    matrix
+        .factorize(&pattern, &values, &|| {
+            format!("step {} (t = {t:.6e} s)", s.index)
+        })
+        .map_err(|e| e.to_string())?;
+    let partials = f.take_partials();
+    Ok(Prepared {
+        step,
+        partials,
+        matrix,
+    })
+}
+
+/// Runs `chain` on every step of `steps` in order, the steps prepared on as many workers as
+/// `scratch` has scratch data (at least two). `chain` gives back the factorization's storage
+/// for the next steps. The first error stops everything and is returned.
+pub fn run<S, I>(
+    model: &Model,
+    layout: &Layout,
+    settings: &DynamicSettings,
+    scratch: Vec<&mut Data>,
+    steps: I,
+    chain: &mut dyn FnMut(Prepared<S>) -> Result<StepMatrix, String>,
+) -> Result<(), String>
+where
+    S: Borrow<TrajectoryStep> + Send,
+    I: Iterator<Item = S> + Send,
+{
+    let workers = scratch.len();
+    std::thread::scope(|scope| {
+        let mut ready: Vec<Receiver<Result<Prepared<S>, String>>> = Vec::with_capacity(workers);
+        let mut inputs = Vec::with_capacity(workers);
+        let mut spare = Vec::with_capacity(workers);
+        for data in scratch {
+            let (input, steps_in) = sync_channel::<S>(AHEAD);
+            let (tx, rx) = sync_channel(AHEAD);
+            let (back_tx, back_rx) = channel::<StepMatrix>();
+            inputs.push(input);
+            ready.push(rx);
+            spare.push(back_tx);
+            scope.spawn(move || {
+                let mut matrices: Vec<StepMatrix> = Vec::new();
+                for step in steps_in {
+                    matrices.extend(back_rx.try_iter());
+                    let matrix = matrices.pop().unwrap_or_default();
+                    let prepared = prepare(model, layout, settings, step, data, matrix);
+                    let failed = prepared.is_err();
+                    // The chain stopped (an error): nothing more to prepare.
+                    if tx.send(prepared).is_err() || failed {
+                        return;
+                    }
+                }
+            });
+        }
+        // Step `k` of the sequence goes to worker `k % workers`.
+        scope.spawn(move || {
+            for (k, step) in steps.enumerate() {
+                if inputs[k % workers].send(step).is_err() {
+                    return;
+                }
+            }
+        });
+        // A worker without a step `k` has closed its channel: the sequence has ended.
+        let mut k = 0;
+        while let Ok(prepared) = ready[k % workers].recv() {
+            let matrix = chain(prepared?)?;
+            // A worker that has finished no longer takes matrices back.
+            let _ = spare[k % workers].send(matrix);
+            k += 1;
+        }
+        Ok(())
+    })
+}
