@@ -1,7 +1,8 @@
 //! Sensitivity benchmarks behind BENCHMARKS.md: the cost of the gradients of one criterion
 //! relative to one forward run, for 1, 10 and 100 parameters, by direct differentiation and
 //! by the discrete adjoint (finite differences cost `2 n_p + 1` runs by construction), and
-//! the adjoint's memory with checkpoints under a budget. Release build, one thread.
+//! the adjoint's memory with checkpoints under a budget. Release build, one thread
+//! (`FLEXMB_THREADS=n` for another count), and the two methods again on two threads.
 //!
 //! ```text
 //! cargo bench -p flexmb --bench sensitivity                  # all cases, each in its own process
@@ -79,8 +80,8 @@ fn best<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
 }
 
 fn costs(case: &str, file: &str, counts: &[usize], expression: &str, prefix: &str) {
-    println!("| case | n_p | forward [ms] | direct [ms] | direct / forward | adjoint [ms] | adjoint / forward | adjoint, workspace kept / forward | fd / forward | direct-adjoint |");
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("| case | n_p | forward [ms] | direct [ms] | direct / forward | adjoint [ms] | adjoint / forward | adjoint, workspace kept / forward | direct, 2 threads / forward | adjoint, 2 threads / forward | fd / forward | direct-adjoint |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     // `FLEXMB_NP=n` measures one count only (for profiling).
     let only: Option<usize> = std::env::var("FLEXMB_NP")
         .ok()
@@ -123,19 +124,30 @@ fn costs(case: &str, file: &str, counts: &[usize], expression: &str, prefix: &st
         let (kept, _) = best(4, || {
             sensitivity::adjoint_in(&p, &mut workspace, &mut |_, _| {}).expect("adjoint")
         });
+        // The same on two threads (the steps' Jacobians prepared ahead of the chain), against
+        // the same forward run (on one thread: a model this size gains nothing from more).
+        let p2 = problem_on(file, &[], expression, prefix, n, 2);
+        let (direct2, d2) = best(3, || sensitivity::direct(&p2).expect("direct"));
+        let (adjoint2, a2) = best(3, || {
+            sensitivity::adjoint(&p2, &mut |_, _| {}).expect("adjoint")
+        });
+        assert_eq!(d2.gradients, d.gradients, "the same bits on two threads");
+        assert_eq!(a2.gradients, a.gradients, "the same bits on two threads");
         let scale = d.gradients[0].iter().fold(1e-300f64, |m, v| m.max(v.abs()));
         let agree = d.gradients[0]
             .iter()
             .zip(&a.gradients[0])
             .fold(0.0f64, |m, (x, y)| m.max((x - y).abs() / scale));
         println!(
-            "| {case} | {n} | {:.1} | {:.1} | {:.2} | {:.1} | {:.2} | {:.2} | {} | {agree:.1e} |",
+            "| {case} | {n} | {:.1} | {:.1} | {:.2} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {} | {agree:.1e} |",
             forward * 1e3,
             direct * 1e3,
             direct / forward,
             adjoint * 1e3,
             adjoint / forward,
             kept / forward,
+            direct2 / forward,
+            adjoint2 / forward,
             2 * n + 1
         );
     }

@@ -341,13 +341,20 @@ fn a_kept_workspace_gives_the_gradients_of_a_fresh_one() {
 /// with a fresh workspace and with one kept from an earlier call.
 #[test]
 fn jacobians_on_two_threads_give_the_gradients_of_one_thread() {
-    let design = ["body.link1.mass", "body.link5.inertia.2", "joint.j3.position.0"];
+    let design = [
+        "body.link1.mass",
+        "body.link5.inertia.2",
+        "joint.j3.position.0",
+    ];
     let criteria = [
         ("tip", CriterionKind::Terminal, "tip_x"),
         ("energy", CriterionKind::Integral, "sq(tip_y)"),
     ];
     let on = |threads: usize| {
-        let set = ["solver.t_end=0.05".to_string(), format!("solver.threads={threads}")];
+        let set = [
+            "solver.t_end=0.05".to_string(),
+            format!("solver.threads={threads}"),
+        ];
         let set: Vec<&str> = set.iter().map(String::as_str).collect();
         problem("chain_10.toml", &set, &design, &criteria)
     };

@@ -2,8 +2,7 @@
 //! for all criteria (module documentation of [`super`]).
 
 use super::criteria::{weight, History};
-use super::matrix::StepMatrix;
-use super::pipeline::{self, prepare, Prepared};
+use super::pipeline::{self, prepare, Prepared, Spare};
 use super::{pick, state_bytes, Gradients, Problem, SensitivityError, Stats};
 use crate::data::Layout;
 use crate::observe::Observers;
@@ -18,7 +17,9 @@ struct Backward<'a> {
     problem: &'a Problem,
     layout: &'a Layout,
     data: &'a mut Data,
-    matrix: &'a mut StepMatrix,
+    spare: &'a mut Spare,
+    /// The step Jacobian's values (scratch).
+    values: Vec<f64>,
     hs: Vec<f64>,
     history: &'a History,
     /// `sbar` per criterion.
@@ -67,14 +68,15 @@ impl Backward<'_> {
     /// Step `n` backward: `sbar_n` to `sbar_{n-1}`, the step prepared here.
     fn step(&mut self, step: &TrajectoryStep) -> Result<(), String> {
         let settings = self.problem.dynamic().map_err(|e| e.to_string())?;
-        let matrix = std::mem::take(self.matrix);
-        let prepared = prepare(&self.problem.model, self.layout, settings, step, self.data, matrix)?;
-        *self.matrix = self.finish(prepared)?;
+        let spare = std::mem::take(self.spare);
+        let (model, values) = (&self.problem.model, &mut self.values);
+        let prepared = prepare(model, self.layout, settings, step, self.data, spare, values)?;
+        *self.spare = self.finish(prepared)?;
         Ok(())
     }
 
-    /// Step `n` backward with its prepared Jacobian; gives the factorization's storage back.
-    fn finish(&mut self, prepared: Prepared<&TrajectoryStep>) -> Result<StepMatrix, String> {
+    /// Step `n` backward with its prepared Jacobian; gives the preparation's storage back.
+    fn finish(&mut self, prepared: Prepared<&TrajectoryStep>) -> Result<Spare, String> {
         let p = self.problem;
         let settings = p.dynamic().map_err(|e| e.to_string())?;
         let Prepared {
@@ -98,7 +100,7 @@ impl Backward<'_> {
             self.bars[c] = start;
         }
         self.point(step.index - 1, &step.start);
-        Ok(matrix)
+        Ok(Spare::after(matrix, &f))
     }
 }
 
@@ -109,7 +111,7 @@ impl Backward<'_> {
 #[derive(Default)]
 pub struct Workspace {
     data: Option<Data>,
-    matrix: StepMatrix,
+    spare: Spare,
     steps: Vec<TrajectoryStep>,
     /// The scratch of the threads that prepare the sweep's steps ahead of it.
     sweepers: Vec<Option<Data>>,
@@ -125,7 +127,7 @@ impl Workspace {
     ) -> Result<&mut Data, SensitivityError> {
         if !refit(&mut self.data, model, layout)? {
             self.data = self.data.take().map(|d| d.with_threads(threads.clone()));
-            self.matrix = StepMatrix::default();
+            self.spare = Spare::default();
         }
         Ok(self.data.as_mut().expect("set above"))
     }
@@ -223,7 +225,7 @@ pub fn adjoint_in(
     workspace.data(&problem.model, &layout, &sim.data.threads)?;
     let Workspace {
         data,
-        matrix,
+        spare,
         steps: kept,
         sweepers,
     } = workspace;
@@ -231,7 +233,8 @@ pub fn adjoint_in(
         problem,
         layout: &layout,
         data: data.as_mut().expect("prepared above"),
-        matrix,
+        spare,
+        values: Vec::new(),
         hs: history.steps(),
         history: &history,
         bars: vec![StateTangent::zeros_of(&layout); n_c],
@@ -268,9 +271,9 @@ pub fn adjoint_in(
                     steps_run.iter().rev(),
                     &mut |prepared| {
                         let step = prepared.step;
-                        let matrix = back.finish(prepared)?;
+                        let spare = back.finish(prepared)?;
                         progress(step)?;
-                        Ok(matrix)
+                        Ok(spare)
                     },
                 )
             } else {

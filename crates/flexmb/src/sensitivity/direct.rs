@@ -3,17 +3,18 @@
 
 use super::criteria::{CriterionKind, History};
 use super::matrix::StepMatrix;
-use super::pipeline::{self, Prepared};
+use super::pipeline::{self, Prepared, Spare};
 use super::{Gradients, Problem, SensitivityError, Stats};
 use crate::data::Layout;
 use crate::observe::{Observer, Sample, StepRecord};
+use crate::solve::step::KeptPartials;
 use crate::solve::step::{StateTangent, StepFunction};
 use crate::solve::trajectory::TrajectoryStep;
 use crate::solve::Simulation;
-use std::borrow::Borrow;
-use std::sync::mpsc::{sync_channel, SyncSender};
 use crate::state::State;
 use crate::{Data, Model};
+use std::borrow::Borrow;
+use std::sync::mpsc::{sync_channel, SyncSender};
 
 /// The direct method's observer of a run.
 struct Direct<'a> {
@@ -21,6 +22,9 @@ struct Direct<'a> {
     layout: &'a Layout,
     data: Data,
     matrix: StepMatrix,
+    /// The storage of the last step's partial derivatives and Jacobian values, reused.
+    partials: KeptPartials,
+    values: Vec<f64>,
     /// `ds_n/dp_k`.
     tangents: Vec<StateTangent>,
     history: History,
@@ -90,18 +94,20 @@ impl Direct<'_> {
         self.check(record.redundant_rows, record.start.t)?;
         let settings = &record.simulation.settings;
         let p = self.problem;
-        let f = StepFunction::new(&p.model, self.layout, record.start, settings, record.info.h);
+        let f = StepFunction::new(&p.model, self.layout, record.start, settings, record.info.h)
+            .with_partials(std::mem::take(&mut self.partials));
         let x = record.unknowns;
-        let (pattern, values) = f.jacobian_values(x, &mut self.data);
+        let pattern = f.jacobian_values_into(x, &mut self.data, &mut self.values);
         let t = record.end.t;
         self.matrix
-            .factorize(&pattern, &values, &|| {
+            .factorize(&pattern, &self.values, &|| {
                 format!("step {} (t = {t:.6e} s)", record.index)
             })
             .map_err(|e| e.to_string())?;
         let mut matrix = std::mem::take(&mut self.matrix);
         self.advance(&f, x, &mut matrix, record.end);
         self.matrix = matrix;
+        self.partials = f.take_partials();
         Ok(())
     }
 
@@ -200,6 +206,8 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
             .with_threads(sim.data.threads.clone()),
         layout: &layout,
         matrix: StepMatrix::default(),
+        partials: KeptPartials::default(),
+        values: Vec::new(),
         tangents,
         history: History::default(),
         last: Vec::new(),
@@ -247,7 +255,7 @@ fn on_threads<'a>(
     workers: usize,
 ) -> Result<Direct<'a>, SensitivityError> {
     let (p, layout) = (obs.problem, obs.layout);
-    let settings = sim.settings.clone();
+    let settings = sim.settings;
     let mut scratch = Vec::with_capacity(workers);
     for _ in 0..workers {
         scratch.push(Data::new(&p.model, layout.clone()).map_err(crate::SolveError::from)?);
@@ -273,7 +281,7 @@ fn on_threads<'a>(
                     let f = StepFunction::new(&p.model, layout, &s.start, &settings, s.h)
                         .with_partials(partials);
                     obs.advance(&f, &s.unknowns, &mut matrix, &step.end);
-                    Ok(matrix)
+                    Ok(Spare::after(matrix, &f))
                 },
             );
             done.map(|()| obs)

@@ -36,21 +36,43 @@ pub struct Prepared<S> {
     pub matrix: StepMatrix,
 }
 
-/// Prepares `step` with the scratch `data` and the factorization's storage `matrix`.
+/// What the preparation of a step reuses from an earlier step's: the factorization's storage
+/// (with its symbolic analysis) and the partial derivatives' storage.
+#[derive(Default)]
+pub struct Spare {
+    pub matrix: StepMatrix,
+    pub partials: KeptPartials,
+}
+
+impl Spare {
+    /// What the next steps reuse of a step done with: its factorization `matrix` and the
+    /// partial derivatives kept in its step function `f`.
+    pub fn after(matrix: StepMatrix, f: &StepFunction) -> Self {
+        Spare {
+            matrix,
+            partials: f.take_partials(),
+        }
+    }
+}
+
+/// Prepares `step` with the scratch `data`, the storage of `spare` and `values` (the
+/// Jacobian's values, scratch).
 pub fn prepare<S: Borrow<TrajectoryStep>>(
     model: &Model,
     layout: &Layout,
     settings: &DynamicSettings,
     step: S,
     data: &mut Data,
-    mut matrix: StepMatrix,
+    spare: Spare,
+    values: &mut Vec<f64>,
 ) -> Result<Prepared<S>, String> {
     let s: &TrajectoryStep = step.borrow();
-    let f = StepFunction::new(model, layout, &s.start, settings, s.h);
-    let (pattern, values) = f.jacobian_values(&s.unknowns, data);
+    let f = StepFunction::new(model, layout, &s.start, settings, s.h).with_partials(spare.partials);
+    let pattern = f.jacobian_values_into(&s.unknowns, data, values);
     let t = s.t_end();
+    let mut matrix = spare.matrix;
     matrix
-        .factorize(&pattern, &values, &|| {
+        .factorize(&pattern, values, &|| {
             format!("step {} (t = {t:.6e} s)", s.index)
         })
         .map_err(|e| e.to_string())?;
@@ -63,15 +85,15 @@ pub fn prepare<S: Borrow<TrajectoryStep>>(
 }
 
 /// Runs `chain` on every step of `steps` in order, the steps prepared on as many workers as
-/// `scratch` has scratch data (at least two). `chain` gives back the factorization's storage
-/// for the next steps. The first error stops everything and is returned.
+/// `scratch` has scratch data (at least two). `chain` gives back the storage of the step's
+/// preparation for the next steps. The first error stops everything and is returned.
 pub fn run<S, I>(
     model: &Model,
     layout: &Layout,
     settings: &DynamicSettings,
     scratch: Vec<&mut Data>,
     steps: I,
-    chain: &mut dyn FnMut(Prepared<S>) -> Result<StepMatrix, String>,
+    chain: &mut dyn FnMut(Prepared<S>) -> Result<Spare, String>,
 ) -> Result<(), String>
 where
     S: Borrow<TrajectoryStep> + Send,
@@ -85,16 +107,16 @@ where
         for data in scratch {
             let (input, steps_in) = sync_channel::<S>(AHEAD);
             let (tx, rx) = sync_channel(AHEAD);
-            let (back_tx, back_rx) = channel::<StepMatrix>();
+            let (back_tx, back_rx) = channel::<Spare>();
             inputs.push(input);
             ready.push(rx);
             spare.push(back_tx);
             scope.spawn(move || {
-                let mut matrices: Vec<StepMatrix> = Vec::new();
+                let (mut spares, mut values): (Vec<Spare>, _) = (Vec::new(), Vec::new());
                 for step in steps_in {
-                    matrices.extend(back_rx.try_iter());
-                    let matrix = matrices.pop().unwrap_or_default();
-                    let prepared = prepare(model, layout, settings, step, data, matrix);
+                    spares.extend(back_rx.try_iter());
+                    let spare = spares.pop().unwrap_or_default();
+                    let prepared = prepare(model, layout, settings, step, data, spare, &mut values);
                     let failed = prepared.is_err();
                     // The chain stopped (an error): nothing more to prepare.
                     if tx.send(prepared).is_err() || failed {
@@ -114,9 +136,9 @@ where
         // A worker without a step `k` has closed its channel: the sequence has ended.
         let mut k = 0;
         while let Ok(prepared) = ready[k % workers].recv() {
-            let matrix = chain(prepared?)?;
-            // A worker that has finished no longer takes matrices back.
-            let _ = spare[k % workers].send(matrix);
+            let done = chain(prepared?)?;
+            // A worker that has finished no longer takes its storage back.
+            let _ = spare[k % workers].send(done);
             k += 1;
         }
         Ok(())

@@ -667,6 +667,7 @@ pub struct StepFunction<'a> {
 /// ([`StepFunction::take_partials`]) to be handed to a step function of the same step made
 /// elsewhere ([`StepFunction::with_partials`]): a sensitivity analysis prepares its steps'
 /// Jacobians on other threads.
+#[derive(Default)]
 pub struct KeptPartials(Option<Cached>);
 
 /// Partial derivatives and where they were taken: the unknowns and the step's numbers.
@@ -714,6 +715,12 @@ impl Partials {
             .filter(|(_, &v)| v != 0.0)
             .map(|(&(i, j), &v)| (i, j, v))
     }
+}
+
+/// `out` as `n` zeros, its storage reused.
+fn zeroed(out: &mut Vec<f64>, n: usize) {
+    out.clear();
+    out.resize(n, 0.0);
 }
 
 /// The positions of the exact step Jacobian of one layout, sorted by row then column
@@ -850,15 +857,14 @@ impl JacobianPattern {
     }
 
     /// The entries of `values` (on the iteration matrix's pattern) that `selection` takes,
-    /// summed on the Jacobian's positions.
-    fn select(&self, selection: Selection, values: &[f64]) -> Vec<f64> {
+    /// summed on the Jacobian's positions, into `out` (its storage reused).
+    fn select_into(&self, selection: Selection, values: &[f64], out: &mut Vec<f64>) {
         use crate::assembly::Sink;
-        let mut out = vec![0.0; self.positions.len()];
-        let mut sink = self.sink(selection, &mut out);
+        zeroed(out, self.positions.len());
+        let mut sink = self.sink(selection, out);
         for &v in values {
             sink.entry(0, 0, v);
         }
-        out
     }
 
     /// A sink of the iteration matrix's entries that sums those of `selection` into `out`
@@ -940,8 +946,8 @@ impl<'a> StepFunction<'a> {
     }
 
     /// This step function with the partial derivatives `kept` of another of the same step
-    /// (used where they were taken: at the same unknowns and step numbers; recomputed
-    /// elsewhere).
+    /// (used where they were taken: at the same unknowns and step numbers; elsewhere their
+    /// storage takes the new ones).
     pub fn with_partials(self, kept: KeptPartials) -> Self {
         *self.cache.borrow_mut() = kept.0;
         self
@@ -1089,7 +1095,10 @@ impl<'a> StepFunction<'a> {
                 return Arc::clone(&c.partials);
             }
         }
-        let partials = Arc::new(self.compute_partials(x, data));
+        // The storage of partial derivatives taken elsewhere (no one else holds them) is
+        // reused for these.
+        let stale = (self.cache.borrow_mut().take()).and_then(|c| Arc::try_unwrap(c.partials).ok());
+        let partials = Arc::new(self.compute_partials(x, data, stale));
         *self.cache.borrow_mut() = Some(Cached {
             x: x.to_vec(),
             step: self.step,
@@ -1102,7 +1111,15 @@ impl<'a> StepFunction<'a> {
     /// coefficient alone (`F_q`, `F_mu`), then the elements alone once per other coefficient
     /// (velocities, accelerations, and the element states' two): the joints have no terms
     /// there but their rows `B`, which the tail takes from the first assembly.
-    fn compute_partials(&self, x: &[f64], data: &mut crate::Data) -> Partials {
+    fn compute_partials(
+        &self,
+        x: &[f64],
+        data: &mut crate::Data,
+        spare: Option<Partials>,
+    ) -> Partials {
+        let [mut f_q, mut f_mu, f_v, f_vd, f_x, f_xd] = spare.map_or_else(Default::default, |p| {
+            [p.f_q, p.f_mu, p.f_v, p.f_vd, p.f_x, p.f_xd]
+        });
         let (end, mut nodes, total) = self.end_nodes(x);
         let group = self.model.group;
         let t: Vec<Mat6> = nodes.iter().map(|n| n.t).collect();
@@ -1129,8 +1146,8 @@ impl<'a> StepFunction<'a> {
         // element states' rows too: a control block measuring a constraint force).
         sc.coef = coef(0.0, 0.0, s);
         self.assemble(data, &nodes, &end, &sc, true);
-        let mut f_q = pattern.select(Selection::Configuration, &data.values);
-        let f_mu = pattern.select(Selection::Multipliers, &data.values);
+        pattern.select_into(Selection::Configuration, &data.values, &mut f_q);
+        pattern.select_into(Selection::Multipliers, &data.values, &mut f_mu);
         // The other partials have no joint terms: the elements alone, once per coefficient
         // set (sequential), or full assemblies on the threads.
         let mut sets = vec![coef(0.0, s, 0.0), coef(s, 0.0, 0.0)];
@@ -1152,30 +1169,36 @@ impl<'a> StepFunction<'a> {
             Selection::States,
             Selection::States,
         ];
-        let mut out = vec![vec![0.0; pattern.positions.len()]; sets.len()];
+        let mut out = [f_v, f_vd, f_x, f_xd];
+        for (k, o) in out.iter_mut().enumerate() {
+            zeroed(
+                o,
+                if k < sets.len() {
+                    pattern.positions.len()
+                } else {
+                    0
+                },
+            );
+        }
         if data.threads.pool().is_some() {
-            for ((coef, o), &w) in sets.iter().zip(&mut out).zip(&which) {
+            for ((coef, o), &w) in sets.iter().zip(out.iter_mut()).zip(&which) {
                 sc.coef = *coef;
                 self.assemble(data, &nodes, &end, &sc, true);
-                *o = pattern.select(w, &data.values);
+                pattern.select_into(w, &data.values, o);
             }
         } else {
             let it = self.iterate(&nodes, &end);
-            let mut sinks: Vec<_> = (out.iter_mut().zip(&which))
+            let mut sinks: Vec<_> = (out.iter_mut().zip(&which).take(sets.len()))
                 .map(|(o, &w)| pattern.sink(w, o))
                 .collect();
             crate::assembly::assemble_elements(self.model, data, &it, &sc, &sets, &mut sinks);
         }
-        let mut out = out.into_iter();
+        let [mut f_v, f_vd, f_x, f_xd] = out;
         // Velocities: s C_t (and the nodal damping) and, on the velocity-level rows,
         // B / gamma'.
-        let mut f_v = out.next().expect("velocities");
         for &k in &pattern.velocity_positions {
             f_v[k as usize] /= self.step.gp;
         }
-        let f_vd = out.next().expect("accelerations");
-        let f_x = out.next().unwrap_or_default();
-        let f_xd = out.next().unwrap_or_default();
         if layout.stabilized {
             self.velocity_rows_configuration(&nodes, &end, &pattern, &mut f_q);
         }
@@ -1322,20 +1345,35 @@ impl<'a> StepFunction<'a> {
         x: &[f64],
         data: &mut crate::Data,
     ) -> (Arc<JacobianPattern>, Vec<f64>) {
+        let mut out = Vec::new();
+        let pattern = self.jacobian_values_into(x, data, &mut out);
+        (pattern, out)
+    }
+
+    /// [`StepFunction::jacobian_values`] into `out` (its storage reused).
+    pub fn jacobian_values_into(
+        &self,
+        x: &[f64],
+        data: &mut crate::Data,
+        out: &mut Vec<f64>,
+    ) -> Arc<JacobianPattern> {
         let p = self.partials(x, data);
         let pattern = &p.pattern;
         let step = &self.step;
         let (gp, bp, cx) = (step.gp, step.bp, step.cx);
-        let mut out: Vec<f64> = (p.f_v.iter().zip(&p.f_vd).zip(&p.f_mu))
-            .map(|((v, vd), mu)| v * gp + vd * bp + mu)
-            .collect();
+        out.clear();
+        out.extend(
+            (p.f_v.iter().zip(&p.f_vd).zip(&p.f_mu)).map(|((v, vd), mu)| v * gp + vd * bp + mu),
+        );
         if self.layout.n_states > 0 {
             for ((o, x), xd) in out.iter_mut().zip(&p.f_x).zip(&p.f_xd) {
                 *o += x + xd * cx;
             }
         }
-        // F_q T, node block by node block of each row: (F_q T)_k = sum_c F_q,c T(c, k).
-        let mut fqt = Vec::with_capacity(pattern.blocks.len());
+        // F_q T, node block by node block of each row: (F_q T)_k = sum_c F_q,c T(c, k); the
+        // stabilized form keeps them for its zeta columns.
+        let stabilized = !pattern.zeta.is_empty();
+        let mut fqt = Vec::with_capacity(if stabilized { pattern.blocks.len() } else { 0 });
         // The increments' columns take F_q T (I + E) (module documentation).
         for &(k, n) in &pattern.blocks {
             let row = p.t[n].tr_mul(&Vec6::from_column_slice(&p.f_q[k..k + 6]));
@@ -1343,7 +1381,9 @@ impl<'a> StepFunction<'a> {
             for c in 0..6 {
                 out[k + c] += columns[c];
             }
-            fqt.push(row);
+            if stabilized {
+                fqt.push(row);
+            }
         }
         // Stabilized: F_q T B(q_n)^T on the zeta columns.
         let mut block = 0;
@@ -1353,7 +1393,7 @@ impl<'a> StepFunction<'a> {
             }
             out[at] += fqt[block].dot(&self.b_start[row].fixed_rows::<6>(6 * slot));
         }
-        (Arc::clone(pattern), out)
+        Arc::clone(pattern)
     }
 
     /// `alpha dD/dp` of the nodal damping `alpha D v` (pseudo-dynamic statics; none without
