@@ -113,8 +113,10 @@ pub struct Workspace {
     data: Option<Data>,
     spare: Spare,
     steps: Vec<TrajectoryStep>,
-    /// The scratch of the threads that prepare the sweep's steps ahead of it.
+    /// The scratch and the storage of the threads that prepare the sweep's steps ahead of
+    /// it.
     sweepers: Vec<Option<Data>>,
+    sweepers_spares: Vec<std::sync::Mutex<Vec<Spare>>>,
 }
 
 impl Workspace {
@@ -228,6 +230,7 @@ pub fn adjoint_in(
         spare,
         steps: kept,
         sweepers,
+        sweepers_spares,
     } = workspace;
     let mut back = Backward {
         problem,
@@ -259,6 +262,8 @@ pub fn adjoint_in(
             if workers > 1 && layout.n_unknowns() >= pipeline::PARALLEL_FROM {
                 stats.jacobian_threads = workers;
                 sweepers.resize_with(workers, || None);
+                sweepers_spares.resize_with(workers, Default::default);
+                // (A spare factorization of another pattern rebuilds its analysis.)
                 for kept in sweepers.iter_mut() {
                     refit(kept, &problem.model, &layout)?;
                 }
@@ -268,6 +273,7 @@ pub fn adjoint_in(
                     &layout,
                     settings,
                     scratch,
+                    sweepers_spares,
                     steps_run.iter().rev(),
                     &mut |prepared| {
                         let step = prepared.step;

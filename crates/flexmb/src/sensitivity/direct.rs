@@ -260,6 +260,7 @@ fn on_threads<'a>(
     for _ in 0..workers {
         scratch.push(Data::new(&p.model, layout.clone()).map_err(crate::SolveError::from)?);
     }
+    let spares: Vec<_> = (0..workers).map(|_| Default::default()).collect();
     let (tx, rx) = sync_channel::<OwnedStep>(pipeline::AHEAD);
     std::thread::scope(|scope| {
         let chain = scope.spawn(|| {
@@ -269,6 +270,7 @@ fn on_threads<'a>(
                 layout,
                 &settings,
                 scratch,
+                &spares,
                 rx.into_iter(),
                 &mut |prepared| {
                     let Prepared {

@@ -17,7 +17,8 @@ use crate::solve::trajectory::TrajectoryStep;
 use crate::solve::DynamicSettings;
 use crate::{Data, Model};
 use std::borrow::Borrow;
-use std::sync::mpsc::{channel, sync_channel, Receiver};
+use std::sync::mpsc::{sync_channel, Receiver};
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
 /// Steps a worker prepares ahead of the chain (each holds the step's partial derivatives
 /// and factorization: about 1 MB for chain_100).
@@ -85,13 +86,16 @@ pub fn prepare<S: Borrow<TrajectoryStep>>(
 }
 
 /// Runs `chain` on every step of `steps` in order, the steps prepared on as many workers as
-/// `scratch` has scratch data (at least two). `chain` gives back the storage of the step's
-/// preparation for the next steps. The first error stops everything and is returned.
+/// `scratch` has scratch data (at least two), worker `w` with the storage of `spares[w]`.
+/// `chain` gives back the storage of the step's preparation, which goes back to the
+/// worker's `spares` (for its next steps, and for the next call). The first error stops
+/// everything and is returned.
 pub fn run<S, I>(
     model: &Model,
     layout: &Layout,
     settings: &DynamicSettings,
     scratch: Vec<&mut Data>,
+    spares: &[Mutex<Vec<Spare>>],
     steps: I,
     chain: &mut dyn FnMut(Prepared<S>) -> Result<Spare, String>,
 ) -> Result<(), String>
@@ -103,19 +107,15 @@ where
     std::thread::scope(|scope| {
         let mut ready: Vec<Receiver<Result<Prepared<S>, String>>> = Vec::with_capacity(workers);
         let mut inputs = Vec::with_capacity(workers);
-        let mut spare = Vec::with_capacity(workers);
-        for data in scratch {
+        for (data, spares) in scratch.into_iter().zip(spares) {
             let (input, steps_in) = sync_channel::<S>(AHEAD);
             let (tx, rx) = sync_channel(AHEAD);
-            let (back_tx, back_rx) = channel::<Spare>();
             inputs.push(input);
             ready.push(rx);
-            spare.push(back_tx);
             scope.spawn(move || {
-                let (mut spares, mut values): (Vec<Spare>, _) = (Vec::new(), Vec::new());
+                let mut values = Vec::new();
                 for step in steps_in {
-                    spares.extend(back_rx.try_iter());
-                    let spare = spares.pop().unwrap_or_default();
+                    let spare = lock(spares).pop().unwrap_or_default();
                     let prepared = prepare(model, layout, settings, step, data, spare, &mut values);
                     let failed = prepared.is_err();
                     // The chain stopped (an error): nothing more to prepare.
@@ -137,10 +137,14 @@ where
         let mut k = 0;
         while let Ok(prepared) = ready[k % workers].recv() {
             let done = chain(prepared?)?;
-            // A worker that has finished no longer takes its storage back.
-            let _ = spare[k % workers].send(done);
+            lock(&spares[k % workers]).push(done);
             k += 1;
         }
         Ok(())
     })
+}
+
+/// The storage of a worker (a thread that panicked left it as it was: still storage).
+fn lock(spares: &Mutex<Vec<Spare>>) -> MutexGuard<'_, Vec<Spare>> {
+    spares.lock().unwrap_or_else(PoisonError::into_inner)
 }
