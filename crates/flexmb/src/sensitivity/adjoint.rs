@@ -2,7 +2,8 @@
 //! for all criteria (module documentation of [`super`]).
 
 use super::criteria::{weight, History};
-use super::pipeline::{self, prepare, Prepared, Spare};
+use super::matrix::StepMatrix;
+use super::pipeline::{self, prepare_function, Prepared, Spare};
 use super::{pick, state_bytes, Gradients, Problem, SensitivityError, Stats};
 use crate::data::Layout;
 use crate::observe::Observers;
@@ -67,15 +68,20 @@ impl Backward<'_> {
 
     /// Step `n` backward: `sbar_n` to `sbar_{n-1}`, the step prepared here.
     fn step(&mut self, step: &TrajectoryStep) -> Result<(), String> {
-        let settings = self.problem.dynamic().map_err(|e| e.to_string())?;
+        let p = self.problem;
+        let settings = p.dynamic().map_err(|e| e.to_string())?;
         let spare = std::mem::take(self.spare);
-        let (model, values) = (&self.problem.model, &mut self.values);
-        let prepared = prepare(model, self.layout, settings, step, self.data, spare, values)?;
-        *self.spare = self.finish(prepared)?;
+        let at = (step.index, &step.start, step.h, &step.unknowns[..]);
+        let (data, values) = (&mut *self.data, &mut self.values);
+        let (f, mut matrix) =
+            prepare_function(&p.model, self.layout, settings, at, data, spare, values)?;
+        self.backward(step, &f, &mut matrix);
+        *self.spare = Spare::after(matrix, &f);
         Ok(())
     }
 
-    /// Step `n` backward with its prepared Jacobian; gives the preparation's storage back.
+    /// Step `n` backward with its Jacobian prepared on another thread; gives the
+    /// preparation's storage back.
     fn finish(&mut self, prepared: Prepared<&TrajectoryStep>) -> Result<Spare, String> {
         let p = self.problem;
         let settings = p.dynamic().map_err(|e| e.to_string())?;
@@ -86,6 +92,13 @@ impl Backward<'_> {
         } = prepared;
         let f = StepFunction::new(&p.model, self.layout, &step.start, settings, step.h)
             .with_partials(partials);
+        self.backward(step, &f, &mut matrix);
+        Ok(Spare::after(matrix, &f))
+    }
+
+    /// Step `n` backward: `f` its step function, `matrix` its factorized Jacobian.
+    fn backward(&mut self, step: &TrajectoryStep, f: &StepFunction, matrix: &mut StepMatrix) {
+        let p = self.problem;
         let x = &step.unknowns;
         for c in 0..self.bars.len() {
             let (mut mu, mut start, pe) =
@@ -100,7 +113,6 @@ impl Backward<'_> {
             self.bars[c] = start;
         }
         self.point(step.index - 1, &step.start);
-        Ok(Spare::after(matrix, &f))
     }
 }
 

@@ -7,7 +7,6 @@ use super::pipeline::{self, Prepared, Spare};
 use super::{Gradients, Problem, SensitivityError, Stats};
 use crate::data::Layout;
 use crate::observe::{Observer, Sample, StepRecord};
-use crate::solve::step::KeptPartials;
 use crate::solve::step::{StateTangent, StepFunction};
 use crate::solve::trajectory::TrajectoryStep;
 use crate::solve::Simulation;
@@ -21,9 +20,9 @@ struct Direct<'a> {
     problem: &'a Problem,
     layout: &'a Layout,
     data: Data,
-    matrix: StepMatrix,
-    /// The storage of the last step's partial derivatives and Jacobian values, reused.
-    partials: KeptPartials,
+    /// The storage of the last step's factorization, partial derivatives and Jacobian
+    /// values, reused.
+    spare: Spare,
     values: Vec<f64>,
     /// `ds_n/dp_k`.
     tangents: Vec<StateTangent>,
@@ -92,22 +91,15 @@ impl Direct<'_> {
     /// Step `n` on the run's thread: its Jacobian prepared here, then [`Direct::advance`].
     fn step(&mut self, record: &StepRecord) -> Result<(), String> {
         self.check(record.redundant_rows, record.start.t)?;
-        let settings = &record.simulation.settings;
         let p = self.problem;
-        let f = StepFunction::new(&p.model, self.layout, record.start, settings, record.info.h)
-            .with_partials(std::mem::take(&mut self.partials));
-        let x = record.unknowns;
-        let pattern = f.jacobian_values_into(x, &mut self.data, &mut self.values);
-        let t = record.end.t;
-        self.matrix
-            .factorize(&pattern, &self.values, &|| {
-                format!("step {} (t = {t:.6e} s)", record.index)
-            })
-            .map_err(|e| e.to_string())?;
-        let mut matrix = std::mem::take(&mut self.matrix);
-        self.advance(&f, x, &mut matrix, record.end);
-        self.matrix = matrix;
-        self.partials = f.take_partials();
+        let spare = std::mem::take(&mut self.spare);
+        let at = (record.index, record.start, record.info.h, record.unknowns);
+        let settings = &record.simulation.settings;
+        let (data, values) = (&mut self.data, &mut self.values);
+        let (f, mut matrix) =
+            pipeline::prepare_function(&p.model, self.layout, settings, at, data, spare, values)?;
+        self.advance(&f, record.unknowns, &mut matrix, record.end);
+        self.spare = Spare::after(matrix, &f);
         Ok(())
     }
 
@@ -205,8 +197,7 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
             .map_err(crate::SolveError::from)?
             .with_threads(sim.data.threads.clone()),
         layout: &layout,
-        matrix: StepMatrix::default(),
-        partials: KeptPartials::default(),
+        spare: Spare::default(),
         values: Vec::new(),
         tangents,
         history: History::default(),

@@ -15,6 +15,7 @@ use crate::data::Layout;
 use crate::solve::step::{KeptPartials, StepFunction};
 use crate::solve::trajectory::TrajectoryStep;
 use crate::solve::DynamicSettings;
+use crate::state::State;
 use crate::{Data, Model};
 use std::borrow::Borrow;
 use std::sync::mpsc::{sync_channel, Receiver};
@@ -68,21 +69,38 @@ pub fn prepare<S: Borrow<TrajectoryStep>>(
     values: &mut Vec<f64>,
 ) -> Result<Prepared<S>, String> {
     let s: &TrajectoryStep = step.borrow();
-    let f = StepFunction::new(model, layout, &s.start, settings, s.h).with_partials(spare.partials);
-    let pattern = f.jacobian_values_into(&s.unknowns, data, values);
-    let t = s.t_end();
-    let mut matrix = spare.matrix;
-    matrix
-        .factorize(&pattern, values, &|| {
-            format!("step {} (t = {t:.6e} s)", s.index)
-        })
-        .map_err(|e| e.to_string())?;
+    let at = (s.index, &s.start, s.h, &s.unknowns[..]);
+    let (f, matrix) = prepare_function(model, layout, settings, at, data, spare, values)?;
     let partials = f.take_partials();
     Ok(Prepared {
         step,
         partials,
         matrix,
     })
+}
+
+/// [`prepare`] where the step is used: the step function of the step `index` of size `h`
+/// from `start` (its partial derivatives at `unknowns` kept) and its Jacobian factorized.
+#[allow(clippy::too_many_arguments)]
+pub fn prepare_function<'s>(
+    model: &'s Model,
+    layout: &'s Layout,
+    settings: &DynamicSettings,
+    (index, start, h, unknowns): (usize, &'s State, f64, &[f64]),
+    data: &mut Data,
+    spare: Spare,
+    values: &mut Vec<f64>,
+) -> Result<(StepFunction<'s>, StepMatrix), String> {
+    let f = StepFunction::new(model, layout, start, settings, h).with_partials(spare.partials);
+    let pattern = f.jacobian_values_into(unknowns, data, values);
+    let t = start.t + h;
+    let mut matrix = spare.matrix;
+    matrix
+        .factorize(&pattern, values, &|| {
+            format!("step {index} (t = {t:.6e} s)")
+        })
+        .map_err(|e| e.to_string())?;
+    Ok((f, matrix))
 }
 
 /// Runs `chain` on every step of `steps` in order, the steps prepared on as many workers as
