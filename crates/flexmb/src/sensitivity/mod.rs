@@ -37,7 +37,7 @@
 //! `parameter_jvp`, `parameter_vjp_for`, `end_jvp`, `end_vjp`, `jacobian_values`); the same code serves
 //! both methods, so they agree to round-off. The Jacobian of a step does not depend on the
 //! recursion, only on the step: with several threads, workers prepare the steps' Jacobians
-//! ahead of it ([`pipeline`]), with the same results bit for bit. The step sizes of the run
+//! ahead of it (`pipeline.rs`), with the same results bit for bit. The step sizes of the run
 //! are taken as given
 //! (an adaptive step sequence is not differentiated). The backward sweep needs every step's
 //! start, unknowns and end: kept in memory when they fit in
