@@ -81,7 +81,6 @@ pub fn prepare<S: Borrow<TrajectoryStep>>(
 
 /// [`prepare`] where the step is used: the step function of the step `index` of size `h`
 /// from `start` (its partial derivatives at `unknowns` kept) and its Jacobian factorized.
-#[allow(clippy::too_many_arguments)]
 pub fn prepare_function<'s>(
     model: &'s Model,
     layout: &'s Layout,
