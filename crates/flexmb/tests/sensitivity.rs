@@ -385,6 +385,33 @@ fn jacobians_on_two_threads_give_the_gradients_of_one_thread() {
     assert_eq!(parallel.stats.steps, direct.stats.steps);
 }
 
+/// A run that fails while the direct method's tangents are carried on other threads (its
+/// first step, with one Newton iteration allowed) stops them and reports the run's error,
+/// as on one thread.
+#[test]
+fn a_run_that_fails_stops_the_threads_with_its_error() {
+    let failing = |threads: usize| {
+        let set = [
+            "solver.t_end=0.05".to_string(),
+            "solver.max_iterations=1".to_string(),
+            format!("solver.threads={threads}"),
+        ];
+        let set: Vec<&str> = set.iter().map(String::as_str).collect();
+        let p = problem(
+            "chain_10.toml",
+            &set,
+            &["body.link1.mass"],
+            &[("tip", CriterionKind::Terminal, "tip_x")],
+        );
+        sensitivity::direct(&p)
+            .expect_err("one Newton iteration per step")
+            .to_string()
+    };
+    let (one, two) = (failing(1), failing(2));
+    assert_eq!(one, two);
+    assert!(one.contains("Newton failed at step 1"), "{one}");
+}
+
 #[test]
 fn variable_step_sizes() {
     // t_end = 0.2045 with h = 1e-2: the step control shortens steps to land on the output
