@@ -338,7 +338,7 @@ fn a_kept_workspace_gives_the_gradients_of_a_fresh_one() {
 
 /// Both methods with their steps' Jacobians prepared on two threads give the gradients of
 /// the sequential methods, bit for bit (the same operations in the same order); the adjoint
-/// with a fresh workspace and with one kept from an earlier call.
+/// with a fresh workspace, with one kept from an earlier call, and from checkpoints.
 #[test]
 fn jacobians_on_two_threads_give_the_gradients_of_one_thread() {
     let design = [
@@ -375,6 +375,13 @@ fn jacobians_on_two_threads_give_the_gradients_of_one_thread() {
         assert_eq!(parallel.gradients, sequential.gradients, "call {call}");
         assert_eq!(parallel.values, sequential.values);
     }
+    // From checkpoints: each recomputed segment swept on the threads.
+    let mut tight = on(2);
+    tight.memory_budget = 240_000;
+    let segments = sensitivity::adjoint(&tight, &mut |_, _| {}).expect("checkpoints");
+    assert!(segments.stats.checkpoints > 1, "{:?}", segments.stats);
+    assert_eq!(segments.stats.jacobian_threads, 2);
+    assert_eq!(segments.gradients, sequential.gradients);
     let direct = sensitivity::direct(&on(1)).expect("direct, one thread");
     assert_eq!(direct.stats.jacobian_threads, 1);
     assert!(difference(&direct, &sequential, 1e-300) < 1e-8);

@@ -266,41 +266,48 @@ pub fn adjoint_in(
         Ok(())
     };
     let checkpoints = trajectory.checkpoints() * memory_bytes;
+    // The steps' Jacobians on the threads of the setting (from the size where they pay).
+    let workers = crate::parallel::resolve(settings.threads).min(n_steps);
+    let parallel = workers > 1 && layout.n_unknowns() >= pipeline::PARALLEL_FROM;
+    if parallel {
+        stats.jacobian_threads = workers;
+        sweepers.resize_with(workers, || None);
+        sweepers_spares.resize_with(workers, Default::default);
+        // (A spare factorization of another pattern rebuilds its analysis.)
+        for kept in sweepers.iter_mut() {
+            refit(kept, &problem.model, &layout)?;
+        }
+    }
+    // The sweep through consecutive steps, from the last.
+    let mut sweep = |steps: &[TrajectoryStep]| -> Result<(), crate::SolveError> {
+        if parallel {
+            let scratch: Vec<&mut Data> = sweepers.iter_mut().flatten().collect();
+            pipeline::run(
+                &problem.model,
+                &layout,
+                settings,
+                scratch,
+                sweepers_spares,
+                steps.iter().rev(),
+                &mut |prepared| {
+                    let step = prepared.step;
+                    let spare = back.finish(prepared)?;
+                    progress(step)?;
+                    Ok(spare)
+                },
+            )
+        } else {
+            steps.iter().rev().try_for_each(|step| {
+                back.step(step)?;
+                progress(step)
+            })
+        }
+        .map_err(crate::SolveError::Output)
+    };
     match forward.steps {
         Some(mut steps) => {
             stats.trajectory_bytes = checkpoints + n_steps * step_bytes;
-            let steps_run = &steps[..n_steps];
-            let workers = crate::parallel::resolve(settings.threads).min(n_steps);
-            if workers > 1 && layout.n_unknowns() >= pipeline::PARALLEL_FROM {
-                stats.jacobian_threads = workers;
-                sweepers.resize_with(workers, || None);
-                sweepers_spares.resize_with(workers, Default::default);
-                // (A spare factorization of another pattern rebuilds its analysis.)
-                for kept in sweepers.iter_mut() {
-                    refit(kept, &problem.model, &layout)?;
-                }
-                let scratch: Vec<&mut Data> = sweepers.iter_mut().flatten().collect();
-                pipeline::run(
-                    &problem.model,
-                    &layout,
-                    settings,
-                    scratch,
-                    sweepers_spares,
-                    steps_run.iter().rev(),
-                    &mut |prepared| {
-                        let step = prepared.step;
-                        let spare = back.finish(prepared)?;
-                        progress(step)?;
-                        Ok(spare)
-                    },
-                )
-            } else {
-                steps_run.iter().rev().try_for_each(|step| {
-                    back.step(step)?;
-                    progress(step)
-                })
-            }
-            .map_err(crate::SolveError::Output)?;
+            sweep(&steps[..n_steps])?;
             // Kept for the next call, without the slots of an earlier, longer run (the
             // storage held stays what this run's budget allowed).
             steps.truncate(n_steps);
@@ -310,10 +317,10 @@ pub fn adjoint_in(
             stats.checkpoints = trajectory.checkpoints();
             stats.recomputed_steps = n_steps;
             stats.trajectory_bytes = checkpoints + every * step_bytes;
-            trajectory.backward(&mut |step: &TrajectoryStep| {
-                back.step(step)?;
-                progress(step)
-            })?;
+            // One segment at a time, recomputed from its checkpoint.
+            for k in (0..trajectory.checkpoints()).rev() {
+                sweep(&trajectory.segment(k)?)?;
+            }
         }
     }
     stats.sweep_seconds = clock.elapsed().as_secs_f64();
