@@ -91,7 +91,7 @@ pub fn prepare_function<'s>(
     values: &mut Vec<f64>,
 ) -> Result<(StepFunction<'s>, StepMatrix), String> {
     let f = StepFunction::new(model, layout, start, settings, h).with_partials(spare.partials);
-    let pattern = f.jacobian_values_into(unknowns, data, values);
+    let pattern = f.jacobian_values(unknowns, data, values);
     let t = start.t + h;
     let mut matrix = spare.matrix;
     matrix

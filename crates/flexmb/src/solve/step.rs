@@ -1329,7 +1329,8 @@ impl<'a> StepFunction<'a> {
     /// The exact Jacobian `dR/dx` at `x`, built fresh (no regularization):
     /// `[F_q T + gamma' F_v + beta' F_vd | F_mu | F_q T B(q_n)^T]`.
     pub fn jacobian(&self, x: &[f64], data: &mut crate::Data) -> Triplets {
-        let (pattern, values) = self.jacobian_values(x, data);
+        let mut values = Vec::new();
+        let pattern = self.jacobian_values(x, data, &mut values);
         pattern
             .positions
             .iter()
@@ -1339,19 +1340,9 @@ impl<'a> StepFunction<'a> {
     }
 
     /// The exact Jacobian `dR/dx` at `x` as values on the positions of the layout's
-    /// [`JacobianPattern`] (the same positions at every step of a layout).
+    /// [`JacobianPattern`] (the same positions at every step of a layout), into `out` (its
+    /// storage reused); the pattern is returned.
     pub fn jacobian_values(
-        &self,
-        x: &[f64],
-        data: &mut crate::Data,
-    ) -> (Arc<JacobianPattern>, Vec<f64>) {
-        let mut out = Vec::new();
-        let pattern = self.jacobian_values_into(x, data, &mut out);
-        (pattern, out)
-    }
-
-    /// [`StepFunction::jacobian_values`] into `out` (its storage reused).
-    pub fn jacobian_values_into(
         &self,
         x: &[f64],
         data: &mut crate::Data,
