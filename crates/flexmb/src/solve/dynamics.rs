@@ -1282,6 +1282,7 @@ impl Simulation {
         );
         self.state.t = t_new;
         let max_mu = force_scale(model, &self.data, &it.saved, &self.settings) * start.scale;
+        let accelerations = acceleration_scale(model, &it.saved, &self.settings);
         let servo_forces = servo_forces(model, &self.data.layout);
         let mut sys = StepSystem {
             model,
@@ -1296,6 +1297,7 @@ impl Simulation {
             b_start: &it.b_start,
             mu_floor: &mut it.mu_floor,
             max_mu,
+            accelerations,
             servo_forces: &servo_forces,
             previous: &mut it.previous,
         };
@@ -1339,6 +1341,8 @@ struct StepSystem<'a> {
     mu_floor: &'a mut Vec<f64>,
     /// Scaled force scale of the multipliers' tolerance ([`force_scale`]).
     max_mu: f64,
+    /// The model's accelerations, translation and rotation ([`acceleration_scale`]).
+    accelerations: [f64; 2],
     /// The states that are the forces of servo constraints ([`servo_forces`]).
     servo_forces: &'a [usize],
     previous: &'a mut Previous,
@@ -1355,6 +1359,39 @@ impl StepSystem<'_> {
         step::total_increments(layout, self.dq, self.zeta, self.b_start, self.total);
         let (group, v_1) = (self.model.group, &self.state.v);
         step::commutator_correction(&self.start, group, self.saved, v_1, self.total);
+    }
+
+    /// The node corrections `dx` where the step carries them furthest (the Newton module's
+    /// "Where the error lands"): the accelerations move by `beta' dx`, weighted by `rtol`
+    /// times the model's accelerations of the same kind (translation, rotation; a kind
+    /// without acceleration is left to the configuration norm), the root mean square over
+    /// the node unknowns. The weight has a floor at the round-off of the increments
+    /// (`1000 eps` times each node's increment of that kind), which a chord iteration cannot
+    /// go below. Index 3 only ([`NonlinearSystem::norms`]' caller): there a fresh matrix is
+    /// exact or nearly, so that a reused one must reach what it reaches; the stabilized
+    /// form's matrix is an approximation whose own iterates converge linearly (0.15 per
+    /// correction on the stabilized heavy top), and judged at this level they do not reach
+    /// it in `max_iterations` at `rtol = 1e-10` (`tests/sensitivity.rs`, stabilized top).
+    fn carried_norm(&self, dx: &[f64]) -> f64 {
+        let (bp, rtol) = (self.start.bp, self.settings.newton.rtol);
+        let mut sum = 0.0;
+        for (d, inc) in dx.chunks_exact(6).zip(self.dq.chunks_exact(6)) {
+            for part in 0..2 {
+                let a = self.accelerations[part];
+                if a == 0.0 {
+                    continue;
+                }
+                let range = 3 * part..3 * part + 3;
+                let increment = inc[range.clone()].iter().map(|v| v * v).sum::<f64>().sqrt();
+                let roundoff = 1e3 * f64::EPSILON * increment;
+                let weight = rtol * a + bp * roundoff;
+                sum += d[range]
+                    .iter()
+                    .map(|d| (bp * d / weight).powi(2))
+                    .sum::<f64>();
+            }
+        }
+        (sum / dx.len().max(1) as f64).sqrt()
     }
 
     /// Final configuration and algorithmic acceleration.
@@ -1497,6 +1534,11 @@ impl NonlinearSystem for StepSystem<'_> {
             multipliers: Some(1),
             stabilization: layout.stabilized.then_some(2),
             worst,
+            carried: if self.near_exact_matrix() {
+                self.carried_norm(&dx[..nd])
+            } else {
+                0.0
+            },
         }
     }
 
@@ -1545,6 +1587,30 @@ impl NonlinearSystem for StepSystem<'_> {
         self.reset_zeta(n);
     }
 }
+
+/// The model's accelerations at the start of the step, against which the acceleration
+/// errors of an iterate are judged ([`StepSystem::carried_norm`]): the largest
+/// translational acceleration of a node plus gravity \[m/s^2\], and the largest angular
+/// acceleration \[rad/s^2\] (each node's `vdot`, in the group's frame). The multipliers'
+/// tolerance takes the forces of the same accelerations ([`force_scale`]).
+fn acceleration_scale(model: &Model, saved: &State, settings: &DynamicSettings) -> [f64; 2] {
+    let g = model.gravity.norm() * settings.load_factor_at(saved.t);
+    let scale = saved.vdot.iter().fold([0.0f64; 2], |[t, r], a| {
+        [
+            t.max(a.fixed_rows::<3>(0).norm() + g),
+            r.max(a.fixed_rows::<3>(3).norm()),
+        ]
+    });
+    // A kind whose accelerations are round-off beside the other's (the translations of
+    // wheels on their bearings) has none to judge against.
+    let noise = ACCELERATION_NOISE * scale[0].max(scale[1]);
+    scale.map(|a| if a > noise { a } else { 0.0 })
+}
+
+/// Accelerations of one kind (translation or rotation, SI units) below this fraction of the
+/// other kind's are taken for round-off by [`acceleration_scale`] (a gear pair on bearings:
+/// 1e-27 to 4e-20 m/s^2 beside 620 rad/s^2).
+const ACCELERATION_NOISE: f64 = 1e-8;
 
 /// Force scale of the multipliers' tolerance at the start of the step: the largest
 /// multiplier and the largest nodal force `m (|vdot| + |g|)` (or moment `J |vdot|`). A

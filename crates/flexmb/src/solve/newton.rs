@@ -24,8 +24,8 @@
 //! Söderlind 1997, SIAM J. Sci. Comput. 18, 23-40). An iterate is accepted when
 //!
 //! * the correction came from the exact matrix at that iterate and `|dx_k| <= 1`, or
-//! * `k >= 2`, `theta_k < 1` and `theta_k / (1 - theta_k) |dx_k| <= kappa` with
-//!   [`KAPPA`] `= 0.01`, or
+//! * `k >= 2`, `theta_k < 1` and `theta_k / (1 - theta_k) max(|dx_k|, |dx_k|_c) <= kappa`
+//!   with [`KAPPA`] `= 0.01` (`|dx_k|_c` below, "Where the error lands"), or
 //! * the correction is exactly zero (the residual vanishes).
 //!
 //! So a correction made with a reused matrix is never accepted on its own size: at least two
@@ -38,6 +38,35 @@
 //! the acceptance on one correction's size gave 7.84, 12.275 and 16.605 s, this test with
 //! kappa = 1 about 8.6 and 14.15 s, and with kappa = 0.01 8.29, 13.5775 and 18.8675 s
 //! (BENCHMARKS.md has the cost).
+//!
+//! **Rates.** The rate that bounds the error is the slowest measured with the same matrix in
+//! the solve, not the last one: a ratio of successive corrections is a lower bound of the
+//! matrix's contraction, and a sharp drop says that the correction lost its fast part (the
+//! predictor's error, which the coupling of translation and rotation of a reused matrix
+//! moves), not that the matrix improved. Measured on the free body below (R3xSO(3),
+//! corrections in the accelerations' norm 44, 13, 1.0e-3): the last ratio, 7.7e-5,
+//! estimated an error of 7.6e-8 where a fresh matrix then measured 2.7e-4; the slowest,
+//! 0.3, estimates 4.1e-4. The refresh decisions keep the last rate ([`Verdict::Continue`]).
+//!
+//! **Where the error lands.** `|dx|_c` ([`Norms::carried`]) measures the same correction
+//! where the system carries it furthest: in a time step, a configuration error `e` is an
+//! error `gamma' e` of the velocities and `beta' e` of the accelerations (`1/h` and `1/h^2`
+//! times larger), which every later step inherits. The error a linearly converging iterate
+//! keeps is its estimate itself, of one sign from step to step (a stale matrix errs the
+//! same way while the motion is smooth), so a bound relative to the configuration increment
+//! (`rtol h |v|`) or absolute (`atol`) sums to a velocity error of `kappa rtol |v| T / h` or
+//! `kappa atol T / h^2` over a run of length `T`: it grows as the step shrinks, and the
+//! scheme's order is lost. Measured on the free body above on R3xSO(3) (trust issue, round
+//! 2; `tests/matrix_reuse.rs`): with the configuration norm alone a reused matrix ended
+//! 9.5e-6 rad/s from the exact solution after 1 s where fresh matrices end 5.7e-7, and at
+//! `rtol = 1e-10` its flip times stopped converging (7.8e-5 s at h = 2.5e-3, 3.5e-4 s at
+//! h = 1.25e-3, where fresh matrices give 1.45e-5 and 3.6e-6 s). On SE(3) the same body's
+//! mass matrix is constant, a reused matrix converges at rates near 1e-9, and the defect
+//! did not show. Judged at the level of the accelerations, relative to the model's
+//! accelerations `A`, the error such iterates leave sums to at most `kappa gamma rtol A T`
+//! in the velocities, whatever `h`: the reused matrix gives the fresh matrices' error and
+//! order. An exact correction is still accepted on its size: the error it leaves is
+//! quadratic, below the tolerance at every level.
 
 use super::linear::{Backend, LinearError, LinearSolver};
 use crate::data::Data;
@@ -136,6 +165,9 @@ pub const NEGLIGIBLE: f64 = 1e-4 * KAPPA;
 /// Most blocks of unknowns [`Convergence`] tracks separately.
 pub const MAX_BLOCKS: usize = 4;
 
+/// The norms [`Convergence`] tracks: the blocks, then the carried norm ([`Norms::carried`]).
+const TRACKED: usize = MAX_BLOCKS + 1;
+
 /// The acceptance test of one Newton solve (see the module documentation), fed the weighted
 /// norms of each correction as it is applied, one per block of unknowns (e.g. increments,
 /// multipliers, stabilization). The error is their largest; the contraction rate is the
@@ -146,14 +178,31 @@ pub const MAX_BLOCKS: usize = 4;
 /// matrix then measured at 1.2).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Convergence {
-    /// Weighted norms of the previous correction (`None` before the first).
-    previous: Option<[f64; MAX_BLOCKS]>,
+    /// Weighted norms of the previous correction, blocks then carried (`None` before the
+    /// first).
+    previous: Option<[f64; TRACKED]>,
     /// The contraction rate of the last correction over the blocks whose previous correction
     /// was outside the tolerance (above 1; `None` if none was), what judges a reused matrix
     /// ([`Self::matrix_rate`]).
     matrix_rate: Option<f64>,
+    /// The slowest contraction rate of the norms outside the tolerance measured with the
+    /// matrix since it was built, which bounds the error of an iterate reached with it with
+    /// the last rate (module documentation, "Rates").
+    slowest: Option<f64>,
     /// Judge corrections from the exact matrix on their size alone (no rate estimate).
     pub exact_by_size: bool,
+}
+
+/// The iteration matrix a correction was computed with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Matrix {
+    /// Built at the iterate the correction starts from, and the exact Jacobian there.
+    Exact,
+    /// Built at that iterate, an approximation of the Jacobian (the stabilized form's, a
+    /// regularized one, the Lie algebra updates').
+    Fresh,
+    /// Built at an earlier iterate or step (the chord method).
+    Reused,
 }
 
 /// What the iteration should do after a correction.
@@ -167,15 +216,19 @@ pub enum Verdict {
 
 impl Convergence {
     /// Judges the iterate reached by a correction with the weighted norms `blocks` (at most
-    /// [`MAX_BLOCKS`]); `exact` says whether the correction came from the exact iteration
-    /// matrix at the iterate it started from.
-    pub fn update(&mut self, blocks: &[f64], exact: bool) -> Verdict {
-        let mut norms = [0.0; MAX_BLOCKS];
+    /// [`MAX_BLOCKS`]) and `carried` ([`Norms::carried`], 0 if the system has none),
+    /// computed with `matrix`.
+    pub fn update(&mut self, blocks: &[f64], carried: f64, matrix: Matrix) -> Verdict {
+        let exact = matrix == Matrix::Exact;
+        let mut norms = [0.0; TRACKED];
         norms[..blocks.len()].copy_from_slice(blocks);
-        let dx = norms.iter().fold(0.0f64, |m, &v| m.max(v));
-        let rate = |outside: bool| {
+        norms[MAX_BLOCKS] = carried;
+        let size = blocks.iter().fold(0.0f64, |m, &v| m.max(v));
+        // The rate over the norms `..tracked`, of those outside the tolerance before the
+        // correction if `outside`.
+        let rate = |outside: bool, tracked: usize| {
             self.previous.and_then(|previous| {
-                norms
+                norms[..tracked]
                     .iter()
                     .zip(previous)
                     .filter(|(&now, before)| now > NEGLIGIBLE && (!outside || *before > 1.0))
@@ -183,8 +236,41 @@ impl Convergence {
                     .reduce(f64::max)
             })
         };
-        let theta = rate(false).or(self.previous.map(|_| 0.0));
-        self.matrix_rate = rate(true);
+        let theta = rate(false, MAX_BLOCKS).or(self.previous.map(|_| 0.0));
+        self.matrix_rate = rate(true, MAX_BLOCKS);
+        // The carried norm counts while it contracts: a correction that no longer shrinks in
+        // it, where the blocks' do, has reached the round-off of the accelerations (`beta'`
+        // times that of the increments, large at small steps and stiff couplings).
+        let carried_rate = self
+            .previous
+            .map(|p| p[MAX_BLOCKS])
+            .filter(|&before| carried > NEGLIGIBLE && before > 0.0)
+            .map(|before| carried / before);
+        let carried_counts = carried_rate.is_none_or(|r| r < 1.0);
+        let dx = if carried_counts {
+            size.max(carried)
+        } else {
+            size
+        };
+        if matrix != Matrix::Reused {
+            self.slowest = None;
+        } else {
+            let carried_outside = carried_rate
+                .filter(|&r| r < 1.0 && self.previous.is_some_and(|p| p[MAX_BLOCKS] > 1.0));
+            let outside = match (self.matrix_rate, carried_outside) {
+                (Some(a), Some(b)) => Some(a.max(b)),
+                (a, b) => a.or(b),
+            };
+            if let Some(outside) = outside {
+                self.slowest = Some(self.slowest.map_or(outside, |s| s.max(outside)));
+            }
+        }
+        let bound = theta.map(|t| {
+            let t = carried_rate
+                .filter(|_| carried_counts)
+                .map_or(t, |r| t.max(r));
+            self.slowest.map_or(t, |s| s.max(t))
+        });
         self.previous = Some(norms);
         if dx == 0.0 {
             return Verdict::Converged { estimate: 0.0 };
@@ -192,23 +278,23 @@ impl Convergence {
         if dx.is_nan() {
             return Verdict::Continue { theta: None };
         }
-        if exact && dx <= 1.0 {
-            // Quadratic convergence: the error left is O(dx^2), far below dx.
-            return Verdict::Converged { estimate: dx };
+        if exact && size <= 1.0 {
+            // Quadratic convergence: the error left is O(dx^2), far below dx at every level.
+            return Verdict::Converged { estimate: size };
         }
         if exact && self.exact_by_size {
             return Verdict::Continue { theta };
         }
-        match theta {
-            Some(theta) if theta < 1.0 => {
-                let estimate = theta / (1.0 - theta) * dx;
+        match bound {
+            Some(rate) if rate < 1.0 => {
+                let estimate = rate / (1.0 - rate) * dx;
                 if estimate <= KAPPA {
                     Verdict::Converged { estimate }
                 } else {
-                    Verdict::Continue { theta: Some(theta) }
+                    Verdict::Continue { theta }
                 }
             }
-            theta => Verdict::Continue { theta },
+            _ => Verdict::Continue { theta },
         }
     }
 
@@ -306,6 +392,12 @@ pub struct Norms {
     pub stabilization: Option<usize>,
     /// Index (in the Newton vector) of the unknown with the largest weighted correction.
     pub worst: usize,
+    /// The correction where the system carries it furthest (0 where it has no such level):
+    /// for a time step, the configuration corrections at the level of the accelerations
+    /// they move, `beta' dx` against `rtol` times the model's acceleration scale. It bounds
+    /// the error of an iterate reached at a linear rate, not the size of an exact Newton
+    /// correction (module documentation, "Where the error lands").
+    pub carried: f64,
 }
 
 impl Norms {
@@ -696,11 +788,18 @@ impl NewtonSolver {
                 let norms = sys.norms(data);
                 let err = norms.max();
                 info.iterations += 1;
-                let exact = fresh && regularization == 0.0 && sys.exact_matrix();
-                let verdict = convergence.update(&norms.blocks[..norms.n], exact);
+                let matrix = if !fresh {
+                    Matrix::Reused
+                } else if regularization == 0.0 && sys.exact_matrix() {
+                    Matrix::Exact
+                } else {
+                    Matrix::Fresh
+                };
+                let exact = matrix == Matrix::Exact;
+                let verdict = convergence.update(&norms.blocks[..norms.n], norms.carried, matrix);
                 let (blocks, n) = norms.configuration(regularization > 0.0);
                 let configuration_converged = matches!(
-                    configuration.update(&blocks[..n], exact),
+                    configuration.update(&blocks[..n], norms.carried, matrix),
                     Verdict::Converged { .. }
                 );
                 // Multipliers that Newton cannot converge further: at a singular configuration
@@ -892,7 +991,7 @@ mod tests {
                 for _ in 0..500 {
                     let dx = (1.0 - rho) * error; // correction computed with the stale matrix
                     error *= rho; // error of the new iterate
-                    if let Verdict::Converged { estimate } = c.update(&[dx], false) {
+                    if let Verdict::Converged { estimate } = c.update(&[dx], 0.0, Matrix::Reused) {
                         accepted = Some((error, estimate));
                         break;
                     }
@@ -910,10 +1009,13 @@ mod tests {
         }
         // One small stale correction is never accepted; an exactly zero one is.
         let mut c = Convergence::default();
-        assert_eq!(c.update(&[1e-3], false), Verdict::Continue { theta: None });
+        assert_eq!(
+            c.update(&[1e-3], 0.0, Matrix::Reused),
+            Verdict::Continue { theta: None }
+        );
         let mut c = Convergence::default();
         assert_eq!(
-            c.update(&[0.0], false),
+            c.update(&[0.0], 0.0, Matrix::Reused),
             Verdict::Converged { estimate: 0.0 }
         );
     }
@@ -924,18 +1026,18 @@ mod tests {
     fn slowest_block_sets_the_rate() {
         let mut c = Convergence::default();
         assert!(matches!(
-            c.update(&[0.85, 54.0], false),
+            c.update(&[0.85, 54.0], 0.0, Matrix::Reused),
             Verdict::Continue { .. }
         ));
-        match c.update(&[0.17, 0.59], false) {
+        match c.update(&[0.17, 0.59], 0.0, Matrix::Reused) {
             Verdict::Continue { theta } => assert!((theta.unwrap() - 0.2).abs() < 1e-12),
             v => panic!("{v:?}"),
         }
         // A block that was exactly zero and no longer is: no rate can be claimed.
         let mut c = Convergence::default();
-        c.update(&[1.0, 0.0], false);
+        c.update(&[1.0, 0.0], 0.0, Matrix::Reused);
         assert!(matches!(
-            c.update(&[1e-3, 1e-3], false),
+            c.update(&[1e-3, 1e-3], 0.0, Matrix::Reused),
             Verdict::Continue { .. }
         ));
     }
@@ -945,10 +1047,16 @@ mod tests {
     #[test]
     fn exact_correction_accepted_and_divergence_is_not() {
         let mut c = Convergence::default();
-        assert_eq!(c.update(&[0.5], true), Verdict::Converged { estimate: 0.5 });
+        assert_eq!(
+            c.update(&[0.5], 0.0, Matrix::Exact),
+            Verdict::Converged { estimate: 0.5 }
+        );
         let mut c = Convergence::default();
         for dx in [2.0, 4.0, 8.0, 16.0] {
-            assert!(matches!(c.update(&[dx], false), Verdict::Continue { .. }));
+            assert!(matches!(
+                c.update(&[dx], 0.0, Matrix::Reused),
+                Verdict::Continue { .. }
+            ));
         }
     }
 }
