@@ -66,7 +66,12 @@
 //! accelerations `A`, the error such iterates leave sums to at most `kappa gamma rtol A T`
 //! in the velocities, whatever `h`: the reused matrix gives the fresh matrices' error and
 //! order. An exact correction is still accepted on its size: the error it leaves is
-//! quadratic, below the tolerance at every level.
+//! quadratic, below the tolerance at every level. The time step judges its iterates so
+//! where its fresh matrix is exact or nearly (index 3); the stabilized form's matrix is an
+//! approximation whose iterates are all accepted on rates, fresh or reused
+//! (`StepSystem::carried_norm` in `super::dynamics`). A correction that no longer shrinks
+//! in `|dx|_c` while the blocks' do has reached the round-off of the accelerations, and
+//! `|dx|_c` is then left out.
 
 use super::linear::{Backend, LinearError, LinearSolver};
 use crate::data::Data;
