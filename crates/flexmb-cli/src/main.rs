@@ -37,6 +37,12 @@ mod exit {
     pub const INVALID_MODEL: i32 = 2;
     /// The results could not be written (the output directory or a result file).
     pub const OUTPUT_FAILED: i32 = 3;
+    /// The analysis stopped at a limit of its settings before its end (`max_steps` load
+    /// steps before the final load factor; `optimize`: `--iterations` before L-BFGS
+    /// converged); nothing failed and the results up to where it stopped are kept. The next
+    /// code of flexmb's own outcome classes: below sysexits' 64-78, the shell's 126-127 and
+    /// the 128 + n of signals, so it means nothing else.
+    pub const INCOMPLETE: i32 = 4;
     /// The command line is wrong (sysexits' EX_USAGE).
     pub const USAGE: i32 = 64;
 }
@@ -48,6 +54,8 @@ Exit codes:
   1    the analysis failed (results up to the failure are kept)
   2    the model is invalid (model file, settings or initial conditions)
   3    the results could not be written (output directory or files)
+  4    the analysis stopped before its end at a limit of its settings (summary status
+       \"incomplete\"; a warning says which setting to raise; results up to there are kept)
   64   wrong command line
   128+n  stopped by signal n: 130 SIGINT, 143 SIGTERM, 129 SIGHUP (summary status \"interrupted\")";
 
@@ -556,6 +564,14 @@ fn report(
             }
             exit::OK
         }
+        (Status::Incomplete, _) => {
+            // (the warning above says which limit and what to raise)
+            tell(format_args!(
+                "incomplete: results up to {reached} are in {}",
+                out.display()
+            ));
+            exit::INCOMPLETE
+        }
         (Status::Interrupted, _) => {
             let signal = interrupt.map_or(signals::SIGINT, |i| i.received());
             tell(format_args!(
@@ -725,7 +741,7 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         Ok(g) => g,
         Err(e) => {
             tell(format_args!("error: {e}"));
-            return exit::ANALYSIS_FAILED;
+            return analysis_exit_code(&e);
         }
     };
     for w in &g.warnings {
@@ -757,7 +773,7 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
             Ok(fd) => fd,
             Err(e) => {
                 tell(format_args!("error: finite differences: {e}"));
-                return exit::ANALYSIS_FAILED;
+                return analysis_exit_code(&e);
             }
         };
         let (table, worst) = report::check_csv(setup, &g, &fd);
@@ -780,6 +796,18 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         out.display()
     ));
     exit::OK
+}
+
+/// The exit code of a sensitivity analysis or an optimization that could not be computed:
+/// its forward analysis stopped before its end (no gradients of the criteria as declared),
+/// or it failed.
+fn analysis_exit_code(e: &flexmb::sensitivity::SensitivityError) -> i32 {
+    match e {
+        flexmb::sensitivity::SensitivityError::Solve(flexmb::SolveError::Incomplete { .. }) => {
+            exit::INCOMPLETE
+        }
+        _ => exit::ANALYSIS_FAILED,
+    }
 }
 
 /// `flexmb optimize`: lowers a criterion over the bounded design parameters.
@@ -847,7 +875,7 @@ fn optimize(
         Ok(o) => o,
         Err(e) => {
             tell(format_args!("error: {e}"));
-            return exit::ANALYSIS_FAILED;
+            return analysis_exit_code(&e);
         }
     };
     let csv = flexmb::sensitivity::report::optimization_csv(&setup.design, &optimum);
@@ -885,6 +913,12 @@ fn optimize(
         optimum.status,
         out.display()
     ));
+    if optimum.iteration_limit {
+        tell(format_args!(
+            "warning: the optimization stopped after --iterations {iterations} L-BFGS iterations before it converged: the last point is the best found, not an optimum; raise --iterations"
+        ));
+        return exit::INCOMPLETE;
+    }
     exit::OK
 }
 

@@ -1,7 +1,7 @@
 //! One exit code per class of outcome (README.md, "Exit status"), and one message per cause:
 //! 0 success, 1 failed analysis (tests/cli.rs), 2 invalid model (the same for `check` and
-//! `run`), 3 results that cannot be written, 64 a wrong command line; signals in
-//! tests/signals.rs.
+//! `run`), 3 results that cannot be written, 4 an analysis stopped at a limit of its settings
+//! before its end, 64 a wrong command line; signals in tests/signals.rs.
 
 mod common;
 
@@ -36,7 +36,7 @@ fn usage_errors_exit_64_and_help_exits_0() {
     let help = flexmb().arg("--help").output().unwrap();
     assert_eq!(help.status.code(), Some(0));
     let text = String::from_utf8_lossy(&help.stdout);
-    for code in ["0 ", "1 ", "2 ", "3 ", "64 ", "128+n", "130 SIGINT"] {
+    for code in ["0 ", "1 ", "2 ", "3 ", "4 ", "64 ", "128+n", "130 SIGINT"] {
         assert!(text.contains(code), "--help lists exit code {code}: {text}");
     }
     assert_eq!(
@@ -279,4 +279,48 @@ fn summary_that_cannot_be_written_is_never_left_partial() {
         !entries.iter().any(|e| e.ends_with(".tmp")),
         "no temporary file left: {entries:?}"
     );
+}
+
+/// A static analysis that has taken `max_steps` load steps before its final load factor
+/// stops there, whatever its method: status `incomplete` (not `ok`, not `failed`), exit
+/// status 4, a warning that names the limit and the setting to raise, and every converged
+/// step in the files (arc length: examples/lee_frame.toml; load control:
+/// examples/roll_up.toml).
+#[test]
+fn a_static_analysis_stopped_by_max_steps_exits_4_with_status_incomplete() {
+    for (model, method) in [
+        ("examples/lee_frame.toml", "arc-length continuation"),
+        ("examples/roll_up.toml", "load control"),
+    ] {
+        let out = out_dir(&format!("incomplete-{method}").replace(' ', "-"));
+        let result = flexmb()
+            .args(["run", repo(model).to_str().unwrap(), "--out"])
+            .arg(&out)
+            .args(["--set", "solver.max_steps=3", "--results", "none"])
+            .output()
+            .expect("runs");
+        let err = stderr(&result);
+        assert_eq!(result.status.code(), Some(4), "{model}: {err}");
+        let s = summary(&out);
+        assert_eq!(s["status"], "incomplete", "{s}");
+        assert!(s.get("error").is_none(), "{s}");
+        assert_eq!(s["steps"], 3, "{s}");
+        let warning = s["warnings"][0].as_str().unwrap();
+        for part in [method, "max_steps = 3", "raise solver.max_steps"] {
+            assert!(warning.contains(part), "{model}: {warning}");
+        }
+        assert!(err.contains(warning), "{err}");
+        assert!(
+            err.contains("incomplete: results up to load factor"),
+            "{err}"
+        );
+        // The start and the three converged steps, the last at the load factor reached,
+        // short of the final one.
+        let sensors = rows(&out.join("sensors.csv"));
+        assert_eq!(sensors.len(), 4, "{model}");
+        assert_eq!(s["outputs"], 4);
+        let last: f64 = sensors[3][0].parse().unwrap();
+        assert_eq!(last, s["t_reached"].as_f64().unwrap());
+        assert!(last < s["t_end"].as_f64().unwrap(), "{s}");
+    }
 }

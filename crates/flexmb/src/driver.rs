@@ -5,9 +5,11 @@
 //! outcome: `ok`; `failed` with `error_kind` `model` (rejected before the first step:
 //! invalid settings, inconsistent initial conditions, singular initial mass matrix; no CSV
 //! file is written), `analysis` (a step could not converge; the rows up to it are kept) or
-//! `output` (a result file could not be written); or `interrupted` (the interrupt flag was
-//! set; every completed output step is kept). The counts (`steps`, `t_reached`, ...) are
-//! those of the work done, whatever the outcome.
+//! `output` (a result file could not be written); `interrupted` (the interrupt flag was
+//! set; every completed output step is kept); or `incomplete` (the analysis stopped at a
+//! limit of its settings before its end, [`SolveError::Incomplete`]: every converged step
+//! is kept and the warnings say which setting to raise). The counts (`steps`, `t_reached`,
+//! ...) are those of the work done, whatever the outcome.
 //!
 //! The directory must have been taken over by [`OutputDir::prepare`] (which removes the
 //! results of an earlier run).
@@ -155,6 +157,8 @@ struct Work {
 enum Outcome {
     Completed,
     Interrupted,
+    /// Stopped at a limit of the settings; the sentence says which to raise.
+    Incomplete(String),
     Failed(ErrorKind, String),
     /// A result file could not be written; the error is kept for the caller.
     Output(OutputError),
@@ -182,6 +186,7 @@ impl Ended {
             (Some(e), _) => Outcome::Output(e),
             (None, Ok(())) => Outcome::Completed,
             (None, Err(SolveError::Interrupted { .. })) => Outcome::Interrupted,
+            (None, Err(e @ SolveError::Incomplete { .. })) => Outcome::Incomplete(e.to_string()),
             (None, Err(e)) => Outcome::Failed(ErrorKind::Analysis, e.to_string()),
         };
         Self {
@@ -208,6 +213,10 @@ impl Ended {
         match self.outcome {
             Outcome::Completed => summary.status = Status::Ok,
             Outcome::Interrupted => summary.status = Status::Interrupted,
+            Outcome::Incomplete(warning) => {
+                summary.status = Status::Incomplete;
+                summary.warnings.push(warning);
+            }
             Outcome::Failed(kind, message) => summary.fail(kind, message),
             Outcome::Output(e) => summary.fail(ErrorKind::Output, e.to_string()),
         }

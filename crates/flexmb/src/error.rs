@@ -100,8 +100,8 @@ pub enum SolveError {
         load_factor: f64,
         increment: f64,
         rejected: usize,
-        /// The failure of the last attempt (`None`: the step budget ran out).
-        error: Option<Box<crate::solve::NewtonError>>,
+        /// The failure of the last attempt.
+        error: Box<crate::solve::NewtonError>,
         unknown: Option<crate::data::UnknownId>,
         reason: String,
         worst_equation: String,
@@ -117,4 +117,14 @@ pub enum SolveError {
     /// results up to `reached` (time or load factor) are complete.
     #[error("interrupted at {reached:.6e}")]
     Interrupted { reached: f64 },
+    /// The analysis stopped at a limit of its settings before its end (a static analysis:
+    /// `max_steps` load steps before the final load factor `end`). Nothing failed: the
+    /// results up to `reached` (the load factor of the last converged step) are complete;
+    /// `reason` names the limit and the setting to raise.
+    #[error("the analysis stopped at load factor {reached:.6e}, before its final load factor {end}: {reason}")]
+    Incomplete {
+        reached: f64,
+        end: f64,
+        reason: String,
+    },
 }

@@ -19,7 +19,7 @@
 //! * `summary.json` is replaced atomically (written to a temporary file in the same
 //!   directory, synced, then renamed over the old one): a reader, a kill or a full disk never
 //!   leaves a partial summary. Its `status` is [`Status`]: `running` from the start, then
-//!   `ok`, `failed` (with `error_kind` and `error`) or `interrupted`.
+//!   `ok`, `failed` (with `error_kind` and `error`), `interrupted` or `incomplete`.
 
 pub mod snapshot;
 pub mod writer;
@@ -529,6 +529,10 @@ pub enum Status {
     Failed,
     /// The run was stopped from outside (a signal); results up to `t_reached` are complete.
     Interrupted,
+    /// The analysis stopped at a limit of its settings before its end (`max_steps` load
+    /// steps before the final load factor): nothing failed, results up to `t_reached` are
+    /// complete, and a warning says which setting to raise.
+    Incomplete,
 }
 
 /// What kind of error stopped a failed run, `error_kind` in `summary.json`.

@@ -71,8 +71,9 @@ pub struct StaticSettings {
     pub pseudo_time: f64,
     /// Pseudo-dynamic method: nodal viscous damping `alpha` [1/s].
     pub pseudo_damping: f64,
-    /// Most load steps (load control: reaching it is a failure; arc-length: the path is
-    /// followed for at most this many steps, a normal end).
+    /// Most load steps. An analysis that has taken this many before `load_factor` stops
+    /// there with [`SolveError::Incomplete`] (every converged step kept): load control and
+    /// arc length alike (the path of arc length may be long, with snap-backs).
     pub max_steps: usize,
     /// Newton iterations aimed at per step: increments grow when fewer are needed.
     pub target_iterations: usize,
@@ -583,7 +584,9 @@ impl Statics {
     }
 
     /// Runs to the final load factor, calling `output` at `lambda = 0` and after every
-    /// converged load step.
+    /// converged load step. Stops with [`SolveError::Incomplete`] when `max_steps` load steps
+    /// did not reach it (the state is then the last converged one), with
+    /// [`SolveError::StaticFailed`] when a step cannot converge.
     pub fn run(&mut self, output: &mut dyn Observer) -> Result<StaticStats, SolveError> {
         output.output(&self.sample()).map_err(SolveError::Output)?;
         let result = match self.settings.method {
@@ -606,11 +609,7 @@ impl Statics {
         while (target - self.load_factor).abs() > eps {
             self.check_interrupt()?;
             if self.stats.steps >= s.max_steps {
-                return Err(self.failure(
-                    None,
-                    "the maximum number of load steps was reached",
-                    inc,
-                ));
+                return Err(self.incomplete("load control", "solver.max_steps (or max_increment)"));
             }
             let remaining = target - self.load_factor;
             let step = if remaining.abs() <= inc * (1.0 + 1e-9) {
@@ -641,8 +640,7 @@ impl Statics {
                     self.stats.rejected_steps += 1;
                     inc *= 0.5;
                     if inc < s.min_increment || !s.adaptive {
-                        let reason = error.to_string();
-                        return Err(self.failure(Some(error), &reason, inc));
+                        return Err(self.failure(error, inc));
                     }
                 }
             }
@@ -669,10 +667,12 @@ impl Statics {
         Ok(())
     }
 
-    fn failure(&self, error: Option<NewtonError>, reason: &str, inc: f64) -> SolveError {
-        let unknown = error.as_ref().and_then(NewtonError::unknown);
-        let mut reason = reason.to_string();
-        if matches!(error, Some(NewtonError::Singular { .. })) {
+    /// The diagnosis of a load step that could not converge: `error` of its last attempt,
+    /// with the increment `inc` tried.
+    fn failure(&self, error: NewtonError, inc: f64) -> SolveError {
+        let unknown = error.unknown();
+        let mut reason = error.to_string();
+        if matches!(error, NewtonError::Singular { .. }) {
             reason.push_str(": a mechanism (try method = \"pseudo_dynamic\") or a limit point (try method = \"arc_length\")");
         }
         SolveError::StaticFailed {
@@ -685,7 +685,20 @@ impl Statics {
                 .map(|i| self.data.layout.describe_unknown(&self.model, i))
                 .unwrap_or_else(|| "unknown".into()),
             unknown: unknown.map(|i| self.data.layout.unknown(i)),
-            error: error.map(Box::new),
+            error: Box::new(error),
+        }
+    }
+
+    /// The end of an analysis by `method` that has taken `max_steps` load steps before its
+    /// final load factor; `raise` names the settings that let it go further.
+    fn incomplete(&self, method: &str, raise: &str) -> SolveError {
+        SolveError::Incomplete {
+            reached: self.load_factor,
+            end: self.settings.load_factor,
+            reason: format!(
+                "{method} took max_steps = {} load steps; raise {raise}",
+                self.settings.max_steps
+            ),
         }
     }
 
@@ -783,12 +796,10 @@ impl Statics {
         while (target - self.load_factor) * target.signum() > 1e-12 * target.abs().max(1.0) {
             self.check_interrupt()?;
             if self.stats.steps >= s.max_steps {
-                // A path is followed for a number of steps: this is a normal end.
-                self.warnings.push(format!(
-                    "arc-length continuation stopped after max_steps = {} steps at load factor {:.6e}",
-                    s.max_steps, self.load_factor
+                return Err(self.incomplete(
+                    "arc-length continuation",
+                    "solver.max_steps (or arc_length)",
                 ));
-                return Ok(());
             }
             let saved = self.state.clone();
             let lambda0 = self.load_factor;
@@ -822,8 +833,7 @@ impl Statics {
                     self.stats.rejected_steps += 1;
                     dl *= 0.5;
                     if dl < dl_min {
-                        let reason = error.to_string();
-                        return Err(self.failure(Some(error), &reason, dl));
+                        return Err(self.failure(error, dl));
                     }
                 }
             }
