@@ -75,6 +75,16 @@ pub enum SolveError {
         unknown: Option<crate::data::UnknownId>,
         message: String,
     },
+    /// The initial states of the elements cannot be computed: the equations of the control
+    /// blocks' outputs at t = 0, solved at the initial kinematics, have a singular matrix,
+    /// a value that is not finite, or do not converge (`error`); `unknown` and
+    /// `worst_equation` name the output blamed.
+    #[error("the initial states of the elements at t = 0 cannot be solved: {error}; worst equation: {worst_equation}")]
+    InitialStates {
+        error: Box<crate::solve::NewtonError>,
+        unknown: Option<crate::data::UnknownId>,
+        worst_equation: String,
+    },
     #[error(transparent)]
     Settings(#[from] SettingsError),
     #[error("inconsistent initial conditions: {0}")]

@@ -394,7 +394,12 @@ impl ElementKernel for ContactElement<'_> {
         self.contact.n_states()
     }
 
-    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(
+        &self,
+        ctx: &Context,
+        local: &Local,
+        x: &mut [f64],
+    ) -> Result<(), crate::solve::NewtonError> {
         let held = [1.0, 0.0, 0.0, 0.0];
         let local = Local {
             x: &held[..x.len()],
@@ -402,6 +407,7 @@ impl ElementKernel for ContactElement<'_> {
             ..*local
         };
         x[0] = self.approach_speed(&self.state(ctx, &local));
+        Ok(())
     }
 
     fn update_states(&self, ctx: &Context, start: &Local, end: &Local, x: &mut [f64]) {

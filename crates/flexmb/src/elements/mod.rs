@@ -313,8 +313,17 @@ pub trait ElementKernel {
         s: Option<(&Coefficients, &mut LocalMatrix)>,
     );
     /// The element's states at the start of a run, from the initial kinematics in `local`
-    /// (its `x` and `xdot` zero); `x` is zero on entry.
-    fn initial_states(&self, _ctx: &Context, _local: &Local, _x: &mut [f64]) {}
+    /// (its `x` and `xdot` zero); `x` is zero on entry. States found by solving equations
+    /// (the outputs of control blocks) report a failure as the Newton iterations of the
+    /// solver do, the unknown blamed being the index of the state in `x`.
+    fn initial_states(
+        &self,
+        _ctx: &Context,
+        _local: &Local,
+        _x: &mut [f64],
+    ) -> Result<(), crate::solve::NewtonError> {
+        Ok(())
+    }
     /// Kinetic energy \[J\].
     fn kinetic_energy(&self, _ctx: &Context, _local: &Local) -> f64 {
         0.0
@@ -763,7 +772,12 @@ impl ElementKernel for Kernel<'_> {
     ) {
         dispatch!(self, k => k.evaluate(ctx, local, r, s))
     }
-    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(
+        &self,
+        ctx: &Context,
+        local: &Local,
+        x: &mut [f64],
+    ) -> Result<(), crate::solve::NewtonError> {
         dispatch!(self, k => k.initial_states(ctx, local, x))
     }
     fn kinetic_energy(&self, ctx: &Context, local: &Local) -> f64 {

@@ -191,8 +191,14 @@ impl ElementKernel for RotationalSpringElement<'_> {
         1
     }
 
-    fn initial_states(&self, _ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(
+        &self,
+        _ctx: &Context,
+        local: &Local,
+        x: &mut [f64],
+    ) -> Result<(), crate::solve::NewtonError> {
         x[0] = joint_angle(self.joint, local.nodes).0;
+        Ok(())
     }
 
     fn evaluate(

@@ -391,10 +391,16 @@ impl ElementKernel for SpringElement<'_> {
         self.spring.relaxation.is_some() as usize
     }
 
-    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(
+        &self,
+        ctx: &Context,
+        local: &Local,
+        x: &mut [f64],
+    ) -> Result<(), crate::solve::NewtonError> {
         if self.spring.relaxation.is_some() {
             x[0] = self.geometry(ctx, local.nodes).l - self.spring.rest_length;
         }
+        Ok(())
     }
 
     fn evaluate(
@@ -471,7 +477,12 @@ impl ElementKernel for SpringDamper {
         self.relaxation.is_some() as usize
     }
 
-    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(
+        &self,
+        ctx: &Context,
+        local: &Local,
+        x: &mut [f64],
+    ) -> Result<(), crate::solve::NewtonError> {
         SpringElement::linear(self).initial_states(ctx, local, x)
     }
 

@@ -666,7 +666,7 @@ impl Simulation {
         let (layout, warnings) = prepare_layout(&model);
         let threads = Threads::for_model(&model, settings.threads);
         let mut data = Data::new(&model, layout.clone())?.with_threads(threads.clone());
-        let mut state = State::initial(&model, &layout);
+        let mut state = State::initial(&model, &layout)?;
         initial_accelerations(&model, &mut data, &mut state, settings.load_factor_at(0.0))?;
         if settings.stabilized() {
             let mut stabilized = layout;

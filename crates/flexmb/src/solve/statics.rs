@@ -541,7 +541,7 @@ impl Statics {
         model.validate()?;
         settings.check()?;
         let (layout, warnings) = prepare_layout(&model);
-        let mut state = State::initial(&model, &layout);
+        let mut state = State::initial(&model, &layout)?;
         let threads = crate::parallel::Threads::for_model(&model, settings.threads);
         let mut data = Data::new(&model, layout)?.with_threads(threads);
         for v in state.v.iter_mut() {
