@@ -339,7 +339,19 @@ fn run(
     options: flexmb::driver::RunOptions,
     files: RunFiles,
 ) -> i32 {
-    let interrupt = match signals::Interrupt::install() {
+    let taken = if options.resume {
+        OutputDir::reopen(out)
+    } else {
+        OutputDir::prepare(out)
+    };
+    let dir = match taken {
+        Ok(dir) => dir,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::OUTPUT_FAILED;
+        }
+    };
+    let interrupt = match signals::Interrupt::install(end_at_once(&dir, out)) {
         Ok(i) => Some(i),
         Err(e) => {
             tell(format_args!(
@@ -349,21 +361,14 @@ fn run(
         }
     };
     // From here on summary.json describes this run (a resumed run goes on in its directory).
-    let taken = if options.resume {
-        OutputDir::reopen(out)
-    } else {
-        OutputDir::prepare(out)
-    };
-    let dir = match taken.and_then(|dir| {
-        dir.write_summary(&Summary::default())?;
-        Ok(dir)
-    }) {
-        Ok(dir) => dir,
-        Err(e) => {
-            tell(format_args!("error: {e}"));
-            return exit::OUTPUT_FAILED;
-        }
-    };
+    if let Err(e) = dir.write_summary(&Summary::default()) {
+        tell(format_args!("error: {e}"));
+        // The run ends here; its end is written in the room kept for it, if it was kept.
+        let mut failed = Summary::default();
+        failed.fail(ErrorKind::Output, e.to_string());
+        let _ = dir.write_summary(&failed);
+        return exit::OUTPUT_FAILED;
+    }
     let mut file = match flexmb::input::read_model_file(model, set) {
         Ok(file) => file,
         Err(e) => {
@@ -399,11 +404,6 @@ fn run(
         interrupt.as_ref().map(|i| i.flag()),
     );
     bar.finish_and_clear();
-    if let (Status::Running, Some(e)) = (result.summary.status, &result.unwritten) {
-        // The run could not start: summary.json could not be written.
-        tell(format_args!("error: {e}"));
-        return exit::OUTPUT_FAILED;
-    }
     let code = report(model, out, &result.summary, interrupt);
     if result.summary.steps > 0 || result.summary.outputs > 0 {
         draw(&dir, files);
@@ -415,6 +415,38 @@ fn run(
             exit::OUTPUT_FAILED
         }
         None => code,
+    }
+}
+
+/// What the second signal does: the run in `dir` (the output directory `out`) is ended at
+/// once, its summary written from what its result files hold; returns the exit code.
+fn end_at_once(dir: &OutputDir, out: &Path) -> impl FnOnce(i32) -> i32 + Send + 'static {
+    let (dir, out) = (dir.clone(), out.to_path_buf());
+    move |signal| {
+        let name = signals::name(signal);
+        let note = format!(
+            "a second {name} ended the run at once: the results stop at the last output step written (t_reached); the steps computed after it are lost and no checkpoint was written"
+        );
+        match dir.end_now(&note, std::time::Duration::from_secs(2)) {
+            Ok(Some(summary)) => tell(format_args!(
+                "interrupted at once by a second {name}: results up to {} are in {}",
+                reached(&summary),
+                out.display()
+            )),
+            // Not started, or ended: summary.json says so.
+            Ok(None) => {}
+            Err(e) => tell(format_args!("error: {e}")),
+        }
+        signals::exit_code(signal)
+    }
+}
+
+/// Where a run's results are complete up to, in words: `t = 1.5 s`, `load factor 0.3`.
+fn reached(summary: &Summary) -> String {
+    if summary.analysis == "static" {
+        format!("load factor {}", summary.t_reached)
+    } else {
+        format!("t = {} s", summary.t_reached)
     }
 }
 
@@ -538,11 +570,7 @@ fn report(
     for w in &summary.warnings {
         tell(format_args!("warning: {w}"));
     }
-    let reached = if summary.analysis == "static" {
-        format!("load factor {}", summary.t_reached)
-    } else {
-        format!("t = {} s", summary.t_reached)
-    };
+    let reached = reached(summary);
     let error = summary.error.as_deref().unwrap_or("the analysis failed");
     match (summary.status, summary.error_kind) {
         (Status::Ok, _) => {

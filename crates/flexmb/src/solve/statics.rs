@@ -28,7 +28,7 @@ use crate::elements::{Coefficients, NodeState};
 use crate::error::{SettingsError, SolveError};
 use crate::model::limits::within;
 use crate::model::Model;
-use crate::observe::{Observer, Sample};
+use crate::observe::{Observer, Sample, Work};
 use crate::sensors::node_states;
 use crate::state::State;
 use flexmb_lie::Vec6;
@@ -212,15 +212,6 @@ impl Default for StaticSettings {
     }
 }
 
-/// Work done by a static analysis.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct StaticStats {
-    pub steps: usize,
-    pub newton_iterations: usize,
-    pub rejected_steps: usize,
-    pub factorizations: usize,
-}
-
 /// A static analysis in progress.
 pub struct Statics {
     pub model: Arc<Model>,
@@ -230,7 +221,7 @@ pub struct Statics {
     pub settings: StaticSettings,
     /// Load factor of the converged state.
     pub load_factor: f64,
-    pub stats: StaticStats,
+    pub stats: Work,
     pub warnings: Vec<String>,
     /// Checked before every load step (and every step of a pseudo-dynamic run): when it is
     /// set, [`Statics::run`] returns [`SolveError::Interrupted`].
@@ -574,7 +565,7 @@ impl Statics {
             newton: NewtonSolver::new(policy, settings.verify),
             settings,
             load_factor: 0.0,
-            stats: StaticStats::default(),
+            stats: Work::default(),
             warnings,
             interrupt: None,
             verification: None,
@@ -587,7 +578,7 @@ impl Statics {
     /// converged load step. Stops with [`SolveError::Incomplete`] when `max_steps` load steps
     /// did not reach it (the state is then the last converged one), with
     /// [`SolveError::StaticFailed`] when a step cannot converge.
-    pub fn run(&mut self, output: &mut dyn Observer) -> Result<StaticStats, SolveError> {
+    pub fn run(&mut self, output: &mut dyn Observer) -> Result<Work, SolveError> {
         output.output(&self.sample()).map_err(SolveError::Output)?;
         let result = match self.settings.method {
             StaticMethod::LoadControl => self.run_load_control(output),
@@ -655,6 +646,7 @@ impl Statics {
             data: &self.data,
             state: &self.state,
             at: self.load_factor,
+            work: self.stats,
         }
     }
 
@@ -761,8 +753,8 @@ impl Statics {
         &self,
         output: &mut dyn Observer,
         h: f64,
-        since: &mut StaticStats,
-        before: &StaticStats,
+        since: &mut Work,
+        before: &Work,
     ) -> Result<(), SolveError> {
         let info = super::StepInfo {
             t: self.load_factor,
@@ -956,12 +948,11 @@ impl Statics {
                 *v = Vec6::zeros();
             }
             self.load_factor = d.load_factor_at(sim.state.t);
+            // (the dynamic run is all the work of a pseudo-dynamic analysis)
+            self.stats = sim.work;
             output.output(&self.sample())
         });
-        self.stats.steps += sim.stats.steps;
-        self.stats.newton_iterations += sim.stats.newton_iterations;
-        self.stats.rejected_steps += sim.stats.rejected_steps;
-        self.stats.factorizations += sim.stats.factorizations;
+        self.stats = sim.stats.work();
         self.verification.clone_from(&sim.verification);
         match result {
             Err(SolveError::Interrupted { .. }) => {
