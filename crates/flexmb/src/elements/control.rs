@@ -154,8 +154,8 @@
 
 use super::pose::{c, pose, Pose};
 use super::{
-    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
-    LocalMatrix, LocalVector, Mat12, StepLimit,
+    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters,
+    InitialStates, Local, LocalMatrix, LocalVector, Mat12, StepLimit,
 };
 use crate::model::control::{BlockKind, ControlSystem, Quantity, Target};
 use crate::model::parameters::{ControlWrt, SectionParam};
@@ -1325,12 +1325,7 @@ impl ElementKernel for ControlElement<'_> {
         self.states
     }
 
-    fn initial_states(
-        &self,
-        ctx: &Context,
-        local: &Local,
-        x: &mut [f64],
-    ) -> Result<(), NewtonError> {
+    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) -> InitialStates {
         let sys = self.system;
         for (b, block) in sys.blocks.iter().enumerate() {
             let s0 = sys.state_start[b];
