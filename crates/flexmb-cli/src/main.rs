@@ -427,16 +427,20 @@ fn end_at_once(dir: &OutputDir, out: &Path) -> impl FnOnce(i32) -> i32 + Send + 
         let note = format!(
             "a second {name} ended the run at once: the results stop at the last output step written (t_reached); the steps computed after it are lost and no checkpoint was written"
         );
-        match dir.end_now(&note, std::time::Duration::from_secs(2)) {
+        let ended = dir.end_now(&note, std::time::Duration::from_secs(2));
+        match &ended.summary {
             Ok(Some(summary)) => tell(format_args!(
                 "interrupted at once by a second {name}: results up to {} are in {}",
-                reached(&summary),
+                reached(summary),
                 out.display()
             )),
             // Not started, or ended: summary.json says so.
             Ok(None) => {}
             Err(e) => tell(format_args!("error: {e}")),
         }
+        // The run's writer stays held until the process ends (at once, on return): the run
+        // cannot write or record anything else meanwhile.
+        std::mem::forget(ended);
         signals::exit_code(signal)
     }
 }

@@ -160,6 +160,13 @@ struct Record {
     reached: Reached,
 }
 
+/// A run ended at once by [`OutputDir::end_now`]: the summary written, if any, and the run's
+/// writer thread held (between two batches) until this is dropped.
+pub struct EndedNow<'a> {
+    pub summary: Result<Option<Summary>, OutputError>,
+    _writer: Option<MutexGuard<'a, ()>>,
+}
+
 /// How far the result files of a run go: the output steps the writer thread last made
 /// durable in every file, and where the run stood at the last of them.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -325,9 +332,10 @@ impl OutputDir {
     /// files stand: status `interrupted`, `outputs`, `t_reached` and the counts of the last
     /// output step in the files, `note` among the warnings (with a word when the writer
     /// could not be stopped in time: the files may then hold more steps than `outputs`, the
-    /// last perhaps incomplete). Returns that summary, or `None` when the run had not
-    /// written its first summary yet or had already written its last.
-    pub fn end_now(&self, note: &str, wait: Duration) -> Result<Option<Summary>, OutputError> {
+    /// last perhaps incomplete). Its `summary` is that summary, or `None` when the run had
+    /// not written its first summary yet or had already written its last; the run's writer
+    /// (and so the run's own end) is held until it is dropped.
+    pub fn end_now(&self, note: &str, wait: Duration) -> EndedNow<'_> {
         let deadline = Instant::now() + wait;
         let files = loop {
             match self.shared.files.try_lock() {
@@ -340,15 +348,18 @@ impl OutputDir {
             }
         };
         let mut record = lock(&self.shared.record);
+        let stopped = files.is_some();
+        let mut ended = EndedNow {
+            summary: Ok(None),
+            _writer: files,
+        };
         let Some(mut summary) = record.summary.clone() else {
-            return Ok(None);
+            return ended;
         };
         if summary.status != Status::Running {
-            return Ok(None);
+            return ended;
         }
         self.shared.ended.store(true, Ordering::SeqCst);
-        let stopped = files.is_some();
-        drop(files);
         let r = record.reached;
         summary.status = Status::Interrupted;
         summary.outputs = r.rows;
@@ -361,8 +372,10 @@ impl OutputDir {
         } else {
             format!("{note} (the result files were still being written: they may hold more output steps than `outputs`, the last perhaps incomplete)")
         });
-        self.record_summary(&mut record, &summary)?;
-        Ok(Some(summary))
+        ended.summary = self
+            .record_summary(&mut record, &summary)
+            .map(|()| Some(summary));
+        ended
     }
 
     /// Replaces `checkpoint.json` atomically, as [`OutputDir::write_summary`] does.
@@ -1142,7 +1155,10 @@ mod tests {
         let out = OutputDir::prepare(&dir).unwrap();
         let note = "ended at once";
         let wait = Duration::from_secs(10);
-        assert!(out.end_now(note, wait).unwrap().is_none(), "not started");
+        assert!(
+            out.end_now(note, wait).summary.unwrap().is_none(),
+            "not started"
+        );
         let running = Summary {
             title: "ended".into(),
             analysis: "dynamic".into(),
@@ -1163,7 +1179,7 @@ mod tests {
         });
         let ended = std::thread::scope(|scope| {
             let files = out.lock_files().expect("the run goes on");
-            let ending = scope.spawn(|| out.end_now(note, wait));
+            let ending = scope.spawn(|| out.end_now(note, wait).summary);
             // the batch being written when the signal came
             std::thread::sleep(Duration::from_millis(50));
             out.files_reached(Reached {
@@ -1196,7 +1212,7 @@ mod tests {
         let other = OutputDir::prepare(&temp_dir("end-after")).unwrap();
         other.write_summary(&running).unwrap();
         other.write_summary(&ok).unwrap();
-        assert!(other.end_now(note, wait).unwrap().is_none());
+        assert!(other.end_now(note, wait).summary.unwrap().is_none());
         assert!(other.lock_files().is_some());
     }
 }
