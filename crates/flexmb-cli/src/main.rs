@@ -37,6 +37,12 @@ mod exit {
     pub const INVALID_MODEL: i32 = 2;
     /// The results could not be written (the output directory or a result file).
     pub const OUTPUT_FAILED: i32 = 3;
+    /// The analysis stopped at a limit of its settings before its end (`max_steps` load
+    /// steps before the final load factor; `optimize`: `--iterations` before L-BFGS
+    /// converged); nothing failed and the results up to where it stopped are kept. The next
+    /// code of flexmb's own outcome classes: below sysexits' 64-78, the shell's 126-127 and
+    /// the 128 + n of signals, so it means nothing else.
+    pub const INCOMPLETE: i32 = 4;
     /// The command line is wrong (sysexits' EX_USAGE).
     pub const USAGE: i32 = 64;
 }
@@ -48,6 +54,8 @@ Exit codes:
   1    the analysis failed (results up to the failure are kept)
   2    the model is invalid (model file, settings or initial conditions)
   3    the results could not be written (output directory or files)
+  4    the analysis stopped before its end at a limit of its settings (summary status
+       \"incomplete\"; a warning says which setting to raise; results up to there are kept)
   64   wrong command line
   128+n  stopped by signal n: 130 SIGINT, 143 SIGTERM, 129 SIGHUP (summary status \"interrupted\")";
 
@@ -331,7 +339,19 @@ fn run(
     options: flexmb::driver::RunOptions,
     files: RunFiles,
 ) -> i32 {
-    let interrupt = match signals::Interrupt::install() {
+    let taken = if options.resume {
+        OutputDir::reopen(out)
+    } else {
+        OutputDir::prepare(out)
+    };
+    let dir = match taken {
+        Ok(dir) => dir,
+        Err(e) => {
+            tell(format_args!("error: {e}"));
+            return exit::OUTPUT_FAILED;
+        }
+    };
+    let interrupt = match signals::Interrupt::install(end_at_once(&dir, out)) {
         Ok(i) => Some(i),
         Err(e) => {
             tell(format_args!(
@@ -341,21 +361,14 @@ fn run(
         }
     };
     // From here on summary.json describes this run (a resumed run goes on in its directory).
-    let taken = if options.resume {
-        OutputDir::reopen(out)
-    } else {
-        OutputDir::prepare(out)
-    };
-    let dir = match taken.and_then(|dir| {
-        dir.write_summary(&Summary::default())?;
-        Ok(dir)
-    }) {
-        Ok(dir) => dir,
-        Err(e) => {
-            tell(format_args!("error: {e}"));
-            return exit::OUTPUT_FAILED;
-        }
-    };
+    if let Err(e) = dir.write_summary(&Summary::default()) {
+        tell(format_args!("error: {e}"));
+        // The run ends here; its end is written in the room kept for it, if it was kept.
+        let mut failed = Summary::default();
+        failed.fail(ErrorKind::Output, e.to_string());
+        let _ = dir.write_summary(&failed);
+        return exit::OUTPUT_FAILED;
+    }
     let mut file = match flexmb::input::read_model_file(model, set) {
         Ok(file) => file,
         Err(e) => {
@@ -391,11 +404,6 @@ fn run(
         interrupt.as_ref().map(|i| i.flag()),
     );
     bar.finish_and_clear();
-    if let (Status::Running, Some(e)) = (result.summary.status, &result.unwritten) {
-        // The run could not start: summary.json could not be written.
-        tell(format_args!("error: {e}"));
-        return exit::OUTPUT_FAILED;
-    }
     let code = report(model, out, &result.summary, interrupt);
     if result.summary.steps > 0 || result.summary.outputs > 0 {
         draw(&dir, files);
@@ -407,6 +415,42 @@ fn run(
             exit::OUTPUT_FAILED
         }
         None => code,
+    }
+}
+
+/// What the second signal does: the run in `dir` (the output directory `out`) is ended at
+/// once, its summary written from what its result files hold; returns the exit code.
+fn end_at_once(dir: &OutputDir, out: &Path) -> impl FnOnce(i32) -> i32 + Send + 'static {
+    let (dir, out) = (dir.clone(), out.to_path_buf());
+    move |signal| {
+        let name = signals::name(signal);
+        let note = format!(
+            "a second {name} ended the run at once: the results stop at the last output step written (t_reached); the steps computed after it are lost and no checkpoint was written"
+        );
+        let ended = dir.end_now(&note, std::time::Duration::from_secs(2));
+        match &ended.summary {
+            Ok(Some(summary)) => tell(format_args!(
+                "interrupted at once by a second {name}: results up to {} are in {}",
+                reached(summary),
+                out.display()
+            )),
+            // Not started, or ended: summary.json says so.
+            Ok(None) => {}
+            Err(e) => tell(format_args!("error: {e}")),
+        }
+        // The run's writer stays held until the process ends (at once, on return): the run
+        // cannot write or record anything else meanwhile.
+        std::mem::forget(ended);
+        signals::exit_code(signal)
+    }
+}
+
+/// Where a run's results are complete up to, in words: `t = 1.5 s`, `load factor 0.3`.
+fn reached(summary: &Summary) -> String {
+    if summary.analysis == "static" {
+        format!("load factor {}", summary.t_reached)
+    } else {
+        format!("t = {} s", summary.t_reached)
     }
 }
 
@@ -530,11 +574,7 @@ fn report(
     for w in &summary.warnings {
         tell(format_args!("warning: {w}"));
     }
-    let reached = if summary.analysis == "static" {
-        format!("load factor {}", summary.t_reached)
-    } else {
-        format!("t = {} s", summary.t_reached)
-    };
+    let reached = reached(summary);
     let error = summary.error.as_deref().unwrap_or("the analysis failed");
     match (summary.status, summary.error_kind) {
         (Status::Ok, _) => {
@@ -555,6 +595,14 @@ fn report(
                 ));
             }
             exit::OK
+        }
+        (Status::Incomplete, _) => {
+            // (the warning above says which limit and what to raise)
+            tell(format_args!(
+                "incomplete: results up to {reached} are in {}",
+                out.display()
+            ));
+            exit::INCOMPLETE
         }
         (Status::Interrupted, _) => {
             let signal = interrupt.map_or(signals::SIGINT, |i| i.received());
@@ -725,7 +773,7 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         Ok(g) => g,
         Err(e) => {
             tell(format_args!("error: {e}"));
-            return exit::ANALYSIS_FAILED;
+            return analysis_exit_code(&e);
         }
     };
     for w in &g.warnings {
@@ -757,7 +805,7 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
             Ok(fd) => fd,
             Err(e) => {
                 tell(format_args!("error: finite differences: {e}"));
-                return exit::ANALYSIS_FAILED;
+                return analysis_exit_code(&e);
             }
         };
         let (table, worst) = report::check_csv(setup, &g, &fd);
@@ -780,6 +828,18 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         out.display()
     ));
     exit::OK
+}
+
+/// The exit code of a sensitivity analysis or an optimization that could not be computed:
+/// its forward analysis stopped before its end (no gradients of the criteria as declared),
+/// or it failed.
+fn analysis_exit_code(e: &flexmb::sensitivity::SensitivityError) -> i32 {
+    match e {
+        flexmb::sensitivity::SensitivityError::Solve(flexmb::SolveError::Incomplete { .. }) => {
+            exit::INCOMPLETE
+        }
+        _ => exit::ANALYSIS_FAILED,
+    }
 }
 
 /// `flexmb optimize`: lowers a criterion over the bounded design parameters.
@@ -847,7 +907,7 @@ fn optimize(
         Ok(o) => o,
         Err(e) => {
             tell(format_args!("error: {e}"));
-            return exit::ANALYSIS_FAILED;
+            return analysis_exit_code(&e);
         }
     };
     let csv = flexmb::sensitivity::report::optimization_csv(&setup.design, &optimum);
@@ -885,6 +945,12 @@ fn optimize(
         optimum.status,
         out.display()
     ));
+    if optimum.iteration_limit {
+        tell(format_args!(
+            "warning: the optimization stopped after --iterations {iterations} L-BFGS iterations before it converged: the last point is the best found, not an optimum; raise --iterations"
+        ));
+        return exit::INCOMPLETE;
+    }
     exit::OK
 }
 

@@ -1,7 +1,7 @@
 //! One exit code per class of outcome (README.md, "Exit status"), and one message per cause:
 //! 0 success, 1 failed analysis (tests/cli.rs), 2 invalid model (the same for `check` and
-//! `run`), 3 results that cannot be written, 64 a wrong command line; signals in
-//! tests/signals.rs.
+//! `run`), 3 results that cannot be written, 4 an analysis stopped at a limit of its settings
+//! before its end, 64 a wrong command line; signals in tests/signals.rs.
 
 mod common;
 
@@ -36,7 +36,7 @@ fn usage_errors_exit_64_and_help_exits_0() {
     let help = flexmb().arg("--help").output().unwrap();
     assert_eq!(help.status.code(), Some(0));
     let text = String::from_utf8_lossy(&help.stdout);
-    for code in ["0 ", "1 ", "2 ", "3 ", "64 ", "128+n", "130 SIGINT"] {
+    for code in ["0 ", "1 ", "2 ", "3 ", "4 ", "64 ", "128+n", "130 SIGINT"] {
         assert!(text.contains(code), "--help lists exit code {code}: {text}");
     }
     assert_eq!(
@@ -142,7 +142,8 @@ fn earlier_result_that_cannot_be_removed_exits_3() {
 
 /// Runs the pendulum with the size of every file the process writes limited to `blocks`
 /// 512-byte blocks (`ulimit -f` of sh, SIGXFSZ ignored so that writes past it fail with
-/// EFBIG like on a full disk).
+/// EFBIG like on a full disk). At least 8 blocks hold the room a run keeps for its last
+/// summary (4096 bytes).
 #[cfg(unix)]
 fn run_with_file_size_limit(out: &Path, blocks: u32) -> Output {
     run_model_with_file_size_limit(
@@ -189,7 +190,7 @@ fn full_disk_keeps_the_same_steps_in_every_result_file() {
         "examples/chain_10.toml",
         &["solver.output_interval=0", "solver.t_end=0.01"],
         &out,
-        4,
+        8,
     );
     assert_eq!(result.status.code(), Some(3), "{}", stderr(&result));
     assert!(
@@ -206,10 +207,11 @@ fn full_disk_keeps_the_same_steps_in_every_result_file() {
         "{} sensor rows",
         sensors.len()
     );
-    assert_eq!(
-        summary(&out)["outputs"].as_u64().unwrap() as usize,
-        sensors.len()
-    );
+    let s = summary(&out);
+    assert_eq!(s["outputs"].as_u64().unwrap() as usize, sensors.len());
+    // complete up to the last step written (the solver had gone further)
+    let last: f64 = sensors[sensors.len() - 1][0].parse().unwrap();
+    assert_eq!(s["t_reached"].as_f64().unwrap(), last, "{s}");
 }
 
 /// A results file that cannot be written (here: created) ends the run with exit status 3
@@ -218,7 +220,7 @@ fn full_disk_keeps_the_same_steps_in_every_result_file() {
 #[test]
 fn full_disk_on_the_results_file_exits_3_and_names_it() {
     let out = out_dir("fsize-h5");
-    let result = run_limited("examples/pendulum.toml", &["--no-plot"], &[], &out, 2);
+    let result = run_limited("examples/pendulum.toml", &["--no-plot"], &[], &out, 8);
     assert_eq!(result.status.code(), Some(3), "{}", stderr(&result));
     let err = stderr(&result);
     assert!(err.contains("results.h5: cannot create"), "{err}");
@@ -232,7 +234,7 @@ fn full_disk_on_the_results_file_exits_3_and_names_it() {
 #[test]
 fn full_disk_exits_3_keeps_complete_rows_and_says_so_in_the_summary() {
     let out = out_dir("fsize");
-    let result = run_with_file_size_limit(&out, 4);
+    let result = run_with_file_size_limit(&out, 8);
     assert_eq!(result.status.code(), Some(3), "{}", stderr(&result));
     let err = stderr(&result);
     assert!(err.contains("sensors.csv: cannot write"), "{err}");
@@ -249,34 +251,75 @@ fn full_disk_exits_3_keeps_complete_rows_and_says_so_in_the_summary() {
         .unwrap()
         .ends_with('\n'));
     assert_eq!(s["outputs"].as_u64().unwrap() as usize, rows.len());
+    // complete up to the last step written, not to the step the solver had reached
+    let last: f64 = rows[rows.len() - 1][0].parse().unwrap();
+    assert_eq!(s["t_reached"].as_f64().unwrap(), last, "{s}");
 }
 
+/// A run records its end in room kept for it when it starts: one that cannot keep that
+/// room (here: files of at most one 512-byte block, under the 4096 bytes of the room) does
+/// not start. It says why on one line and leaves nothing in the directory: no result file,
+/// no partial summary (the failure itself, naming this long directory twice, does not fit
+/// in a block either), no temporary file.
 #[cfg(unix)]
 #[test]
-fn summary_that_cannot_be_written_is_never_left_partial() {
-    // One block (512 bytes) fits the summary written at the start but not the final one,
-    // whose error message names this long directory: the final write fails and the earlier
-    // summary stays whole (a truncating write would leave 512 bytes of broken JSON).
+fn a_run_that_cannot_keep_room_for_its_last_summary_does_not_start() {
     let out = out_dir(&format!("fsize-summary-{}", "long-name-".repeat(12)));
     let result = run_with_file_size_limit(&out, 1);
     assert_eq!(result.status.code(), Some(3), "{}", stderr(&result));
     let err = stderr(&result);
-    // Two causes, one line each: the result file and the final summary.
     assert!(
-        err.contains("sensors.csv: cannot write"),
-        "the cause: {err}"
+        err.contains(".summary.json.room: cannot keep room for the last summary"),
+        "{err}"
     );
-    assert!(err.contains("summary.json"), "{err}");
-    assert_eq!(err.lines().count(), 2, "{err}");
-    let s = summary(&out); // parses
-    assert_eq!(s["status"], "running");
-    assert_eq!(s["title"], "Simple pendulum (IFToMM A01)");
+    assert_eq!(err.lines().count(), 1, "{err}");
     let entries: Vec<_> = std::fs::read_dir(&out)
         .unwrap()
         .map(|e| e.unwrap().file_name().into_string().unwrap())
         .collect();
-    assert!(
-        !entries.iter().any(|e| e.ends_with(".tmp")),
-        "no temporary file left: {entries:?}"
-    );
+    assert!(entries.is_empty(), "{entries:?}");
+}
+
+/// A static analysis that has taken `max_steps` load steps before its final load factor
+/// stops there, whatever its method: status `incomplete` (not `ok`, not `failed`), exit
+/// status 4, a warning that names the limit and the setting to raise, and every converged
+/// step in the files (arc length: examples/lee_frame.toml; load control:
+/// examples/roll_up.toml).
+#[test]
+fn a_static_analysis_stopped_by_max_steps_exits_4_with_status_incomplete() {
+    for (model, method) in [
+        ("examples/lee_frame.toml", "arc-length continuation"),
+        ("examples/roll_up.toml", "load control"),
+    ] {
+        let out = out_dir(&format!("incomplete-{method}").replace(' ', "-"));
+        let result = flexmb()
+            .args(["run", repo(model).to_str().unwrap(), "--out"])
+            .arg(&out)
+            .args(["--set", "solver.max_steps=3", "--results", "none"])
+            .output()
+            .expect("runs");
+        let err = stderr(&result);
+        assert_eq!(result.status.code(), Some(4), "{model}: {err}");
+        let s = summary(&out);
+        assert_eq!(s["status"], "incomplete", "{s}");
+        assert!(s.get("error").is_none(), "{s}");
+        assert_eq!(s["steps"], 3, "{s}");
+        let warning = s["warnings"][0].as_str().unwrap();
+        for part in [method, "max_steps = 3", "raise solver.max_steps"] {
+            assert!(warning.contains(part), "{model}: {warning}");
+        }
+        assert!(err.contains(warning), "{err}");
+        assert!(
+            err.contains("incomplete: results up to load factor"),
+            "{err}"
+        );
+        // The start and the three converged steps, the last at the load factor reached,
+        // short of the final one.
+        let sensors = rows(&out.join("sensors.csv"));
+        assert_eq!(sensors.len(), 4, "{model}");
+        assert_eq!(s["outputs"], 4);
+        let last: f64 = sensors[3][0].parse().unwrap();
+        assert_eq!(last, s["t_reached"].as_f64().unwrap());
+        assert!(last < s["t_end"].as_f64().unwrap(), "{s}");
+    }
 }

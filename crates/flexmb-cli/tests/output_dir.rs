@@ -183,3 +183,106 @@ fn rigid_run_repeated_into_a_used_directory_gives_identical_files() {
 fn beam_run_repeated_into_a_used_directory_gives_identical_files() {
     repeated_runs_give_identical_files("same-roll-up", ROLL_UP, &[]);
 }
+
+/// A tmpfs mounted for a test, unmounted when dropped.
+struct Tmpfs(std::path::PathBuf);
+
+impl Tmpfs {
+    /// Mounts a tmpfs with `options` on `dir`; `None` where that is not allowed (not root).
+    fn mount(dir: &Path, options: &str) -> Option<Self> {
+        std::fs::create_dir_all(dir).unwrap();
+        let mounted = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", options, "tmpfs"])
+            .arg(dir)
+            .stderr(std::process::Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        mounted.then(|| Self(dir.to_path_buf()))
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg(&self.0).status();
+    }
+}
+
+/// Fills the file system of `dir` with one file, then frees `free` bytes of it.
+fn fill(dir: &Path, free: u64) {
+    use std::io::Write;
+    let path = dir.join("filler");
+    let mut f = std::fs::File::create(&path).unwrap();
+    let page = [1u8; 4096];
+    while f.write_all(&page).is_ok() {}
+    let len = f.metadata().unwrap().len();
+    f.set_len(len.saturating_sub(free)).unwrap();
+}
+
+/// `flexmb run` of the pendulum (`t_end`) into `out`: its exit code and summary.
+fn run_pendulum(out: &Path, t_end: &str) -> (i32, serde_json::Value) {
+    let code = run(
+        "examples/pendulum.toml",
+        out,
+        &[&format!("solver.t_end={t_end}")],
+    );
+    (code, summary(out))
+}
+
+/// The end of a run is recorded whatever the disk has left, on a real full file system (a
+/// tmpfs of 256 KiB mounted for the test; it needs root, and says it is skipped otherwise:
+/// tests/exit_codes.rs checks the same with a file size limit, and the output module's
+/// tests the room kept for the last summary). The summary said `running` (0 outputs beside
+/// the rows written) when the disk filled during the run, or one page was left, or no inode:
+/// it now says `failed` (`output`), with the output steps the files hold.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_file_system_still_records_the_end_of_the_run() {
+    let mnt = out_dir("tmpfs");
+    let out = mnt.join("out");
+    let failed_on_output = |(code, s): (i32, serde_json::Value)| {
+        assert_eq!(code, 3, "{s}");
+        assert_eq!(s["status"], "failed", "{s}");
+        assert_eq!(s["error_kind"], "output", "{s}");
+        let rows = std::fs::read_to_string(out.join("sensors.csv"))
+            .map_or(0, |t| t.lines().count().saturating_sub(1));
+        assert_eq!(s["outputs"].as_u64().unwrap() as usize, rows, "{s}");
+        s
+    };
+    {
+        // The disk fills during the run (the results file included).
+        let Some(_fs) = Tmpfs::mount(&mnt, "size=1m") else {
+            eprintln!(
+                "skipped: cannot mount a tmpfs on {} (needs root)",
+                mnt.display()
+            );
+            return;
+        };
+        let s = failed_on_output(run_pendulum(&out, "100"));
+        // complete up to the last step written (how many fit depends on how far the solver
+        // ran ahead of the writer)
+        let text = std::fs::read_to_string(out.join("sensors.csv")).unwrap();
+        let last = text
+            .lines()
+            .skip(1)
+            .last()
+            .map_or(0.0, |l| l.split(',').next().unwrap().parse().unwrap());
+        assert_eq!(s["t_reached"].as_f64().unwrap(), last, "{s}");
+    }
+    {
+        // One page left.
+        let _fs = Tmpfs::mount(&mnt, "size=256k").unwrap();
+        fill(&mnt, 4096);
+        let s = failed_on_output(run_pendulum(&out, "1"));
+        assert_eq!(s["outputs"], 0);
+    }
+    {
+        // No inode left, the directory holding an earlier run's results.
+        let _fs = Tmpfs::mount(&mnt, "size=256k,nr_inodes=16").unwrap();
+        assert_eq!(run_pendulum(&out, "0.01").1["status"], "ok");
+        let mut k = 0;
+        while std::fs::File::create(mnt.join(format!("f{k}"))).is_ok() {
+            k += 1;
+        }
+        failed_on_output(run_pendulum(&out, "1"));
+    }
+}

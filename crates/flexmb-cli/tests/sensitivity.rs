@@ -287,3 +287,45 @@ fn optimize_lowers_the_half_car_comfort_criterion() {
             .unwrap();
     assert_eq!(json["criterion"], "comfort");
 }
+
+/// Gradients are those of the criteria as declared, at the end of the analysis: a forward
+/// run that stops short of it (Lee's frame, arc length, at `max_steps` before its final load
+/// factor) gives none, and says so with the exit status of an analysis stopped before its
+/// end (4). An optimization that stops at `--iterations` before L-BFGS converged keeps its
+/// history and exits with 4 too, saying to raise it.
+#[test]
+fn sensitivity_and_optimize_stopped_short_exit_4() {
+    let out = out_dir("lee-incomplete");
+    let output = flexmb()
+        .args([
+            "sensitivity",
+            repo("examples/lee_frame_sensitivity.toml")
+                .to_str()
+                .unwrap(),
+            "--out",
+        ])
+        .arg(&out)
+        .args(["--quiet", "--set", "solver.max_steps=3"])
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(4), "{stderr}");
+    assert!(stderr.contains("raise solver.max_steps"), "{stderr}");
+    assert!(!out.join("gradients.json").exists());
+    let out = out_dir("optimize-incomplete");
+    let output = flexmb()
+        .args(["optimize", repo("examples/half_car.toml").to_str().unwrap()])
+        .arg("--out")
+        .arg(&out)
+        .args(["--iterations", "1", "--set", "solver.t_end=0.8"])
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(4), "{stderr}");
+    assert!(stderr.contains("raise --iterations"), "{stderr}");
+    assert!(common::rows(&out.join("optimization.csv")).len() >= 2);
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("optimization.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["status"], "Maximum number of iterations reached");
+}

@@ -56,3 +56,42 @@ fn sigterm_stops_a_run_with_status_interrupted_and_exit_143() {
 fn sighup_stops_a_run_with_status_interrupted_and_exit_129() {
     interrupted_run_keeps_its_results("sighup", "HUP", 129);
 }
+
+/// Two signals in a row (a second Ctrl-C; `timeout -s INT`, which signals the process and
+/// then its group; here SIGINT then SIGTERM, which the kernel cannot merge into one) end the
+/// run at once, and the summary still tells the truth: `interrupted`, the output steps the
+/// files hold and the time of the last (it said `running` and `t_reached` 0 beside the
+/// rows written when the second signal took its default action).
+#[test]
+fn two_signals_in_a_row_end_the_run_with_a_summary_of_what_was_written() {
+    let out = out_dir("two-signals");
+    let mut child = start_long_run(&out, 5);
+    send_signal(&child, "INT");
+    send_signal(&child, "TERM");
+    let status = wait_for(&mut child);
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(
+        matches!(status.code(), Some(130 | 143)),
+        "{status}: {stderr}"
+    );
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    let s = summary(&out);
+    assert_eq!(s["status"], "interrupted", "{s}");
+    let sensors = rows(&out.join("sensors.csv"));
+    assert!(sensors.iter().all(|r| r.len() == 7));
+    assert_eq!(
+        s["outputs"].as_u64().unwrap() as usize,
+        sensors.len(),
+        "{s}"
+    );
+    let last: f64 = sensors.last().unwrap()[0].parse().unwrap();
+    assert_eq!(s["t_reached"].as_f64().unwrap(), last, "{s}");
+    // The pendulum writes every step: the counts are those of the rows.
+    assert_eq!(
+        s["steps"].as_u64().unwrap() as usize + 1,
+        sensors.len(),
+        "{s}"
+    );
+    assert_eq!(rows(&out.join("nodes.csv")).len(), sensors.len());
+}

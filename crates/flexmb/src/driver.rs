@@ -1,13 +1,19 @@
 //! The run of a model file into an output directory: what `flexmb run` does.
 //!
-//! Contract: [`run`] writes `summary.json` with status `running` before anything else, then
-//! the result files of [`crate::output`] step by step, and finally the summary with the
-//! outcome: `ok`; `failed` with `error_kind` `model` (rejected before the first step:
+//! Contract: [`run`] writes `summary.json` with status `running` once the analysis is set up
+//! (with its unknowns and linear solver; room is then kept for the last summary, see
+//! [`crate::output`]), then the result files of [`crate::output`] step by step, and finally
+//! the summary with the outcome: `ok`; `failed` with `error_kind` `model` (rejected before the first step:
 //! invalid settings, inconsistent initial conditions, singular initial mass matrix; no CSV
 //! file is written), `analysis` (a step could not converge; the rows up to it are kept) or
-//! `output` (a result file could not be written); or `interrupted` (the interrupt flag was
-//! set; every completed output step is kept). The counts (`steps`, `t_reached`, ...) are
-//! those of the work done, whatever the outcome.
+//! `output` (a result file could not be written); `interrupted` (the interrupt flag was
+//! set; every completed output step is kept); or `incomplete` (the analysis stopped at a
+//! limit of its settings before its end, [`SolveError::Incomplete`]: every converged step
+//! is kept and the warnings say which setting to raise). The counts (`steps`, ...) are those
+//! of the work done, whatever the outcome; `outputs` the output steps in the result files,
+//! and `t_reached` the time (load factor) up to which they are complete: that of the last
+//! completed step, or of the last output step written when a result file could not be
+//! written (the solver may have gone further).
 //!
 //! The directory must have been taken over by [`OutputDir::prepare`] (which removes the
 //! results of an earlier run).
@@ -17,7 +23,7 @@ use crate::input::{Analysis, ModelFile};
 use crate::observe::{Observer, Observers, Sample};
 use crate::output::writer::{Open, Stopped, Writer, Written};
 use crate::output::{
-    ErrorKind, OutputDir, OutputError, Status, StoreFormat, Summary, CHECKPOINT_FILE,
+    ErrorKind, OutputDir, OutputError, Reached, Status, StoreFormat, Summary, CHECKPOINT_FILE,
 };
 use crate::sensors::SensorEvaluator;
 use crate::solve::dynamics::Checkpoint;
@@ -99,25 +105,21 @@ pub fn run_with(
         t_end,
         ..Default::default()
     };
-    if let Err(e) = out.write_summary(&summary) {
-        // Nothing ran: the summary stays `running`, the error says why.
-        return Report {
-            summary,
-            unwritten: Some(e),
-        };
-    }
+    let target = Target {
+        out,
+        formats,
+        summary: &summary,
+    };
     let ended = match &file.analysis {
         Analysis::Dynamic(settings) => {
-            run_dynamic(model, settings, out, options, formats, progress, interrupt)
+            run_dynamic(model, settings, target, options, progress, interrupt)
         }
         Analysis::Static(_) if options.resume || options.checkpoint_interval.is_some() => {
             Ended::rejected(SolveError::Checkpoint(
                 "only a dynamic analysis has checkpoints".into(),
             ))
         }
-        Analysis::Static(settings) => {
-            run_static(model, settings, out, formats, progress, interrupt)
-        }
+        Analysis::Static(settings) => run_static(model, settings, target, progress, interrupt),
     };
     let output_seconds = ended.output_seconds;
     ended.record(&mut summary);
@@ -130,20 +132,18 @@ pub fn run_with(
 
 /// How an analysis ended: its work counts and the error that stopped it, if any.
 struct Ended {
-    work: Work,
+    work: Tally,
     outcome: Outcome,
+    /// Output steps in the result files.
+    outputs: usize,
     /// Time spent writing result files \[s\].
     output_seconds: f64,
 }
 
 /// Work counts and notes of a run (zero for a run rejected before the first step).
 #[derive(Default)]
-struct Work {
-    steps: usize,
-    newton_iterations: usize,
-    rejected_steps: usize,
-    factorizations: usize,
-    outputs: usize,
+struct Tally {
+    work: crate::observe::Work,
     reached: f64,
     unknowns: usize,
     linear_solver: String,
@@ -155,6 +155,8 @@ struct Work {
 enum Outcome {
     Completed,
     Interrupted,
+    /// Stopped at a limit of the settings; the sentence says which to raise.
+    Incomplete(String),
     Failed(ErrorKind, String),
     /// A result file could not be written; the error is kept for the caller.
     Output(OutputError),
@@ -164,29 +166,36 @@ impl Ended {
     /// A run rejected before its first step.
     fn rejected(e: SolveError) -> Self {
         Self {
-            work: Work::default(),
+            work: Tally::default(),
             outcome: Outcome::Failed(ErrorKind::Model, e.to_string()),
+            outputs: 0,
             output_seconds: 0.0,
         }
     }
 
     /// The outcome of a run that started: a write error takes precedence over the solver's
-    /// report of it.
+    /// report of it. The files hold the output steps `written` reached; when one could not be
+    /// written, the run is complete up to the last of them only.
     fn of_run(
-        work: Work,
+        mut work: Tally,
         result: Result<(), SolveError>,
-        output_error: Option<OutputError>,
+        written: Written,
         output_seconds: f64,
     ) -> Self {
-        let outcome = match (output_error, result) {
+        if written.error.is_some() {
+            work.reached = written.reached.at;
+        }
+        let outcome = match (written.error, result) {
             (Some(e), _) => Outcome::Output(e),
             (None, Ok(())) => Outcome::Completed,
             (None, Err(SolveError::Interrupted { .. })) => Outcome::Interrupted,
+            (None, Err(e @ SolveError::Incomplete { .. })) => Outcome::Incomplete(e.to_string()),
             (None, Err(e)) => Outcome::Failed(ErrorKind::Analysis, e.to_string()),
         };
         Self {
             work,
             outcome,
+            outputs: written.reached.rows,
             output_seconds,
         }
     }
@@ -194,12 +203,8 @@ impl Ended {
     /// Writes the counts and the outcome into the summary; returns the output error, if any.
     fn record(self, summary: &mut Summary) {
         let w = self.work;
-        summary.steps = w.steps;
-        summary.newton_iterations = w.newton_iterations;
-        summary.rejected_steps = w.rejected_steps;
-        summary.factorizations = w.factorizations;
-        summary.outputs = w.outputs;
-        summary.newton_iterations_per_step = w.newton_iterations as f64 / w.steps.max(1) as f64;
+        summary.count(w.work);
+        summary.outputs = self.outputs;
         summary.t_reached = w.reached;
         summary.unknowns = w.unknowns;
         summary.linear_solver = w.linear_solver;
@@ -208,6 +213,10 @@ impl Ended {
         match self.outcome {
             Outcome::Completed => summary.status = Status::Ok,
             Outcome::Interrupted => summary.status = Status::Interrupted,
+            Outcome::Incomplete(warning) => {
+                summary.status = Status::Incomplete;
+                summary.warnings.push(warning);
+            }
             Outcome::Failed(kind, message) => summary.fail(kind, message),
             Outcome::Output(e) => summary.fail(ErrorKind::Output, e.to_string()),
         }
@@ -253,7 +262,8 @@ impl Observer for ResultSink<'_, '_> {
     fn output(&mut self, s: &Sample) -> Result<(), String> {
         self.timed(|sink| {
             let values = sink.sensors.evaluate(sink.model, s.data, s.state);
-            sink.writer.output(s, values)
+            let seconds = sink.seconds;
+            sink.writer.output(s, values, seconds)
         })
     }
     fn accepted(&mut self, info: &StepInfo) -> Result<(), String> {
@@ -274,34 +284,66 @@ impl Observer for Progress<'_> {
     }
 }
 
-/// The result files of a run being opened: which, the sensors' memory and the rows of the
-/// multipliers.
-struct Opening<'a> {
+/// Where a run writes: its directory, the stores beside the CSV files, and its summary as
+/// it starts (status `running`).
+#[derive(Clone, Copy)]
+struct Target<'a> {
     out: &'a OutputDir,
     formats: &'a [&'a dyn StoreFormat],
+    summary: &'a Summary,
+}
+
+/// The result files of a run being opened: where, which, how far they go already, the
+/// sensors' memory and the rows of the multipliers; and the summary of the run set up.
+struct Opening<'a> {
+    target: Target<'a>,
+    running: Summary,
     open: Open,
+    start: Reached,
     sensors: SensorEvaluator,
     layout: Layout,
 }
 
+impl Target<'_> {
+    /// The summary of the run once its analysis is set up on `data` (`warnings` said while
+    /// setting it up).
+    fn running(&self, data: &crate::data::Data, warnings: &[String]) -> Summary {
+        Summary {
+            unknowns: data.layout.n_unknowns(),
+            linear_solver: linear_solver(data),
+            warnings: warnings.to_vec(),
+            ..self.summary.clone()
+        }
+    }
+}
+
 /// Runs an analysis with the result files (written by a writer thread) and the progress as
-/// its observers (`run` gets both); returns the analysis' result, what was written (with
-/// the first write error) and the output time of the solver's thread.
+/// its observers (`run` gets both), once its summary says it runs (a summary that cannot be
+/// written ends the run there, as a result file would); returns the analysis' result, what
+/// was written (with the first write error) and the output time of the solver's thread.
 fn observed<R>(
     model: &crate::Model,
     files: Opening,
     mut progress: Progress,
     run: impl FnOnce(&mut ResultSink, &mut Progress) -> Result<R, SolveError>,
 ) -> (Result<(), SolveError>, Written, f64) {
+    let Target { out, formats, .. } = files.target;
+    if let Err(e) = out.write_summary(&files.running) {
+        let written = Written {
+            reached: files.start,
+            error: Some(e),
+        };
+        return (Ok(()), written, 0.0);
+    }
     std::thread::scope(|scope| {
         let t0 = Instant::now();
         let writer = Writer::spawn(
             scope,
-            files.out,
+            out,
             model,
-            files.layout,
-            files.formats,
+            (files.layout, formats),
             files.open,
+            files.start,
         );
         let mut sink = ResultSink {
             model,
@@ -323,12 +365,16 @@ fn observed<R>(
     })
 }
 
+/// The linear solver of `data` in words (`dense`, `block`, ...).
+fn linear_solver(data: &crate::data::Data) -> String {
+    format!("{:?}", data.solver.backend()).to_lowercase()
+}
+
 /// Static analysis: `sensors.csv` has the load factor in its first column.
 fn run_static(
     model: &crate::Model,
     settings: &StaticSettings,
-    out: &OutputDir,
-    formats: &[&dyn StoreFormat],
+    target: Target,
     progress: &mut dyn FnMut(f64, f64),
     interrupt: Option<Arc<AtomicBool>>,
 ) -> Ended {
@@ -342,31 +388,27 @@ fn run_static(
         end: settings.load_factor,
     };
     let files = Opening {
-        out,
-        formats,
+        target,
+        running: target.running(&statics.data, &statics.warnings),
         open: Open::Create {
             first: "load_factor",
         },
+        start: Reached::default(),
         sensors: SensorEvaluator::new(model),
         layout: statics.data.layout.clone(),
     };
     let (result, written, seconds) = observed(model, files, progress, |sink, progress| {
         statics.run(&mut Observers(vec![sink, progress]))
     });
-    let stats = statics.stats;
-    let work = Work {
-        steps: stats.steps,
-        newton_iterations: stats.newton_iterations,
-        rejected_steps: stats.rejected_steps,
-        factorizations: stats.factorizations,
-        outputs: written.rows,
+    let work = Tally {
+        work: statics.stats,
         reached: statics.load_factor,
         unknowns: statics.data.layout.n_unknowns(),
-        linear_solver: format!("{:?}", statics.data.solver.backend()).to_lowercase(),
+        linear_solver: linear_solver(&statics.data),
         warnings: statics.warnings.clone(),
         verify: statics.verification.clone(),
     };
-    Ended::of_run(work, result, written.error, seconds)
+    Ended::of_run(work, result, written, seconds)
 }
 
 /// The simulation and result files of a dynamic run: new, or resumed from the checkpoint
@@ -374,16 +416,17 @@ fn run_static(
 fn start_dynamic<'a>(
     model: &crate::Model,
     settings: &DynamicSettings,
-    out: &'a OutputDir,
+    target: Target<'a>,
     options: RunOptions,
-    formats: &'a [&'a dyn StoreFormat],
 ) -> Result<(Simulation, Opening<'a>), SolveError> {
+    let out = target.out;
     if !options.resume {
         let sim = Simulation::new(model, *settings)?;
         let files = Opening {
-            out,
-            formats,
+            target,
+            running: target.running(&sim.data, &sim.warnings),
             open: Open::Create { first: "time" },
+            start: Reached::default(),
             sensors: SensorEvaluator::new(model),
             layout: sim.data.layout.clone(),
         };
@@ -429,13 +472,18 @@ fn start_dynamic<'a>(
     } = saved;
     checkpoint.settings.threads = settings.threads;
     let sim = Simulation::resume(checkpoint, settings.t_end)?;
+    // the files are complete up to the checkpoint
+    let start = Reached {
+        rows: outputs,
+        at: sim.state.t,
+        work: sim.stats.work(),
+        output_seconds: 0.0,
+    };
     let files = Opening {
-        out,
-        formats,
-        open: Open::Reopen {
-            lengths: files,
-            rows: outputs,
-        },
+        target,
+        running: target.running(&sim.data, &sim.warnings),
+        open: Open::Reopen { lengths: files },
+        start,
         sensors,
         layout: sim.data.layout.clone(),
     };
@@ -464,13 +512,13 @@ fn write_checkpoint(out: &OutputDir, sim: &Simulation, sink: &mut ResultSink) {
 fn run_dynamic(
     model: &crate::Model,
     settings: &DynamicSettings,
-    out: &OutputDir,
+    target: Target,
     options: RunOptions,
-    formats: &[&dyn StoreFormat],
     progress: &mut dyn FnMut(f64, f64),
     interrupt: Option<Arc<AtomicBool>>,
 ) -> Ended {
-    let (mut sim, files) = match start_dynamic(model, settings, out, options, formats) {
+    let out = target.out;
+    let (mut sim, files) = match start_dynamic(model, settings, target, options) {
         Ok(started) => started,
         Err(e) => return Ended::rejected(e),
     };
@@ -507,17 +555,13 @@ fn run_dynamic(
         sim.warnings.extend(notes);
         result
     });
-    let work = Work {
-        steps: sim.stats.steps,
-        newton_iterations: sim.stats.newton_iterations,
-        rejected_steps: sim.stats.rejected_steps,
-        factorizations: sim.stats.factorizations,
-        outputs: written.rows,
+    let work = Tally {
+        work: sim.stats.work(),
         reached: sim.state.t,
         unknowns: sim.data.layout.n_unknowns(),
-        linear_solver: format!("{:?}", sim.data.solver.backend()).to_lowercase(),
+        linear_solver: linear_solver(&sim.data),
         warnings: sim.warnings.clone(),
         verify: sim.verification.clone(),
     };
-    Ended::of_run(work, result, written.error, seconds)
+    Ended::of_run(work, result, written, seconds)
 }

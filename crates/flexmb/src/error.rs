@@ -75,6 +75,16 @@ pub enum SolveError {
         unknown: Option<crate::data::UnknownId>,
         message: String,
     },
+    /// The initial states of the elements cannot be computed: the equations of the control
+    /// blocks' outputs at t = 0, solved at the initial kinematics, have a singular matrix,
+    /// a value that is not finite, or do not converge (`error`); `unknown` and
+    /// `worst_equation` name the output blamed.
+    #[error("the initial states of the elements at t = 0 cannot be solved: {error}; worst equation: {worst_equation}")]
+    InitialStates {
+        error: Box<crate::solve::NewtonError>,
+        unknown: Option<crate::data::UnknownId>,
+        worst_equation: String,
+    },
     #[error(transparent)]
     Settings(#[from] SettingsError),
     #[error("inconsistent initial conditions: {0}")]
@@ -100,8 +110,8 @@ pub enum SolveError {
         load_factor: f64,
         increment: f64,
         rejected: usize,
-        /// The failure of the last attempt (`None`: the step budget ran out).
-        error: Option<Box<crate::solve::NewtonError>>,
+        /// The failure of the last attempt.
+        error: Box<crate::solve::NewtonError>,
         unknown: Option<crate::data::UnknownId>,
         reason: String,
         worst_equation: String,
@@ -117,4 +127,14 @@ pub enum SolveError {
     /// results up to `reached` (time or load factor) are complete.
     #[error("interrupted at {reached:.6e}")]
     Interrupted { reached: f64 },
+    /// The analysis stopped at a limit of its settings before its end (a static analysis:
+    /// `max_steps` load steps before the final load factor `end`). Nothing failed: the
+    /// results up to `reached` (the load factor of the last converged step) are complete;
+    /// `reason` names the limit and the setting to raise.
+    #[error("the analysis stopped at load factor {reached:.6e}, before its final load factor {end}: {reason}")]
+    Incomplete {
+        reached: f64,
+        end: f64,
+        reason: String,
+    },
 }

@@ -22,6 +22,18 @@ pub struct Sample<'a> {
     pub state: &'a State,
     /// Time \[s\] (dynamics) or load factor (statics): the first column of the results.
     pub at: f64,
+    /// The work done to reach it.
+    pub work: Work,
+}
+
+/// The work an analysis has done: accepted steps (load steps), Newton iterations, rejected
+/// attempts and factorizations of the iteration matrix (of every attempt).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Work {
+    pub steps: usize,
+    pub newton_iterations: usize,
+    pub rejected_steps: usize,
+    pub factorizations: usize,
 }
 
 /// One accepted step of a dynamic run.

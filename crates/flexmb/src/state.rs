@@ -3,6 +3,7 @@
 use crate::data::Layout;
 use crate::elements::{Context, ElementKernel, LocalBuffers};
 use crate::model::Model;
+use crate::SolveError;
 use flexmb_lie::{Frame, Group, Vec6};
 
 /// Configuration, velocities, accelerations and multipliers at one time.
@@ -68,8 +69,9 @@ impl State {
     /// The model's initial configuration and velocities, and the elements' initial states
     /// ([`crate::elements::ElementKernel::initial_states`]) of `layout`; accelerations,
     /// rates and multipliers zero (see [`crate::solve::initial_accelerations`] for
-    /// consistent ones).
-    pub fn initial(model: &Model, layout: &Layout) -> Self {
+    /// consistent ones). Fails with [`SolveError::InitialStates`] when an element cannot
+    /// solve for its states (the outputs of control blocks), naming the state.
+    pub fn initial(model: &Model, layout: &Layout) -> Result<Self, SolveError> {
         let n_rows = layout.n_rows;
         let v = model
             .nodes
@@ -110,10 +112,24 @@ impl State {
                         &state.lambda,
                     );
                     let x = &mut state.x[start..start + ns];
-                    kernel.initial_states(&ctx, &buffers.local(&nodes), x);
+                    kernel
+                        .initial_states(&ctx, &buffers.local(&nodes), x)
+                        .map_err(|error| {
+                            let unknown = error
+                                .unknown()
+                                .map(|i| layout.unknown(layout.state_offset() + start + i));
+                            SolveError::InitialStates {
+                                worst_equation: unknown.map_or_else(
+                                    || e.describe(model),
+                                    |u| layout.describe(model, u),
+                                ),
+                                unknown,
+                                error: Box::new(error),
+                            }
+                        })?;
                 }
             }
         }
-        state
+        Ok(state)
     }
 }

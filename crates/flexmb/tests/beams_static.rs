@@ -410,6 +410,24 @@ fn lee_frame_limit_loads_converge_to_the_reference() {
     );
 }
 
+/// examples/lee_frame.toml does what its header promises: arc-length continuation follows
+/// the path through the snap-through and the snap-back (the lowest load, about -9.4 kN,
+/// tests/reference/lee_frame_reference.md) and on up to the final load of 40 kN, within its
+/// `max_steps` (an analysis that takes them all stops short with `SolveError::Incomplete`,
+/// which `run_static` reports).
+#[test]
+fn lee_frame_example_follows_the_path_to_the_load_its_header_promises() {
+    let run = common::run_static("lee_frame.toml", &[]);
+    let loads: Vec<f64> = run.rows.iter().map(|(p, _)| *p).collect();
+    assert_eq!(loads[loads.len() - 1], 40.0, "the final load factor");
+    let lowest = loads.iter().fold(f64::INFINITY, |m, &p| m.min(p));
+    assert!(
+        lowest < -9.0,
+        "the snap-back is passed: lowest load {lowest}"
+    );
+    println!("Lee frame example: {} load steps", run.stats.steps);
+}
+
 /// A uniformly distributed load on a cantilever, lumped to the nodes, against the linear
 /// Timoshenko solution w = q L^4 / (8 EI) + q L^2 / (2 GA) (small load: the geometrically
 /// exact beam reduces to it). The constant-strain two-node element with nodal loads is

@@ -374,6 +374,75 @@ fn diagnoses_name_blocks() {
     assert!(words[5].contains("output 0 of block 'pid'"), "{words:?}");
 }
 
+/// examples/pid_mass_spring.toml with more blocks before its PID: `blocks` (TOML).
+fn pid_with_blocks(blocks: &str) -> String {
+    let text = std::fs::read_to_string(common::example("pid_mass_spring.toml")).unwrap();
+    let pid = "[[block]]\nname = \"pid\"";
+    assert!(text.contains(pid));
+    text.replace(pid, &format!("{blocks}\n\n{pid}"))
+}
+
+/// The outputs at t = 0 are solved at the initial kinematics by the diagram's own Newton
+/// iteration, which fails as the solver's do (a `NewtonError` in
+/// `SolveError::InitialStates`, the output blamed in words). An algebraic loop without a
+/// solution, `y = y^2 + 1` (Newton cycles between 0 and 1), is refused with the model file
+/// on its block (it was taken as it stood: `y = 1` written at t = 0, then the first step
+/// failed); a loop of gain 1, `y = y + e` (the reader refuses it too), set through the Rust
+/// API fails `Simulation::new` on its singular matrix (it was diagnosed as a singular mass
+/// matrix).
+#[test]
+fn outputs_that_cannot_be_solved_at_the_start_are_diagnosed_on_their_block() {
+    let no_root = pid_with_blocks(
+        "[[block]]\nname = \"one\"\ntype = \"source\"\nfunction = { type = \"constant\", value = 1.0 }\n\n[[block]]\nname = \"square\"\ntype = \"product\"\ninputs = [\"loop\", \"loop\"]\n\n[[block]]\nname = \"loop\"\ntype = \"sum\"\ninputs = [\"square\", \"one\"]",
+    );
+    let e = flexmb::input::parse_model_str(&no_root, "no_root.toml", &[])
+        .expect_err("y = y^2 + 1 has no solution");
+    let e = e.to_string();
+    for part in [
+        "no_root.toml:",
+        "field 'block[4].inputs' (block 'square')",
+        "the algebraic loop through blocks 'square', 'loop' cannot be solved",
+        "no convergence in 30 iterations",
+        "the equation of output 0 of block 'square' (control blocks)",
+    ] {
+        assert!(e.contains(part), "{part}: {e}");
+    }
+    let gain = |g: f64| {
+        pid_with_blocks(&format!(
+            "[[block]]\nname = \"echo\"\ntype = \"gain\"\ninput = \"loop\"\ngain = {g}\n\n[[block]]\nname = \"loop\"\ntype = \"sum\"\ninputs = [\"echo\", \"error\"]"
+        ))
+    };
+    let file = flexmb::input::parse_model_str(&gain(0.5), "loop.toml", &[]).expect("gain 1/2");
+    let flexmb::input::Analysis::Dynamic(settings) = file.analysis else {
+        panic!("dynamic")
+    };
+    let mut model = file.model;
+    let echo = model.control.find("echo").unwrap();
+    let k = model.control.blocks[echo]
+        .kind
+        .param_names()
+        .iter()
+        .position(|n| n == "gain")
+        .unwrap();
+    model.control.blocks[echo].set_param(k, 1.0);
+    let e = flexmb::Simulation::new(model, settings)
+        .map(|_| ())
+        .expect_err("a singular loop");
+    let flexmb::SolveError::InitialStates {
+        error,
+        worst_equation,
+        ..
+    } = &e
+    else {
+        panic!("{e}")
+    };
+    assert!(
+        matches!(**error, flexmb::solve::NewtonError::Singular { .. }),
+        "{e}"
+    );
+    assert!(worst_equation.contains("of block '"), "{e}");
+}
+
 #[test]
 fn transfer_function_realizes_its_ratio() {
     // (s + 2) / (s^2 + 3 s + 2) = 1 / (s + 1): its unit step response is 1 - exp(-t); the

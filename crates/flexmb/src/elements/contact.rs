@@ -119,8 +119,8 @@
 use super::impact::{Gap, ImpactLaw};
 use super::pose::{c, lift, perturbed, pose, Dv, Pose, D1};
 use super::{
-    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
-    LocalMatrix, LocalVector, StepLimit, Vec12,
+    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters,
+    InitialStates, Local, LocalMatrix, LocalVector, StepLimit, Vec12,
 };
 use crate::model::contact::{Contact, ContactShape};
 use crate::model::parameters::ContactParam;
@@ -394,7 +394,7 @@ impl ElementKernel for ContactElement<'_> {
         self.contact.n_states()
     }
 
-    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) -> InitialStates {
         let held = [1.0, 0.0, 0.0, 0.0];
         let local = Local {
             x: &held[..x.len()],
@@ -402,6 +402,7 @@ impl ElementKernel for ContactElement<'_> {
             ..*local
         };
         x[0] = self.approach_speed(&self.state(ctx, &local));
+        Ok(())
     }
 
     fn update_states(&self, ctx: &Context, start: &Local, end: &Local, x: &mut [f64]) {

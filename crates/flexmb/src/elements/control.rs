@@ -154,12 +154,14 @@
 
 use super::pose::{c, pose, Pose};
 use super::{
-    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
-    LocalMatrix, LocalVector, Mat12, StepLimit,
+    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters,
+    InitialStates, Local, LocalMatrix, LocalVector, Mat12, StepLimit,
 };
 use crate::model::control::{BlockKind, ControlSystem, Quantity, Target};
 use crate::model::parameters::{ControlWrt, SectionParam};
 use crate::model::{Joint, JointId, JointKind, Model, NodeId};
+use crate::solve::linear::LinearError;
+use crate::solve::NewtonError;
 use flexmb_lie::Vec3;
 use nalgebra::{DMatrix, DVector, Matrix3, RealField, RowVector6, SMatrix, Vector3};
 
@@ -167,6 +169,13 @@ use nalgebra::{DMatrix, DVector, Matrix3, RealField, RowVector6, SMatrix, Vector
 type RowVector12 = SMatrix<f64, 1, 12>;
 use num_dual::Dual64;
 use std::f64::consts::PI;
+
+/// Most Newton iterations for the outputs at the initial state
+/// ([`ControlElement::solve_outputs`]).
+const OUTPUTS_ITERATIONS: usize = 30;
+/// Relative size of the last correction at which the outputs at the initial state have
+/// converged (a few units of round-off).
+const OUTPUTS_TOLERANCE: f64 = 1e-14;
 
 /// The block diagram of a model as the assembly sees it: the system, its slots and the
 /// constraint rows it reads.
@@ -1055,8 +1064,18 @@ impl ControlElement<'_> {
     }
 
     /// Outputs and held values at `t` from the states in `x` (the outputs' and holds' entries
-    /// are the starting guess), by Newton's method on their equations at fixed kinematics.
-    fn solve_outputs(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+    /// are the starting guess), by Newton's method on their equations at fixed kinematics,
+    /// converged when the largest correction is at most `OUTPUTS_TOLERANCE (1 + |e|)`, `e`
+    /// the equations' values before it. Fails as the solver's Newton iterations do, blaming
+    /// an output by its index in `x`: a singular matrix (an algebraic loop of gain 1), a
+    /// value that is not finite, or no convergence in `OUTPUTS_ITERATIONS` iterations (an
+    /// algebraic loop without a solution there).
+    fn solve_outputs(
+        &self,
+        ctx: &Context,
+        local: &Local,
+        x: &mut [f64],
+    ) -> Result<(), NewtonError> {
         let sys = self.system;
         let unknowns: Vec<usize> = (0..sys.n_unknowns)
             .filter(|&i| {
@@ -1070,27 +1089,53 @@ impl ControlElement<'_> {
             })
             .collect();
         if unknowns.is_empty() {
-            return;
+            return Ok(());
         }
         let ns = PER_SLOT * self.slots.len();
         let rows = 6 * self.slots.len();
-        for _ in 0..30 {
+        // the weighted correction of the last iteration and its largest entry
+        let mut last = (0.0, 0);
+        for _ in 0..OUTPUTS_ITERATIONS {
             let here = Local { x: &*x, ..*local };
             let reactions = self.reactions(ctx, &here);
             let (value, jac) = self.jacobian(ctx, &here, Phase::Initial, &reactions);
             let m = unknowns.len();
             let a = DMatrix::from_fn(m, m, |i, j| jac[(rows + unknowns[i], ns + unknowns[j])]);
             let r = DVector::from_fn(m, |i, _| value[rows + unknowns[i]]);
-            let Some(dx) = a.lu().solve(&r) else {
-                return;
+            if let Some(k) = r.iter().position(|v| !v.is_finite()) {
+                return Err(NewtonError::NonFiniteResidual {
+                    unknown: unknowns[k],
+                });
+            }
+            let lu = a.lu();
+            let Some(dx) = lu.solve(&r) else {
+                // (partial pivoting permutes rows only: a zero pivot is in its column)
+                let u = lu.u();
+                let column = (0..m).find(|&k| u[(k, k)] == 0.0);
+                return Err(NewtonError::Singular {
+                    unknown: column.map(|k| unknowns[k]),
+                    source: LinearError::Singular { column: None },
+                });
             };
+            if let Some(k) = dx.iter().position(|v| !v.is_finite()) {
+                return Err(NewtonError::NonFiniteCorrection {
+                    unknown: unknowns[k],
+                });
+            }
             for (k, &i) in unknowns.iter().enumerate() {
                 x[i] -= dx[k];
             }
-            if dx.amax() <= 1e-14 * (1.0 + r.amax()) {
-                return;
+            let tolerance = OUTPUTS_TOLERANCE * (1.0 + r.amax());
+            if dx.amax() <= tolerance {
+                return Ok(());
             }
+            last = (dx.amax() / tolerance, dx.iamax());
         }
+        Err(NewtonError::MaxIterations {
+            iterations: OUTPUTS_ITERATIONS,
+            error: last.0,
+            unknown: unknowns[last.1],
+        })
     }
 }
 
@@ -1158,17 +1203,61 @@ pub fn algebraic_loops(system: &ControlSystem) -> Vec<Vec<usize>> {
 }
 
 /// A located reason why the diagram of `model` cannot be solved at its initial state:
-/// an algebraic loop whose equations are singular there (e.g. a loop gain of 1), as the
-/// index of a block on it and a message. `None` when every loop can be solved.
+/// an algebraic loop whose outputs' Newton iteration fails there
+/// ([`crate::SolveError::InitialStates`]: no convergence, a loop without a solution), or
+/// whose equations are singular there (e.g. a loop gain of 1), as the index of a block on
+/// it and a message. `None` when every loop can be solved.
 pub fn unsolvable_loop(model: &Model) -> Option<(usize, String)> {
     let system = &model.control;
     let loops = algebraic_loops(system);
     if loops.is_empty() {
         return None;
     }
+    // the located reason: a loop's first block, the loop's blocks and why
+    let unsolvable = |blocks: &[usize], why: &str| {
+        let names: Vec<String> = blocks
+            .iter()
+            .map(|&b| format!("'{}'", system.blocks[b].name))
+            .collect();
+        Some((
+            blocks[0],
+            format!(
+                "the algebraic loop through blocks {} cannot be solved: {why}; break it with a block that has a state (integrator, lag)",
+                names.join(", ")
+            ),
+        ))
+    };
+    const SINGULAR: &str = "its output equations are singular at t = 0 (a loop gain of 1?)";
     // the initial state of the model: node kinematics, the blocks' states and outputs
     let layout = crate::data::Layout::new(model);
-    let state = crate::state::State::initial(model, &layout);
+    let state = match crate::state::State::initial(model, &layout) {
+        Ok(state) => state,
+        Err(crate::SolveError::InitialStates {
+            error,
+            unknown,
+            worst_equation,
+        }) => {
+            // the loop of the output blamed
+            let blamed = match unknown {
+                Some(crate::data::UnknownId::State { index, .. }) => {
+                    Some(system.owner(usize::from(index)))
+                }
+                _ => None,
+            };
+            let blocks = loops
+                .iter()
+                .find(|l| blamed.is_some_and(|b| l.contains(&b)))
+                .unwrap_or(&loops[0]);
+            return match *error {
+                NewtonError::Singular { .. } => unsolvable(blocks, SINGULAR),
+                error => unsolvable(
+                    blocks,
+                    &format!("Newton's method on the outputs at t = 0 fails: {error}; worst equation: {worst_equation}"),
+                ),
+            };
+        }
+        Err(e) => return Some((loops[0][0], e.to_string())),
+    };
     let control = layout
         .elements
         .iter()
@@ -1204,17 +1293,7 @@ pub fn unsolvable_loop(model: &Model) -> Option<(usize, String)> {
         let (smax, smin) = (svd.max(), svd.min());
         // (a NaN singular value counts as singular)
         if smin.is_nan() || smin <= 1e-10 * smax.max(1.0) {
-            let names: Vec<String> = blocks
-                .iter()
-                .map(|&b| format!("'{}'", system.blocks[b].name))
-                .collect();
-            return Some((
-                blocks[0],
-                format!(
-                    "the algebraic loop through blocks {} cannot be solved: its output equations are singular at t = 0 (a loop gain of 1?); break it with a block that has a state (integrator, lag)",
-                    names.join(", ")
-                ),
-            ));
+            return unsolvable(&blocks, SINGULAR);
         }
     }
     None
@@ -1246,7 +1325,7 @@ impl ElementKernel for ControlElement<'_> {
         self.states
     }
 
-    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) -> InitialStates {
         let sys = self.system;
         for (b, block) in sys.blocks.iter().enumerate() {
             let s0 = sys.state_start[b];
@@ -1263,7 +1342,7 @@ impl ElementKernel for ControlElement<'_> {
             }
         }
         // Measured angles start on the branch of the geometric angle.
-        self.solve_outputs(ctx, local, x);
+        self.solve_outputs(ctx, local, x)
     }
 
     fn evaluate(

@@ -257,6 +257,11 @@ impl<'a> Local<'a> {
     }
 }
 
+/// What [`ElementKernel::initial_states`] returns: a failure of the Newton iterations that
+/// solve for states, as [`crate::solve::NewtonError`], the unknown blamed being the index of
+/// the state in the element's `x`.
+pub type InitialStates = Result<(), crate::solve::NewtonError>;
+
 /// One small capability set shared by every force element.
 ///
 /// An element connects `n_slots` node slots (any number; a slot may be the ground) and may
@@ -313,8 +318,12 @@ pub trait ElementKernel {
         s: Option<(&Coefficients, &mut LocalMatrix)>,
     );
     /// The element's states at the start of a run, from the initial kinematics in `local`
-    /// (its `x` and `xdot` zero); `x` is zero on entry.
-    fn initial_states(&self, _ctx: &Context, _local: &Local, _x: &mut [f64]) {}
+    /// (its `x` and `xdot` zero); `x` is zero on entry. States found by solving equations
+    /// (the outputs of control blocks) report a failure as the Newton iterations of the
+    /// solver do ([`InitialStates`]).
+    fn initial_states(&self, _ctx: &Context, _local: &Local, _x: &mut [f64]) -> InitialStates {
+        Ok(())
+    }
     /// Kinetic energy \[J\].
     fn kinetic_energy(&self, _ctx: &Context, _local: &Local) -> f64 {
         0.0
@@ -763,7 +772,7 @@ impl ElementKernel for Kernel<'_> {
     ) {
         dispatch!(self, k => k.evaluate(ctx, local, r, s))
     }
-    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) -> InitialStates {
         dispatch!(self, k => k.initial_states(ctx, local, x))
     }
     fn kinetic_energy(&self, ctx: &Context, local: &Local) -> f64 {

@@ -68,8 +68,8 @@
 
 use super::spring::Force;
 use super::{
-    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
-    LocalMatrix, LocalVector, Mat12, NodeState, Vec12,
+    physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters,
+    InitialStates, Local, LocalMatrix, LocalVector, Mat12, NodeState, Vec12,
 };
 use crate::joints::primitives::dot1;
 use crate::model::parameters::RotationalSpringParam;
@@ -191,8 +191,9 @@ impl ElementKernel for RotationalSpringElement<'_> {
         1
     }
 
-    fn initial_states(&self, _ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(&self, _ctx: &Context, local: &Local, x: &mut [f64]) -> InitialStates {
         x[0] = joint_angle(self.joint, local.nodes).0;
+        Ok(())
     }
 
     fn evaluate(

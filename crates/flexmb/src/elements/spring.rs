@@ -52,7 +52,7 @@
 
 use super::{
     central_difference, physical, Coefficients, Context, DerivativeMethod, ElementKernel,
-    ElementParameters, Local, LocalMatrix, LocalVector, Mat12, NodeState, Vec12,
+    ElementParameters, InitialStates, Local, LocalMatrix, LocalVector, Mat12, NodeState, Vec12,
 };
 use crate::model::parameters::{SpringLawParam, SpringParam};
 use crate::model::{ForceCurve, ForceLaw, Model, NodeId, SpringDamper, SpringSide};
@@ -391,10 +391,11 @@ impl ElementKernel for SpringElement<'_> {
         self.spring.relaxation.is_some() as usize
     }
 
-    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) -> InitialStates {
         if self.spring.relaxation.is_some() {
             x[0] = self.geometry(ctx, local.nodes).l - self.spring.rest_length;
         }
+        Ok(())
     }
 
     fn evaluate(
@@ -471,7 +472,7 @@ impl ElementKernel for SpringDamper {
         self.relaxation.is_some() as usize
     }
 
-    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) {
+    fn initial_states(&self, ctx: &Context, local: &Local, x: &mut [f64]) -> InitialStates {
         SpringElement::linear(self).initial_states(ctx, local, x)
     }
 

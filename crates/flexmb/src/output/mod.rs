@@ -19,17 +19,31 @@
 //! * `summary.json` is replaced atomically (written to a temporary file in the same
 //!   directory, synced, then renamed over the old one): a reader, a kill or a full disk never
 //!   leaves a partial summary. Its `status` is [`Status`]: `running` from the start, then
-//!   `ok`, `failed` (with `error_kind` and `error`) or `interrupted`.
+//!   `ok`, `failed` (with `error_kind` and `error`), `interrupted` or `incomplete`.
+//! * The end of a run is always recorded: the first summary of a run (status `running`) is
+//!   written after room for the last one is kept, a file of [`SUMMARY_ROOM`] bytes or more
+//!   (`.summary.json.room`, filled with bytes that do not compress). The last summary is
+//!   written in its place (the file is truncated, which frees its blocks, written and renamed
+//!   over `summary.json`): it needs no new inode and no more blocks than the room freed, so
+//!   a disk that filled during the run cannot keep it from being written, and it is cut to
+//!   fit ([`Summary::json_within`]).
+//! * A run can be ended at once from another thread (a second signal,
+//!   [`OutputDir::end_now`]): the summary then says `interrupted` with the output steps the
+//!   result files hold, the files' writer having been stopped between two output steps.
 
 pub mod snapshot;
 pub mod writer;
 
+use crate::observe::Work;
 use serde::Serialize;
 pub use snapshot::Snapshot;
 use std::fmt::Write as _;
 use std::fs::File;
 use std::io::{Seek, SeekFrom, Write as _};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError, TryLockError};
+use std::time::{Duration, Instant};
 
 /// The summary of the run.
 pub const SUMMARY_FILE: &str = "summary.json";
@@ -78,6 +92,15 @@ pub const GRADIENT_CHECK_FILE: &str = "gradient_check.csv";
 const SUMMARY_TEMP_FILE: &str = ".summary.json.tmp";
 /// Where a new checkpoint is written before it is renamed over [`CHECKPOINT_FILE`].
 const CHECKPOINT_TEMP_FILE: &str = ".checkpoint.json.tmp";
+/// The room kept for the last summary of a run, in which it is written.
+const SUMMARY_ROOM_FILE: &str = ".summary.json.room";
+/// Least size of the room kept for the last summary \[bytes\]: one page of memory (a
+/// tmpfs) or one block of most file systems, more than a summary needs beyond the first
+/// one but for its warnings and error, which are cut to fit.
+pub const SUMMARY_ROOM: u64 = 4096;
+/// The room is at least this much more than the first summary \[bytes\]: the counts, the
+/// error kind and `verify` of the last one.
+const SUMMARY_ROOM_MARGIN: u64 = 2048;
 
 /// Why the results could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -105,10 +128,57 @@ impl OutputError {
     }
 }
 
-/// The output directory of a run, taken over by [`OutputDir::prepare`].
+/// The output directory of a run, taken over by [`OutputDir::prepare`]. Its clones (the
+/// run's threads, a signal handler's) share what the run has recorded there: the summary
+/// written last and how far the result files go.
 #[derive(Clone, Debug)]
 pub struct OutputDir {
     path: PathBuf,
+    shared: Arc<Shared>,
+}
+
+/// What the clones of an [`OutputDir`] share.
+#[derive(Debug, Default)]
+struct Shared {
+    record: Mutex<Record>,
+    /// Held by the run's writer thread while it writes a batch of output steps
+    /// ([`OutputDir::lock_files`]).
+    files: Mutex<()>,
+    /// The run has been ended by [`OutputDir::end_now`]: the summary and the result files
+    /// are no longer written.
+    ended: AtomicBool,
+}
+
+/// What a run has recorded in its directory.
+#[derive(Debug, Default)]
+struct Record {
+    /// The summary written last (`None` before the first).
+    summary: Option<Summary>,
+    /// When the first summary with status `running` was written.
+    started: Option<Instant>,
+    /// How far the result files go.
+    reached: Reached,
+}
+
+/// A run ended at once by [`OutputDir::end_now`]: the summary written, if any, and the run's
+/// writer thread held (between two batches) until this is dropped.
+pub struct EndedNow<'a> {
+    pub summary: Result<Option<Summary>, OutputError>,
+    _writer: Option<MutexGuard<'a, ()>>,
+}
+
+/// How far the result files of a run go: the output steps the writer thread last made
+/// durable in every file, and where the run stood at the last of them.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Reached {
+    /// Output steps in every result file.
+    pub rows: usize,
+    /// The first column (time or load factor) of the last of them.
+    pub at: f64,
+    /// The work done up to it.
+    pub work: Work,
+    /// Wall time the run's thread had spent on output up to it \[s\].
+    pub output_seconds: f64,
 }
 
 impl OutputDir {
@@ -122,13 +192,12 @@ impl OutputDir {
         }
         std::fs::create_dir_all(path)
             .map_err(OutputError::io(path, "cannot create the output directory"))?;
-        let dir = Self {
-            path: path.to_path_buf(),
-        };
-        for name in RESULT_FILES
-            .iter()
-            .chain([&SUMMARY_TEMP_FILE, &CHECKPOINT_TEMP_FILE])
-        {
+        let dir = Self::at(path);
+        for name in RESULT_FILES.iter().chain([
+            &SUMMARY_TEMP_FILE,
+            &SUMMARY_ROOM_FILE,
+            &CHECKPOINT_TEMP_FILE,
+        ]) {
             let file = dir.file(name);
             match std::fs::remove_file(&file) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
@@ -149,9 +218,14 @@ impl OutputDir {
                 path: path.to_path_buf(),
             });
         }
-        Ok(Self {
+        Ok(Self::at(path))
+    }
+
+    fn at(path: &Path) -> Self {
+        Self {
             path: path.to_path_buf(),
-        })
+            shared: Arc::default(),
+        }
     }
 
     pub fn path(&self) -> &Path {
@@ -166,11 +240,142 @@ impl OutputDir {
     /// Replaces `summary.json` atomically: the JSON goes to a temporary file in the same
     /// directory, is synced to the disk and renamed over the old summary (the directory is
     /// then synced too), so `summary.json` is always either the old or the new summary.
+    ///
+    /// A summary with status `running` is written after room is kept for the last one (a
+    /// file of at least [`SUMMARY_ROOM`] bytes and [`SUMMARY_ROOM_MARGIN`] more than this
+    /// summary; an error if it cannot be kept, and then nothing is written). Any other
+    /// summary is the last: it is written in that room when there is one, cut to fit.
+    /// After [`OutputDir::end_now`] nothing is written: the run's end is recorded.
     pub fn write_summary(&self, summary: &Summary) -> Result<(), OutputError> {
-        let mut text = serde_json::to_string_pretty(summary)
-            .expect("a summary (strings, numbers, lists) always serializes");
-        text.push('\n');
-        self.replace(SUMMARY_FILE, SUMMARY_TEMP_FILE, &text)
+        let mut record = lock(&self.shared.record);
+        if self.shared.ended.load(Ordering::SeqCst) {
+            return Ok(());
+        }
+        self.record_summary(&mut record, summary)
+    }
+
+    /// [`OutputDir::write_summary`], the record held.
+    fn record_summary(&self, record: &mut Record, summary: &Summary) -> Result<(), OutputError> {
+        if summary.status == Status::Running {
+            let text = summary.json();
+            self.keep_room(text.len() as u64 + SUMMARY_ROOM_MARGIN)?;
+            self.replace(SUMMARY_FILE, SUMMARY_TEMP_FILE, &text)?;
+            record.started.get_or_insert_with(Instant::now);
+        } else {
+            match std::fs::metadata(self.file(SUMMARY_ROOM_FILE)) {
+                Ok(room) => {
+                    let text = summary.json_within(room.len() as usize);
+                    self.replace(SUMMARY_FILE, SUMMARY_ROOM_FILE, &text)?
+                }
+                Err(_) => self.replace(SUMMARY_FILE, SUMMARY_TEMP_FILE, &summary.json())?,
+            }
+        }
+        record.summary = Some(summary.clone());
+        Ok(())
+    }
+
+    /// Makes the room for the last summary at least `bytes` (rounded up to
+    /// [`SUMMARY_ROOM`]): written, so that the file system allocates it, with bytes that do
+    /// not compress (a compressing file system would keep little room for zeros). A room
+    /// that cannot be made or grown is taken back.
+    fn keep_room(&self, bytes: u64) -> Result<(), OutputError> {
+        let path = self.file(SUMMARY_ROOM_FILE);
+        let size = bytes.next_multiple_of(SUMMARY_ROOM);
+        let had = std::fs::metadata(&path).map_or(None, |m| Some(m.len()));
+        let from = had.unwrap_or(0);
+        if from >= size {
+            return Ok(());
+        }
+        // xorshift64: a fixed sequence of bytes that no compressor shortens
+        let mut x = 0x9e37_79b9_7f4a_7c15_u64;
+        let fill: Vec<u8> = (from..size)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                x as u8
+            })
+            .collect();
+        let written = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .and_then(|mut f| f.write_all(&fill));
+        written.map_err(|e| {
+            let _ = match had {
+                Some(len) => File::options()
+                    .write(true)
+                    .open(&path)
+                    .and_then(|f| f.set_len(len)),
+                None => std::fs::remove_file(&path),
+            };
+            OutputError::io(&path, "cannot keep room for the last summary")(e)
+        })
+    }
+
+    /// Holds the result files for the run's writer thread while it writes a batch of output
+    /// steps; `None` once the run has been ended by [`OutputDir::end_now`] (nothing more is
+    /// written).
+    pub fn lock_files(&self) -> Option<MutexGuard<'_, ()>> {
+        let files = lock(&self.shared.files);
+        (!self.shared.ended.load(Ordering::SeqCst)).then_some(files)
+    }
+
+    /// Records how far the result files go, once the writer has made it durable.
+    pub fn files_reached(&self, reached: Reached) {
+        lock(&self.shared.record).reached = reached;
+    }
+
+    /// Ends the run at once, from another thread (a second signal; the caller ends the
+    /// process next). Waits at most `wait` for the writer thread to finish its batch of
+    /// output steps and stops it there, then writes the summary of a run stopped where its
+    /// files stand: status `interrupted`, `outputs`, `t_reached` and the counts of the last
+    /// output step in the files, `note` among the warnings (with a word when the writer
+    /// could not be stopped in time: the files may then hold more steps than `outputs`, the
+    /// last perhaps incomplete). Its `summary` is that summary, or `None` when the run had
+    /// not written its first summary yet or had already written its last; the run's writer
+    /// (and so the run's own end) is held until it is dropped.
+    pub fn end_now(&self, note: &str, wait: Duration) -> EndedNow<'_> {
+        let deadline = Instant::now() + wait;
+        let files = loop {
+            match self.shared.files.try_lock() {
+                Ok(files) => break Some(files),
+                Err(TryLockError::Poisoned(files)) => break Some(files.into_inner()),
+                Err(TryLockError::WouldBlock) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                Err(TryLockError::WouldBlock) => break None,
+            }
+        };
+        let mut record = lock(&self.shared.record);
+        let stopped = files.is_some();
+        let mut ended = EndedNow {
+            summary: Ok(None),
+            _writer: files,
+        };
+        let Some(mut summary) = record.summary.clone() else {
+            return ended;
+        };
+        if summary.status != Status::Running {
+            return ended;
+        }
+        self.shared.ended.store(true, Ordering::SeqCst);
+        let r = record.reached;
+        summary.status = Status::Interrupted;
+        summary.outputs = r.rows;
+        summary.t_reached = r.at;
+        summary.count(r.work);
+        summary.wall_seconds = record.started.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        summary.solve_seconds = (summary.wall_seconds - r.output_seconds).max(0.0);
+        summary.warnings.push(if stopped {
+            note.to_string()
+        } else {
+            format!("{note} (the result files were still being written: they may hold more output steps than `outputs`, the last perhaps incomplete)")
+        });
+        ended.summary = self
+            .record_summary(&mut record, &summary)
+            .map(|()| Some(summary));
+        ended
     }
 
     /// Replaces `checkpoint.json` atomically, as [`OutputDir::write_summary`] does.
@@ -205,6 +410,12 @@ impl OutputDir {
         }
         Ok(())
     }
+}
+
+/// The value of a mutex, also when a thread panicked holding it (what it guards stays
+/// consistent: a summary, counts).
+fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// Appends `x` to `out` in the shortest decimal form that parses back to the same bits:
@@ -529,6 +740,10 @@ pub enum Status {
     Failed,
     /// The run was stopped from outside (a signal); results up to `t_reached` are complete.
     Interrupted,
+    /// The analysis stopped at a limit of its settings before its end (`max_steps` load
+    /// steps before the final load factor): nothing failed, results up to `t_reached` are
+    /// complete, and a warning says which setting to raise.
+    Incomplete,
 }
 
 /// What kind of error stopped a failed run, `error_kind` in `summary.json`.
@@ -582,6 +797,54 @@ pub struct Summary {
 }
 
 impl Summary {
+    /// The summary as `summary.json` holds it.
+    fn json(&self) -> String {
+        let mut text = serde_json::to_string_pretty(self)
+            .expect("a summary (strings, numbers, lists) always serializes");
+        text.push('\n');
+        text
+    }
+
+    /// [`Summary::json`] in at most `room` bytes, when that can be done by leaving out
+    /// warnings (from the last; a last warning says how many) and then cutting the error
+    /// message (which ends with `...` then).
+    pub fn json_within(&self, room: usize) -> String {
+        let mut text = self.json();
+        let mut cut = self.clone();
+        let mut kept = self.warnings.len();
+        while text.len() > room {
+            if kept > 0 {
+                kept -= 1;
+                cut.warnings.truncate(kept);
+                cut.warnings.push(format!(
+                    "{} more warnings left out of this file (on the standard error of the run)",
+                    self.warnings.len() - kept
+                ));
+            } else if let Some(error) = cut.error.as_mut().filter(|e| e.len() > 3) {
+                let excess = text.len() - room + 3;
+                let mut end = error.len().saturating_sub(excess);
+                while !error.is_char_boundary(end) {
+                    end -= 1;
+                }
+                error.truncate(end);
+                error.push_str("...");
+            } else {
+                break;
+            }
+            text = cut.json();
+        }
+        text
+    }
+
+    /// Sets the counts of the work done.
+    pub fn count(&mut self, work: Work) {
+        self.steps = work.steps;
+        self.newton_iterations = work.newton_iterations;
+        self.rejected_steps = work.rejected_steps;
+        self.factorizations = work.factorizations;
+        self.newton_iterations_per_step = work.newton_iterations as f64 / work.steps.max(1) as f64;
+    }
+
     /// Marks the summary failed with the kind and message of the error.
     pub fn fail(&mut self, kind: ErrorKind, error: String) {
         self.status = Status::Failed;
@@ -759,9 +1022,10 @@ mod tests {
     fn prepare_removes_earlier_results_and_keeps_other_files() {
         let dir = temp_dir("prepare");
         std::fs::create_dir_all(&dir).unwrap();
-        for name in RESULT_FILES
-            .iter()
-            .chain([&SUMMARY_TEMP_FILE, &"notes.txt"])
+        for name in
+            RESULT_FILES
+                .iter()
+                .chain([&SUMMARY_TEMP_FILE, &SUMMARY_ROOM_FILE, &"notes.txt"])
         {
             std::fs::write(dir.join(name), "earlier").unwrap();
         }
@@ -811,7 +1075,7 @@ mod tests {
         // The temporary file cannot be created (a directory is in its place): the write fails
         // and the earlier summary is untouched, never truncated.
         std::fs::create_dir(out.file(SUMMARY_TEMP_FILE)).unwrap();
-        summary.fail(ErrorKind::Analysis, "why".into());
+        summary.title = "second".into();
         let err = out.write_summary(&summary).unwrap_err();
         assert!(err.to_string().contains(SUMMARY_TEMP_FILE), "{err}");
         assert_eq!(
@@ -819,6 +1083,7 @@ mod tests {
             first
         );
         std::fs::remove_dir(out.file(SUMMARY_TEMP_FILE)).unwrap();
+        summary.fail(ErrorKind::Analysis, "why".into());
         out.write_summary(&summary).unwrap();
         let json: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.file(SUMMARY_FILE)).unwrap())
@@ -826,6 +1091,129 @@ mod tests {
         assert_eq!(json["status"], "failed");
         assert_eq!(json["error_kind"], "analysis");
         assert_eq!(json["error"], "why");
+    }
+
+    /// The first summary of a run keeps room for the last: a file of 4096 bytes (one page,
+    /// one block), allocated (not sparse) and filled with bytes that do not compress. The
+    /// last summary is written in it, so that it needs neither a new inode nor more blocks
+    /// than the room: `summary.json` is then the room's inode, renamed. A summary too long
+    /// for the room leaves out warnings, then cuts its error, to fit.
+    #[cfg(unix)]
+    #[test]
+    fn the_last_summary_is_written_in_the_room_kept_by_the_first() {
+        use std::os::unix::fs::MetadataExt;
+        let dir = temp_dir("room");
+        let out = OutputDir::prepare(&dir).unwrap();
+        let mut summary = Summary {
+            title: "room".into(),
+            ..Default::default()
+        };
+        out.write_summary(&summary).unwrap();
+        let room = std::fs::metadata(out.file(SUMMARY_ROOM_FILE)).expect("room kept");
+        assert_eq!(room.len(), SUMMARY_ROOM);
+        assert!(room.blocks() * 512 >= room.len(), "allocated: {room:?}");
+        let bytes = std::fs::read(out.file(SUMMARY_ROOM_FILE)).unwrap();
+        let zeros = bytes.iter().filter(|&&b| b == 0).count();
+        assert!(zeros < bytes.len() / 64, "{zeros} zero bytes");
+        summary.warnings = (0..500)
+            .map(|k| format!("warning {k}: {}", "x".repeat(40)))
+            .collect();
+        summary.fail(ErrorKind::Output, "disk full ".repeat(1000));
+        out.write_summary(&summary).unwrap();
+        let last = std::fs::metadata(out.file(SUMMARY_FILE)).unwrap();
+        assert_eq!(last.ino(), room.ino(), "the room became the summary");
+        assert!(last.len() <= SUMMARY_ROOM, "{} bytes", last.len());
+        assert!(!out.file(SUMMARY_ROOM_FILE).exists());
+        assert!(!out.file(SUMMARY_TEMP_FILE).exists());
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.file(SUMMARY_FILE)).unwrap())
+                .unwrap();
+        assert_eq!(json["status"], "failed");
+        let warnings = json["warnings"].as_array().unwrap();
+        let note = warnings.last().unwrap().as_str().unwrap();
+        assert!(
+            note.ends_with(
+                "more warnings left out of this file (on the standard error of the run)"
+            ),
+            "{note}"
+        );
+        let error = json["error"].as_str().unwrap();
+        assert!(
+            error.starts_with("disk full") && error.ends_with("..."),
+            "{error}"
+        );
+    }
+
+    /// A run ended at once from another thread (a second signal): the writer thread is
+    /// stopped between two batches (`end_now` waits for the batch it holds), and the summary
+    /// says `interrupted` with the output steps the files hold, the time of the last and the
+    /// work done up to it. Nothing is written after it; a run that has written its last
+    /// summary keeps it.
+    #[test]
+    fn a_run_ended_at_once_records_what_its_files_hold() {
+        let dir = temp_dir("end-now");
+        let out = OutputDir::prepare(&dir).unwrap();
+        let note = "ended at once";
+        let wait = Duration::from_secs(10);
+        assert!(
+            out.end_now(note, wait).summary.unwrap().is_none(),
+            "not started"
+        );
+        let running = Summary {
+            title: "ended".into(),
+            analysis: "dynamic".into(),
+            ..Default::default()
+        };
+        out.write_summary(&running).unwrap();
+        let work = Work {
+            steps: 12,
+            newton_iterations: 30,
+            rejected_steps: 1,
+            factorizations: 4,
+        };
+        out.files_reached(Reached {
+            rows: 13,
+            at: 0.012,
+            work,
+            output_seconds: 0.0,
+        });
+        let ended = std::thread::scope(|scope| {
+            let files = out.lock_files().expect("the run goes on");
+            let ending = scope.spawn(|| out.end_now(note, wait).summary);
+            // the batch being written when the signal came
+            std::thread::sleep(Duration::from_millis(50));
+            out.files_reached(Reached {
+                rows: 14,
+                at: 0.013,
+                work: Work { steps: 13, ..work },
+                output_seconds: 0.0,
+            });
+            drop(files);
+            ending.join().unwrap()
+        });
+        let ended = ended.unwrap().expect("the run was going on");
+        assert_eq!(ended.status, Status::Interrupted);
+        assert_eq!(
+            (ended.outputs, ended.t_reached, ended.steps),
+            (14, 0.013, 13)
+        );
+        assert_eq!(ended.warnings, [note]);
+        assert!(out.lock_files().is_none(), "the writer stops");
+        // the run's own last summary is not written over it
+        let mut ok = running.clone();
+        ok.status = Status::Ok;
+        out.write_summary(&ok).unwrap();
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.file(SUMMARY_FILE)).unwrap())
+                .unwrap();
+        assert_eq!(json["status"], "interrupted");
+        assert_eq!(json["outputs"], 14);
+        // a run that ended by itself keeps its summary
+        let other = OutputDir::prepare(&temp_dir("end-after")).unwrap();
+        other.write_summary(&running).unwrap();
+        other.write_summary(&ok).unwrap();
+        assert!(other.end_now(note, wait).summary.unwrap().is_none());
+        assert!(other.lock_files().is_some());
     }
 }
 

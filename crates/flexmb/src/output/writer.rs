@@ -25,8 +25,13 @@
 //! the CSV files back to the steps of its last sync, so that every file holds the same
 //! steps; whatever the outcome, the stores are synced once more when the thread ends.
 //! [`Writer::sync`] (a checkpoint) waits until every step sent is in the files.
+//!
+//! The writer holds the directory's files ([`OutputDir::lock_files`]) while it writes a
+//! batch and syncs the stores, and then records how far the files go
+//! ([`OutputDir::files_reached`]), so that a run ended at once from another thread
+//! ([`OutputDir::end_now`]) stops it between two batches and says what the files hold.
 
-use super::{OutputDir, OutputError, ResultFiles, Snapshot, Store, StoreFormat};
+use super::{OutputDir, OutputError, Reached, ResultFiles, Snapshot, Store, StoreFormat};
 use crate::data::Layout;
 use crate::model::Model;
 use crate::observe::Sample;
@@ -48,11 +53,8 @@ pub enum Open {
     /// New files; `first` names their first column (`time` or `load_factor`).
     Create { first: &'static str },
     /// The files of a resumed run, cut back to the `lengths` (and marks) its checkpoint
-    /// recorded, which held `rows` output steps.
-    Reopen {
-        lengths: Vec<(String, u64)>,
-        rows: usize,
-    },
+    /// recorded.
+    Reopen { lengths: Vec<(String, u64)> },
 }
 
 /// Where the files stand after a sync, for a checkpoint.
@@ -63,9 +65,9 @@ pub struct Synced {
     pub rows: usize,
 }
 
-/// How the writer thread ended: the output steps in every file, and its first error.
+/// How the writer thread ended: how far every file goes, and its first error.
 pub struct Written {
-    pub rows: usize,
+    pub reached: Reached,
     pub error: Option<OutputError>,
 }
 
@@ -83,15 +85,20 @@ struct Taken {
     at: f64,
     state: State,
     sensors: Vec<f64>,
+    /// The work done up to it, and the output time of the solver's thread \[s\].
+    work: crate::observe::Work,
+    output_seconds: f64,
 }
 
 impl Taken {
     /// Copies `sample` into the buffers of an earlier output step.
-    fn fill(&mut self, sample: &Sample, sensors: Vec<f64>) {
+    fn fill(&mut self, sample: &Sample, sensors: Vec<f64>, output_seconds: f64) {
         // (`State::clone_from` reuses the vectors)
         self.state.clone_from(sample.state);
         self.at = sample.at;
         self.sensors = sensors;
+        self.work = sample.work;
+        self.output_seconds = output_seconds;
     }
 }
 
@@ -131,33 +138,36 @@ pub struct Writer<'scope> {
 impl<'scope> Writer<'scope> {
     /// Starts the thread, which opens the files of `model` in `out` (one store of each of
     /// `formats`) and writes them until [`Writer::finish`]; `layout` numbers the rows of the
-    /// states' multipliers.
+    /// states' multipliers, `start` is how far the files go when they are opened.
     pub fn spawn(
         scope: &'scope Scope<'scope, '_>,
         out: &'scope OutputDir,
         model: &'scope Model,
-        layout: Layout,
-        formats: &'scope [&'scope dyn StoreFormat],
+        (layout, formats): (Layout, &'scope [&'scope dyn StoreFormat]),
         open: Open,
+        start: Reached,
     ) -> Self {
         let capacity = capacity(model);
         let (sender, receiver) = sync_channel(capacity);
         let (recycle, returned) = sync_channel(capacity);
         let thread = scope.spawn(move || {
-            let mut files = match Files::open(out, model, layout, formats, open, recycle) {
+            out.files_reached(start);
+            let opened = Files::open(out, model, (layout, formats), open, start, recycle);
+            let mut files = match opened {
                 Ok(files) => files,
                 Err(e) => {
                     return Written {
-                        rows: 0,
+                        reached: start,
                         error: Some(e),
                     }
                 }
             };
             let error = files.serve(&receiver, capacity).err();
-            // Whatever the outcome, the stores get every step the CSV files have.
-            let last = files.sync().err();
+            // Whatever the outcome, the stores get every step the CSV files have (unless the
+            // run was ended at once).
+            let last = out.lock_files().and_then(|_files| files.sync().err());
             Written {
-                rows: files.rows,
+                reached: files.reached,
                 error: error.or(last),
             }
         });
@@ -170,10 +180,16 @@ impl<'scope> Writer<'scope> {
         }
     }
 
-    /// Hands over the output step `sample` with its sensor values.
-    pub fn output(&mut self, sample: &Sample, sensors: Vec<f64>) -> Result<(), Stopped> {
+    /// Hands over the output step `sample` with its sensor values; `output_seconds` is the
+    /// time the solver's thread has spent on output so far.
+    pub fn output(
+        &mut self,
+        sample: &Sample,
+        sensors: Vec<f64>,
+        output_seconds: f64,
+    ) -> Result<(), Stopped> {
         let mut taken = self.returned.try_recv().unwrap_or_default();
-        taken.fill(sample, sensors);
+        taken.fill(sample, sensors, output_seconds);
         // The accepted steps go with it; its (emptied) list takes the next ones.
         std::mem::swap(&mut taken.steps, &mut self.steps);
         self.send(Message::Output(taken))
@@ -238,28 +254,29 @@ fn capacity(model: &Model) -> usize {
 
 /// What the writer thread writes, and what it computes the output steps with.
 struct Files<'m> {
+    out: &'m OutputDir,
     model: &'m Model,
     layout: Layout,
     csv: ResultFiles,
     stores: Vec<Box<dyn Store>>,
-    /// Output steps in the CSV files.
-    rows: usize,
-    /// The CSV files' lengths and rows when the stores were last synced.
-    synced: (Vec<(String, u64)>, usize),
+    /// How far the CSV files go.
+    reached: Reached,
+    /// The CSV files' lengths and how far they went when the stores were last synced.
+    synced: (Vec<(String, u64)>, Reached),
     /// Where the output steps written go back to the solver's thread.
     recycle: SyncSender<Box<Taken>>,
 }
 
 impl<'m> Files<'m> {
     fn open(
-        out: &OutputDir,
+        out: &'m OutputDir,
         model: &'m Model,
-        layout: Layout,
-        formats: &[&dyn StoreFormat],
+        (layout, formats): (Layout, &[&dyn StoreFormat]),
         open: Open,
+        start: Reached,
         recycle: SyncSender<Box<Taken>>,
     ) -> Result<Self, OutputError> {
-        let (csv, stores, rows) = match open {
+        let (csv, stores) = match open {
             Open::Create { first } => {
                 let names = SensorEvaluator::names(model);
                 let analysis = if first == "time" { "dynamic" } else { "static" };
@@ -268,40 +285,45 @@ impl<'m> Files<'m> {
                     .iter()
                     .map(|f| f.create(out, model, analysis))
                     .collect::<Result<_, _>>()?;
-                (csv, stores, 0)
+                (csv, stores)
             }
-            Open::Reopen { lengths, rows } => {
+            Open::Reopen { lengths } => {
                 let csv = ResultFiles::reopen(out, model, &lengths)?;
                 let stores = formats
                     .iter()
                     .map(|f| f.reopen(out, model, &lengths))
                     .collect::<Result<_, _>>()?;
-                (csv, stores, rows)
+                (csv, stores)
             }
         };
-        let synced = (csv.lengths(), rows);
+        let synced = (csv.lengths(), start);
         Ok(Self {
+            out,
             model,
             layout,
             csv,
             stores,
-            rows,
+            reached: start,
             synced,
             recycle,
         })
     }
 
-    /// Writes what comes through the channel until the solver's end is dropped, syncing the
-    /// stores after every batch that has an output step; a batch is at most `batch`
-    /// messages more than the first.
+    /// Writes what comes through the channel until the solver's end is dropped (or the run
+    /// is ended at once), syncing the stores after every batch that has an output step; a
+    /// batch is at most `batch` messages more than the first.
     fn serve(&mut self, receiver: &Receiver<Message>, batch: usize) -> Result<(), OutputError> {
         while let Ok(first) = receiver.recv() {
+            let Some(held) = self.out.lock_files() else {
+                return Ok(());
+            };
             let mut outputs = self.take(first)?;
             for message in receiver.try_iter().take(batch) {
                 outputs |= self.take(message)?;
             }
             if outputs {
                 self.sync()?;
+                drop(held);
                 // Not waiting on the channel, the writer is not woken by each send.
                 std::thread::park_timeout(PAUSE);
             }
@@ -323,7 +345,12 @@ impl<'m> Files<'m> {
                     Snapshot::capture(self.model, &self.layout, state, at, sensors)
                 };
                 self.csv.write_step(&snapshot)?;
-                self.rows += 1;
+                self.reached = Reached {
+                    rows: self.reached.rows + 1,
+                    at,
+                    work: taken.work,
+                    output_seconds: taken.output_seconds,
+                };
                 self.each_store(|s| s.write(&snapshot))?;
                 // Back to the solver's thread (unless it has enough), with the sensors' list.
                 taken.sensors = snapshot.sensors;
@@ -340,7 +367,7 @@ impl<'m> Files<'m> {
                 // The solver waits for the answer (or for the thread's end).
                 let _ = reply.send(Synced {
                     files,
-                    rows: self.rows,
+                    rows: self.reached.rows,
                 });
                 Ok(false)
             }
@@ -355,13 +382,15 @@ impl<'m> Files<'m> {
         Ok(())
     }
 
-    /// Syncs the stores: the lengths of the CSV files and the stores' marks.
+    /// Syncs the stores and records how far the files go: returns the lengths of the CSV
+    /// files and the stores' marks.
     fn sync(&mut self) -> Result<Vec<(String, u64)>, OutputError> {
         let mut files = self.csv.lengths();
         for marks in self.each_store(|s| s.sync())? {
             files.extend(marks);
         }
-        self.synced = (self.csv.lengths(), self.rows);
+        self.synced = (self.csv.lengths(), self.reached);
+        self.out.files_reached(self.reached);
         Ok(files)
     }
 
@@ -373,9 +402,9 @@ impl<'m> Files<'m> {
     ) -> Result<Vec<T>, OutputError> {
         let result: Result<Vec<T>, _> = self.stores.iter_mut().map(|s| f(s.as_mut())).collect();
         if result.is_err() {
-            let (lengths, rows) = &self.synced;
+            let (lengths, reached) = &self.synced;
             self.csv.cut_back(lengths);
-            self.rows = *rows;
+            self.reached = *reached;
         }
         result
     }

@@ -103,7 +103,7 @@ pub fn initial_tangents(
         let mut ds = StateTangent::zeros_of(&layout);
         initial_velocity(model, params, id, &mut ds.v);
         if layout.n_states > 0 && params.role(id) == ParamRole::Residual {
-            ds.x = initial_states_derivative(model, params, id, &layout);
+            ds.x = initial_states_derivative(model, params, id, &layout)?;
             // the algebraic states are unknowns of the solve, not inputs
             for (d, &algebraic) in ds.x.iter_mut().zip(&layout.algebraic) {
                 if algebraic {
@@ -227,20 +227,32 @@ fn initial_velocity(model: &Model, params: &Parameters, id: ParamId, dv: &mut [V
     }
 }
 
-/// `dx_0/dp`: the initial element states of a copy of the model with `id` moved.
+/// `dx_0/dp`: the initial element states of a copy of the model with `id` moved; fails
+/// where a moved copy's states cannot be solved.
 fn initial_states_derivative(
     model: &Model,
     params: &Parameters,
     id: ParamId,
     layout: &Layout,
-) -> Vec<f64> {
+) -> Result<Vec<f64>, crate::SolveError> {
     let value = params.value(model, id);
     let mut copy = model.clone();
     let eps = 1e-4 * value.abs().max(1e-3);
-    super::fourth_order_difference(eps, &mut |e| {
+    let mut failure = None;
+    let d = super::fourth_order_difference(eps, &mut |e| {
         params.set(&mut copy, id, value + e);
-        State::initial(&copy, layout).x
-    })
+        match State::initial(&copy, layout) {
+            Ok(state) => state.x,
+            Err(error) => {
+                failure.get_or_insert(error);
+                vec![0.0; layout.n_states]
+            }
+        }
+    });
+    match failure {
+        Some(error) => Err(error),
+        None => Ok(d),
+    }
 }
 
 /// A constraint row's slots (node indices, `None` for the ground) and a gradient on them.

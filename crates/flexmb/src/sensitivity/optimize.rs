@@ -10,7 +10,7 @@
 
 use super::adjoint::{adjoint_in, Workspace};
 use super::{DesignParameter, Problem, SensitivityError};
-use argmin::core::{CostFunction, Error, Executor, Gradient, State};
+use argmin::core::{CostFunction, Error, Executor, Gradient, State, TerminationReason};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::LBFGS;
 use std::cell::RefCell;
@@ -78,6 +78,9 @@ pub struct Optimum {
     pub history: Vec<Improvement>,
     /// Why the loop stopped (argmin's termination status).
     pub status: String,
+    /// The loop stopped at its most iterations before a convergence test held: the last
+    /// point is the best found, not an optimum.
+    pub iteration_limit: bool,
     /// L-BFGS iterations.
     pub iterations: u64,
     /// Evaluations (forward and adjoint runs).
@@ -238,10 +241,15 @@ pub fn optimize(
         .map_err(|e| SensitivityError::Unsupported(format!("optimization: {e}")))?;
     let state = result.state();
     let (status, iterations) = (state.get_termination_status().to_string(), state.get_iter());
+    let iteration_limit = matches!(
+        state.get_termination_reason(),
+        Some(TerminationReason::MaxItersReached)
+    );
     let runs = cost.evaluator.borrow().runs;
     Ok(Optimum {
         history: cost.history.into_inner(),
         status,
+        iteration_limit,
         iterations,
         runs,
     })

@@ -347,6 +347,18 @@ pub struct Stats {
     pub event_rejections: usize,
 }
 
+impl Stats {
+    /// The counts of the work done.
+    pub fn work(&self) -> crate::observe::Work {
+        crate::observe::Work {
+            steps: self.steps,
+            newton_iterations: self.newton_iterations,
+            rejected_steps: self.rejected_steps,
+            factorizations: self.factorizations,
+        }
+    }
+}
+
 /// What one accepted step did ([`Simulation::step`]).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepInfo {
@@ -666,7 +678,7 @@ impl Simulation {
         let (layout, warnings) = prepare_layout(&model);
         let threads = Threads::for_model(&model, settings.threads);
         let mut data = Data::new(&model, layout.clone())?.with_threads(threads.clone());
-        let mut state = State::initial(&model, &layout);
+        let mut state = State::initial(&model, &layout)?;
         initial_accelerations(&model, &mut data, &mut state, settings.load_factor_at(0.0))?;
         if settings.stabilized() {
             let mut stabilized = layout;
@@ -966,6 +978,7 @@ impl Simulation {
             data: &self.data,
             state: &self.state,
             at: self.state.t,
+            work: self.stats.work(),
         }
     }
 

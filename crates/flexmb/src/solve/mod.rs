@@ -21,4 +21,4 @@ pub use dynamics::{
 pub use generalized_alpha::{FirstOrderParameters, GaParameters};
 pub use initial::{initial_accelerations, prepare_layout};
 pub use newton::{NewtonError, NewtonSettings, Verification};
-pub use statics::{StaticMethod, StaticSettings, StaticStats, Statics};
+pub use statics::{StaticMethod, StaticSettings, Statics};

@@ -28,7 +28,7 @@ use crate::elements::{Coefficients, NodeState};
 use crate::error::{SettingsError, SolveError};
 use crate::model::limits::within;
 use crate::model::Model;
-use crate::observe::{Observer, Sample};
+use crate::observe::{Observer, Sample, Work};
 use crate::sensors::node_states;
 use crate::state::State;
 use flexmb_lie::Vec6;
@@ -71,8 +71,9 @@ pub struct StaticSettings {
     pub pseudo_time: f64,
     /// Pseudo-dynamic method: nodal viscous damping `alpha` [1/s].
     pub pseudo_damping: f64,
-    /// Most load steps (load control: reaching it is a failure; arc-length: the path is
-    /// followed for at most this many steps, a normal end).
+    /// Most load steps. An analysis that has taken this many before `load_factor` stops
+    /// there with [`SolveError::Incomplete`] (every converged step kept): load control and
+    /// arc length alike (the path of arc length may be long, with snap-backs).
     pub max_steps: usize,
     /// Newton iterations aimed at per step: increments grow when fewer are needed.
     pub target_iterations: usize,
@@ -211,15 +212,6 @@ impl Default for StaticSettings {
     }
 }
 
-/// Work done by a static analysis.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct StaticStats {
-    pub steps: usize,
-    pub newton_iterations: usize,
-    pub rejected_steps: usize,
-    pub factorizations: usize,
-}
-
 /// A static analysis in progress.
 pub struct Statics {
     pub model: Arc<Model>,
@@ -229,7 +221,7 @@ pub struct Statics {
     pub settings: StaticSettings,
     /// Load factor of the converged state.
     pub load_factor: f64,
-    pub stats: StaticStats,
+    pub stats: Work,
     pub warnings: Vec<String>,
     /// Checked before every load step (and every step of a pseudo-dynamic run): when it is
     /// set, [`Statics::run`] returns [`SolveError::Interrupted`].
@@ -540,7 +532,7 @@ impl Statics {
         model.validate()?;
         settings.check()?;
         let (layout, warnings) = prepare_layout(&model);
-        let mut state = State::initial(&model, &layout);
+        let mut state = State::initial(&model, &layout)?;
         let threads = crate::parallel::Threads::for_model(&model, settings.threads);
         let mut data = Data::new(&model, layout)?.with_threads(threads);
         for v in state.v.iter_mut() {
@@ -573,7 +565,7 @@ impl Statics {
             newton: NewtonSolver::new(policy, settings.verify),
             settings,
             load_factor: 0.0,
-            stats: StaticStats::default(),
+            stats: Work::default(),
             warnings,
             interrupt: None,
             verification: None,
@@ -583,8 +575,10 @@ impl Statics {
     }
 
     /// Runs to the final load factor, calling `output` at `lambda = 0` and after every
-    /// converged load step.
-    pub fn run(&mut self, output: &mut dyn Observer) -> Result<StaticStats, SolveError> {
+    /// converged load step. Stops with [`SolveError::Incomplete`] when `max_steps` load steps
+    /// did not reach it (the state is then the last converged one), with
+    /// [`SolveError::StaticFailed`] when a step cannot converge.
+    pub fn run(&mut self, output: &mut dyn Observer) -> Result<Work, SolveError> {
         output.output(&self.sample()).map_err(SolveError::Output)?;
         let result = match self.settings.method {
             StaticMethod::LoadControl => self.run_load_control(output),
@@ -606,11 +600,7 @@ impl Statics {
         while (target - self.load_factor).abs() > eps {
             self.check_interrupt()?;
             if self.stats.steps >= s.max_steps {
-                return Err(self.failure(
-                    None,
-                    "the maximum number of load steps was reached",
-                    inc,
-                ));
+                return Err(self.incomplete("load control", "solver.max_steps (or max_increment)"));
             }
             let remaining = target - self.load_factor;
             let step = if remaining.abs() <= inc * (1.0 + 1e-9) {
@@ -641,8 +631,7 @@ impl Statics {
                     self.stats.rejected_steps += 1;
                     inc *= 0.5;
                     if inc < s.min_increment || !s.adaptive {
-                        let reason = error.to_string();
-                        return Err(self.failure(Some(error), &reason, inc));
+                        return Err(self.failure(error, inc));
                     }
                 }
             }
@@ -657,6 +646,7 @@ impl Statics {
             data: &self.data,
             state: &self.state,
             at: self.load_factor,
+            work: self.stats,
         }
     }
 
@@ -669,10 +659,12 @@ impl Statics {
         Ok(())
     }
 
-    fn failure(&self, error: Option<NewtonError>, reason: &str, inc: f64) -> SolveError {
-        let unknown = error.as_ref().and_then(NewtonError::unknown);
-        let mut reason = reason.to_string();
-        if matches!(error, Some(NewtonError::Singular { .. })) {
+    /// The diagnosis of a load step that could not converge: `error` of its last attempt,
+    /// with the increment `inc` tried.
+    fn failure(&self, error: NewtonError, inc: f64) -> SolveError {
+        let unknown = error.unknown();
+        let mut reason = error.to_string();
+        if matches!(error, NewtonError::Singular { .. }) {
             reason.push_str(": a mechanism (try method = \"pseudo_dynamic\") or a limit point (try method = \"arc_length\")");
         }
         SolveError::StaticFailed {
@@ -685,7 +677,20 @@ impl Statics {
                 .map(|i| self.data.layout.describe_unknown(&self.model, i))
                 .unwrap_or_else(|| "unknown".into()),
             unknown: unknown.map(|i| self.data.layout.unknown(i)),
-            error: error.map(Box::new),
+            error: Box::new(error),
+        }
+    }
+
+    /// The end of an analysis by `method` that has taken `max_steps` load steps before its
+    /// final load factor; `raise` names the settings that let it go further.
+    fn incomplete(&self, method: &str, raise: &str) -> SolveError {
+        SolveError::Incomplete {
+            reached: self.load_factor,
+            end: self.settings.load_factor,
+            reason: format!(
+                "{method} took max_steps = {} load steps; raise {raise}",
+                self.settings.max_steps
+            ),
         }
     }
 
@@ -748,8 +753,8 @@ impl Statics {
         &self,
         output: &mut dyn Observer,
         h: f64,
-        since: &mut StaticStats,
-        before: &StaticStats,
+        since: &mut Work,
+        before: &Work,
     ) -> Result<(), SolveError> {
         let info = super::StepInfo {
             t: self.load_factor,
@@ -783,12 +788,10 @@ impl Statics {
         while (target - self.load_factor) * target.signum() > 1e-12 * target.abs().max(1.0) {
             self.check_interrupt()?;
             if self.stats.steps >= s.max_steps {
-                // A path is followed for a number of steps: this is a normal end.
-                self.warnings.push(format!(
-                    "arc-length continuation stopped after max_steps = {} steps at load factor {:.6e}",
-                    s.max_steps, self.load_factor
+                return Err(self.incomplete(
+                    "arc-length continuation",
+                    "solver.max_steps (or arc_length)",
                 ));
-                return Ok(());
             }
             let saved = self.state.clone();
             let lambda0 = self.load_factor;
@@ -822,8 +825,7 @@ impl Statics {
                     self.stats.rejected_steps += 1;
                     dl *= 0.5;
                     if dl < dl_min {
-                        let reason = error.to_string();
-                        return Err(self.failure(Some(error), &reason, dl));
+                        return Err(self.failure(error, dl));
                     }
                 }
             }
@@ -946,12 +948,11 @@ impl Statics {
                 *v = Vec6::zeros();
             }
             self.load_factor = d.load_factor_at(sim.state.t);
+            // (the dynamic run is all the work of a pseudo-dynamic analysis)
+            self.stats = sim.work;
             output.output(&self.sample())
         });
-        self.stats.steps += sim.stats.steps;
-        self.stats.newton_iterations += sim.stats.newton_iterations;
-        self.stats.rejected_steps += sim.stats.rejected_steps;
-        self.stats.factorizations += sim.stats.factorizations;
+        self.stats = sim.stats.work();
         self.verification.clone_from(&sim.verification);
         match result {
             Err(SolveError::Interrupted { .. }) => {
