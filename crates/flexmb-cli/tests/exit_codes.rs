@@ -1,7 +1,7 @@
 //! One exit code per class of outcome (README.md, "Exit status"), and one message per cause:
 //! 0 success, 1 failed analysis (tests/cli.rs), 2 invalid model (the same for `check` and
-//! `run`), 3 results that cannot be written, 64 a wrong command line; signals in
-//! tests/signals.rs.
+//! `run`, and for `sensitivity` and `optimize` before their first step), 3 results that
+//! cannot be written, 64 a wrong command line; signals in tests/signals.rs.
 
 mod common;
 
@@ -67,6 +67,105 @@ fn inconsistent_initial_velocity_exits_2_from_check_and_run() {
     assert_eq!(s["status"], "failed");
     assert_eq!(s["error_kind"], "model");
     assert!(!out.join("sensors.csv").exists(), "nothing was solved");
+}
+
+/// `flexmb COMMAND MODEL --out DIR ARGS...` of a model of the repository.
+fn command(command: &str, model: &str, out: &Path, args: &[&str]) -> Output {
+    flexmb()
+        .args([command, repo(model).to_str().unwrap(), "--out"])
+        .arg(out)
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+#[test]
+fn problems_before_the_first_step_exit_2_from_sensitivity_and_optimize_as_from_run() {
+    // Before: exit 1 ("ran and failed") without the model file's name; the memory budget
+    // in bytes.
+    // Initial velocities that violate a joint: the heavy top's pivot, the half car's plane.
+    let cases = [
+        (
+            "sensitivity",
+            "examples/heavy_top_sensitivity.toml",
+            "body.top.velocity=[0.0, 1.0, 0.0]",
+        ),
+        (
+            "optimize",
+            "examples/half_car.toml",
+            "body.chassis.velocity=[0.0, 1.0, 0.0]",
+        ),
+    ];
+    for (cmd, model, velocity) in cases {
+        let set = ["--set", velocity, "--set", "solver.t_end=0.01"];
+        let run = command(
+            "run",
+            model,
+            &out_dir("ic-run"),
+            &[&set[..], &["--no-plot"]].concat(),
+        );
+        assert_eq!(run.status.code(), Some(2), "{}", stderr(&run));
+        assert!(
+            stderr(&run).contains(".toml: inconsistent initial conditions"),
+            "{}",
+            stderr(&run)
+        );
+        let o = command(cmd, model, &out_dir("ic"), &set);
+        assert_eq!(o.status.code(), Some(2), "{cmd}: {}", stderr(&o));
+        assert_eq!(stderr(&o), stderr(&run), "{cmd}: the message of run");
+    }
+    let model = "examples/heavy_top_sensitivity.toml";
+    // A memory budget too small, in MiB.
+    let o = command(
+        "sensitivity",
+        "examples/right_angle_cantilever_sensitivity.toml",
+        &out_dir("budget"),
+        &["--memory-mb", "1", "--set", "solver.h=1e-4", "--quiet"],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.starts_with("error: ")
+            && err.contains(
+                "right_angle_cantilever_sensitivity.toml: sensitivity: the memory budget of 1 MiB"
+            )
+            && err.contains("it needs at least 11.6 MiB"),
+        "{err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+    // An update the direct and adjoint methods do not differentiate.
+    let o = command(
+        "sensitivity",
+        model,
+        &out_dir("update"),
+        &[
+            "--set",
+            "solver.lie_update=lie_algebra",
+            "--set",
+            "solver.t_end=0.01",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o)
+            .contains("heavy_top_sensitivity.toml: sensitivity: the direct and adjoint methods"),
+        "{}",
+        stderr(&o)
+    );
+    // No parameter with both bounds: nothing to optimize.
+    let o = command(
+        "optimize",
+        model,
+        &out_dir("unbounded"),
+        &["--set", "solver.t_end=0.01"],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o)
+            .contains("heavy_top_sensitivity.toml: sensitivity: no design parameter has both"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]
