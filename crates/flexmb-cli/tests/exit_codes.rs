@@ -114,58 +114,45 @@ fn problems_before_the_first_step_exit_2_from_sensitivity_and_optimize_as_from_r
         assert_eq!(o.status.code(), Some(2), "{cmd}: {}", stderr(&o));
         assert_eq!(stderr(&o), stderr(&run), "{cmd}: the message of run");
     }
-    let model = "examples/heavy_top_sensitivity.toml";
-    // A memory budget too small, in MiB.
-    let o = command(
-        "sensitivity",
-        "examples/right_angle_cantilever_sensitivity.toml",
-        &out_dir("budget"),
-        &["--memory-mb", "1", "--set", "solver.h=1e-4", "--quiet"],
-    );
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    let err = stderr(&o);
-    assert!(
-        err.starts_with("error: ")
-            && err.contains(
-                "right_angle_cantilever_sensitivity.toml: sensitivity: the memory budget of 1 MiB"
-            )
-            && err.contains("it needs at least 11.6 MiB"),
-        "{err}"
-    );
-    assert_eq!(err.lines().count(), 1, "{err}");
-    // An update the direct and adjoint methods do not differentiate.
-    let o = command(
-        "sensitivity",
-        model,
-        &out_dir("update"),
-        &[
-            "--set",
-            "solver.lie_update=lie_algebra",
-            "--set",
-            "solver.t_end=0.01",
-        ],
-    );
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(
-        stderr(&o)
-            .contains("heavy_top_sensitivity.toml: sensitivity: the direct and adjoint methods"),
-        "{}",
-        stderr(&o)
-    );
-    // No parameter with both bounds: nothing to optimize.
-    let o = command(
-        "optimize",
-        model,
-        &out_dir("unbounded"),
-        &["--set", "solver.t_end=0.01"],
-    );
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(
-        stderr(&o)
-            .contains("heavy_top_sensitivity.toml: sensitivity: no design parameter has both"),
-        "{}",
-        stderr(&o)
-    );
+    // A memory budget too small (in MiB), an update the direct and adjoint methods do not
+    // differentiate, no parameter with both bounds: one line naming the model file.
+    let top = "examples/heavy_top_sensitivity.toml";
+    let cases: [(&str, &str, &[&str], &[&str]); 3] = [
+        (
+            "sensitivity",
+            "examples/right_angle_cantilever_sensitivity.toml",
+            &["--memory-mb", "1", "--set", "solver.h=1e-4"],
+            &[
+                "right_angle_cantilever_sensitivity.toml: sensitivity: the memory budget of 1 MiB",
+                "it needs at least 11.6 MiB",
+            ],
+        ),
+        (
+            "sensitivity",
+            top,
+            &[
+                "--set",
+                "solver.lie_update=lie_algebra",
+                "--set",
+                "solver.t_end=0.01",
+            ],
+            &["heavy_top_sensitivity.toml: sensitivity: the direct and adjoint methods"],
+        ),
+        (
+            "optimize",
+            top,
+            &["--set", "solver.t_end=0.01"],
+            &["heavy_top_sensitivity.toml: sensitivity: no design parameter has both"],
+        ),
+    ];
+    for (cmd, model, args, expected) in cases {
+        let o = command(cmd, model, &out_dir("refused"), args);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{cmd} {args:?}: {err}");
+        assert!(err.starts_with("error: "), "{err}");
+        assert!(expected.iter().all(|x| err.contains(x)), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+    }
 }
 
 #[test]

@@ -309,24 +309,13 @@ fn optimize_lowers_the_half_car_comfort_criterion() {
 }
 
 /// `examples/ball_drop.toml` (a steel ball released at rest 0.1 m above a steel plane,
-/// Lankarani-Nikravesh contact, restitution 0.8, h = 1e-2) with its height at the end as the
-/// criterion and the restitution and the gravity (bounded) as design parameters, written
-/// into `dir`.
+/// Lankarani-Nikravesh contact, restitution 0.8, h = 1e-2) with the sensitivity sections of
+/// the engine's tests of events (the height at the end; the restitution, the initial
+/// velocity and the gravity, bounded), written into `dir`.
 fn ball_model(dir: &std::path::Path) -> std::path::PathBuf {
-    let text = std::fs::read_to_string(repo("examples/ball_drop.toml")).expect("example")
-        + r#"
-[[design_parameter]]
-path = "contact.floor.restitution"
-
-[[design_parameter]]
-path = "model.gravity.2"
-lower = -30.0
-upper = -1.0
-
-[[criterion]]
-name = "height_end"
-terminal = "height"
-"#;
+    let read = |path| std::fs::read_to_string(repo(path)).expect("model text");
+    let text = read("examples/ball_drop.toml")
+        + &read("crates/flexmb/tests/data/ball_drop_sensitivity.toml");
     std::fs::create_dir_all(dir).expect("directory");
     let path = dir.join("ball.toml");
     std::fs::write(&path, text).expect("model");
@@ -402,7 +391,8 @@ fn an_optimization_stopped_by_an_impact_keeps_what_it_found() {
     assert!(err.contains("improvements found before are in"), "{err}");
     let rows = common::rows(&out.join("optimization.csv"));
     assert!(!rows.is_empty());
-    assert_eq!(rows[0][3], "-9.81", "the start first: {rows:?}");
+    // evaluation, criterion, restitution, velocity, gravity
+    assert_eq!(rows[0][4], "-9.81", "the start first: {rows:?}");
     let json: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("optimization.json")).unwrap())
             .unwrap();

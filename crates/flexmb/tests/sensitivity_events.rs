@@ -9,6 +9,7 @@
 use flexmb::input::parse_model_str;
 use flexmb::sensitivity::optimize::{optimize, Evaluator};
 use flexmb::sensitivity::{self, Gradients, Problem, SensitivityError, Setup};
+use flexmb::solve::StepEvent;
 use std::sync::Arc;
 
 /// An example's text with `extra` appended (its sensitivity sections).
@@ -68,29 +69,25 @@ fn agree(name: &str, p: &Problem, fd: f64) -> Gradients {
 /// contact closes at t = sqrt(2 0.1 / 9.81) = 0.142784 s) with its height at the end as the
 /// criterion.
 fn ball() -> String {
+    let sections = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/ball_drop_sensitivity.toml");
     example(
         "ball_drop.toml",
-        r#"
-[[design_parameter]]
-path = "contact.floor.restitution"
-
-[[design_parameter]]
-path = "node.ball.velocity.2"
-
-[[design_parameter]]
-path = "model.gravity.2"
-lower = -30.0
-upper = -1.0
-
-[[criterion]]
-name = "height_end"
-terminal = "height"
-
-[[criterion]]
-name = "speed_squared"
-integral = "sq(vz)"
-"#,
+        &std::fs::read_to_string(sections).expect("sections"),
     )
+}
+
+/// The events the engine reports in a run of `p` (`Simulation::last_step_event` after each
+/// step).
+fn events(p: &Problem) -> Vec<StepEvent> {
+    let settings = *p.analysis.dynamic().expect("dynamic");
+    let mut sim = flexmb::Simulation::new(Arc::clone(&p.model), settings).expect("simulation");
+    let mut events = Vec::new();
+    while sim.state.t < settings.t_end {
+        sim.step().expect("step");
+        events.extend(sim.last_step_event());
+    }
+    events
 }
 
 #[test]
@@ -316,13 +313,7 @@ fn a_model_with_a_hold_is_refused_and_its_samples_are_events() {
     }
     // The engine reports the samples as events, and nothing between them.
     let (p, _) = problem(&held(), &["solver.t_end=0.25"]);
-    let settings = *p.analysis.dynamic().expect("dynamic");
-    let mut sim = flexmb::Simulation::new(Arc::clone(&p.model), settings).expect("simulation");
-    let mut events = Vec::new();
-    while sim.state.t < settings.t_end {
-        sim.step().expect("step");
-        events.extend(sim.last_step_event());
-    }
+    let events = events(&p);
     let times: Vec<f64> = events.iter().map(|e| e.t).collect();
     assert!(
         events.iter().all(|e| e.what == "hold 'zoh' samples"),
@@ -340,13 +331,7 @@ fn the_engine_reports_a_bounce_as_a_closing_and_an_opening() {
     // The ball's first impact lasts about 0.3 ms: the contact closes at the onset and opens
     // at the release, and nothing happens in free flight.
     let (p, _) = problem(&ball(), &["solver.t_end=0.2"]);
-    let settings = *p.analysis.dynamic().expect("dynamic");
-    let mut sim = flexmb::Simulation::new(Arc::clone(&p.model), settings).expect("simulation");
-    let mut events = Vec::new();
-    while sim.state.t < settings.t_end {
-        sim.step().expect("step");
-        events.extend(sim.last_step_event());
-    }
+    let events = events(&p);
     let what: Vec<&str> = events.iter().map(|e| e.what.as_str()).collect();
     assert_eq!(what, ["contact 'floor' closes", "contact 'floor' opens"]);
     let contact = events[1].t - events[0].t;
