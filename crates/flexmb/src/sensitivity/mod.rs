@@ -65,18 +65,17 @@
 //! [`SensitivityError::Event`], which names the element and the time. The decision is the
 //! run's ([`crate::solve::Simulation::last_step_event`] after every step), not the model's:
 //! a contact that does not close during the run, a gear pair whose flank does not open, have
-//! no event, and their gradients are exact. A model with a hold is refused before its run:
-//! the derivative of the held value is not followed from its start either (with a hold of
-//! period 0.1 s between the controller and the motor of `examples/pid_mass_spring.toml`, the
-//! held value's derivative was 0.1 % off at t = 0 and the position's 2.6 % at t = 0.08 s,
-//! before the first sample).
-//! So are those of a run whose steps are cut to reach output times (the cuts do not depend
-//! on the parameters), and those of laws with kinks that have no event (force tables,
-//! one-sided springs, slack ropes, limiters): the derivative of the side a step ends on
-//! (one-sided at a kink a step ends on; a damped one-sided spring's force jumps where it
-//! engages, and its gradients across that are not meaningful either). The finite
-//! differences ([`finite_differences`]) run through events: with a step larger than the
-//! events' noise they estimate the gradient.
+//! no event, and their gradients are exact. So are those of a run whose steps are cut to
+//! reach output times (the cuts do not depend on the parameters), and those of laws with
+//! kinks that have no event (force tables, one-sided springs, slack ropes, limiters): the
+//! derivative of the side a step ends on (one-sided at a kink a step ends on; a damped
+//! one-sided spring's force jumps where it engages, and its gradients across that are not
+//! meaningful either). A model with a hold is refused before its run: the derivative of the
+//! held value is not followed from its start either (with a hold of period 0.1 s between
+//! the controller and the motor of `examples/pid_mass_spring.toml`, the held value's
+//! derivative was 0.1 % off at t = 0 and the position's 2.6 % at t = 0.08 s, before the
+//! first sample). The finite differences ([`finite_differences`]) run through events: with
+//! a step larger than the events' noise they estimate the gradient.
 //!
 //! # References
 //! - O. Brüls, P. Eberhard, Sensitivity analysis for dynamic mechanical systems with finite
