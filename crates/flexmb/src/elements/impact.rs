@@ -47,7 +47,7 @@ pub struct Gap {
 
 /// How a gap changed side in a step from `g0` to `g1` ([`super::ElementKernel::event`]):
 /// `closes` from open (`g > 0`) to closed (`g < 0`), `opens` the other way. A step that starts
-/// touching, `|g0|` at most [`TOUCHING`] times `|g1|` (a gap of 0 at t = 0 computed to
+/// touching, `|g0|` at most `TOUCHING` (1e-9) times `|g1|` (a gap of 0 at t = 0 computed to
 /// round-off), has not crossed: the force starts from zero there, and a contact's held
 /// impact velocity is reset to the value it holds.
 pub fn crossing(g0: f64, g1: f64) -> Option<&'static str> {
