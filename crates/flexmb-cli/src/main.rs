@@ -52,7 +52,8 @@ const EXIT_CODES_HELP: &str = "\
 Exit codes:
   0    success
   1    the analysis failed (results up to the failure are kept)
-  2    the model is invalid (model file, settings or initial conditions)
+  2    the model is invalid (model file, settings or initial conditions), or cannot be
+       analysed as asked (sensitivity, optimize: e.g. an event in the run)
   3    the results could not be written (output directory or files)
   4    the analysis stopped before its end at a limit of its settings (summary status
        \"incomplete\"; a warning says which setting to raise; results up to there are kept)
@@ -119,7 +120,8 @@ enum Command {
     },
     /// Gradients of the model's [[criterion]] items with respect to its [[design_parameter]]
     /// items, exact for the computed solution; write gradients.json and gradients.csv into
-    /// DIR.
+    /// DIR. A run with an event (a contact or gear flank that closes or opens), and a model
+    /// with a zero-order hold, are refused (exit 2): their gradients would not be exact.
     Sensitivity {
         model: PathBuf,
         #[arg(long, default_value = "out")]
@@ -129,15 +131,18 @@ enum Command {
         /// 2 n_p + 1 runs); default: the file's [sensitivity] method, else adjoint.
         #[arg(long, value_parser = ["direct", "adjoint", "fd"])]
         method: Option<String>,
-        /// Relative step of the finite differences (default: the file's fd_step, else 1e-6).
+        /// Relative step of the finite differences, in [1e-12, 0.1] (default: the file's
+        /// fd_step, else 1e-6).
         #[arg(long, value_name = "S")]
         fd_step: Option<f64>,
-        /// Check the exact gradients: the adjoint against central finite differences,
-        /// written to gradient_check.csv with their relative differences.
+        /// Check the exact gradients: the adjoint against central finite differences, both
+        /// computed again by full Newton at rtol <= 1e-10, atol <= 1e-12, written to
+        /// gradient_check.csv with their relative differences (of scale dJ/dp).
         #[arg(long, conflicts_with = "method")]
         check: bool,
-        /// Memory the adjoint may keep for the trajectory, in MiB (default: the file's
-        /// memory_budget_mb, else 256); beyond it, steps are recomputed from checkpoints.
+        /// Memory the adjoint may keep for the trajectory, in MiB, in [1, 1e6] (default: the
+        /// file's memory_budget_mb, else 256); beyond it, steps are recomputed from
+        /// checkpoints.
         #[arg(long, value_name = "M")]
         memory_mb: Option<f64>,
         #[arg(long = "set", value_name = "KEY=VALUE")]
@@ -722,22 +727,65 @@ fn prepare_sensitivity(
     Ok((dir, file, setup))
 }
 
+/// Says why a sensitivity analysis or an optimization failed and returns its exit code: a
+/// problem that cannot be analysed as asked (found before the first step, or an event in the
+/// run) is an invalid model, said with the model file as `run` says it; the rest is a failed
+/// analysis, or one stopped before its end (no gradients of the criteria as declared).
+fn sensitivity_failed(model: &Path, e: &flexmb::sensitivity::SensitivityError) -> i32 {
+    use flexmb::sensitivity::SensitivityError;
+    if e.is_refusal() {
+        tell(format_args!("error: {}: {e}", model.display()));
+        return exit::INVALID_MODEL;
+    }
+    tell(format_args!("error: {e}"));
+    match e {
+        SensitivityError::Solve(flexmb::SolveError::Incomplete { .. }) => exit::INCOMPLETE,
+        _ => exit::ANALYSIS_FAILED,
+    }
+}
+
+/// `Err` with the message of a number option outside `range` (the range of the model file's
+/// key `key`).
+fn check_option(option: &str, key: &str, v: Option<f64>, range: (f64, f64)) -> Result<(), i32> {
+    match v {
+        Some(v) if !(v >= range.0 && v <= range.1) => {
+            tell(format_args!(
+                "error: {option} must be in [{:e}, {:e}] (the range of {key} in [sensitivity]), got {v:e}",
+                range.0, range.1
+            ));
+            Err(exit::USAGE)
+        }
+        _ => Ok(()),
+    }
+}
+
 /// `flexmb sensitivity`: the gradients of the model's criteria.
 fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOptions) -> i32 {
-    use flexmb::sensitivity::{self, report, Method};
+    use flexmb::sensitivity::{self, check, report, Method};
+    if let Err(code) = check_option(
+        "--fd-step",
+        "fd_step",
+        options.fd_step,
+        sensitivity::FD_STEP_RANGE,
+    )
+    .and_then(|()| {
+        check_option(
+            "--memory-mb",
+            "memory_budget_mb",
+            options.memory_mb,
+            sensitivity::MEMORY_BUDGET_MB_RANGE,
+        )
+    }) {
+        return code;
+    }
     let (dir, file, setup) = match prepare_sensitivity(model, out, set) {
         Ok(prepared) => prepared,
         Err(code) => return code,
     };
     let setup = &setup;
     let fd_step = options.fd_step.unwrap_or(setup.fd_step);
-    if !(fd_step.is_finite() && fd_step > 0.0 && fd_step <= 0.1) {
-        tell(format_args!(
-            "error: --fd-step must be in (0, 0.1], got {fd_step}"
-        ));
-        return exit::USAGE;
-    }
     let method = match options.method.as_deref() {
+        _ if options.check => Method::Adjoint,
         Some("direct") => Method::Direct,
         Some("fd") => Method::Fd,
         Some(_) => Method::Adjoint,
@@ -748,12 +796,6 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         file.analysis.clone(),
     );
     if let Some(m) = options.memory_mb {
-        if !(m.is_finite() && m >= 1.0) {
-            tell(format_args!(
-                "error: --memory-mb must be at least 1, got {m}"
-            ));
-            return exit::USAGE;
-        }
         problem.memory_budget = (m * (1 << 20) as f64) as usize;
     }
     let bar = progress_bar(options.quiet);
@@ -762,19 +804,11 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         bar.set_message("backward sweep");
     };
     let started = std::time::Instant::now();
-    let method = if options.check {
-        Method::Adjoint
-    } else {
-        method
-    };
     let result = sensitivity::gradients(&problem, method, fd_step, &mut progress);
     bar.finish_and_clear();
     let g = match result {
         Ok(g) => g,
-        Err(e) => {
-            tell(format_args!("error: {e}"));
-            return analysis_exit_code(&e);
-        }
+        Err(e) => return sensitivity_failed(model, &e),
     };
     for w in &g.warnings {
         tell(format_args!("warning: {w}"));
@@ -801,21 +835,25 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
         }
     }
     if options.check {
-        let fd = match sensitivity::finite_differences(&problem, fd_step) {
-            Ok(fd) => fd,
-            Err(e) => {
-                tell(format_args!("error: finite differences: {e}"));
-                return analysis_exit_code(&e);
-            }
+        let checked = match check::check(&problem, &g, fd_step, &mut progress) {
+            Ok(checked) => checked,
+            Err(e) => return sensitivity_failed(model, &e),
         };
-        let (table, worst) = report::check_csv(setup, &g, &fd);
+        let (table, worst) = report::check_csv(setup, &checked.exact, &checked.fd);
         if let Err(e) = dir.write_file(flexmb::output::GRADIENT_CHECK_FILE, &table) {
             tell(format_args!("error: {e}"));
             return exit::OUTPUT_FAILED;
         }
+        let n = checked.newton;
         say(format_args!(
-            "check: adjoint against central differences (relative step {fd_step:e}): largest relative difference {worst:.3e}; table in {}",
+            "check: the adjoint against central differences (relative step {fd_step:e}), both solved by full Newton at rtol {:e}, atol {:e}, where the differences measure the gradient rather than the Newton iteration's error: largest relative difference of scale dJ/dp {worst:.3e}; table in {}",
+            n.rtol,
+            n.atol,
             dir.file(flexmb::output::GRADIENT_CHECK_FILE).display()
+        ));
+        say(format_args!(
+            "check: the gradients written (the model's Newton settings) are within {:.3e} of the check's adjoint",
+            report::largest_difference(setup, &checked.exact, &g)
         ));
     }
     say(format_args!(
@@ -830,18 +868,6 @@ fn sensitivity(model: &Path, out: &Path, set: &[String], options: SensitivityOpt
     exit::OK
 }
 
-/// The exit code of a sensitivity analysis or an optimization that could not be computed:
-/// its forward analysis stopped before its end (no gradients of the criteria as declared),
-/// or it failed.
-fn analysis_exit_code(e: &flexmb::sensitivity::SensitivityError) -> i32 {
-    match e {
-        flexmb::sensitivity::SensitivityError::Solve(flexmb::SolveError::Incomplete { .. }) => {
-            exit::INCOMPLETE
-        }
-        _ => exit::ANALYSIS_FAILED,
-    }
-}
-
 /// `flexmb optimize`: lowers a criterion over the bounded design parameters.
 fn optimize(
     model: &Path,
@@ -850,7 +876,7 @@ fn optimize(
     criterion: Option<&str>,
     iterations: u64,
 ) -> i32 {
-    use flexmb::sensitivity::optimize::{optimize, Evaluator};
+    use flexmb::sensitivity::optimize::{optimize, Evaluator, Improvement};
     let (dir, file, setup) = match prepare_sensitivity(model, out, set) {
         Ok(prepared) => prepared,
         Err(code) => return code,
@@ -887,7 +913,7 @@ fn optimize(
     );
     let mut evaluator = Evaluator::new(problem);
     let started = std::time::Instant::now();
-    let mut report = |it: &flexmb::sensitivity::optimize::Improvement| {
+    let mut report = |it: &Improvement| {
         let values: Vec<String> = it.values.iter().map(|v| format!("{v:.6e}")).collect();
         say(format_args!(
             "evaluation {:>3}: {} = {:.10e} at [{}]",
@@ -897,39 +923,54 @@ fn optimize(
             values.join(", ")
         ));
     };
-    let optimum = match optimize(
+    let outcome = optimize(
         &mut evaluator,
         &setup.design,
         index,
         iterations,
         &mut report,
-    ) {
-        Ok(o) => o,
-        Err(e) => {
+    );
+    // The improvements found are written whatever the outcome.
+    let (history, status, iterations_done, runs) = match &outcome {
+        Ok(o) => (&o.history, o.status.clone(), Some(o.iterations), o.runs),
+        Err(s) => (&s.history, format!("stopped: {}", s.error), None, s.runs),
+    };
+    if !history.is_empty() {
+        let csv = flexmb::sensitivity::report::optimization_csv(&setup.design, history);
+        let json = serde_json::json!({
+            "criterion": names[index],
+            "parameters": setup.design.iter().map(|d| d.path.clone()).collect::<Vec<_>>(),
+            "status": status,
+            "iterations": iterations_done,
+            "runs": runs,
+            "wall_seconds": started.elapsed().as_secs_f64(),
+            "first": history.first(),
+            "last": history.last(),
+        });
+        let mut text = serde_json::to_string_pretty(&json).expect("numbers and strings");
+        text.push('\n');
+        let written = dir
+            .write_file(flexmb::output::OPTIMIZATION_CSV_FILE, &csv)
+            .and_then(|()| dir.write_file(flexmb::output::OPTIMIZATION_JSON_FILE, &text));
+        if let Err(e) = written {
             tell(format_args!("error: {e}"));
-            return analysis_exit_code(&e);
+            return exit::OUTPUT_FAILED;
+        }
+    }
+    let optimum = match outcome {
+        Ok(o) => o,
+        Err(stopped) => {
+            let code = sensitivity_failed(model, &stopped.error);
+            if !stopped.history.is_empty() {
+                tell(format_args!(
+                    "the {} improvements found before are in {}",
+                    stopped.history.len(),
+                    dir.file(flexmb::output::OPTIMIZATION_CSV_FILE).display()
+                ));
+            }
+            return code;
         }
     };
-    let csv = flexmb::sensitivity::report::optimization_csv(&setup.design, &optimum);
-    let json = serde_json::json!({
-        "criterion": names[index],
-        "parameters": setup.design.iter().map(|d| d.path.clone()).collect::<Vec<_>>(),
-        "status": optimum.status,
-        "iterations": optimum.iterations,
-        "runs": optimum.runs,
-        "wall_seconds": started.elapsed().as_secs_f64(),
-        "first": optimum.history.first(),
-        "last": optimum.history.last(),
-    });
-    let mut text = serde_json::to_string_pretty(&json).expect("numbers and strings");
-    text.push('\n');
-    let written = dir
-        .write_file(flexmb::output::OPTIMIZATION_CSV_FILE, &csv)
-        .and_then(|()| dir.write_file(flexmb::output::OPTIMIZATION_JSON_FILE, &text));
-    if let Err(e) = written {
-        tell(format_args!("error: {e}"));
-        return exit::OUTPUT_FAILED;
-    }
     let (first, last) = (
         &optimum.history[0],
         &optimum.history[optimum.history.len() - 1],

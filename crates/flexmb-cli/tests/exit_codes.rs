@@ -1,7 +1,8 @@
 //! One exit code per class of outcome (README.md, "Exit status"), and one message per cause:
 //! 0 success, 1 failed analysis (tests/cli.rs), 2 invalid model (the same for `check` and
-//! `run`), 3 results that cannot be written, 4 an analysis stopped at a limit of its settings
-//! before its end, 64 a wrong command line; signals in tests/signals.rs.
+//! `run`, and for `sensitivity` and `optimize` before their first step), 3 results that
+//! cannot be written, 4 an analysis stopped at a limit of its settings before its end, 64 a
+//! wrong command line; signals in tests/signals.rs.
 
 mod common;
 
@@ -67,6 +68,92 @@ fn inconsistent_initial_velocity_exits_2_from_check_and_run() {
     assert_eq!(s["status"], "failed");
     assert_eq!(s["error_kind"], "model");
     assert!(!out.join("sensors.csv").exists(), "nothing was solved");
+}
+
+/// `flexmb COMMAND MODEL --out DIR ARGS...` of a model of the repository.
+fn command(command: &str, model: &str, out: &Path, args: &[&str]) -> Output {
+    flexmb()
+        .args([command, repo(model).to_str().unwrap(), "--out"])
+        .arg(out)
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+#[test]
+fn problems_before_the_first_step_exit_2_from_sensitivity_and_optimize_as_from_run() {
+    // Before: exit 1 ("ran and failed") without the model file's name; the memory budget
+    // in bytes.
+    // Initial velocities that violate a joint: the heavy top's pivot, the half car's plane.
+    let cases = [
+        (
+            "sensitivity",
+            "examples/heavy_top_sensitivity.toml",
+            "body.top.velocity=[0.0, 1.0, 0.0]",
+        ),
+        (
+            "optimize",
+            "examples/half_car.toml",
+            "body.chassis.velocity=[0.0, 1.0, 0.0]",
+        ),
+    ];
+    for (cmd, model, velocity) in cases {
+        let set = ["--set", velocity, "--set", "solver.t_end=0.01"];
+        let run = command(
+            "run",
+            model,
+            &out_dir("ic-run"),
+            &[&set[..], &["--no-plot"]].concat(),
+        );
+        assert_eq!(run.status.code(), Some(2), "{}", stderr(&run));
+        assert!(
+            stderr(&run).contains(".toml: inconsistent initial conditions"),
+            "{}",
+            stderr(&run)
+        );
+        let o = command(cmd, model, &out_dir("ic"), &set);
+        assert_eq!(o.status.code(), Some(2), "{cmd}: {}", stderr(&o));
+        assert_eq!(stderr(&o), stderr(&run), "{cmd}: the message of run");
+    }
+    // A memory budget too small (in MiB), an update the direct and adjoint methods do not
+    // differentiate, no parameter with both bounds: one line naming the model file.
+    let top = "examples/heavy_top_sensitivity.toml";
+    let cases: [(&str, &str, &[&str], &[&str]); 3] = [
+        (
+            "sensitivity",
+            "examples/right_angle_cantilever_sensitivity.toml",
+            &["--memory-mb", "1", "--set", "solver.h=1e-4"],
+            &[
+                "right_angle_cantilever_sensitivity.toml: sensitivity: the memory budget of 1 MiB",
+                "it needs at least 11.6 MiB",
+            ],
+        ),
+        (
+            "sensitivity",
+            top,
+            &[
+                "--set",
+                "solver.lie_update=lie_algebra",
+                "--set",
+                "solver.t_end=0.01",
+            ],
+            &["heavy_top_sensitivity.toml: sensitivity: the direct and adjoint methods"],
+        ),
+        (
+            "optimize",
+            top,
+            &["--set", "solver.t_end=0.01"],
+            &["heavy_top_sensitivity.toml: sensitivity: no design parameter has both"],
+        ),
+    ];
+    for (cmd, model, args, expected) in cases {
+        let o = command(cmd, model, &out_dir("refused"), args);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{cmd} {args:?}: {err}");
+        assert!(err.starts_with("error: "), "{err}");
+        assert!(expected.iter().all(|x| err.contains(x)), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+    }
 }
 
 #[test]

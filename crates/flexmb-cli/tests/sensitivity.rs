@@ -286,6 +286,198 @@ fn optimize_lowers_the_half_car_comfort_criterion() {
         serde_json::from_str(&std::fs::read_to_string(out.join("optimization.json")).unwrap())
             .unwrap();
     assert_eq!(json["criterion"], "comfort");
+    // The header is the one docs/model-format.md gives (before: it said `iteration`).
+    let docs = std::fs::read_to_string(repo("docs/model-format.md")).unwrap();
+    let documented = docs
+        .split("`optimization.csv` (`")
+        .nth(1)
+        .and_then(|rest| rest.split('`').next())
+        .expect("docs/model-format.md documents optimization.csv");
+    let paths = json["parameters"].as_array().unwrap();
+    let list = |prefix: &str| -> String {
+        paths
+            .iter()
+            .map(|p| format!("{prefix}{}", p.as_str().unwrap()))
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let expected = documented
+        .replace("d/d <paths>", &list("d/d "))
+        .replace("<paths>", &list(""));
+    let text = std::fs::read_to_string(out.join("optimization.csv")).unwrap();
+    assert_eq!(text.lines().next(), Some(expected.as_str()));
+}
+
+/// `examples/ball_drop.toml` (a steel ball released at rest 0.1 m above a steel plane,
+/// Lankarani-Nikravesh contact, restitution 0.8, h = 1e-2) with the sensitivity sections of
+/// the engine's tests of events (the height at the end; the restitution, the initial
+/// velocity and the gravity, bounded), written into `dir`.
+fn ball_model(dir: &std::path::Path) -> std::path::PathBuf {
+    let read = |path| std::fs::read_to_string(repo(path)).expect("model text");
+    let text = read("examples/ball_drop.toml")
+        + &read("crates/flexmb/tests/data/ball_drop_sensitivity.toml");
+    std::fs::create_dir_all(dir).expect("directory");
+    let path = dir.join("ball.toml");
+    std::fs::write(&path, text).expect("model");
+    path
+}
+
+/// `flexmb COMMAND MODEL --out DIR ARGS...`.
+fn command(
+    cmd: &str,
+    model: &std::path::Path,
+    out: &std::path::Path,
+    args: &[&str],
+) -> std::process::Output {
+    flexmb()
+        .arg(cmd)
+        .arg(model)
+        .arg("--out")
+        .arg(out)
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+#[test]
+fn a_run_through_an_impact_exits_2_naming_the_contact_and_its_time() {
+    // Before: d height / d restitution = -132 at h = 1e-2 (+210 at 1e-4, -93.6 at 2e-5) with
+    // exit code 0; --check reported a largest relative difference of 1.0, also with exit 0.
+    let dir = out_dir("ball");
+    let model = ball_model(&dir);
+    let expected = format!(
+        "error: {}: sensitivity: contact 'floor' closes in the step ending at t = 1.4279",
+        model.display()
+    );
+    for (cmd, args) in [
+        ("sensitivity", &["--quiet"][..]),
+        ("sensitivity", &["--quiet", "--method", "direct"]),
+        ("sensitivity", &["--quiet", "--check"]),
+        ("optimize", &[]),
+    ] {
+        let out = dir.join("out");
+        let o = command(cmd, &model, &out, args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{cmd} {args:?}: {err}");
+        assert!(err.starts_with(&expected), "{cmd} {args:?}: {err}");
+        assert!(err.contains("--method fd"), "says what works: {err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        for file in ["gradients.json", "gradient_check.csv", "optimization.csv"] {
+            assert!(!out.join(file).exists(), "{cmd} {args:?} wrote {file}");
+        }
+    }
+    // What works: finite differences with a step above the impacts' noise (+0.48).
+    let o = command(
+        "sensitivity",
+        &model,
+        &dir.join("fd"),
+        &["--quiet", "--method", "fd", "--fd-step", "1e-2"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn an_optimization_stopped_by_an_impact_keeps_what_it_found() {
+    // To t = 0.13 s the ball does not reach the plane at g = -9.81; lowering its height, the
+    // optimizer tries stronger gravity and brings it onto the plane: that evaluation is
+    // refused (exit 2), the improvements found before are written.
+    let dir = out_dir("ball-optimize");
+    let model = ball_model(&dir);
+    let out = dir.join("out");
+    let o = command("optimize", &model, &out, &["--set", "solver.t_end=0.13"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("contact 'floor' closes"), "{err}");
+    assert!(err.contains("improvements found before are in"), "{err}");
+    let rows = common::rows(&out.join("optimization.csv"));
+    assert!(!rows.is_empty());
+    // evaluation, criterion, restitution, velocity, gravity
+    assert_eq!(rows[0][4], "-9.81", "the start first: {rows:?}");
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("optimization.json")).unwrap())
+            .unwrap();
+    assert!(
+        json["status"]
+            .as_str()
+            .unwrap()
+            .starts_with("stopped: sensitivity: contact 'floor' closes"),
+        "{json}"
+    );
+}
+
+#[test]
+fn the_finite_difference_step_has_one_range_for_the_option_and_the_file_key() {
+    // Before: --fd-step 1e-20 was accepted and wrote every gradient as 0 with exit code 0,
+    // while the file key refused below 1e-12.
+    let model = repo("examples/half_car.toml");
+    let short = ["--quiet", "--method", "fd", "--set", "solver.t_end=0.02"];
+    for step in ["1e-20", "1e-13", "0.2"] {
+        let o = command(
+            "sensitivity",
+            &model,
+            &out_dir("fd-step"),
+            &[&short[..], &["--fd-step", step]].concat(),
+        );
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(64), "{step}: {err}");
+        assert!(
+            err.contains(
+                "--fd-step must be in [1e-12, 1e-1] (the range of fd_step in [sensitivity])"
+            ),
+            "{err}"
+        );
+        let key = format!("sensitivity.fd_step={step}");
+        let o = command(
+            "sensitivity",
+            &model,
+            &out_dir("fd-key"),
+            &[&short[..], &["--set", &key]].concat(),
+        );
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{step}: {err}");
+        assert!(
+            err.contains("field 'sensitivity.fd_step': must be between 1e-12 and 1e-1"),
+            "{err}"
+        );
+    }
+    let o = command(
+        "sensitivity",
+        &model,
+        &out_dir("fd-step-ok"),
+        &[&short[..], &["--fd-step", "1e-12"]].concat(),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn check_measures_the_gradient_not_the_newton_error() {
+    // The right-angle cantilever at its own settings (rtol 1e-6, atol 1e-9, the iteration
+    // matrix reused). Before: the check ran at those settings and reported 2.0e-5 (6.2e-6
+    // with rtol = 1e-13): the Newton iteration's error divided by the step. The check's runs
+    // now take full Newton at rtol <= 1e-10, atol <= 1e-12.
+    let out = out_dir("check-beam");
+    let o = command(
+        "sensitivity",
+        &repo("examples/right_angle_cantilever_sensitivity.toml"),
+        &out,
+        &["--quiet", "--check"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("both solved by full Newton at rtol 1e-10, atol 1e-12"),
+        "{stdout}"
+    );
+    let worst = common::rows(&out.join("gradient_check.csv"))
+        .iter()
+        .map(|r| r[5].parse::<f64>().unwrap())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-7, "largest relative difference {worst:e}");
+    // The gradients written are the model's settings' (the check's adjoint is another run).
+    assert!(
+        stdout.contains("the gradients written (the model's Newton settings) are within"),
+        "{stdout}"
+    );
 }
 
 /// Gradients are those of the criteria as declared, at the end of the analysis: a forward

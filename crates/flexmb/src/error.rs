@@ -138,3 +138,20 @@ pub enum SolveError {
         reason: String,
     },
 }
+
+impl SolveError {
+    /// Whether the error rejects the model before its first step: the model, the settings,
+    /// the linear solver's setup, the initial conditions or a checkpoint (what `flexmb run`
+    /// reports as `error_kind` `model`, exit code 2), not a step that failed.
+    pub fn is_before_first_step(&self) -> bool {
+        matches!(
+            self,
+            SolveError::Model(_)
+                | SolveError::Linear(_)
+                | SolveError::InitialAccelerations { .. }
+                | SolveError::Settings(_)
+                | SolveError::InconsistentInitialConditions(_)
+                | SolveError::Checkpoint(_)
+        )
+    }
+}

@@ -508,6 +508,17 @@ fn sensitivity_sections_are_checked_with_file_line_and_field() {
             &[("lower = 100.0", "lower = 2000.0")],
             &["half_car.toml:", "design_parameter[0].lower", "must contain the parameter's value 2000"],
         ),
+        // reversed or equal bounds say so (before: "must contain the value strictly")
+        (
+            "half_car.toml",
+            &[("lower = 100.0\nupper = 20000.0", "lower = 2000.0\nupper = 100.0")],
+            &["design_parameter[0].lower", "the bounds are reversed: lower = 2000 is above upper = 100"],
+        ),
+        (
+            "half_car.toml",
+            &[("lower = 100.0\nupper = 20000.0", "lower = 2000.0\nupper = 2000.0")],
+            &["design_parameter[0].lower", "lower and upper are equal (2000)"],
+        ),
         (
             "half_car.toml",
             &[("upper = 20000.0\n", "\n")],

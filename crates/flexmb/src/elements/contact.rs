@@ -116,7 +116,7 @@
 //! and opens it within itself is shortened, about 35 steps resolve the impact, and after the
 //! contact opens the step grows back (doubling every 4 accepted steps).
 
-use super::impact::{Gap, ImpactLaw};
+use super::impact::{crossing, Gap, ImpactLaw};
 use super::pose::{c, lift, perturbed, pose, Dv, Pose, D1};
 use super::{
     physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters,
@@ -430,6 +430,12 @@ impl ElementKernel for ContactElement<'_> {
         let impact_speed = start.x[0].max(end.x[0]);
         self.impact_law()
             .step_limit(gap(&s0), gap(&s1), Some(impact_speed), h)
+    }
+
+    fn event(&self, ctx: &Context, start: &Local, end: &Local) -> Option<String> {
+        let gap = |local: &Local| self.state(ctx, local).gap;
+        let what = crossing(gap(start), gap(end))?;
+        Some(format!("contact '{}' {what}", self.contact.name))
     }
 
     fn evaluate(

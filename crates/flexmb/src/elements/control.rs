@@ -1482,6 +1482,18 @@ impl ElementKernel for ControlElement<'_> {
         }
     }
 
+    fn event(&self, ctx: &Context, _start: &Local, _end: &Local) -> Option<String> {
+        self.system
+            .blocks
+            .iter()
+            .find_map(|block| match block.kind {
+                BlockKind::Hold { period } if on_sample(ctx.t, period) => {
+                    Some(format!("hold '{}' samples", block.name))
+                }
+                _ => None,
+            })
+    }
+
     fn step_limit(&self, ctx: &Context, _start: &Local, _end: &Local, h: f64) -> Option<StepLimit> {
         let (t0, t1) = (ctx.t - h, ctx.t);
         let mut limit: Option<StepLimit> = None;

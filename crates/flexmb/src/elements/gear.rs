@@ -125,7 +125,7 @@
 //!   (backlash).
 //! - F. L. Litvin, A. Fuentes, "Gear Geometry and Applied Theory", 2nd ed., 2004.
 
-use super::impact::{Gap, ImpactLaw};
+use super::impact::{crossing, Gap, ImpactLaw};
 use super::{
     central_difference, physical, spring, Coefficients, Context, DerivativeMethod, ElementKernel,
     ElementParameters, Local, LocalMatrix, LocalVector, Mat12, NodeState, StepLimit, Vec12,
@@ -393,6 +393,14 @@ impl GearPair {
         self.backlash > 0.0 && self.locate_impacts
     }
 
+    /// Whether a flank that closes or opens is an event ([`ElementKernel::event`]): with
+    /// backlash (located or not), or with damping, which acts on a flank in contact only
+    /// (`c y_f'` starts at once when a flank closes). Without either the two flanks carry the
+    /// same spring across a flank change, and the force is continuous.
+    pub fn can_switch(&self) -> bool {
+        self.backlash > 0.0 || self.damping > 0.0
+    }
+
     /// The effective mass `m*` of the mesh along the normal line of action (module
     /// documentation), from the inertias of the bodies on the wheels' nodes about the wheel
     /// axes (infinite when neither node carries a body).
@@ -487,6 +495,19 @@ impl ElementKernel for GearPair {
         (0..2)
             .map(|f| law.step_limit(gap(&m0, f), gap(&m1, f), None, h))
             .fold(None, StepLimit::stricter)
+    }
+
+    fn event(&self, ctx: &Context, start: &Local, end: &Local) -> Option<String> {
+        // Each flank's gap is -y_f.
+        let (m0, m1) = (self.mesh(ctx, start.nodes), self.mesh(ctx, end.nodes));
+        (0..2).find_map(|f| {
+            let what = crossing(-m0.y[f].v, -m1.y[f].v)?;
+            let flank = ["drive", "coast"][f];
+            Some(format!(
+                "gear pair '{}': its {flank} flank {what}",
+                self.name
+            ))
+        })
     }
 
     fn potential_energy(&self, ctx: &Context, local: &Local) -> f64 {

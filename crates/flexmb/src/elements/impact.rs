@@ -45,6 +45,26 @@ pub struct Gap {
     pub rate: f64,
 }
 
+/// How a gap changed side in a step from `g0` to `g1` ([`super::ElementKernel::event`]):
+/// `closes` from open (`g > 0`) to closed (`g < 0`), `opens` the other way. A step that starts
+/// touching, `|g0|` at most `TOUCHING` (1e-9) times `|g1|` (a gap of 0 at t = 0 computed to
+/// round-off), has not crossed: the force starts from zero there, and a contact's held
+/// impact velocity is reset to the value it holds.
+pub fn crossing(g0: f64, g1: f64) -> Option<&'static str> {
+    if g0.abs() <= TOUCHING * g1.abs() {
+        None
+    } else if g0 > 0.0 && g1 < 0.0 {
+        Some("closes")
+    } else if g0 < 0.0 && g1 > 0.0 {
+        Some("opens")
+    } else {
+        None
+    }
+}
+
+/// A gap below this fraction of the next one is a touching start ([`crossing`]).
+const TOUCHING: f64 = 1e-9;
+
 /// The elastic part of a compliant contact force `K delta^n` between bodies of effective
 /// mass `m*` along the gap's normal (infinite: no step control).
 #[derive(Clone, Copy, Debug)]

@@ -348,6 +348,15 @@ pub trait ElementKernel {
     ) -> Option<StepLimit> {
         None
     }
+    /// The event of an accepted step from `start` to `end`, in words (e.g. `contact 'floor'
+    /// closes`), if the element has one in it: a change of its law's branch that the step's
+    /// equations do not carry smoothly (a contact or a gear flank that closes or opens, a
+    /// hold that samples). Elements that can have one are those of
+    /// [`ElementRef::can_switch`]; a run's derivatives are not followed through it
+    /// ([`crate::sensitivity`], "Events").
+    fn event(&self, _ctx: &Context, _start: &Local, _end: &Local) -> Option<String> {
+        None
+    }
 }
 
 /// What an element with events asks of a converged step ([`ElementKernel::step_limit`]).
@@ -614,6 +623,19 @@ impl ElementRef {
         }
     }
 
+    /// Whether the element's law can switch in a way a step does not carry smoothly
+    /// ([`ElementKernel::event`]): contacts (closing, opening), gear pairs whose flanks' laws
+    /// differ (backlash or damping: without either, the force is the same spring on both
+    /// sides of a flank change) and the holds of a control diagram (their samples).
+    pub fn can_switch(&self, model: &Model) -> bool {
+        match self {
+            ElementRef::Contact(..) => true,
+            ElementRef::Gear(i) => model.gears[*i].can_switch(),
+            ElementRef::Control(_) => model.control.has_holds(),
+            _ => false,
+        }
+    }
+
     /// Name for diagnostics, e.g. `body 'crank'`.
     pub fn describe(&self, model: &Model) -> String {
         match self {
@@ -786,6 +808,9 @@ impl ElementKernel for Kernel<'_> {
     }
     fn step_limit(&self, ctx: &Context, start: &Local, end: &Local, h: f64) -> Option<StepLimit> {
         dispatch!(self, k => k.step_limit(ctx, start, end, h))
+    }
+    fn event(&self, ctx: &Context, start: &Local, end: &Local) -> Option<String> {
+        dispatch!(self, k => k.event(ctx, start, end))
     }
 }
 

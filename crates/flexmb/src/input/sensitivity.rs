@@ -7,7 +7,7 @@ use super::reader::Table;
 use crate::model::{Model, Parameters};
 use crate::sensitivity::{
     CriteriaSet, Criterion, CriterionKind, DesignParameter, Method, Reference, Setup,
-    DEFAULT_FD_STEP, DEFAULT_MEMORY_BUDGET,
+    DEFAULT_FD_STEP, DEFAULT_MEMORY_BUDGET, FD_STEP_RANGE, MEMORY_BUDGET_MB_RANGE,
 };
 use std::collections::HashMap;
 use std::path::Path;
@@ -64,10 +64,11 @@ pub(super) fn read_sensitivity(
             _ => Method::Adjoint,
         };
         if let Some(f) = t.field("fd_step") {
-            fd_step = f.f64_in(1e-12, 0.1)?;
+            fd_step = f.f64_in(FD_STEP_RANGE.0, FD_STEP_RANGE.1)?;
         }
         if let Some(f) = t.field("memory_budget_mb") {
-            memory_budget = (f.f64_in(1.0, 1e6)? * (1 << 20) as f64) as usize;
+            let (lo, hi) = MEMORY_BUDGET_MB_RANGE;
+            memory_budget = (f.f64_in(lo, hi)? * (1 << 20) as f64) as usize;
         }
     }
     let registry = Parameters::new(model);
@@ -94,6 +95,18 @@ pub(super) fn read_sensitivity(
         let (lower, upper) = (bound("lower")?, bound("upper")?);
         match (lower, upper) {
             (None, None) => {}
+            (Some(l), Some(u)) if l > u => {
+                return Err(t.key_err(
+                    "lower",
+                    format!("the bounds are reversed: lower = {l} is above upper = {u}"),
+                ))
+            }
+            (Some(l), Some(u)) if l == u => {
+                return Err(t.key_err(
+                    "lower",
+                    format!("lower and upper are equal ({l}): the optimizer moves a parameter with both bounds between them; leave both out to hold it"),
+                ))
+            }
             (Some(l), Some(u)) => {
                 let value = registry.value(model, id);
                 if !(l < value && value < u) {

@@ -78,9 +78,11 @@ pub const RESULT_FILES: [&str; 13] = [
     OPTIMIZATION_CSV_FILE,
     OPTIMIZATION_JSON_FILE,
 ];
-/// `flexmb optimize`: one row per iteration, `iteration,criterion,<parameters>,<gradients>`.
+/// `flexmb optimize`: one row per improvement, `evaluation,criterion,<parameters>,d/d
+/// <parameters>` ([`crate::sensitivity::report::optimization_csv`]).
 pub const OPTIMIZATION_CSV_FILE: &str = "optimization.csv";
-/// `flexmb optimize`: the criterion, the status, the runs, the first and last iterations.
+/// `flexmb optimize`: the criterion, the status, the iterations and runs, the first and last
+/// improvements.
 pub const OPTIMIZATION_JSON_FILE: &str = "optimization.json";
 /// The criteria and their gradients of `flexmb sensitivity` (JSON).
 pub const GRADIENTS_JSON_FILE: &str = "gradients.json";

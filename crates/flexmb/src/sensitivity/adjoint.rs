@@ -200,10 +200,13 @@ pub fn adjoint_in(
     let best = ((2 * expected * memory_bytes) as f64 / step_bytes as f64).sqrt() as usize;
     let best = best.clamp(1, expected);
     if total(best) > budget {
-        return Err(SensitivityError::Unsupported(format!(
-            "the memory budget of {budget} bytes is too small for the adjoint of {expected} steps (a step takes about {step_bytes} bytes, a checkpoint {memory_bytes}); it needs at least {} bytes",
-            total(best)
-        )));
+        return Err(SensitivityError::MemoryBudget {
+            budget,
+            needed: total(best),
+            steps: expected,
+            step_bytes,
+            checkpoint_bytes: memory_bytes,
+        });
     }
     let every = (best..=expected)
         .take_while(|&k| total(k) <= budget)
@@ -215,6 +218,7 @@ pub fn adjoint_in(
         problem,
         layout: &layout,
         redundant: layout.redundant_rows(),
+        events: Some(super::EventWatch::default()),
         history: History::default(),
         steps: Some(std::mem::take(&mut workspace.steps)),
         most_steps: budget.saturating_sub(checkpoints_bytes) / step_bytes,
@@ -224,7 +228,9 @@ pub fn adjoint_in(
         .criteria
         .record(&problem.model, &layout, &sim.state, &mut forward.history);
     let clock = std::time::Instant::now();
-    sim.run(&mut Observers(vec![&mut trajectory, &mut forward]))?;
+    let run = sim.run(&mut Observers(vec![&mut trajectory, &mut forward]));
+    let events = forward.events.take().unwrap_or_default();
+    events.outcome(run)?;
     let forward_seconds = clock.elapsed().as_secs_f64();
     let n_steps = forward.count;
     let history = forward.history;

@@ -4,7 +4,7 @@
 use super::criteria::{CriterionKind, History};
 use super::matrix::StepMatrix;
 use super::pipeline::{self, Prepared, Spare};
-use super::{Gradients, Problem, SensitivityError, Stats};
+use super::{EventWatch, Gradients, Problem, SensitivityError, Stats};
 use crate::data::Layout;
 use crate::observe::{Observer, Sample, StepRecord};
 use crate::solve::step::{StateTangent, StepFunction};
@@ -37,6 +37,9 @@ struct Direct<'a> {
     steps: usize,
     /// The rows left out as redundant at the start (a run that changes them is refused).
     redundant: Vec<usize>,
+    /// The run's first event, which stops it (the run's thread watches it when the tangents
+    /// are carried on another: [`Handover`]).
+    events: EventWatch,
     /// Weight 1 for every criterion; the index in the design of each registry parameter.
     ones: Vec<f64>,
     index: Vec<Option<usize>>,
@@ -91,6 +94,7 @@ impl Direct<'_> {
     /// Step `n` on the run's thread: its Jacobian prepared here, then [`Direct::advance`].
     fn step(&mut self, record: &StepRecord) -> Result<(), String> {
         self.check(record.redundant_rows, record.start.t)?;
+        self.events.step(record)?;
         let p = self.problem;
         let spare = std::mem::take(&mut self.spare);
         let at = (record.index, record.start, record.info.h, record.unknowns);
@@ -146,8 +150,8 @@ impl Borrow<TrajectoryStep> for OwnedStep {
 }
 
 /// The run's observer when the tangents are carried on other threads: each step is copied
-/// to them.
-struct Handover(SyncSender<OwnedStep>);
+/// to them, up to the run's first event.
+struct Handover(SyncSender<OwnedStep>, EventWatch);
 
 impl Observer for Handover {
     fn output(&mut self, _: &Sample) -> Result<(), String> {
@@ -157,6 +161,7 @@ impl Observer for Handover {
         true
     }
     fn step(&mut self, record: &StepRecord) -> Result<(), String> {
+        self.1.step(record)?;
         let step = OwnedStep {
             step: TrajectoryStep {
                 index: record.index,
@@ -207,6 +212,7 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
         scratch: (*problem.model).clone(),
         steps: 0,
         redundant: sim.data.layout.redundant_rows(),
+        events: EventWatch::default(),
         ones: vec![1.0; n_c],
         index: problem.design_index(),
     };
@@ -216,7 +222,8 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
         obs = on_threads(&mut sim, obs, workers)?;
         workers
     } else {
-        sim.run(&mut obs)?;
+        let run = sim.run(&mut obs);
+        std::mem::take(&mut obs.events).outcome(run)?;
         1
     };
     for (c, crit) in problem.criteria.criteria.iter().enumerate() {
@@ -279,14 +286,16 @@ fn on_threads<'a>(
             );
             done.map(|()| obs)
         });
-        let mut handover = Handover(tx);
+        let mut handover = Handover(tx, EventWatch::default());
         let run = sim.run(&mut handover);
         // The end of the steps: the tangents' thread finishes those it has.
-        drop(handover);
+        let Handover(tx, events) = handover;
+        drop(tx);
+        let run = events.outcome(run);
         let chain = chain.join().expect("the tangents' thread does not panic");
         match (run, chain) {
             (_, Err(e)) => Err(SensitivityError::from(crate::SolveError::Output(e))),
-            (Err(e), _) => Err(e.into()),
+            (Err(e), _) => Err(e),
             (Ok(_), Ok(obs)) => Ok(obs),
         }
     })

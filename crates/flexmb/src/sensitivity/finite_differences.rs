@@ -20,6 +20,7 @@ pub fn criteria_values(
         problem,
         layout: &layout,
         redundant: layout.redundant_rows(),
+        events: None,
         history: History::default(),
         steps: None,
         most_steps: 0,
@@ -38,7 +39,9 @@ pub fn criteria_values(
 
 /// The criteria of `problem` and their central differences with relative step `step`:
 /// `dJ/dp_k = (J(p + e_k d_k) - J(p - e_k d_k)) / (2 d_k)`, `d_k = step max(|p_k|, scale_k)`
-/// (the design parameter's typical magnitude, [`Problem::scales`]).
+/// (the design parameter's typical magnitude, [`Problem::scales`]). A step that leaves a
+/// parameter unchanged (`p_k +- d_k == p_k`: a step below the parameter's round-off) is an
+/// error, not a zero derivative.
 pub fn finite_differences(problem: &Problem, step: f64) -> Result<Gradients, SensitivityError> {
     let (values, steps, warnings) = criteria_values(problem)?;
     let p0 = problem.values();
@@ -46,18 +49,22 @@ pub fn finite_differences(problem: &Problem, step: f64) -> Result<Gradients, Sen
     let mut fd_steps = Vec::with_capacity(p0.len());
     for k in 0..p0.len() {
         let d = step * p0[k].abs().max(problem.scales[k]);
+        let error =
+            |value: f64, failed: Option<SensitivityError>| SensitivityError::FiniteDifference {
+                path: problem.params.path(problem.design[k]).to_string(),
+                value,
+                step: d,
+                failed: failed.map(Box::new),
+            };
+        if p0[k] + d == p0[k] || p0[k] - d == p0[k] {
+            return Err(error(p0[k], None));
+        }
         let at = |sign: f64| {
             let mut p = p0.clone();
             p[k] += sign * d;
             criteria_values(&problem.with_values(&p))
                 .map(|r| r.0)
-                .map_err(|e| {
-                    SensitivityError::Unsupported(format!(
-                        "finite differences: the run with {} = {} (step {d:e}) failed: {e}",
-                        problem.params.path(problem.design[k]),
-                        p[k]
-                    ))
-                })
+                .map_err(|e| error(p[k], Some(e)))
         };
         let (plus, minus) = (at(1.0)?, at(-1.0)?);
         for c in 0..values.len() {

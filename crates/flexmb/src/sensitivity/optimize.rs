@@ -87,6 +87,16 @@ pub struct Optimum {
     pub runs: usize,
 }
 
+/// An [`optimize`] that stopped on an error: the error, and the improvements found before
+/// it (none when the first evaluation failed), which are the optimization's results so far.
+#[derive(Debug)]
+pub struct Stopped {
+    pub error: SensitivityError,
+    pub history: Vec<Improvement>,
+    /// Evaluations (forward and adjoint runs), the one that failed included.
+    pub runs: usize,
+}
+
 /// The map between the free parameters' values and the optimizer's variables.
 struct Variables {
     /// Index in the design and bounds of each free parameter.
@@ -151,6 +161,8 @@ struct Cost<'a, 'r> {
     last: RefCell<Option<Evaluated>>,
     history: RefCell<Vec<Improvement>>,
     report: RefCell<&'r mut dyn FnMut(&Improvement)>,
+    /// The error of an evaluation, which stops the optimizer (argmin keeps only its text).
+    failed: RefCell<Option<SensitivityError>>,
 }
 
 impl Cost<'_, '_> {
@@ -162,7 +174,11 @@ impl Cost<'_, '_> {
         }
         let p = self.variables.values(z);
         let mut evaluator = self.evaluator.borrow_mut();
-        let (f, g) = evaluator.criteria_and_gradients(&p)?;
+        let (f, g) = evaluator.criteria_and_gradients(&p).map_err(|e| {
+            let text = e.to_string();
+            *self.failed.borrow_mut() = Some(e);
+            Error::msg(text)
+        })?;
         let (f, g) = (f[self.criterion], g[self.criterion].clone());
         let gz = self.variables.gradient(&p, &g);
         let mut history = self.history.borrow_mut();
@@ -202,14 +218,16 @@ impl Gradient for Shared<'_, '_, '_> {
 
 /// Lowers criterion `criterion` of the evaluator's problem over the design parameters that
 /// have both bounds (`design`: the problem's design parameters with their bounds), at most
-/// `max_iterations` L-BFGS iterations; `report` is told each improvement as it is found.
+/// `max_iterations` L-BFGS iterations; `report` is told each improvement as it is found. An
+/// evaluation that fails (a run that does not converge, an event in the run: the adjoint
+/// refuses it) stops the optimization with the improvements found so far.
 pub fn optimize(
     evaluator: &mut Evaluator,
     design: &[DesignParameter],
     criterion: usize,
     max_iterations: u64,
     report: &mut dyn FnMut(&Improvement),
-) -> Result<Optimum, SensitivityError> {
+) -> Result<Optimum, Box<Stopped>> {
     let nominal = evaluator.problem().values();
     let free: Vec<(usize, f64, f64)> = design
         .iter()
@@ -220,9 +238,14 @@ pub fn optimize(
         })
         .collect();
     if free.is_empty() {
-        return Err(SensitivityError::Unsupported(
-            "no design parameter has both a lower and an upper bound: nothing to optimize".into(),
-        ));
+        return Err(Box::new(Stopped {
+            error: SensitivityError::Unsupported(
+                "no design parameter has both a lower and an upper bound: nothing to optimize"
+                    .into(),
+            ),
+            history: Vec::new(),
+            runs: 0,
+        }));
     }
     let variables = Variables::new(free, nominal);
     let z0 = variables.z0.clone();
@@ -233,19 +256,36 @@ pub fn optimize(
         last: RefCell::new(None),
         history: RefCell::new(Vec::new()),
         report: RefCell::new(report),
+        failed: RefCell::new(None),
     };
     let solver = LBFGS::new(MoreThuenteLineSearch::new(), 7);
     let result = Executor::new(Shared(&cost), solver)
         .configure(|s| s.param(z0).max_iters(max_iterations))
-        .run()
-        .map_err(|e| SensitivityError::Unsupported(format!("optimization: {e}")))?;
+        .run();
+    let runs = cost.evaluator.borrow().runs;
+    // An evaluation that failed stops the optimization, also when the line search took its
+    // error for its own end (argmin then reports a termination status); the evaluator did
+    // not count it.
+    let stopped = |error, runs| {
+        Box::new(Stopped {
+            error,
+            history: cost.history.take(),
+            runs,
+        })
+    };
+    let result = match (result, cost.failed.take()) {
+        (_, Some(error)) => return Err(stopped(error, runs + 1)),
+        (Err(e), None) => {
+            return Err(stopped(SensitivityError::Optimization(e.to_string()), runs));
+        }
+        (Ok(result), None) => result,
+    };
     let state = result.state();
     let (status, iterations) = (state.get_termination_status().to_string(), state.get_iter());
     let iteration_limit = matches!(
         state.get_termination_reason(),
         Some(TerminationReason::MaxItersReached)
     );
-    let runs = cost.evaluator.borrow().runs;
     Ok(Optimum {
         history: cost.history.into_inner(),
         status,

@@ -250,7 +250,7 @@ fn check_equilibrium(
     let tolerance = 10.0 * (settings.newton.atol + settings.newton.rtol * size);
     let moved = dx[..nd].iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if moved > tolerance {
-        return Err(SensitivityError::Unsupported(format!(
+        return Err(SensitivityError::Unconverged(format!(
             "the final point of the static analysis is not an equilibrium: one Newton correction from it moves the configuration by {moved:.3e} (tolerance {tolerance:.3e}); a pseudo-dynamic run has not settled: increase pseudo_time or pseudo_damping, or use load_control"
         )));
     }

@@ -48,7 +48,7 @@ use super::step;
 use crate::assembly::{assemble, Iterate};
 use crate::data::{Block, Data, Layout};
 use crate::elements::{
-    Context, ElementKernel, Kernel, Local, LocalBuffers, NodeState, StepLimit, Vec12,
+    Context, ElementKernel, ElementRef, Kernel, Local, LocalBuffers, NodeState, StepLimit, Vec12,
 };
 use crate::error::{SettingsError, SolveError};
 use crate::model::Model;
@@ -377,6 +377,15 @@ pub struct StepInfo {
     pub regularized: bool,
 }
 
+/// An event of a step ([`Simulation::last_step_event`]): an element's law switched in it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepEvent {
+    /// Time at the end of the step \[s\].
+    pub t: f64,
+    /// What happened, naming the item: `contact 'floor' closes`, `hold 'zoh' samples`.
+    pub what: String,
+}
+
 /// A model that a simulation can hold: the simulation shares it, so a binding or another
 /// thread can keep it too. A borrowed model is copied once.
 pub trait IntoShared {
@@ -440,6 +449,9 @@ pub struct Simulation {
     /// Node kinematics at the start and the end of the step just converged, when there are
     /// events ([`Simulation::event_limit`]).
     event_nodes: [Vec<NodeState>; 2],
+    /// The elements that can switch ([`crate::elements::ElementRef::can_switch`]), indices
+    /// in the layout ([`Simulation::last_step_event`]).
+    switching: Vec<usize>,
 }
 
 /// The memory of a simulation at a step boundary: with the model and the settings,
@@ -708,17 +720,23 @@ impl Simulation {
             keep_steps: false,
             events: Vec::new(),
             event_nodes: Default::default(),
+            switching: Vec::new(),
         }
         .with_events())
     }
 
-    /// The simulation with its list of elements with events.
+    /// The simulation with its lists of elements with events and of elements that can
+    /// switch.
     fn with_events(mut self) -> Self {
         let elements = &self.data.layout.elements;
         let model = &self.model;
-        self.events = (0..elements.len())
-            .filter(|&e| elements[e].has_events(model))
-            .collect();
+        let which = |has: fn(&ElementRef, &Model) -> bool| -> Vec<usize> {
+            (0..elements.len())
+                .filter(|&e| has(&elements[e], model))
+                .collect()
+        };
+        self.events = which(ElementRef::has_events);
+        self.switching = which(ElementRef::can_switch);
         self
     }
 
@@ -870,6 +888,7 @@ impl Simulation {
             keep_steps: false,
             events: Vec::new(),
             event_nodes: Default::default(),
+            switching: Vec::new(),
         }
         .with_events())
     }
@@ -1129,17 +1148,50 @@ impl Simulation {
         }
     }
 
+    /// The event of the last accepted step, if an element that can switch
+    /// ([`crate::elements::ElementRef::can_switch`]) had one in it
+    /// ([`crate::elements::ElementKernel::event`]): the first such element's, in the layout's
+    /// order, at the step's end. Evaluated when asked (by an observer's
+    /// [`Observer::step`]); `None` before the first step.
+    pub fn last_step_event(&self) -> Option<StepEvent> {
+        let (start, end) = (&self.integrator.saved, &self.state);
+        if self.switching.is_empty() || start.t == end.t {
+            return None;
+        }
+        let mut nodes: [Vec<NodeState>; 2] = Default::default();
+        node_states_into(start, &mut nodes[0]);
+        node_states_into(end, &mut nodes[1]);
+        let mut what = None;
+        self.visit(&self.switching, &nodes, |kernel, ctx, start, end, _| {
+            if what.is_none() {
+                what = kernel.event(ctx, start, end);
+            }
+        });
+        what.map(|what| StepEvent { t: end.t, what })
+    }
+
     /// Calls `visit` with each element with events, the context at the end of the step, the
     /// element's kinematics and states at the start and end of the step (node kinematics
     /// from `event_nodes`) and the index of its first state.
-    fn visit_events(&self, mut visit: impl FnMut(&Kernel<'_>, &Context, &Local, &Local, usize)) {
+    fn visit_events(&self, visit: impl FnMut(&Kernel<'_>, &Context, &Local, &Local, usize)) {
+        self.visit(&self.events, &self.event_nodes, visit);
+    }
+
+    /// [`Simulation::visit_events`] for the elements `elements` (indices in the layout), with
+    /// the node kinematics `nodes` at the start and end of the step.
+    fn visit(
+        &self,
+        elements: &[usize],
+        nodes: &[Vec<NodeState>; 2],
+        mut visit: impl FnMut(&Kernel<'_>, &Context, &Local, &Local, usize),
+    ) {
         let layout = &self.data.layout;
         let t = self.state.t;
         let ctx = Context::at(&self.model, t, self.settings.load_factor_at(t));
         let (start, end) = (&self.integrator.saved, &self.state);
-        let [n0, n1] = &self.event_nodes;
+        let [n0, n1] = nodes;
         let (mut b0, mut b1) = (LocalBuffers::default(), LocalBuffers::default());
-        for &e in &self.events {
+        for &e in elements {
             let kernel = layout.elements[e].kernel(&self.model);
             let x0 = layout.state_start[e];
             b0.gather(&kernel, n0, (&start.x, &start.xdot, x0), &start.lambda);

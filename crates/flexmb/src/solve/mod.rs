@@ -16,7 +16,8 @@ pub mod step;
 pub mod trajectory;
 
 pub use dynamics::{
-    DynamicSettings, Formulation, IntoShared, LieUpdate, Scheme, Simulation, Stats, StepInfo,
+    DynamicSettings, Formulation, IntoShared, LieUpdate, Scheme, Simulation, Stats, StepEvent,
+    StepInfo,
 };
 pub use generalized_alpha::{FirstOrderParameters, GaParameters};
 pub use initial::{initial_accelerations, prepare_layout};
