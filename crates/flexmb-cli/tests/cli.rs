@@ -243,3 +243,81 @@ fn run_threads_write_the_same_bytes() {
         "a thread count out of range is a usage error"
     );
 }
+
+/// Lines of a run's stdout and stderr that start with `prefix`.
+fn lines_starting<'a>(out: &'a std::process::Output, prefix: &str) -> Vec<String> {
+    [&out.stdout, &out.stderr]
+        .into_iter()
+        .flat_map(|s| {
+            String::from_utf8_lossy(s)
+                .lines()
+                .map(str::to_owned)
+                .collect::<Vec<_>>()
+        })
+        .filter(|l| l.starts_with(prefix))
+        .collect()
+}
+
+/// Redundant constraint rows are expected of closed loops built with spatial joints: one
+/// note per run naming them, no warning (Andrews' mechanism printed 9 warning lines, one
+/// per row left out).
+#[test]
+fn redundant_constraints_are_one_note_not_warnings() {
+    let out = out_dir("andrews-notes");
+    let r = flexmb()
+        .args([
+            "run",
+            repo("examples/andrews.toml").to_str().unwrap(),
+            "--set",
+            "solver.t_end=0.001",
+            "--no-plot",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let warnings = lines_starting(&r, "warning:");
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let notes = lines_starting(&r, "note:");
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    assert!(
+        notes[0].contains("9 of the 50 constraint rows are redundant"),
+        "{notes:?}"
+    );
+    assert!(
+        notes[0].contains("revolute joint 'E_K2_K3', row 4"),
+        "{notes:?}"
+    );
+    let s = summary(&out);
+    assert!(s.get("warnings").is_none(), "{s}");
+    assert_eq!(s["notes"][0].as_str(), Some(&notes[0]["note: ".len()..]));
+}
+
+/// A run that succeeds without writing its summary plot says why, on the terminal and in
+/// summary.json (a single body without sensors wrote no summary.png and said so only on the
+/// terminal).
+#[test]
+fn run_without_sensors_says_why_it_draws_no_summary_plot() {
+    let out = out_dir("no-sensors");
+    let r = flexmb()
+        .args([
+            "run",
+            repo("crates/flexmb-cli/tests/data/falling_body.toml")
+                .to_str()
+                .unwrap(),
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(!out.join("summary.png").exists());
+    assert!(lines_starting(&r, "warning:").is_empty());
+    let notes = lines_starting(&r, "note:");
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    assert!(notes[0].contains("no sensors") && notes[0].contains("no summary.png"));
+    let s = summary(&out);
+    assert_eq!(s["status"], "ok");
+    assert_eq!(s["notes"][0].as_str(), Some(&notes[0]["note: ".len()..]));
+}
