@@ -244,18 +244,32 @@ fn run_threads_write_the_same_bytes() {
     );
 }
 
-/// Lines of a run's stdout and stderr that start with `prefix`.
-fn lines_starting<'a>(out: &'a std::process::Output, prefix: &str) -> Vec<String> {
-    [&out.stdout, &out.stderr]
-        .into_iter()
-        .flat_map(|s| {
-            String::from_utf8_lossy(s)
-                .lines()
-                .map(str::to_owned)
-                .collect::<Vec<_>>()
-        })
-        .filter(|l| l.starts_with(prefix))
-        .collect()
+/// Runs `flexmb run MODEL ARGS --out OUT`, which must succeed without a warning and say one
+/// note, on stdout and in summary.json; returns the note.
+fn the_one_note_of_a_run(model: &str, args: &[&str], out: &std::path::Path) -> String {
+    let r = flexmb()
+        .args(["run", repo(model).to_str().unwrap()])
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("runs");
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&r.stdout),
+        String::from_utf8_lossy(&r.stderr),
+    );
+    assert!(r.status.success(), "{stderr}");
+    assert!(!stderr.contains("warning:"), "{stderr}");
+    let notes: Vec<&str> = stdout
+        .lines()
+        .filter_map(|l| l.strip_prefix("note: "))
+        .collect();
+    assert_eq!(notes.len(), 1, "{stdout}");
+    let s = summary(out);
+    assert_eq!(s["status"], "ok");
+    assert!(s.get("warnings").is_none(), "{s}");
+    assert_eq!(s["notes"], serde_json::json!(notes));
+    notes[0].to_string()
 }
 
 /// Redundant constraint rows are expected of closed loops built with spatial joints: one
@@ -263,35 +277,16 @@ fn lines_starting<'a>(out: &'a std::process::Output, prefix: &str) -> Vec<String
 /// per row left out).
 #[test]
 fn redundant_constraints_are_one_note_not_warnings() {
-    let out = out_dir("andrews-notes");
-    let r = flexmb()
-        .args([
-            "run",
-            repo("examples/andrews.toml").to_str().unwrap(),
-            "--set",
-            "solver.t_end=0.001",
-            "--no-plot",
-            "--out",
-        ])
-        .arg(&out)
-        .output()
-        .expect("runs");
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let warnings = lines_starting(&r, "warning:");
-    assert!(warnings.is_empty(), "{warnings:?}");
-    let notes = lines_starting(&r, "note:");
-    assert_eq!(notes.len(), 1, "{notes:?}");
-    assert!(
-        notes[0].contains("9 of the 50 constraint rows are redundant"),
-        "{notes:?}"
+    let note = the_one_note_of_a_run(
+        "examples/andrews.toml",
+        &["--set", "solver.t_end=0.001", "--no-plot"],
+        &out_dir("andrews-notes"),
     );
     assert!(
-        notes[0].contains("revolute joint 'E_K2_K3', row 4"),
-        "{notes:?}"
+        note.contains("9 of the 50 constraint rows are redundant"),
+        "{note}"
     );
-    let s = summary(&out);
-    assert!(s.get("warnings").is_none(), "{s}");
-    assert_eq!(s["notes"][0].as_str(), Some(&notes[0]["note: ".len()..]));
+    assert!(note.contains("revolute joint 'E_K2_K3', row 4"), "{note}");
 }
 
 /// A run that succeeds without writing its summary plot says why, on the terminal and in
@@ -300,24 +295,10 @@ fn redundant_constraints_are_one_note_not_warnings() {
 #[test]
 fn run_without_sensors_says_why_it_draws_no_summary_plot() {
     let out = out_dir("no-sensors");
-    let r = flexmb()
-        .args([
-            "run",
-            repo("crates/flexmb-cli/tests/data/falling_body.toml")
-                .to_str()
-                .unwrap(),
-            "--out",
-        ])
-        .arg(&out)
-        .output()
-        .expect("runs");
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let note = the_one_note_of_a_run("crates/flexmb-cli/tests/data/falling_body.toml", &[], &out);
     assert!(!out.join("summary.png").exists());
-    assert!(lines_starting(&r, "warning:").is_empty());
-    let notes = lines_starting(&r, "note:");
-    assert_eq!(notes.len(), 1, "{notes:?}");
-    assert!(notes[0].contains("no sensors") && notes[0].contains("no summary.png"));
-    let s = summary(&out);
-    assert_eq!(s["status"], "ok");
-    assert_eq!(s["notes"][0].as_str(), Some(&notes[0]["note: ".len()..]));
+    assert!(
+        note.contains("no sensors") && note.contains("no summary.png"),
+        "{note}"
+    );
 }

@@ -337,10 +337,14 @@ pub struct Stats {
     /// Shortest accepted step \[s\] (0 before the first).
     pub smallest_step: f64,
     /// Steps accepted with the multipliers at their round-off floor above the tolerance
-    /// (exact matrix, configuration converged, multiplier corrections no longer decreasing).
+    /// (configuration converged, multiplier corrections no longer halving from one exact
+    /// correction to the next).
     pub multiplier_floor_steps: usize,
     /// Largest weighted multiplier correction of those steps (in units of the tolerance).
     pub multiplier_floor: f64,
+    /// Time at the end of the step with that correction \[s\].
+    #[serde(default)]
+    pub multiplier_floor_t: f64,
     /// Converged steps repeated shorter because an event asked for it (a contact closing
     /// too deep; counted in `rejected_steps` too).
     #[serde(default)]
@@ -902,8 +906,8 @@ impl Simulation {
         }
         if self.stats.multiplier_floor_steps > 0 {
             self.warnings.push(format!(
-                "at {} steps the multipliers (joint reactions and servo forces) could not be converged below {:.2e} times their tolerance (rtol times the largest force of the model; atol and rtol for a servo force): round-off of an ill-conditioned constraint system; positions and velocities are converged",
-                self.stats.multiplier_floor_steps, self.stats.multiplier_floor
+                "at {} steps the multipliers (joint reactions and servo forces) stopped converging, their last corrections up to {:.2e} times their tolerance (rtol times the largest force of the model; atol and rtol for a servo force; the largest at t = {:.6e} s), two exact Newton corrections in a row: round-off of an ill-conditioned constraint system, whose equations nearly leave a combination of the reactions undetermined (e.g. near a singular position); positions and velocities are converged",
+                self.stats.multiplier_floor_steps, self.stats.multiplier_floor, self.stats.multiplier_floor_t
             ));
         }
         if self.stats.reselections > 0 {
@@ -1178,8 +1182,10 @@ impl Simulation {
             Some(MultiplierLimit::Undetermined) => self.stats.undetermined_multipliers += 1,
             Some(MultiplierLimit::RoundOff) => {
                 self.stats.multiplier_floor_steps += 1;
-                self.stats.multiplier_floor =
-                    self.stats.multiplier_floor.max(newton.multiplier_norm);
+                if newton.multiplier_norm > self.stats.multiplier_floor {
+                    self.stats.multiplier_floor = newton.multiplier_norm;
+                    self.stats.multiplier_floor_t = t_new;
+                }
             }
             None => {}
         }
