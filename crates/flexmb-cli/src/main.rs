@@ -476,6 +476,8 @@ fn draw(dir: &OutputDir, files: RunFiles) {
     if files.plot {
         let path = dir.file(flexmb::output::SUMMARY_PLOT_FILE);
         match flexmb_results::plot::summary(&results, &path) {
+            // A model without sensors: the run's notes said so (`driver::NO_SENSORS`).
+            Ok(flexmb_results::plot::Summary::NoSensors) => {}
             Ok(summary) => {
                 if let Some(note) = summary.note() {
                     say(format_args!("note: {note}"));
@@ -576,6 +578,9 @@ fn report(
     summary: &Summary,
     interrupt: Option<signals::Interrupt>,
 ) -> i32 {
+    for n in &summary.notes {
+        say(format_args!("note: {n}"));
+    }
     for w in &summary.warnings {
         tell(format_args!("warning: {w}"));
     }
@@ -650,22 +655,22 @@ fn check(model: &Path, set: &[String]) -> i32 {
     let built = match &file.analysis {
         flexmb::input::Analysis::Dynamic(settings) => {
             flexmb::Simulation::new(&file.model, *settings)
-                .map(|sim| (sim.data.layout.n_unknowns(), sim.warnings))
+                .map(|sim| (sim.data.layout.n_unknowns(), sim.notes))
         }
         flexmb::input::Analysis::Static(settings) => {
             flexmb::solve::Statics::new(&file.model, *settings)
-                .map(|s| (s.data.layout.n_unknowns(), s.warnings))
+                .map(|s| (s.data.layout.n_unknowns(), s.notes))
         }
     };
-    let (unknowns, warnings) = match built {
+    let (unknowns, notes) = match built {
         Ok(built) => built,
         Err(e) => {
             tell(format_args!("error: {}: {e}", model.display()));
             return exit::INVALID_MODEL;
         }
     };
-    for w in &warnings {
-        tell(format_args!("warning: {w}"));
+    for n in &notes {
+        say(format_args!("note: {n}"));
     }
     say(format_args!(
         "{}: {} nodes, {} bodies, {} beam elements, {} joints, {} unknowns: ok",

@@ -243,3 +243,62 @@ fn run_threads_write_the_same_bytes() {
         "a thread count out of range is a usage error"
     );
 }
+
+/// Runs `flexmb run MODEL ARGS --out OUT`, which must succeed without a warning and say one
+/// note, on stdout and in summary.json; returns the note.
+fn the_one_note_of_a_run(model: &str, args: &[&str], out: &std::path::Path) -> String {
+    let r = flexmb()
+        .args(["run", repo(model).to_str().unwrap()])
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("runs");
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&r.stdout),
+        String::from_utf8_lossy(&r.stderr),
+    );
+    assert!(r.status.success(), "{stderr}");
+    assert!(!stderr.contains("warning:"), "{stderr}");
+    let notes: Vec<&str> = stdout
+        .lines()
+        .filter_map(|l| l.strip_prefix("note: "))
+        .collect();
+    assert_eq!(notes.len(), 1, "{stdout}");
+    let s = summary(out);
+    assert_eq!(s["status"], "ok");
+    assert!(s.get("warnings").is_none(), "{s}");
+    assert_eq!(s["notes"], serde_json::json!(notes));
+    notes[0].to_string()
+}
+
+/// Redundant constraint rows are expected of closed loops built with spatial joints: one
+/// note per run naming them, no warning (Andrews' mechanism printed 9 warning lines, one
+/// per row left out).
+#[test]
+fn redundant_constraints_are_one_note_not_warnings() {
+    let note = the_one_note_of_a_run(
+        "examples/andrews.toml",
+        &["--set", "solver.t_end=0.001", "--no-plot"],
+        &out_dir("andrews-notes"),
+    );
+    assert!(
+        note.contains("9 of the 50 constraint rows are redundant"),
+        "{note}"
+    );
+    assert!(note.contains("revolute joint 'E_K2_K3', row 4"), "{note}");
+}
+
+/// A run that succeeds without writing its summary plot says why, on the terminal and in
+/// summary.json (a single body without sensors wrote no summary.png and said so only on the
+/// terminal).
+#[test]
+fn run_without_sensors_says_why_it_draws_no_summary_plot() {
+    let out = out_dir("no-sensors");
+    let note = the_one_note_of_a_run("crates/flexmb-cli/tests/data/falling_body.toml", &[], &out);
+    assert!(!out.join("summary.png").exists());
+    assert!(
+        note.contains("no sensors") && note.contains("no summary.png"),
+        "{note}"
+    );
+}

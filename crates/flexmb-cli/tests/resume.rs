@@ -176,7 +176,7 @@ fn a_resumed_run_keeps_the_notes_on_the_model() {
         &part,
     );
     go(&["--set", "solver.t_end=0.2", "--resume"], &part);
-    let warnings = summary(&whole)["warnings"].clone();
-    assert!(warnings.as_array().is_some_and(|w| !w.is_empty()));
-    assert_eq!(summary(&part)["warnings"], warnings);
+    let notes = summary(&whole)["notes"].clone();
+    assert!(notes.as_array().is_some_and(|w| !w.is_empty()));
+    assert_eq!(summary(&part)["notes"], notes);
 }

@@ -122,13 +122,20 @@ pub fn run_with(
         Analysis::Static(settings) => run_static(model, settings, target, progress, interrupt),
     };
     let output_seconds = ended.output_seconds;
+    let started = !matches!(ended.outcome, Outcome::Failed(ErrorKind::Model, _));
     ended.record(&mut summary);
+    if started && model.sensors.is_empty() {
+        summary.notes.push(NO_SENSORS.into());
+    }
     let wall = start.elapsed().as_secs_f64();
     summary.wall_seconds = wall;
     summary.solve_seconds = (wall - output_seconds).max(0.0);
     let unwritten = out.write_summary(&summary).err();
     Report { summary, unwritten }
 }
+
+/// The note of a run of a model without sensors: no history to write or draw.
+pub const NO_SENSORS: &str = "the model has no sensors: sensors.csv holds the time alone and there is no history to plot (no summary.png); add [[sensor]] items to record some";
 
 /// How an analysis ended: its work counts and the error that stopped it, if any.
 struct Ended {
@@ -148,6 +155,7 @@ struct Tally {
     unknowns: usize,
     linear_solver: String,
     warnings: Vec<String>,
+    notes: Vec<String>,
     verify: Option<crate::solve::Verification>,
 }
 
@@ -209,6 +217,7 @@ impl Ended {
         summary.unknowns = w.unknowns;
         summary.linear_solver = w.linear_solver;
         summary.warnings = w.warnings;
+        summary.notes = w.notes;
         summary.verify = w.verify;
         match self.outcome {
             Outcome::Completed => summary.status = Status::Ok,
@@ -406,6 +415,7 @@ fn run_static(
         unknowns: statics.data.layout.n_unknowns(),
         linear_solver: linear_solver(&statics.data),
         warnings: statics.warnings.clone(),
+        notes: statics.notes.clone(),
         verify: statics.verification.clone(),
     };
     Ended::of_run(work, result, written, seconds)
@@ -551,8 +561,7 @@ fn run_dynamic(
                 break result;
             }
         };
-        let notes = sim.notes();
-        sim.warnings.extend(notes);
+        sim.add_run_notes();
         result
     });
     let work = Tally {
@@ -561,6 +570,7 @@ fn run_dynamic(
         unknowns: sim.data.layout.n_unknowns(),
         linear_solver: linear_solver(&sim.data),
         warnings: sim.warnings.clone(),
+        notes: sim.notes.clone(),
         verify: sim.verification.clone(),
     };
     Ended::of_run(work, result, written, seconds)

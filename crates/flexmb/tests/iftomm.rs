@@ -36,9 +36,18 @@ fn four_bar_reference(n: f64, t_end: f64, dt_out: f64) -> Vec<(f64, f64)> {
 #[test]
 fn four_bar_follows_reference_through_its_singular_positions() {
     let run = run("four_bar.toml", &[]);
-    // Over-constrained planar loops: redundant rows found and removed (3 per loop).
-    let redundant = run.warnings.iter().filter(|w| w.contains("was removed"));
-    assert_eq!(redundant.count(), 6, "{:?}", run.warnings);
+    // Over-constrained planar loops: redundant rows found and removed (3 per loop), said in
+    // one note, expected of the model: not a warning.
+    let redundant: Vec<_> = run
+        .notes
+        .iter()
+        .filter(|w| w.contains("rows are redundant"))
+        .collect();
+    assert_eq!(redundant.len(), 1, "{:?}", run.notes);
+    assert!(
+        redundant[0].contains("6 of the 35 constraint rows"),
+        "{redundant:?}"
+    );
     // Its singular positions (links aligned) are passed with few step reductions.
     assert!(
         run.stats.rejected_steps < 50,
@@ -64,6 +73,90 @@ fn four_bar_follows_reference_through_its_singular_positions() {
     let drift = e.iter().fold(0.0f64, |m, (_, v)| m.max((v - 35.835).abs()));
     assert!(drift < 1e-3, "energy drift {drift}");
     assert!(run.series("violation").iter().all(|(_, v)| *v < 1e-9));
+}
+
+/// The trust issue's four-bar (item 5): its run warned that at 29 steps the multipliers
+/// could not be converged below 3.94e6 times their tolerance. The steps were near the
+/// singular positions (every link on one line), where the first exact Newton correction
+/// after corrections with a reused matrix was taken for round-off: its size was reported,
+/// while `--verify` estimated the error left at 4.4 at most. The reactions the equations
+/// determine, in the plane of the mechanism, are checked over 2 s (two singular positions)
+/// against the planar Newton-Euler reference of `tests/reference/four_bar_reactions.md`;
+/// out of the plane they are not determined (three redundant rows per loop, left out at
+/// zero), and with no load out of the plane the kept ones are zero.
+#[test]
+fn four_bar_in_plane_reactions_match_a_planar_reference_without_warning() {
+    let mut file = read_model_file(
+        &common::example("four_bar.toml"),
+        &["solver.t_end=2".into()],
+    )
+    .expect("reads");
+    let Analysis::Dynamic(settings) = file.analysis else {
+        panic!("dynamic")
+    };
+    let model = &mut file.model;
+    let joints: Vec<String> = model.joints.iter().map(|j| j.name.clone()).collect();
+    for (j, name) in joints.iter().enumerate() {
+        for (c, axis) in ["x", "y", "z"].iter().enumerate() {
+            let joint = flexmb::model::JointId(j);
+            model.sensors.push(flexmb::model::Sensor {
+                name: format!("{name}_f{axis}"),
+                kind: flexmb::model::SensorKind::JointForce {
+                    joint,
+                    component: c,
+                },
+            });
+            model.sensors.push(flexmb::model::Sensor {
+                name: format!("{name}_m{axis}"),
+                kind: flexmb::model::SensorKind::JointTorque {
+                    joint,
+                    component: c,
+                },
+            });
+        }
+    }
+    let run = run_model(model, settings).expect("runs");
+    assert!(run.warnings.is_empty(), "{:?}", run.warnings);
+    let text = std::fs::read_to_string(reference("four_bar_reactions.csv")).expect("reference");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let (mut regular, mut singular, mut out_of_plane) = (0.0f64, 0.0f64, 0.0f64);
+    let mut compared = 0;
+    for line in lines {
+        let v: Vec<f64> = line
+            .split(',')
+            .map(|s| s.parse().expect("number"))
+            .collect();
+        let k = (v[0] / 0.01).round() as usize;
+        let (t, sigma_min) = (run.rows[k].0, v[2]);
+        assert!((t - v[0]).abs() < 1e-9);
+        for (name, value) in header.iter().zip(&v).skip(3) {
+            let e = (run.rows[k].1[run.column(name)] - value).abs();
+            if sigma_min > 0.05 {
+                regular = regular.max(e);
+            } else {
+                singular = singular.max(e);
+            }
+        }
+        for name in &joints {
+            for q in ["fz", "mx", "my"] {
+                out_of_plane =
+                    out_of_plane.max(run.rows[k].1[run.column(&format!("{name}_{q}"))].abs());
+            }
+        }
+        compared += 1;
+    }
+    assert_eq!(compared, 201);
+    // Away from the singular positions (the in-plane matrix's smallest singular value above
+    // 0.05): 1.6e-3 N of reactions up to 96 N, the second-order error at h = 1e-3. Near them
+    // one combination of the reactions is close to undetermined (the links in line can
+    // carry any tension): 0.14 N at t = 1.23 s, sigma_min = 3.3e-3.
+    assert!(regular < 4e-3, "in-plane reactions off by {regular} N");
+    assert!(
+        singular < 0.3,
+        "in-plane reactions near the singular positions off by {singular} N"
+    );
+    assert!(out_of_plane < 1e-9, "out-of-plane reactions {out_of_plane}");
 }
 
 #[test]
@@ -98,11 +191,11 @@ fn andrews_squeezer_converges_to_the_test_set_reference() {
 #[test]
 fn bricard_mechanism_moves_with_its_redundant_constraint() {
     let run = run("bricard.toml", &[]);
-    assert_eq!(
-        run.warnings.len(),
-        1,
+    assert!(run.warnings.is_empty(), "{:?}", run.warnings);
+    assert!(
+        run.notes[0].contains("1 of the 30 constraint rows"),
         "one redundant row: {:?}",
-        run.warnings
+        run.notes
     );
     let worst = bricard_error(&run);
     // IFToMM high-precision criterion 1e-3; second order at h = 1e-3 does much better.

@@ -787,8 +787,13 @@ pub struct Summary {
     pub solve_seconds: f64,
     pub unknowns: usize,
     pub linear_solver: String,
+    /// What may be wrong with the results.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// Information on what the run did as expected (redundant constraint rows left out,
+    /// files not written and why).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
     /// What `--verify` found: every accepted step re-checked with a fresh matrix.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub verify: Option<crate::solve::Verification>,

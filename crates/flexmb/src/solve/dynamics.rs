@@ -337,10 +337,14 @@ pub struct Stats {
     /// Shortest accepted step \[s\] (0 before the first).
     pub smallest_step: f64,
     /// Steps accepted with the multipliers at their round-off floor above the tolerance
-    /// (exact matrix, configuration converged, multiplier corrections no longer decreasing).
+    /// (configuration converged, multiplier corrections no longer halving from one exact
+    /// correction to the next).
     pub multiplier_floor_steps: usize,
     /// Largest weighted multiplier correction of those steps (in units of the tolerance).
     pub multiplier_floor: f64,
+    /// Time at the end of the step with that correction \[s\].
+    #[serde(default)]
+    pub multiplier_floor_t: f64,
     /// Converged steps repeated shorter because an event asked for it (a contact closing
     /// too deep; counted in `rejected_steps` too).
     #[serde(default)]
@@ -426,8 +430,12 @@ pub struct Simulation {
     pub settings: DynamicSettings,
     pub params: GaParameters,
     pub stats: Stats,
-    /// Notes for the user (e.g. redundant constraints removed).
+    /// What may be wrong with the results, for the user (e.g. steps accepted outside the
+    /// tolerance under `--verify`).
     pub warnings: Vec<String>,
+    /// Information for the user on what the run did as expected (e.g. redundant constraint
+    /// rows of closed loops left out).
+    pub notes: Vec<String>,
     /// Checked before every step: when it is set, [`Simulation::run`] returns
     /// [`SolveError::Interrupted`] with every completed output step already delivered.
     pub interrupt: Option<Arc<AtomicBool>>,
@@ -687,7 +695,7 @@ impl Simulation {
         let model = model.into_shared();
         model.validate()?;
         settings.check()?;
-        let (layout, warnings) = prepare_layout(&model);
+        let (layout, note) = prepare_layout(&model);
         let threads = Threads::for_model(&model, settings.threads);
         let mut data = Data::new(&model, layout.clone())?.with_threads(threads.clone());
         let mut state = State::initial(&model, &layout)?;
@@ -712,7 +720,8 @@ impl Simulation {
             control: StepControl::new(settings.h),
             settings,
             stats: Stats::default(),
-            warnings,
+            warnings: Vec::new(),
+            notes: note.into_iter().collect(),
             interrupt: None,
             verification: None,
             redundancy: RedundancyWatch::default(),
@@ -747,7 +756,7 @@ impl Simulation {
     /// be called again to go on.
     pub fn run(&mut self, observer: &mut dyn Observer) -> Result<Stats, SolveError> {
         let result = self.run_until(self.settings.t_end, observer);
-        self.warnings.extend(self.notes());
+        self.add_run_notes();
         result
     }
 
@@ -800,11 +809,11 @@ impl Simulation {
             ..c.settings
         };
         let model = Arc::new(c.model);
-        // The notes on the rows left out at the start, which the run that wrote the
+        // The note on the rows left out at the start, which the run that wrote the
         // checkpoint gave too (`restore` alone does not repeat this QR).
-        let (_, warnings) = prepare_layout(&model);
+        let (_, note) = prepare_layout(&model);
         let mut sim = Self::restore(model, settings, c.memory)?;
-        sim.warnings = warnings;
+        sim.notes = note.into_iter().collect();
         Ok(sim)
     }
 
@@ -881,6 +890,7 @@ impl Simulation {
             settings,
             stats: c.stats,
             warnings: Vec::new(),
+            notes: Vec::new(),
             interrupt: None,
             verification: c.verification,
             redundancy: c.redundancy,
@@ -916,32 +926,31 @@ impl Simulation {
         )
     }
 
-    /// What the run should tell the user about the steps so far ([`Simulation::run`] adds
-    /// them to its warnings at its end).
-    pub fn notes(&self) -> Vec<String> {
-        let mut notes = Vec::new();
+    /// Adds what the run should tell the user about the steps so far to its warnings (what
+    /// may be wrong) and notes (what is expected); [`Simulation::run`] calls it at its end.
+    pub fn add_run_notes(&mut self) {
         if self.stats.undetermined_multipliers > 0 {
-            notes.push(format!(
+            self.warnings.push(format!(
                 "{} steps passed singular configurations (a rank-deficient constraint matrix, e.g. a dead point): positions and velocities are converged there, the multipliers (joint reactions) are not determined by the equations at those steps",
                 self.stats.undetermined_multipliers
             ));
         }
         if self.stats.multiplier_floor_steps > 0 {
-            notes.push(format!(
-                "at {} steps the multipliers (joint reactions and servo forces) could not be converged below {:.2e} times their tolerance (rtol times the largest force of the model; atol and rtol for a servo force): round-off of an ill-conditioned constraint system; positions and velocities are converged",
-                self.stats.multiplier_floor_steps, self.stats.multiplier_floor
+            self.warnings.push(format!(
+                "at {} steps the multipliers (joint reactions and servo forces) stopped converging, their last corrections up to {:.2e} times their tolerance (rtol times the largest force of the model; atol and rtol for a servo force; the largest at t = {:.6e} s), two exact Newton corrections in a row: round-off of an ill-conditioned constraint system, whose equations nearly leave a combination of the reactions undetermined (e.g. near a singular position); positions and velocities are converged",
+                self.stats.multiplier_floor_steps, self.stats.multiplier_floor, self.stats.multiplier_floor_t
             ));
         }
         if self.stats.reselections > 0 {
-            notes.push(format!(
+            // Expected of a closed loop that moves: information.
+            self.notes.push(format!(
                 "the redundant constraint rows were chosen again {} times as the mechanism moved (first at t = {:.6e} s), where the rows kept came close to losing rank",
                 self.stats.reselections, self.redundancy.first_reselection
             ));
         }
         if let Some(w) = self.verification.as_ref().and_then(Verification::warning) {
-            notes.push(w);
+            self.warnings.push(w);
         }
-        notes
     }
 
     /// [`Simulation::run`] until the first step that ends at or after `t_stop` (a step
@@ -1238,8 +1247,10 @@ impl Simulation {
             Some(MultiplierLimit::Undetermined) => self.stats.undetermined_multipliers += 1,
             Some(MultiplierLimit::RoundOff) => {
                 self.stats.multiplier_floor_steps += 1;
-                self.stats.multiplier_floor =
-                    self.stats.multiplier_floor.max(newton.multiplier_norm);
+                if newton.multiplier_norm > self.stats.multiplier_floor {
+                    self.stats.multiplier_floor = newton.multiplier_norm;
+                    self.stats.multiplier_floor_t = t_new;
+                }
             }
             None => {}
         }

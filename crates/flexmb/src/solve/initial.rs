@@ -94,29 +94,34 @@ fn row_order(model: &Model, layout: &Layout, q: &[Frame]) -> (Vec<usize>, usize)
     )
 }
 
-/// Layout of the unknowns with redundant constraint rows removed; also returns a warning
-/// per removed row.
-pub fn prepare_layout(model: &Model) -> (Layout, Vec<String>) {
+/// Layout of the unknowns with redundant constraint rows removed; also returns a note for
+/// the user naming them (`None` when no row is redundant). Redundant rows are expected of a
+/// closed loop built with spatial joints (a planar four-bar of revolutes has three per
+/// loop): information, not a warning.
+pub fn prepare_layout(model: &Model) -> (Layout, Option<String>) {
     let mut layout = Layout::new(model);
-    let mut warnings = Vec::new();
     if layout.n_rows == 0 || !has_closed_loop(model) {
-        return (layout, warnings);
+        return (layout, None);
     }
     let q0: Vec<Frame> = model.nodes.iter().map(|n| n.frame).collect();
     let (order, rank) = row_order(model, &layout, &q0);
     if rank == layout.n_rows {
-        return (layout, warnings);
+        return (layout, None);
     }
     // The first `rank` rows of the pivot order are independent.
     let redundant = &order[rank..];
-    for &row in redundant {
-        warnings.push(format!(
-            "{} is redundant and was removed; its reaction is carried by the other joints of the loop",
-            layout.describe_row(model, row)
-        ));
-    }
+    let rows: Vec<String> = redundant
+        .iter()
+        .map(|&row| layout.describe_row(model, row))
+        .collect();
+    let note = format!(
+        "closed loops: {} of the {} constraint rows are redundant and were left out, their reactions carried by the other joints of the loops (the reactions along them are not determined by the equations; flexmb gives the ones with these rows at zero): {}",
+        redundant.len(),
+        layout.n_rows,
+        rows.join("; ")
+    );
     layout.deactivate_rows(model, redundant);
-    (layout, warnings)
+    (layout, Some(note))
 }
 
 /// Which rows to remove as redundant at the configuration `q`, keeping their number: the

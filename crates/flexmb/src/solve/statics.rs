@@ -222,7 +222,11 @@ pub struct Statics {
     /// Load factor of the converged state.
     pub load_factor: f64,
     pub stats: Work,
+    /// What may be wrong with the results, for the user.
     pub warnings: Vec<String>,
+    /// Information for the user on what the analysis did as expected (e.g. redundant
+    /// constraint rows of closed loops left out).
+    pub notes: Vec<String>,
     /// Checked before every load step (and every step of a pseudo-dynamic run): when it is
     /// set, [`Statics::run`] returns [`SolveError::Interrupted`].
     pub interrupt: Option<Arc<AtomicBool>>,
@@ -531,7 +535,7 @@ impl Statics {
         let model = model.into_shared();
         model.validate()?;
         settings.check()?;
-        let (layout, warnings) = prepare_layout(&model);
+        let (layout, note) = prepare_layout(&model);
         let mut state = State::initial(&model, &layout)?;
         let threads = crate::parallel::Threads::for_model(&model, settings.threads);
         let mut data = Data::new(&model, layout)?.with_threads(threads);
@@ -566,7 +570,8 @@ impl Statics {
             settings,
             load_factor: 0.0,
             stats: Work::default(),
-            warnings,
+            warnings: Vec::new(),
+            notes: note.into_iter().collect(),
             interrupt: None,
             verification: None,
             nodes,

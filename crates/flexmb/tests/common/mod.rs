@@ -29,6 +29,7 @@ pub struct History {
     pub rows: Vec<(f64, Vec<f64>)>,
     pub stats: flexmb::solve::Stats,
     pub warnings: Vec<String>,
+    pub notes: Vec<String>,
 }
 
 impl History {
@@ -96,6 +97,7 @@ pub fn run_model(
         rows,
         stats,
         warnings: sim.warnings.clone(),
+        notes: sim.notes.clone(),
     })
 }
 
@@ -143,6 +145,7 @@ pub fn run_static(name: &str, overrides: &[&str]) -> History {
             ..Default::default()
         },
         warnings: statics.warnings.clone(),
+        notes: statics.notes.clone(),
     }
 }
 
