@@ -165,8 +165,7 @@ pub(super) struct BlockLu {
     /// Row interchanges of the diagonal blocks, LAPACK style (row `c` of a block was swapped
     /// with row `swaps[start + c]` of the block, in the order of `c`).
     swaps: Vec<usize>,
-    /// The position of the column of each triplet, and the largest entry of each column.
-    slot_columns: Vec<usize>,
+    /// The largest entry of each column of `A`, by position.
     column_max: Vec<f64>,
     /// `|A| + |L| |U|` at the saddle columns of the diagonal blocks, accumulated as the
     /// elimination goes (the rounding scale of their pivots, module documentation).
@@ -281,14 +280,21 @@ impl BlockLu {
 
         // Rows of the panels: the couplings of A (symmetrized), then the rows each supernode
         // passes to its parent in the elimination tree.
+        // (`added[p]`: the last supernode given position `p`, which skips at once the
+        // repetitions within a block of triplets.)
         let mut panel_rows: Vec<Vec<usize>> = vec![Vec::new(); n_super];
+        let mut added = vec![usize::MAX; n];
         for &(i, j) in pattern {
             let (pi, pj) = (position[i], position[j]);
             let (ki, kj) = (supernode_at[pi], supernode_at[pj]);
-            if ki < kj {
-                panel_rows[ki].push(pj);
-            } else if kj < ki {
-                panel_rows[kj].push(pi);
+            let (k, p) = match ki.cmp(&kj) {
+                std::cmp::Ordering::Less => (ki, pj),
+                std::cmp::Ordering::Greater => (kj, pi),
+                std::cmp::Ordering::Equal => continue,
+            };
+            if added[p] != k {
+                added[p] = k;
+                panel_rows[k].push(p);
             }
         }
         for k in 0..n_super {
@@ -335,7 +341,6 @@ impl BlockLu {
             targets: Vec::with_capacity(n_targets),
             store: vec![0.0; size_store],
             swaps: vec![0; n],
-            slot_columns: pattern.iter().map(|&(_, j)| position[j]).collect(),
             column_max: vec![0.0; n],
             magnitudes: vec![0.0; n_magnitudes],
             saddle_targets: Vec::new(),
@@ -411,17 +416,7 @@ impl BlockLu {
         for (&s, &v) in slots.iter().zip(values) {
             self.store[s] += v;
         }
-        // The largest entry of each column of A (duplicates summed): the singularity rule's
-        // scale.
-        self.column_max.fill(0.0);
-        for (&s, &p) in slots.iter().zip(&self.slot_columns) {
-            let v = self.store[s].abs();
-            if !v.is_finite() {
-                return Err(Rejected);
-            }
-            let m = &mut self.column_max[p];
-            *m = m.max(v);
-        }
+        self.find_column_max()?;
         // |A| at the saddle columns of the diagonal blocks, to which each elimination adds its
         // |L| |U|.
         for sn in &self.supernodes {
@@ -569,6 +564,70 @@ impl BlockLu {
         Ok(pivots)
     }
 
+    /// The largest entry of each column of `A` (duplicates summed), the singularity rule's
+    /// scale, from the assembled storage (the entries of the filled structure that are not
+    /// in `A` hold 0); rejects a non-finite entry.
+    fn find_column_max(&mut self) -> Result<(), Rejected> {
+        self.column_max.fill(0.0);
+        let column_max = &mut self.column_max;
+        let mut take = |position: usize, entries: &[f64]| {
+            let m = &mut column_max[position];
+            for v in entries.iter().map(|v| v.abs()) {
+                if !v.is_finite() {
+                    return Err(Rejected);
+                }
+                *m = m.max(v);
+            }
+            Ok(())
+        };
+        for sn in &self.supernodes {
+            let (s, r) = (sn.size, sn.rows.len());
+            // Column-major: the diagonal block's and L's columns are the supernode's, U's
+            // the panel rows'.
+            let diag = self.store[sn.diag..sn.lower].chunks_exact(s);
+            for (c, column) in diag.enumerate() {
+                take(sn.start + c, column)?;
+            }
+            if r > 0 {
+                for (c, column) in self.store[sn.lower..sn.upper].chunks_exact(r).enumerate() {
+                    take(sn.start + c, column)?;
+                }
+            }
+            let upper = self.store[sn.upper..sn.upper + s * r].chunks_exact(s);
+            for (&p, column) in self.rows[sn.rows.clone()].iter().zip(upper) {
+                take(p, column)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The triplet positions `(i, j)` of the pattern whose storage indices are `slots` (as
+    /// [`BlockLu::new`] returned them): the pattern of the general LU, built from them when
+    /// it is first needed.
+    pub(super) fn pattern(&self, slots: &[usize]) -> Vec<(usize, usize)> {
+        let position = |t: usize| {
+            let sn = &self.supernodes[self.supernodes.partition_point(|sn| sn.diag <= t) - 1];
+            let (s, rows) = (sn.size, &self.rows[sn.rows.clone()]);
+            if t < sn.lower {
+                let o = t - sn.diag;
+                (sn.start + o % s, sn.start + o / s)
+            } else if t < sn.upper {
+                let o = t - sn.lower;
+                (rows[o % rows.len()], sn.start + o / rows.len())
+            } else {
+                let o = t - sn.upper;
+                (sn.start + o % s, rows[o / s])
+            }
+        };
+        slots
+            .iter()
+            .map(|&t| {
+                let (pa, pb) = position(t);
+                (self.unknown[pa], self.unknown[pb])
+            })
+            .collect()
+    }
+
     /// Solves `A x = b` (`transpose = false`) or `A^T x = b` in place with the last
     /// factorization.
     ///
@@ -677,11 +736,13 @@ impl BlockLu {
 }
 
 /// The sorted, deduplicated adjacency lists of a graph on `n` vertices given by its edges
-/// (both directions added, loops left out).
+/// (both directions added, loops left out). An edge repeating the last one added to its
+/// first vertex is skipped at once: the triplets of a block all give the same edge, and the
+/// lists stay as long as the graph's edges (not the matrix's entries) while they are built.
 fn graph(n: usize, edges: impl Iterator<Item = (usize, usize)>) -> Vec<Vec<usize>> {
-    let mut adjacency = vec![Vec::new(); n];
+    let mut adjacency: Vec<Vec<usize>> = vec![Vec::new(); n];
     for (a, b) in edges {
-        if a != b {
+        if a != b && adjacency[a].last() != Some(&b) {
             adjacency[a].push(b);
             adjacency[b].push(a);
         }

@@ -185,9 +185,8 @@ enum Inner {
 /// The block LU and the general sparse LU it hands the matrices it rejects to.
 struct BlockBackend {
     block: BlockLu,
-    /// The pattern, to build the general LU on the first rejection.
-    pattern: Vec<(usize, usize)>,
-    /// The general LU and the CSC position of each triplet.
+    /// The general LU (built on the first rejection, on the pattern the block LU recovers
+    /// from its storage indices) and the CSC position of each triplet.
     general: Option<(Vec<usize>, Box<SparseLu>)>,
     /// Rejections in a row; from [`REJECTIONS_BEFORE_GENERAL`] on, the block LU is no
     /// longer tried.
@@ -316,7 +315,6 @@ impl LinearSolver {
                 let (block, slots) = BlockLu::new(n, pattern, groups);
                 let backend = BlockBackend {
                     block,
-                    pattern: pattern.to_vec(),
                     general: None,
                     rejections: 0,
                     general_active: false,
@@ -673,7 +671,7 @@ impl BlockBackend {
             }
         }
         if self.general.is_none() {
-            let (slots, sparse) = SparseLu::new(n, &self.pattern)?;
+            let (slots, sparse) = SparseLu::new(n, &self.block.pattern(slots))?;
             self.general = Some((slots, Box::new(sparse)));
         }
         let (general_slots, general) = self.general.as_mut().expect("built above");
@@ -1268,6 +1266,11 @@ mod tests {
         let mut solver = LinearSolver::with_groups(sys.n, &sys.pattern, &groups).unwrap();
         assert_eq!(solver.backend(), Backend::Block);
         assert_block_lu_solves(&mut solver, &sys, &b, 1e-11);
+        // The pattern, for the general LU, from the storage index of each triplet.
+        let Inner::Block(block) = &solver.inner else {
+            unreachable!()
+        };
+        assert_eq!(block.block.pattern(&solver.slots), sys.pattern);
     }
 
     /// Normwise backward error `|A x - b| / (|A| |x| + |b|)` of a solve (infinity norms).
