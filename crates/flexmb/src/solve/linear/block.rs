@@ -64,8 +64,9 @@
 //!   (Duff, Erisman & Reid, "Direct methods for sparse matrices", Sect. 5.4). Schur
 //!   complements that grow with the mechanism do not: the block of the root of chain_1000
 //!   holds the articulated inertia of the whole chain, 3e8 times a link's own, and the
-//!   elimination's growth stays below 3; on 10 000 links it reaches 1e4. The solves'
-//!   normwise backward error `|A x - b| / (|A| |x| + |b|)` measured on both is 5e-16.
+//!   elimination's growth stays below 3 (2.75 on chains of 1000 to 100 000 links, for the
+//!   initial accelerations and the steps alike). The solves' normwise backward error
+//!   `|A x - b| / (|A| |x| + |b|)` measured on 1000 and 10 000 links is 5e-16.
 //!
 //! A matrix that fails a check is handed to the general sparse LU with full partial
 //! pivoting by the caller (the statics of a rigid mechanism, whose node blocks have no
