@@ -413,10 +413,7 @@ impl BlockLu {
         slots: &[usize],
         values: &[f64],
     ) -> Result<Pivots, Rejected> {
-        self.store.fill(0.0);
-        for (&s, &v) in slots.iter().zip(values) {
-            self.store[s] += v;
-        }
+        super::sum_triplets(&mut self.store, slots, values);
         self.find_column_max()?;
         // |A| at the saddle columns of the diagonal blocks, to which each elimination adds its
         // |L| |U|.

@@ -149,6 +149,10 @@ pub struct LinearSolver {
     inner: Inner,
 }
 
+/// What a backend's factorization gives: the pivots the singularity rule saw, or the
+/// error.
+type Factorized = Result<Pivots, LinearError>;
+
 /// What the singularity rule saw of the pivots of a factorization.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Pivots {
@@ -501,16 +505,8 @@ impl LinearSolver {
 
 impl DenseLu {
     /// Assembles, factors and checks the pivots.
-    fn factorize(
-        &mut self,
-        n: usize,
-        slots: &[usize],
-        values: &[f64],
-    ) -> Result<Pivots, LinearError> {
-        self.lu.fill(0.0);
-        for (&s, &v) in slots.iter().zip(values) {
-            self.lu[s] += v;
-        }
+    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Factorized {
+        sum_triplets(&mut self.lu, slots, values);
         // Entries outside the pattern are zero: the pattern slots suffice.
         let max_bits = slots.iter().map(|&s| abs_bits(self.lu[s])).max();
         let max_abs = check_max_abs(max_bits, || {
@@ -597,16 +593,8 @@ impl SparseLu {
     }
 
     /// Assembles, factors and checks the pivots.
-    fn factorize(
-        &mut self,
-        n: usize,
-        slots: &[usize],
-        values: &[f64],
-    ) -> Result<Pivots, LinearError> {
-        self.values.fill(0.0);
-        for (&s, &v) in slots.iter().zip(values) {
-            self.values[s] += v;
-        }
+    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Factorized {
+        sum_triplets(&mut self.values, slots, values);
         let max_bits = self.values.iter().map(|&v| abs_bits(v)).max();
         let max_abs = check_max_abs(max_bits, || {
             let k = self.values.iter().position(|v| !v.is_finite())?;
@@ -654,12 +642,7 @@ impl SparseLu {
 impl BlockBackend {
     /// The block LU, or the general LU for a matrix the block LU rejects (see
     /// [`REJECTIONS_BEFORE_GENERAL`]).
-    fn factorize(
-        &mut self,
-        n: usize,
-        slots: &[usize],
-        values: &[f64],
-    ) -> Result<Pivots, LinearError> {
+    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Factorized {
         self.general_active = false;
         if self.rejections < REJECTIONS_BEFORE_GENERAL {
             match self.block.factorize(slots, values) {
@@ -705,6 +688,15 @@ fn check_max_abs(
         }),
         Some(bits) if bits > 0 => Ok(f64::from_bits(bits)),
         _ => Err(LinearError::Singular { column: None }),
+    }
+}
+
+/// The matrix of the triplets `values` in `storage`: each added at its slot, in the order of
+/// the triplets (duplicates summed), every other entry zero.
+fn sum_triplets(storage: &mut [f64], slots: &[usize], values: &[f64]) {
+    storage.fill(0.0);
+    for (&s, &v) in slots.iter().zip(values) {
+        storage[s] += v;
     }
 }
 
@@ -870,18 +862,24 @@ mod tests {
         (0..n).map(|_| rng.uniform(-1.0, 1.0)).collect()
     }
 
-    /// Solves with the given backend and returns x, checking the relative
-    /// residual.
-    fn solve_checked(sys: &System, backend: Backend, b: &[f64], transpose: bool) -> Vec<f64> {
-        let mut solver = LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
-        assert_eq!(solver.backend(), backend);
-        solver.factorize(&sys.values).unwrap();
+    /// The solution of `A x = b` (of `A^T x = b` if `transpose`) with `solver`'s factors.
+    fn solved(solver: &mut LinearSolver, b: &[f64], transpose: bool) -> Vec<f64> {
         let mut x = b.to_vec();
         if transpose {
             solver.solve_transpose_in_place(&mut x);
         } else {
             solver.solve_in_place(&mut x);
         }
+        x
+    }
+
+    /// Solves with the given backend and returns x, checking the relative
+    /// residual.
+    fn solve_checked(sys: &System, backend: Backend, b: &[f64], transpose: bool) -> Vec<f64> {
+        let mut solver = LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
+        assert_eq!(solver.backend(), backend);
+        solver.factorize(&sys.values).unwrap();
+        let x = solved(&mut solver, b, transpose);
         assert!(x.iter().all(|v| v.is_finite()));
         let ax = matvec(sys.n, &sys.pattern, &sys.values, &x, transpose);
         let res: Vec<f64> = ax.iter().zip(b).map(|(a, b)| a - b).collect();
@@ -1283,15 +1281,19 @@ mod tests {
         norm_inf(&r) / (norm_inf(&ax_abs) + norm_inf(b))
     }
 
-    /// `sys` with the entries of unknown `copy`'s row and column set to those of `of`'s
-    /// (a repeated constraint row), except the diagonal.
-    fn repeat_row(sys: &System, copy: usize, of: usize) -> System {
-        let at: std::collections::HashMap<(usize, usize), f64> = sys
-            .pattern
+    /// The entries of `sys` by position.
+    fn entries(sys: &System) -> std::collections::HashMap<(usize, usize), f64> {
+        sys.pattern
             .iter()
             .copied()
             .zip(sys.values.iter().copied())
-            .collect();
+            .collect()
+    }
+
+    /// `sys` with the entries of unknown `copy`'s row and column set to those of `of`'s
+    /// (a repeated constraint row), except the diagonal.
+    fn repeat_row(sys: &System, copy: usize, of: usize) -> System {
+        let at = entries(sys);
         let values = sys
             .pattern
             .iter()
@@ -1332,12 +1334,7 @@ mod tests {
         assert!(solver.pivot_margin().unwrap() > 1e10);
         let b = random_rhs(sys.n, 82);
         for transpose in [false, true] {
-            let mut x = b.clone();
-            if transpose {
-                solver.solve_transpose_in_place(&mut x);
-            } else {
-                solver.solve_in_place(&mut x);
-            }
+            let x = solved(&mut solver, &b, transpose);
             assert!(backward_error(&sys, &x, &b, transpose) < 1e-15);
         }
         // A joint's row repeated: its pivot cancels to the rounding level of the terms
@@ -1361,12 +1358,7 @@ mod tests {
         let first = sys.n;
         let rows = 6 * nb + nc * 10;
         sys.n += 3;
-        let at: std::collections::HashMap<(usize, usize), f64> = sys
-            .pattern
-            .iter()
-            .copied()
-            .zip(sys.values.iter().copied())
-            .collect();
+        let at = entries(&sys);
         for r in 0..3 {
             for j in 6 * 9..6 * 11 {
                 let v = at[&(rows + r, j)];
@@ -1391,12 +1383,7 @@ mod tests {
         };
         assert!(!block.general_active, "the block LU took this matrix");
         for transpose in [false, true] {
-            let mut x = b.to_vec();
-            if transpose {
-                solver.solve_transpose_in_place(&mut x);
-            } else {
-                solver.solve_in_place(&mut x);
-            }
+            let x = solved(solver, b, transpose);
             let expected = solve_checked(sys, Backend::Dense, b, transpose);
             assert_close(&expected, &x, tol);
         }
