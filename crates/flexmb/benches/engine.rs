@@ -8,6 +8,8 @@
 //! FLEXMB_THREADS=2 cargo bench -p flexmb --bench engine -- beam_10000  # on 2 threads
 //! cargo bench -p flexmb --bench engine -- threads   # the table of 1 against 2 threads
 //! FLEXMB_SPHERES_OUT=s.json cargo bench -p flexmb --bench engine -- spheres_100  # + events
+//! cargo bench -p flexmb --bench engine -- check     # flexmb check of 10 000 to 100 000 links
+//! cargo bench -p flexmb --bench engine -- check_50000  # one of them
 //! ```
 //! `FLEXMB_SPHERES_OUT` also writes spheres_n's events and final state (JSON) for
 //! `benches/exudyn_spheres_100.py`, the same problem in Exudyn.
@@ -603,6 +605,67 @@ impl SphereEvents {
     }
 }
 
+/// CPU seconds (user and system) of this process so far, from `/proc/self/stat` (Linux,
+/// 100 ticks a second): on a shared machine the wall time counts the other processes too.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // The fields after the command name (in parentheses): utime and stime are the 12th and
+    // 13th.
+    let fields: Vec<&str> = stat
+        .rfind(')')
+        .map_or("", |end| &stat[end + 1..])
+        .split_whitespace()
+        .collect();
+    let ticks = |i: usize| fields.get(i).and_then(|f| f.parse::<f64>().ok());
+    match (ticks(11), ticks(12)) {
+        (Some(user), Some(system)) => (user + system) / 100.0,
+        _ => f64::NAN,
+    }
+}
+
+/// What `flexmb check` does with an `n`-link chain (the file of [`chain_file`]), phase by
+/// phase in CPU seconds: reading (TOML, the model, `Model::validate`), the solver's set-up
+/// (the layout, the iteration matrix's pattern, the block LU's structure: `Data::new`), the
+/// consistent initial accelerations (assembly, factorization, solve); then the wall time of
+/// the three and the peak memory of the process, also per link.
+fn check(n: usize) {
+    let path = chain_file(n);
+    let (wall, start) = (Instant::now(), cpu_seconds());
+    let file = read_model_file(&path, &[]).expect("model file");
+    let read = cpu_seconds();
+    let Analysis::Dynamic(settings) = file.analysis else {
+        unreachable!("the chain is dynamic")
+    };
+    let (layout, _) = flexmb::solve::prepare_layout(&file.model);
+    let mut state = State::initial(&file.model, &layout);
+    let mut data = flexmb::Data::new(&file.model, layout).expect("solver");
+    let set_up = cpu_seconds();
+    let load = settings.load_factor_at(0.0);
+    flexmb::solve::initial_accelerations(&file.model, &mut data, &mut state, load)
+        .expect("consistent");
+    let initial = cpu_seconds();
+    let wall = wall.elapsed().as_secs_f64();
+    let memory = peak_memory_mb();
+    println!(
+        "| {n} | {:.2} | {:.2} | {:.2} | {:.2} | {wall:.2} | {:.1} | {memory:.0} | {:.1} |",
+        read - start,
+        set_up - read,
+        initial - set_up,
+        initial - start,
+        (initial - start) * 1e6 / n as f64,
+        memory * 1024.0 / n as f64,
+    );
+}
+
+/// [`check`] of 10 000, 50 000 and 100 000 links, each in its own process.
+fn check_table() {
+    println!("| links | read [CPU s] | solver set-up [CPU s] | initial accelerations [CPU s] | total [CPU s] | wall [s] | CPU/link [us] | peak memory [MB] | memory/link [kB] |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for n in [10_000, 50_000, 100_000] {
+        print_child(&format!("check_{n}"));
+    }
+}
+
 fn run_case(case: &str) {
     match case {
         "right_angle_cantilever" => right_angle_cantilever(),
@@ -613,6 +676,7 @@ fn run_case(case: &str) {
         "heavy_top_updates" => heavy_top_updates(),
         "lie_updates_other" => lie_updates_other(),
         c if c.starts_with("chain_") => chain(c[6..].parse().expect("chain size")),
+        c if c.starts_with("check_") => check(c[6..].parse().expect("chain size")),
         c if c.starts_with("springs_") => springs(c[8..].parse().expect("chain size")),
         c if c.starts_with("spheres_") => spheres(c[8..].parse().expect("number of balls")),
         other => panic!("unknown case {other}; cases: {CASES:?}"),
@@ -682,15 +746,12 @@ fn main() {
         .skip(1)
         .filter(|a| !a.starts_with("--"))
         .collect();
-    if args.first().map(String::as_str) == Some("threads") {
-        threads_table();
-        return;
+    match args.first().map(String::as_str) {
+        Some("threads") => return threads_table(),
+        Some("check") => return check_table(),
+        Some(case) => return run_case(case),
+        None => {}
     }
-    if let Some(case) = args.first() {
-        run_case(case);
-        return;
-    }
-    let exe = std::env::current_exe().expect("own path");
     for case in CASES {
         if *case == "right_angle_cantilever" {
             println!("\n| case | steps | solve time [ms] | time/step [us] | time/step/element [us] | Newton it./step |");
@@ -711,13 +772,19 @@ fn main() {
             println!("\n| case | steps | solve time [s] | time/step [us] | time/step/link [us] | Newton it./step | peak memory [MB] |");
             println!("|---|---|---|---|---|---|---|");
         }
-        let out = std::process::Command::new(&exe)
-            .arg(case)
-            .output()
-            .expect("child");
-        print!("{}", String::from_utf8_lossy(&out.stdout));
-        if !out.status.success() {
-            eprintln!("{case} failed: {}", String::from_utf8_lossy(&out.stderr));
-        }
+        print_child(case);
+    }
+}
+
+/// Runs `case` in a child process (its peak memory its own) and prints what it printed.
+fn print_child(case: &str) {
+    let exe = std::env::current_exe().expect("own path");
+    let out = std::process::Command::new(&exe)
+        .arg(case)
+        .output()
+        .expect("child");
+    print!("{}", String::from_utf8_lossy(&out.stdout));
+    if !out.status.success() {
+        eprintln!("{case} failed: {}", String::from_utf8_lossy(&out.stderr));
     }
 }

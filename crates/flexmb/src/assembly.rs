@@ -326,6 +326,8 @@ pub fn pattern(model: &Model, layout: &Layout) -> Vec<(usize, usize)> {
         &mut LocalBuffers::default(),
         &mut Pattern(&mut p),
     );
+    // It is kept for the whole run: without the room the pushes left (up to a third).
+    p.shrink_to_fit();
     p
 }
 

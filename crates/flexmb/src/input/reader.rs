@@ -187,6 +187,26 @@ pub(crate) fn name_list<'n>(names: impl IntoIterator<Item = &'n str>, max: usize
     s
 }
 
+/// A finite number (integer or float), or the message saying why `v` is not one.
+fn number(v: &DeValue<'_>) -> std::result::Result<f64, String> {
+    let v = match v {
+        DeValue::Integer(i) => match i64::from_str_radix(i.as_str(), i.radix()) {
+            Ok(v) => v as f64,
+            Err(_) => return Err(format!("integer {i} is out of range")),
+        },
+        DeValue::Float(f) => match f.as_str().parse::<f64>() {
+            Ok(v) => v,
+            Err(_) => return Err(format!("cannot read the number {f}")),
+        },
+        v => return Err(format!("expected a number, got {}", describe(v))),
+    };
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("must be a finite number, got {v}"))
+    }
+}
+
 /// One value of the file with its path, for typed conversions.
 #[derive(Clone)]
 pub(crate) struct Field<'a> {
@@ -211,22 +231,7 @@ impl<'a> Field<'a> {
 
     /// A finite number (integer or float).
     pub fn f64(&self) -> Result<f64> {
-        let v = match self.value.get_ref() {
-            DeValue::Integer(i) => match i64::from_str_radix(i.as_str(), i.radix()) {
-                Ok(v) => v as f64,
-                Err(_) => return Err(self.err(format!("integer {i} is out of range"))),
-            },
-            DeValue::Float(f) => match f.as_str().parse::<f64>() {
-                Ok(v) => v,
-                Err(_) => return Err(self.err(format!("cannot read the number {f}"))),
-            },
-            _ => return Err(self.expected("a number")),
-        };
-        if v.is_finite() {
-            Ok(v)
-        } else {
-            Err(self.err(format!("must be a finite number, got {v}")))
-        }
+        number(self.value.get_ref()).map_err(|message| self.err(message))
     }
 
     /// A number in `[lo, hi]`.
@@ -263,18 +268,21 @@ impl<'a> Field<'a> {
 
     /// A string among `allowed`.
     pub fn choice(&self, allowed: &[&'static str]) -> Result<&'static str> {
-        let list = allowed
-            .iter()
-            .map(|a| format!("\"{a}\""))
-            .collect::<Vec<_>>()
-            .join(", ");
+        let list = || {
+            allowed
+                .iter()
+                .map(|a| format!("\"{a}\""))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         let s = match self.value.get_ref() {
             DeValue::String(s) => s.as_ref(),
-            _ => return Err(self.expected(&format!("one of {list}"))),
+            _ => return Err(self.expected(&format!("one of {}", list()))),
         };
         allowed.iter().find(|a| **a == s).copied().ok_or_else(|| {
             self.err(format!(
-                "must be one of {list}, got \"{}\"{}",
+                "must be one of {}, got \"{}\"{}",
+                list(),
                 clip(s, QUOTED),
                 suggestion(s, allowed.iter().copied())
             ))
@@ -303,9 +311,10 @@ impl<'a> Field<'a> {
             DeValue::Array(a) if a.len() == n => a,
             _ => return Err(self.expected(what)),
         };
+        // The element's field (its path) is made for an error only.
         a.iter()
             .enumerate()
-            .map(|(i, v)| self.elem(i, v).f64())
+            .map(|(i, v)| number(v.get_ref()).map_err(|message| self.elem(i, v).err(message)))
             .collect()
     }
 
@@ -376,11 +385,14 @@ pub(crate) struct Table<'a> {
 
 impl<'a> Table<'a> {
     pub fn child_path(&self, key: &str) -> String {
-        if self.path.is_empty() {
-            key.to_string()
-        } else {
-            format!("{}.{key}", self.path)
+        // Every field read makes its path: without the formatting machinery.
+        let mut path = String::with_capacity(self.path.len() + 1 + key.len());
+        if !self.path.is_empty() {
+            path.push_str(&self.path);
+            path.push('.');
         }
+        path.push_str(key);
+        path
     }
 
     pub fn has(&self, key: &str) -> bool {

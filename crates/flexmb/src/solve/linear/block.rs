@@ -38,24 +38,35 @@
 //! Pivoting is static between supernodes. That is safe only when the diagonal blocks are
 //! well conditioned, which the factorization checks for each supernode:
 //!
-//! * every pivot against [`PIVOT_TOLERANCE`](super::PIVOT_TOLERANCE) times the largest
-//!   entry of its column of `A`. The other backends compare with the largest entry of the
-//!   whole matrix; here the pivots of a joint's multipliers are `B S^-1 B^T` with `S` the
-//!   articulated inertia of everything eliminated before (on a chain of 10 000 links, about
-//!   1e12 times a link's own), legitimately small against the matrix but not against the
-//!   joint's own column `B^T`; a singular matrix (redundant joint rows, a free massless
-//!   node) leaves a pivot at the rounding level of that column;
+//! * every pivot against [`PIVOT_TOLERANCE`](super::PIVOT_TOLERANCE) times a scale of its
+//!   own. A *regular* column (a node's increments, an element's states: a diagonal block of
+//!   its own in `A`) is judged against the largest entry of its column of `A`, as the other
+//!   backends judge every column: a free massless node leaves a pivot at the rounding level
+//!   of that column. A *saddle* column (a joint's multipliers and stabilization unknowns)
+//!   has no such block: its pivot is made by the elimination, `-B S^-1 B^T` with `S` the
+//!   articulated inertia of everything eliminated before, and on a chain of `n` links `S`
+//!   grows as `n^3` (the moment of inertia of the links beyond a joint about its axes
+//!   normal to the chain: 3e8 times a link's own at 1000 links, 3e14 at 100 000), so that
+//!   the pivot falls below any fixed fraction of the joint's column `B^T` (below 1e-13 of
+//!   it from 31 000 links on) with nothing cancelling in it. A saddle pivot is judged
+//!   against the magnitude of the terms that formed it, `|A| + |L| |U|` at its position
+//!   (the sum of `|l_pt| |u_tc|` over every column eliminated before, in this supernode or
+//!   in the earlier ones whose updates reach it), which bounds its rounding error (Higham,
+//!   "Accuracy and stability of numerical algorithms", 2002, Thm. 9.3): redundant joint
+//!   rows, or a loop-closing joint that repeats another, cancel it to the rounding level of
+//!   that scale;
 //! * the growth of the elimination: the largest product `max_i |l_ic| max_j |u_cj|` of a
 //!   column of `L` and the matching row of `U` (one term of `|L| |U|`, which bounds the
-//!   componentwise backward error of an LU, Higham, "Accuracy and stability of numerical
-//!   algorithms", 2002, Thm. 9.3), against the largest entry of the supernode's blocks
+//!   componentwise backward error of an LU, Higham 2002, Thm. 9.3), against the largest
+//!   entry of the supernode's blocks
 //!   before its elimination, at most [`GROWTH_LIMIT`]. A static pivot that is small
 //!   against its own column makes this large, as threshold partial pivoting would see it
 //!   (Duff, Erisman & Reid, "Direct methods for sparse matrices", Sect. 5.4). Schur
 //!   complements that grow with the mechanism do not: the block of the root of chain_1000
 //!   holds the articulated inertia of the whole chain, 3e8 times a link's own, and the
-//!   elimination's growth stays below 3; on 10 000 links it reaches 1e4. The solves'
-//!   normwise backward error `|A x - b| / (|A| |x| + |b|)` measured on both is 5e-16.
+//!   elimination's growth stays below 3 (2.75 on chains of 1000 to 100 000 links, for the
+//!   initial accelerations and the steps alike). The solves' normwise backward error
+//!   `|A x - b| / (|A| |x| + |b|)` measured on 1000 and 10 000 links is 5e-16.
 //!
 //! A matrix that fails a check is handed to the general sparse LU with full partial
 //! pivoting by the caller (the statics of a rigid mechanism, whose node blocks have no
@@ -65,6 +76,8 @@
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::amd;
 use faer::sparse::SymbolicSparseColMatRef;
+
+use super::Pivots;
 
 /// Largest growth of an elimination the block LU accepts (see the module documentation).
 pub const GROWTH_LIMIT: f64 = 1e6;
@@ -130,6 +143,15 @@ struct Supernode {
     /// Offset in `BlockLu::targets` of the storage index of each entry of the update
     /// `L U` (`rows x rows`, column-major).
     targets: usize,
+    /// The first of the supernode's saddle columns (a joint's multipliers and stabilization
+    /// unknowns, after the node's own; `size` if none; 0 for a cut supernode).
+    saddle: usize,
+    /// Offset in `BlockLu::magnitudes` of the magnitudes of the saddle columns of the
+    /// diagonal block (`size x (size - saddle)`, column-major).
+    magnitude: usize,
+    /// Range in `BlockLu::saddle_targets` of the entries of the update `L U` that land in the
+    /// saddle columns of a later diagonal block.
+    saddle_targets: std::ops::Range<usize>,
 }
 
 pub(super) struct BlockLu {
@@ -144,9 +166,14 @@ pub(super) struct BlockLu {
     /// Row interchanges of the diagonal blocks, LAPACK style (row `c` of a block was swapped
     /// with row `swaps[start + c]` of the block, in the order of `c`).
     swaps: Vec<usize>,
-    /// The position of the column of each triplet, and the largest entry of each column.
-    slot_columns: Vec<usize>,
+    /// The largest entry of each column of `A`, by position.
     column_max: Vec<f64>,
+    /// `|A| + |L| |U|` at the saddle columns of the diagonal blocks, accumulated as the
+    /// elimination goes (the rounding scale of their pivots, module documentation).
+    magnitudes: Vec<f64>,
+    /// `(entry of the update L U, index in magnitudes)` of the entries that land in a saddle
+    /// column of a later diagonal block.
+    saddle_targets: Vec<(usize, usize)>,
     /// A vector in elimination order (solves) and one column of an update.
     work: Vec<f64>,
     column: Vec<f64>,
@@ -214,6 +241,12 @@ impl BlockLu {
             supernode_members[s].extend_from_slice(&members[g]);
         }
         let n_super = supernode_members.len();
+        // The host's own unknowns come first, then those of the groups it hosts: the saddle
+        // columns are the last of the supernode (all of a cut one).
+        let saddle_start: Vec<usize> = (0..n_groups)
+            .filter(|&g| host[g] == g)
+            .map(|g| if regular(g) { members[g].len() } else { 0 })
+            .collect();
         let supernode_graph = graph(
             n_super,
             adjacency.iter().enumerate().flat_map(|(g, adj)| {
@@ -248,14 +281,21 @@ impl BlockLu {
 
         // Rows of the panels: the couplings of A (symmetrized), then the rows each supernode
         // passes to its parent in the elimination tree.
+        // (`added[p]`: the last supernode given position `p`, which skips at once the
+        // repetitions within a block of triplets.)
         let mut panel_rows: Vec<Vec<usize>> = vec![Vec::new(); n_super];
+        let mut added = vec![usize::MAX; n];
         for &(i, j) in pattern {
             let (pi, pj) = (position[i], position[j]);
             let (ki, kj) = (supernode_at[pi], supernode_at[pj]);
-            if ki < kj {
-                panel_rows[ki].push(pj);
-            } else if kj < ki {
-                panel_rows[kj].push(pi);
+            let (k, p) = match ki.cmp(&kj) {
+                std::cmp::Ordering::Less => (ki, pj),
+                std::cmp::Ordering::Greater => (kj, pi),
+                std::cmp::Ordering::Equal => continue,
+            };
+            if added[p] != k {
+                added[p] = k;
+                panel_rows[k].push(p);
             }
         }
         for k in 0..n_super {
@@ -273,9 +313,8 @@ impl BlockLu {
         // Storage.
         let mut rows = Vec::new();
         let mut supernodes = Vec::with_capacity(n_super);
-        let mut size_store = 0;
-        let mut n_targets = 0;
-        for k in 0..n_super {
+        let (mut size_store, mut n_targets, mut n_magnitudes) = (0, 0, 0);
+        for (k, &s) in order.iter().enumerate() {
             let (start, size) = (starts[k], starts[k + 1] - starts[k]);
             let r = panel_rows[k].len();
             let first = rows.len();
@@ -288,9 +327,13 @@ impl BlockLu {
                 lower: size_store + size * size,
                 upper: size_store + size * size + r * size,
                 targets: n_targets,
+                saddle: saddle_start[s],
+                magnitude: n_magnitudes,
+                saddle_targets: 0..0,
             });
             size_store += size * size + 2 * r * size;
             n_targets += r * r;
+            n_magnitudes += size * (size - saddle_start[s]);
         }
         let mut lu = Self {
             unknown,
@@ -299,21 +342,27 @@ impl BlockLu {
             targets: Vec::with_capacity(n_targets),
             store: vec![0.0; size_store],
             swaps: vec![0; n],
-            slot_columns: pattern.iter().map(|&(_, j)| position[j]).collect(),
             column_max: vec![0.0; n],
+            magnitudes: vec![0.0; n_magnitudes],
+            saddle_targets: Vec::new(),
             work: vec![0.0; n],
             column: Vec::new(),
         };
         let mut max_rows = 0;
         for k in 0..n_super {
-            let panel = &lu.supernodes[k].rows;
+            let panel = lu.supernodes[k].rows.clone();
+            let first = lu.saddle_targets.len();
             max_rows = max_rows.max(panel.len());
-            for &pb in &lu.rows[panel.clone()] {
-                for &pa in &lu.rows[panel.clone()] {
+            for (b, &pb) in lu.rows[panel.clone()].iter().enumerate() {
+                for (a, &pa) in lu.rows[panel.clone()].iter().enumerate() {
                     let t = lu.index(&supernode_at, pa, pb);
                     lu.targets.push(t);
+                    if let Some(m) = lu.magnitude_index(&supernode_at, pa, pb) {
+                        lu.saddle_targets.push((a + b * panel.len(), m));
+                    }
                 }
             }
+            lu.supernodes[k].saddle_targets = first..lu.saddle_targets.len();
         }
         lu.column = vec![0.0; max_rows];
         let slots = pattern
@@ -344,34 +393,45 @@ impl BlockLu {
         }
     }
 
+    /// Index in `magnitudes` of the entry at positions `(pa, pb)`, if it lies in a saddle
+    /// column of a diagonal block.
+    fn magnitude_index(&self, supernode_at: &[usize], pa: usize, pb: usize) -> Option<usize> {
+        let k = supernode_at[pb];
+        let s = &self.supernodes[k];
+        let (i, j) = (pa.checked_sub(s.start)?, pb - s.start);
+        (supernode_at[pa] == k && j >= s.saddle).then(|| s.magnitude + i + (j - s.saddle) * s.size)
+    }
+
     /// Number of stored entries (diagonal blocks and panels, fill included).
     pub(super) fn stored(&self) -> usize {
         self.store.len()
     }
 
-    /// Assembles and factorizes; returns the smallest `|pivot|` relative to the largest
-    /// entry of its column of `A`.
-    pub(super) fn factorize(&mut self, slots: &[usize], values: &[f64]) -> Result<f64, Rejected> {
-        self.store.fill(0.0);
-        for (&s, &v) in slots.iter().zip(values) {
-            self.store[s] += v;
-        }
-        // The largest entry of each column of A (duplicates summed): the singularity rule's
-        // scale.
-        self.column_max.fill(0.0);
-        for (&s, &p) in slots.iter().zip(&self.slot_columns) {
-            let v = self.store[s].abs();
-            if !v.is_finite() {
-                return Err(Rejected);
+    /// Assembles and factorizes; returns what the singularity rule saw of the pivots.
+    pub(super) fn factorize(
+        &mut self,
+        slots: &[usize],
+        values: &[f64],
+    ) -> Result<Pivots, Rejected> {
+        super::sum_triplets(&mut self.store, slots, values);
+        self.find_column_max()?;
+        // |A| at the saddle columns of the diagonal blocks, to which each elimination adds its
+        // |L| |U|.
+        for sn in &self.supernodes {
+            let (s, q) = (sn.size, sn.saddle);
+            let block = &self.store[sn.diag + q * s..sn.diag + s * s];
+            let magnitudes = &mut self.magnitudes[sn.magnitude..sn.magnitude + block.len()];
+            for (m, a) in magnitudes.iter_mut().zip(block) {
+                *m = a.abs();
             }
-            let m = &mut self.column_max[p];
-            *m = m.max(v);
         }
-        let mut min_ratio = f64::INFINITY;
+        let mut pivots = Pivots::default();
         for k in 0..self.supernodes.len() {
             let sn = &self.supernodes[k];
-            let (s, r, start) = (sn.size, sn.rows.len(), sn.start);
+            let (s, r, start, q) = (sn.size, sn.rows.len(), sn.start, sn.saddle);
             let (diag, lower, upper, targets) = (sn.diag, sn.lower, sn.upper, sn.targets);
+            let magnitudes = &mut self.magnitudes[sn.magnitude..sn.magnitude + s * (s - q)];
+            let saddle_targets = &self.saddle_targets[sn.saddle_targets.clone()];
             // This supernode's blocks, and the storage of the later ones (the updates').
             let (mine, later) = self.store.split_at_mut(upper + s * r);
             let (mine, u) = mine.split_at_mut(upper);
@@ -395,13 +455,24 @@ impl BlockLu {
                     for j in 0..r {
                         u.swap(c + j * s, p + j * s);
                     }
+                    for j in 0..s - q {
+                        magnitudes.swap(c + j * s, p + j * s);
+                    }
                 }
+                // The singularity rule (module documentation): a regular column's pivot
+                // against its column of A, a saddle column's against |A| + |L| |U| at its
+                // position.
                 let pivot = d[c + c * s];
-                let scale = self.column_max[start + c];
+                let column = self.column_max[start + c];
+                let scale = if c < q {
+                    column
+                } else {
+                    magnitudes[c + (c - q) * s]
+                };
                 if !pivot.is_finite() || pivot.abs() <= super::PIVOT_TOLERANCE * scale {
                     return Err(Rejected);
                 }
-                min_ratio = min_ratio.min(pivot.abs() / scale);
+                pivots.add(pivot, column, scale);
                 let inv = 1.0 / pivot;
                 for i in c + 1..s {
                     d[i + c * s] *= inv;
@@ -411,6 +482,12 @@ impl BlockLu {
                     if f != 0.0 {
                         for i in c + 1..s {
                             d[i + j * s] -= d[i + c * s] * f;
+                        }
+                        if j >= q {
+                            let m = &mut magnitudes[(j - q) * s..(j - q + 1) * s];
+                            for i in c + 1..s {
+                                m[i] += (d[i + c * s] * f).abs();
+                            }
                         }
                     }
                 }
@@ -455,7 +532,13 @@ impl BlockLu {
             if growth.is_nan() || growth > GROWTH_LIMIT {
                 return Err(Rejected);
             }
-            // Update of the later blocks: S -= L U, one column at a time.
+            // Update of the later blocks: S -= L U, one column at a time; |L| |U| added to the
+            // magnitudes of the saddle columns it reaches.
+            for &(e, m) in saddle_targets {
+                let (a, b) = (e % r, e / r);
+                let lu: f64 = (0..s).map(|c| (l[c * r + a] * u[c + b * s]).abs()).sum();
+                self.magnitudes[m] += lu;
+            }
             for b in 0..r {
                 let column = &mut self.column[..r];
                 column.fill(0.0);
@@ -476,7 +559,71 @@ impl BlockLu {
                 }
             }
         }
-        Ok(min_ratio)
+        Ok(pivots)
+    }
+
+    /// The largest entry of each column of `A` (duplicates summed), the singularity rule's
+    /// scale, from the assembled storage (the entries of the filled structure that are not
+    /// in `A` hold 0); rejects a non-finite entry.
+    fn find_column_max(&mut self) -> Result<(), Rejected> {
+        self.column_max.fill(0.0);
+        let column_max = &mut self.column_max;
+        let mut take = |position: usize, entries: &[f64]| {
+            let m = &mut column_max[position];
+            for v in entries.iter().map(|v| v.abs()) {
+                if !v.is_finite() {
+                    return Err(Rejected);
+                }
+                *m = m.max(v);
+            }
+            Ok(())
+        };
+        for sn in &self.supernodes {
+            let (s, r) = (sn.size, sn.rows.len());
+            // Column-major: the diagonal block's and L's columns are the supernode's, U's
+            // the panel rows'.
+            let diag = self.store[sn.diag..sn.lower].chunks_exact(s);
+            for (c, column) in diag.enumerate() {
+                take(sn.start + c, column)?;
+            }
+            if r > 0 {
+                for (c, column) in self.store[sn.lower..sn.upper].chunks_exact(r).enumerate() {
+                    take(sn.start + c, column)?;
+                }
+            }
+            let upper = self.store[sn.upper..sn.upper + s * r].chunks_exact(s);
+            for (&p, column) in self.rows[sn.rows.clone()].iter().zip(upper) {
+                take(p, column)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The triplet positions `(i, j)` of the pattern whose storage indices are `slots` (as
+    /// [`BlockLu::new`] returned them): the pattern of the general LU, built from them when
+    /// it is first needed.
+    pub(super) fn pattern(&self, slots: &[usize]) -> Vec<(usize, usize)> {
+        let position = |t: usize| {
+            let sn = &self.supernodes[self.supernodes.partition_point(|sn| sn.diag <= t) - 1];
+            let (s, rows) = (sn.size, &self.rows[sn.rows.clone()]);
+            if t < sn.lower {
+                let o = t - sn.diag;
+                (sn.start + o % s, sn.start + o / s)
+            } else if t < sn.upper {
+                let o = t - sn.lower;
+                (rows[o % rows.len()], sn.start + o / rows.len())
+            } else {
+                let o = t - sn.upper;
+                (sn.start + o % s, rows[o / s])
+            }
+        };
+        slots
+            .iter()
+            .map(|&t| {
+                let (pa, pb) = position(t);
+                (self.unknown[pa], self.unknown[pb])
+            })
+            .collect()
     }
 
     /// Solves `A x = b` (`transpose = false`) or `A^T x = b` in place with the last
@@ -587,11 +734,13 @@ impl BlockLu {
 }
 
 /// The sorted, deduplicated adjacency lists of a graph on `n` vertices given by its edges
-/// (both directions added, loops left out).
+/// (both directions added, loops left out). An edge repeating the last one added to its
+/// first vertex is skipped at once: the triplets of a block all give the same edge, and the
+/// lists stay as long as the graph's edges (not the matrix's entries) while they are built.
 fn graph(n: usize, edges: impl Iterator<Item = (usize, usize)>) -> Vec<Vec<usize>> {
-    let mut adjacency = vec![Vec::new(); n];
+    let mut adjacency: Vec<Vec<usize>> = vec![Vec::new(); n];
     for (a, b) in edges {
-        if a != b {
+        if a != b && adjacency[a].last() != Some(&b) {
             adjacency[a].push(b);
             adjacency[b].push(a);
         }

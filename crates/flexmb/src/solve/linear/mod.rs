@@ -54,7 +54,10 @@
 //! pivot is exactly zero, non-finite, or `|u_kk| <= PIVOT_TOLERANCE * max_i
 //! |a_ik|` (with [`PIVOT_TOLERANCE`] `= 1e-13`, relative to the largest
 //! absolute entry of the pivot's own column of the assembled matrix, as the
-//! block LU does). A matrix with a non-finite entry is rejected as well. The
+//! block LU does for a node's columns; for a joint's multipliers, whose pivots
+//! the elimination makes from nothing in their own diagonal block, the block LU
+//! compares with the terms that formed the pivot instead, see [`block`]). A
+//! matrix with a non-finite entry is rejected as well. The
 //! reported column is the unknown (column of `A`) whose elimination produced
 //! the bad pivot; it is `None` when no single unknown can be blamed (all-zero
 //! matrix).
@@ -141,9 +144,40 @@ pub struct LinearSolver {
     factorizations: usize,
     /// Whether the last call to `factorize` succeeded.
     factorized: bool,
-    /// `min_k |u_kk| / max_ij |a_ij|` of the last successful factorization.
-    min_pivot_ratio: f64,
+    /// The pivots of the last successful factorization.
+    pivots: Pivots,
     inner: Inner,
+}
+
+/// What a backend's factorization gives: the pivots the singularity rule saw, or the
+/// error.
+type Factorized = Result<Pivots, LinearError>;
+
+/// What the singularity rule saw of the pivots of a factorization.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Pivots {
+    /// The smallest `|pivot|` relative to its reference ([`LinearSolver::min_pivot_ratio`]).
+    ratio: f64,
+    /// The smallest `|pivot| / (PIVOT_TOLERANCE * scale)`, with the scale the rule judged it
+    /// against ([`LinearSolver::pivot_margin`]).
+    margin: f64,
+}
+
+impl Default for Pivots {
+    fn default() -> Self {
+        Self {
+            ratio: f64::INFINITY,
+            margin: f64::INFINITY,
+        }
+    }
+}
+
+impl Pivots {
+    /// Takes in an accepted pivot, its reference for the ratio and its rule's scale.
+    fn add(&mut self, pivot: f64, reference: f64, scale: f64) {
+        self.ratio = self.ratio.min(pivot.abs() / reference);
+        self.margin = self.margin.min(pivot.abs() / (PIVOT_TOLERANCE * scale));
+    }
 }
 
 enum Inner {
@@ -155,9 +189,8 @@ enum Inner {
 /// The block LU and the general sparse LU it hands the matrices it rejects to.
 struct BlockBackend {
     block: BlockLu,
-    /// The pattern, to build the general LU on the first rejection.
-    pattern: Vec<(usize, usize)>,
-    /// The general LU and the CSC position of each triplet.
+    /// The general LU (built on the first rejection, on the pattern the block LU recovers
+    /// from its storage indices) and the CSC position of each triplet.
     general: Option<(Vec<usize>, Box<SparseLu>)>,
     /// Rejections in a row; from [`REJECTIONS_BEFORE_GENERAL`] on, the block LU is no
     /// longer tried.
@@ -286,7 +319,6 @@ impl LinearSolver {
                 let (block, slots) = BlockLu::new(n, pattern, groups);
                 let backend = BlockBackend {
                     block,
-                    pattern: pattern.to_vec(),
                     general: None,
                     rejections: 0,
                     general_active: false,
@@ -299,7 +331,7 @@ impl LinearSolver {
             slots,
             factorizations: 0,
             factorized: false,
-            min_pivot_ratio: f64::NAN,
+            pivots: Pivots::default(),
             inner,
         })
     }
@@ -347,7 +379,16 @@ impl LinearSolver {
     /// each pivot with its own column, so a matrix whose unknowns differ in scale by many
     /// orders is accepted with a ratio below [`PIVOT_TOLERANCE`]).
     pub fn min_pivot_ratio(&self) -> Option<f64> {
-        self.factorized.then_some(self.min_pivot_ratio)
+        self.factorized.then_some(self.pivots.ratio)
+    }
+
+    /// How far the last successful factorization was from being called singular: the
+    /// smallest `|u_kk| / (PIVOT_TOLERANCE * scale_k)` over its pivots, with `scale_k` what
+    /// the singularity rule compared the pivot with (the largest entry of its column of `A`;
+    /// for the block LU's saddle columns `|A| + |L| |U|` at the pivot, see [`block`]). Above
+    /// 1 for every accepted factorization; `None` before any.
+    pub fn pivot_margin(&self) -> Option<f64> {
+        self.factorized.then_some(self.pivots.margin)
     }
 
     /// Numeric factorization with the given values (`values.len() ==
@@ -371,15 +412,14 @@ impl LinearSolver {
         let n = self.n;
         if n == 0 {
             self.factorized = true;
-            self.min_pivot_ratio = f64::INFINITY;
+            self.pivots = Pivots::default();
             return Ok(());
         }
-        let min_ratio = match &mut self.inner {
+        self.pivots = match &mut self.inner {
             Inner::Dense(d) => d.factorize(n, &self.slots, values)?,
             Inner::Sparse(s) => s.factorize(n, &self.slots, values)?,
             Inner::Block(b) => b.factorize(n, &self.slots, values)?,
         };
-        self.min_pivot_ratio = min_ratio;
         self.factorized = true;
         Ok(())
     }
@@ -464,13 +504,9 @@ impl LinearSolver {
 }
 
 impl DenseLu {
-    /// Assembles, factors and checks the pivots; returns the smallest relative
-    /// pivot.
-    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Result<f64, LinearError> {
-        self.lu.fill(0.0);
-        for (&s, &v) in slots.iter().zip(values) {
-            self.lu[s] += v;
-        }
+    /// Assembles, factors and checks the pivots.
+    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Factorized {
+        sum_triplets(&mut self.lu, slots, values);
         // Entries outside the pattern are zero: the pattern slots suffice.
         let max_bits = slots.iter().map(|&s| abs_bits(self.lu[s])).max();
         let max_abs = check_max_abs(max_bits, || {
@@ -493,12 +529,12 @@ impl DenseLu {
             stack,
             Default::default(),
         );
-        let mut min_ratio = f64::INFINITY;
+        let mut pivots = Pivots::default();
         for k in 0..n {
             let pivot = self.lu[k + k * n];
-            min_ratio = check_pivot(pivot, (self.column_max[k], max_abs), k, min_ratio)?;
+            check_pivot(pivot, (self.column_max[k], max_abs), k, &mut pivots)?;
         }
-        Ok(min_ratio)
+        Ok(pivots)
     }
 }
 
@@ -556,13 +592,9 @@ impl SparseLu {
         Ok((slots, sparse))
     }
 
-    /// Assembles, factors and checks the pivots; returns the smallest relative
-    /// pivot.
-    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Result<f64, LinearError> {
-        self.values.fill(0.0);
-        for (&s, &v) in slots.iter().zip(values) {
-            self.values[s] += v;
-        }
+    /// Assembles, factors and checks the pivots.
+    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Factorized {
+        sum_triplets(&mut self.values, slots, values);
         let max_bits = self.values.iter().map(|&v| abs_bits(v)).max();
         let max_abs = check_max_abs(max_bits, || {
             let k = self.values.iter().position(|v| !v.is_finite())?;
@@ -589,7 +621,7 @@ impl SparseLu {
         // original column col_perm[j]) as its entry in row j.
         let u = self.lu.u_factor_unsorted();
         let a_col_ptr = self.pattern.col_ptr();
-        let mut min_ratio = f64::INFINITY;
+        let mut pivots = Pivots::default();
         for j in 0..n {
             let pivot = u
                 .row_idx_of_col_raw(j)
@@ -601,34 +633,34 @@ impl SparseLu {
             let column = col_perm.arrays().0[j];
             let col = &self.values[a_col_ptr[column]..a_col_ptr[column + 1]];
             let column_max = col.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            min_ratio = check_pivot(pivot, (column_max, max_abs), column, min_ratio)?;
+            check_pivot(pivot, (column_max, max_abs), column, &mut pivots)?;
         }
-        Ok(min_ratio)
+        Ok(pivots)
     }
 }
 
 impl BlockBackend {
     /// The block LU, or the general LU for a matrix the block LU rejects (see
     /// [`REJECTIONS_BEFORE_GENERAL`]).
-    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Result<f64, LinearError> {
+    fn factorize(&mut self, n: usize, slots: &[usize], values: &[f64]) -> Factorized {
         self.general_active = false;
         if self.rejections < REJECTIONS_BEFORE_GENERAL {
             match self.block.factorize(slots, values) {
-                Ok(ratio) => {
+                Ok(pivots) => {
                     self.rejections = 0;
-                    return Ok(ratio);
+                    return Ok(pivots);
                 }
                 Err(block::Rejected) => self.rejections += 1,
             }
         }
         if self.general.is_none() {
-            let (slots, sparse) = SparseLu::new(n, &self.pattern)?;
+            let (slots, sparse) = SparseLu::new(n, &self.block.pattern(slots))?;
             self.general = Some((slots, Box::new(sparse)));
         }
         let (general_slots, general) = self.general.as_mut().expect("built above");
-        let ratio = general.factorize(n, general_slots, values)?;
+        let pivots = general.factorize(n, general_slots, values)?;
         self.general_active = true;
-        Ok(ratio)
+        Ok(pivots)
     }
 }
 
@@ -659,22 +691,31 @@ fn check_max_abs(
     }
 }
 
+/// The matrix of the triplets `values` in `storage`: each added at its slot, in the order of
+/// the triplets (duplicates summed), every other entry zero.
+fn sum_triplets(storage: &mut [f64], slots: &[usize], values: &[f64]) {
+    storage.fill(0.0);
+    for (&s, &v) in slots.iter().zip(values) {
+        storage[s] += v;
+    }
+}
+
 /// Applies the singularity rule to one pivot of the column whose largest entry is
-/// `column_max`; returns the updated minimum of `|pivot| / max_abs` (`max_abs` the
-/// largest entry of the matrix).
+/// `column_max` and adds it to `pivots` (its ratio relative to `max_abs`, the largest entry
+/// of the matrix).
 fn check_pivot(
     pivot: f64,
     (column_max, max_abs): (f64, f64),
     column: usize,
-    min_ratio: f64,
-) -> Result<f64, LinearError> {
-    let abs = pivot.abs();
-    if !pivot.is_finite() || abs <= PIVOT_TOLERANCE * column_max {
+    pivots: &mut Pivots,
+) -> Result<(), LinearError> {
+    if !pivot.is_finite() || pivot.abs() <= PIVOT_TOLERANCE * column_max {
         return Err(LinearError::Singular {
             column: Some(column),
         });
     }
-    Ok(min_ratio.min(abs / max_abs))
+    pivots.add(pivot, max_abs, column_max);
+    Ok(())
 }
 
 /// Compresses a triplet pattern to CSC (rows sorted within each column,
@@ -821,18 +862,24 @@ mod tests {
         (0..n).map(|_| rng.uniform(-1.0, 1.0)).collect()
     }
 
-    /// Solves with the given backend and returns x, checking the relative
-    /// residual.
-    fn solve_checked(sys: &System, backend: Backend, b: &[f64], transpose: bool) -> Vec<f64> {
-        let mut solver = LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
-        assert_eq!(solver.backend(), backend);
-        solver.factorize(&sys.values).unwrap();
+    /// The solution of `A x = b` (of `A^T x = b` if `transpose`) with `solver`'s factors.
+    fn solved(solver: &mut LinearSolver, b: &[f64], transpose: bool) -> Vec<f64> {
         let mut x = b.to_vec();
         if transpose {
             solver.solve_transpose_in_place(&mut x);
         } else {
             solver.solve_in_place(&mut x);
         }
+        x
+    }
+
+    /// Solves with the given backend and returns x, checking the relative
+    /// residual.
+    fn solve_checked(sys: &System, backend: Backend, b: &[f64], transpose: bool) -> Vec<f64> {
+        let mut solver = LinearSolver::with_backend(sys.n, &sys.pattern, backend).unwrap();
+        assert_eq!(solver.backend(), backend);
+        solver.factorize(&sys.values).unwrap();
+        let x = solved(&mut solver, b, transpose);
         assert!(x.iter().all(|v| v.is_finite()));
         let ax = matvec(sys.n, &sys.pattern, &sys.values, &x, transpose);
         let res: Vec<f64> = ax.iter().zip(b).map(|(a, b)| a - b).collect();
@@ -1217,6 +1264,114 @@ mod tests {
         let mut solver = LinearSolver::with_groups(sys.n, &sys.pattern, &groups).unwrap();
         assert_eq!(solver.backend(), Backend::Block);
         assert_block_lu_solves(&mut solver, &sys, &b, 1e-11);
+        // The pattern, for the general LU, from the storage index of each triplet.
+        let Inner::Block(block) = &solver.inner else {
+            unreachable!()
+        };
+        assert_eq!(block.block.pattern(&solver.slots), sys.pattern);
+    }
+
+    /// Normwise backward error `|A x - b| / (|A| |x| + |b|)` of a solve (infinity norms).
+    fn backward_error(sys: &System, x: &[f64], b: &[f64], transpose: bool) -> f64 {
+        let ax = matvec(sys.n, &sys.pattern, &sys.values, x, transpose);
+        let r: Vec<f64> = ax.iter().zip(b).map(|(a, b)| a - b).collect();
+        let abs: Vec<f64> = sys.values.iter().map(|v| v.abs()).collect();
+        let x_abs: Vec<f64> = x.iter().map(|v| v.abs()).collect();
+        let ax_abs = matvec(sys.n, &sys.pattern, &abs, &x_abs, transpose);
+        norm_inf(&r) / (norm_inf(&ax_abs) + norm_inf(b))
+    }
+
+    /// The entries of `sys` by position.
+    fn entries(sys: &System) -> std::collections::HashMap<(usize, usize), f64> {
+        sys.pattern
+            .iter()
+            .copied()
+            .zip(sys.values.iter().copied())
+            .collect()
+    }
+
+    /// `sys` with the entries of unknown `copy`'s row and column set to those of `of`'s
+    /// (a repeated constraint row), except the diagonal.
+    fn repeat_row(sys: &System, copy: usize, of: usize) -> System {
+        let at = entries(sys);
+        let values = sys
+            .pattern
+            .iter()
+            .zip(&sys.values)
+            .map(|(&(i, j), &v)| match (i == copy, j == copy) {
+                (true, false) => at[&(of, j)],
+                (false, true) => at[&(i, of)],
+                _ => v,
+            })
+            .collect();
+        System {
+            n: sys.n,
+            pattern: sys.pattern.clone(),
+            values,
+        }
+    }
+
+    #[test]
+    fn block_lu_takes_heavy_chains_whose_joint_pivots_are_tiny_against_their_columns() {
+        // Bodies 1e15 times heavier than their joints' entries, as the articulated inertia of
+        // a chain of 1e5 links is: each joint's pivots, B S^-1 B^T, are 1e-16 times its
+        // column of A (B^T) but not small against the terms that formed them. The block LU
+        // takes the matrix and solves it to the rounding level.
+        let (nb, nc) = (40, 5);
+        let (mut sys, groups) = chain_system(nb, nc, 81);
+        for (&(i, j), v) in sys.pattern.iter().zip(sys.values.iter_mut()) {
+            if i < 6 * nb && j < 6 * nb {
+                *v *= 1e15;
+            }
+        }
+        let mut solver = LinearSolver::with_groups(sys.n, &sys.pattern, &groups).unwrap();
+        solver.factorize(&sys.values).unwrap();
+        let Inner::Block(block) = &solver.inner else {
+            unreachable!()
+        };
+        assert!(!block.general_active, "the block LU took this matrix");
+        assert!(solver.min_pivot_ratio().unwrap() < PIVOT_TOLERANCE);
+        assert!(solver.pivot_margin().unwrap() > 1e10);
+        let b = random_rhs(sys.n, 82);
+        for transpose in [false, true] {
+            let x = solved(&mut solver, &b, transpose);
+            assert!(backward_error(&sys, &x, &b, transpose) < 1e-15);
+        }
+        // A joint's row repeated: its pivot cancels to the rounding level of the terms
+        // that formed it; the block LU hands the matrix on and the general LU finds it
+        // singular.
+        let rows = 6 * nb + nc * 7;
+        let repeated = repeat_row(&sys, rows + 4, rows + 3);
+        assert!(matches!(
+            solver.factorize(&repeated.values),
+            Err(LinearError::Singular { .. })
+        ));
+    }
+
+    #[test]
+    fn block_lu_rejects_a_loop_closing_joint_that_repeats_a_joint() {
+        // A joint of 3 rows between bodies 10 and 9 with the first rows of the joint already
+        // there: it closes a loop (a cut supernode, whose block the other supernodes' updates
+        // fill with -B S^-1 B^T) and is redundant, which those updates cancel.
+        let (nb, nc) = (30, 5);
+        let (mut sys, mut groups) = chain_system(nb, nc, 91);
+        let first = sys.n;
+        let rows = 6 * nb + nc * 10;
+        sys.n += 3;
+        let at = entries(&sys);
+        for r in 0..3 {
+            for j in 6 * 9..6 * 11 {
+                let v = at[&(rows + r, j)];
+                sys.pattern.extend([(first + r, j), (j, first + r)]);
+                sys.values.extend([v, v]);
+            }
+        }
+        groups.push(first..first + 3, GroupKind::Multipliers);
+        let mut solver = LinearSolver::with_groups(sys.n, &sys.pattern, &groups).unwrap();
+        assert!(matches!(
+            solver.factorize(&sys.values),
+            Err(LinearError::Singular { .. })
+        ));
     }
 
     /// Factorizes `sys` (the block LU must take it, not hand it on) and checks both solves
@@ -1228,12 +1383,7 @@ mod tests {
         };
         assert!(!block.general_active, "the block LU took this matrix");
         for transpose in [false, true] {
-            let mut x = b.to_vec();
-            if transpose {
-                solver.solve_transpose_in_place(&mut x);
-            } else {
-                solver.solve_in_place(&mut x);
-            }
+            let x = solved(solver, b, transpose);
             let expected = solve_checked(sys, Backend::Dense, b, transpose);
             assert_close(&expected, &x, tol);
         }
