@@ -637,7 +637,7 @@ fn check(n: usize) {
         unreachable!("the chain is dynamic")
     };
     let (layout, _) = flexmb::solve::prepare_layout(&file.model);
-    let mut state = State::initial(&file.model, &layout);
+    let mut state = State::initial(&file.model, &layout).expect("initial states");
     let mut data = flexmb::Data::new(&file.model, layout).expect("solver");
     let set_up = cpu_seconds();
     let load = settings.load_factor_at(0.0);
