@@ -1,6 +1,6 @@
 """Reads back a Paraview series written by flexmb_results::vtk with readers that owe it
 nothing: xml.etree for the .pvd collection and each file's XML header, meshio for the data of
-every .vtu the collection lists. Prints what they found as JSON for tests/vtk.rs to check.
+every .vtu the collection lists. Prints what they found as JSON for tests/results/vtk.rs to check.
 
 Usage: python3 read_vtk.py DIR/results.pvd
 Exit status 3 when meshio is not installed (pip install meshio).

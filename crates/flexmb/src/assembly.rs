@@ -34,7 +34,7 @@
 //! damping, its joints' rows in joint order) and with the same operations as
 //! `add_element`, `add_nodal_damping` and `add_joint`. No sum depends on how the work
 //! is cut. Every number is therefore the same bits with 1, 2 or any number of threads
-//! (`tests/threads.rs`), and a run keeps its bits when its thread count changes (a resumed
+//! (`tests/physics/threads.rs`), and a run keeps its bits when its thread count changes (a resumed
 //! checkpoint may use another).
 
 use crate::data::{active_slots, Data, Layout};

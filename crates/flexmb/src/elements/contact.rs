@@ -53,7 +53,7 @@
 //! this equation with `R = e` ([`crate::model::contact::exact_restitution_factor`]:
 //! safeguarded Newton iterations in the bracket `(0, 1/e)`, `dchi/de` by the implicit
 //! function theorem, exact). Its `chi` (1.4328, 0.37315, 0.07893 for e = 0.5, 0.8, 0.95)
-//! lies between Hunt & Crossley's and Flores et al.'s for these `e`; `tests/contact.rs`
+//! lies between Hunt & Crossley's and Flores et al.'s for these `e`; `tests/physics/contact.rs`
 //! checks that the law restitutes `e` by integrating the impact numerically. This is Hunt &
 //! Crossley's form with `chi` chosen for the exact restitution, and the relation is derived
 //! here as stated: the published work on exact restitution for this form could not be

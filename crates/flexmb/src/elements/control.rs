@@ -93,7 +93,7 @@
 //! Heiland 2017). Its row is the same position-level row, discretized as it stands (no
 //! index reduction); in the initial accelerations it reads `u = initial` (the user's
 //! `u(0)`), since `u` appears only in the fourth derivative of `c`. The consequences,
-//! measured on `examples/servo_noncollocated.toml` (`tests/control.rs`, docs/model-format.md
+//! measured on `examples/servo_noncollocated.toml` (`tests/control/control.rs`, docs/model-format.md
 //! "Servo constraints"):
 //!
 //! * the pivot of `u` in the iteration matrix is `h^5` of its largest entry (the equilibrium

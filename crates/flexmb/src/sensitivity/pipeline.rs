@@ -8,7 +8,7 @@
 //! derivatives, factorization), each with its own scratch [`Data`] and factorizations, at
 //! most [`AHEAD`] steps ahead of the chain; the calling thread takes them in order and runs
 //! the chain. The operations on each step are those of the sequential code, so the results
-//! are the same, bit for bit (`tests/sensitivity.rs`).
+//! are the same, bit for bit (`tests/sensitivity/sensitivity.rs`).
 
 use super::matrix::StepMatrix;
 use crate::data::Layout;

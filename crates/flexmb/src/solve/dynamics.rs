@@ -1447,7 +1447,7 @@ impl StepSystem<'_> {
     /// exact or nearly, so that a reused one must reach what it reaches; the stabilized
     /// form's matrix is an approximation whose own iterates converge linearly (0.15 per
     /// correction on the stabilized heavy top), and judged at this level they do not reach
-    /// it in `max_iterations` at `rtol = 1e-10` (`tests/sensitivity.rs`, stabilized top).
+    /// it in `max_iterations` at `rtol = 1e-10` (`tests/sensitivity/sensitivity.rs`, stabilized top).
     fn carried_norm(&self, dx: &[f64]) -> f64 {
         let (bp, rtol) = (self.start.bp, self.settings.newton.rtol);
         let mut sum = 0.0;

@@ -33,7 +33,7 @@
 //! safety factor (0.01 to 0.1 there): an exact Newton step lands far inside the tolerance
 //! (its error is quadratic in `|dx|`), and a linearly converging one must too, or the two
 //! give different answers that differ by up to the tolerance at every step. Measured on a
-//! free body near its intermediate axis (`tests/matrix_reuse.rs`, 20 s at h = 2.5e-3): full
+//! free body near its intermediate axis (`tests/physics/matrix_reuse.rs`, 20 s at h = 2.5e-3): full
 //! Newton flips at 8.2875, 13.5675 and 18.845 s (13.56625 s at h / 2); with a reused matrix
 //! the acceptance on one correction's size gave 7.84, 12.275 and 16.605 s, this test with
 //! kappa = 1 about 8.6 and 14.15 s, and with kappa = 0.01 8.29, 13.5775 and 18.8675 s
@@ -57,7 +57,7 @@
 //! (`rtol h |v|`) or absolute (`atol`) sums to a velocity error of `kappa rtol |v| T / h` or
 //! `kappa atol T / h^2` over a run of length `T`: it grows as the step shrinks, and the
 //! scheme's order is lost. Measured on the free body above on R3xSO(3) (trust issue, round
-//! 2; `tests/matrix_reuse.rs`): with the configuration norm alone a reused matrix ended
+//! 2; `tests/physics/matrix_reuse.rs`): with the configuration norm alone a reused matrix ended
 //! 9.5e-6 rad/s from the exact solution after 1 s where fresh matrices end 5.7e-7, and at
 //! `rtol = 1e-10` its flip times stopped converging (7.8e-5 s at h = 2.5e-3, 3.5e-4 s at
 //! h = 1.25e-3, where fresh matrices give 1.45e-5 and 3.6e-6 s). On SE(3) the same body's

@@ -8,7 +8,7 @@
 //! & Walther 2000, ACM TOMS 26, "Revolve", with equidistant checkpoints) and recomputes the
 //! steps between two checkpoints when the sweep reaches them: `n / every` memories and
 //! `every` steps in memory at a time, for one more forward run. A restored simulation takes
-//! the same steps as the original, bit for bit (`tests/restart.rs`), so the sweep sees
+//! the same steps as the original, bit for bit (`tests/physics/restart.rs`), so the sweep sees
 //! exactly the trajectory of the run.
 
 use super::dynamics::{DynamicSettings, Memory, Simulation};
