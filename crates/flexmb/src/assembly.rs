@@ -37,11 +37,12 @@
 //! (`tests/physics/threads.rs`), and a run keeps its bits when its thread count changes (a resumed
 //! checkpoint may use another).
 
-use crate::data::{active_slots, Data, Layout};
+use crate::data::{active_slots, nodal_mass, Data, Layout};
 use crate::elements::{
     Coefficients, Context, ElementKernel, Kernel, LocalBuffers, Mat12, NodeState, Vec12,
 };
 use crate::joints::{self, ConstraintKernel};
+use crate::linear::{LinearError, LinearSolver};
 use crate::model::{Model, NodeId};
 use rayon::prelude::*;
 
@@ -74,7 +75,7 @@ pub struct Scaling {
     /// Factor on the velocity-level rows of the stabilized formulation (`1/gamma'`).
     pub velocity_scale: f64,
     /// Nodal viscous damping `alpha D v` with `D` the nodal masses and inertias
-    /// ([`crate::Data::nodal_mass`]) [1/s]: used by pseudo-dynamic static analysis.
+    /// ([`crate::data::Data::nodal_mass`]) [1/s]: used by pseudo-dynamic static analysis.
     pub nodal_damping: f64,
     /// Factor on the elements' state equations (`h` in dynamics: a state equation written
     /// as a rate then weighs like an increment; `row_scale` elsewhere). The element matrices
@@ -232,7 +233,7 @@ pub fn assemble(model: &Model, data: &mut Data, it: &Iterate, sc: &Scaling, matr
         nodal_mass,
         local,
         threads,
-        parallel,
+        derived,
         ..
     } = data;
     let layout: &Layout = layout;
@@ -243,7 +244,7 @@ pub fn assemble(model: &Model, data: &mut Data, it: &Iterate, sc: &Scaling, matr
         b_rows,
     };
     if let Some(pool) = threads.pool() {
-        let scratch = parallel.get_or_insert_with(|| ParallelScratch::new(model, layout));
+        let scratch = derived.get_or_insert_with(|| ParallelScratch::new(model, layout));
         let values = matrix.then_some(&mut values[..]);
         traverse_parallel(&pass, nodal_mass, out, scratch, values, pool);
     } else if matrix {
@@ -301,6 +302,38 @@ pub fn assemble_elements(
         }
         sink.pos = tail_start;
         tail(&pass, nodal_mass, b_rows, sink);
+    }
+}
+
+impl Data {
+    /// Builds the workspaces of `layout`: its sparsity pattern (an assembly pass,
+    /// [`pattern`]) and the linear solver on it.
+    pub fn new(model: &Model, layout: Layout) -> Result<Self, LinearError> {
+        let pattern = pattern(model, &layout);
+        let n = layout.n_unknowns();
+        let solver = LinearSolver::with_groups(n, &pattern, &layout.groups())?;
+        let diagonal_slots = pattern
+            .iter()
+            .enumerate()
+            .filter(|(_, (i, j))| i == j)
+            .map(|(k, &(i, _))| (i, k))
+            .collect();
+        Ok(Self {
+            values: vec![0.0; pattern.len()],
+            diagonal_slots,
+            diagonal: vec![0.0; n],
+            residual: vec![0.0; n],
+            correction: vec![0.0; n],
+            phi: vec![0.0; layout.n_rows],
+            nodal_mass: nodal_mass(model),
+            b_rows: vec![Vec12::zeros(); layout.n_rows],
+            local: Default::default(),
+            threads: Default::default(),
+            pattern,
+            solver,
+            layout,
+            derived: Default::default(),
+        })
     }
 }
 

@@ -32,9 +32,10 @@
 //! set).
 
 use crate::elements::{ElementKernel, ElementRef};
+pub use crate::error::UnknownId;
 use crate::joints::{self, Row};
+use crate::linear::{GroupKind, Groups, LinearSolver};
 use crate::model::{JointId, Model, NodeId};
-use crate::solve::linear::{GroupKind, Groups, LinearError, LinearSolver};
 use flexmb_lie::Vec6;
 use std::ops::Range;
 
@@ -209,7 +210,7 @@ impl Layout {
     }
 
     /// The groups of unknowns the block LU eliminates together
-    /// ([`crate::solve::linear::Groups`]): each node's six increments; each joint's
+    /// ([`crate::linear::Groups`]): each node's six increments; each joint's
     /// multipliers and, in the stabilized formulation, its stabilization unknowns (saddle
     /// groups, with a zero diagonal block); each element's states.
     pub fn groups(&self) -> Groups {
@@ -324,22 +325,6 @@ pub enum Block {
     States,
 }
 
-/// One unknown of the Newton vector, by what it belongs to: the typed form of an index that
-/// failures and diagnoses carry.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum UnknownId {
-    /// Component (0 to 5: x, y, z, rx, ry, rz) of a node's increment; its equation is that
-    /// component of the node's equilibrium.
-    Node { node: NodeId, component: u8 },
-    /// Multiplier of a joint's row (0-based within the joint); its equation is the row.
-    Multiplier { joint: JointId, row: u8 },
-    /// Stabilization unknown of a joint's row; its equation is the row at velocity level.
-    Stabilization { joint: JointId, row: u8 },
-    /// State `index` (0-based) of element `element` (index in [`Layout::elements`]); its
-    /// equation is the element's equation for it.
-    State { element: usize, index: u16 },
-}
-
 /// Everything derived from a model plus the solver workspaces.
 pub struct Data {
     pub layout: Layout,
@@ -367,45 +352,39 @@ pub struct Data {
     pub local: crate::elements::LocalBuffers,
     /// The threads of the assembly (sequential unless set: [`Data::with_threads`]).
     pub threads: crate::parallel::Threads,
-    /// Per-item results of the parallel assembly (built on its first use for this layout).
-    pub parallel: Option<crate::assembly::ParallelScratch>,
     pub solver: LinearSolver,
-    /// The positions of the exact step Jacobian of the layout, built on first use by
-    /// [`crate::solve::step::StepFunction`].
-    pub step_jacobian: Option<std::sync::Arc<crate::solve::step::JacobianPattern>>,
+    /// What higher layers derive from the layout on first use and keep with it: the
+    /// parallel assembly's per-item positions (`assembly::ParallelScratch`), the positions
+    /// of the exact step Jacobian (`solve::step::JacobianPattern`).
+    pub derived: Derived,
+}
+
+/// Structures derived from a [`Layout`] by the layers above this one, built on first use
+/// and kept as long as the [`Data`] of the layout: one of each type, found by its type, so
+/// that this layer does not name them.
+#[derive(Default)]
+pub struct Derived(Vec<Box<dyn std::any::Any + Send + Sync>>);
+
+impl Derived {
+    /// The kept `T`, built by `make` if there is none yet.
+    pub fn get_or_insert_with<T: std::any::Any + Send + Sync>(
+        &mut self,
+        make: impl FnOnce() -> T,
+    ) -> &mut T {
+        let at = match self.0.iter().position(|d| d.is::<T>()) {
+            Some(at) => at,
+            None => {
+                self.0.push(Box::new(make()));
+                self.0.len() - 1
+            }
+        };
+        self.0[at]
+            .downcast_mut()
+            .expect("the entry found has the type asked for")
+    }
 }
 
 impl Data {
-    /// Builds the layout, the sparsity pattern and the linear solver.
-    pub fn new(model: &Model, layout: Layout) -> Result<Self, LinearError> {
-        let pattern = crate::assembly::pattern(model, &layout);
-        let n = layout.n_unknowns();
-        let solver = LinearSolver::with_groups(n, &pattern, &layout.groups())?;
-        let diagonal_slots = pattern
-            .iter()
-            .enumerate()
-            .filter(|(_, (i, j))| i == j)
-            .map(|(k, &(i, _))| (i, k))
-            .collect();
-        Ok(Self {
-            values: vec![0.0; pattern.len()],
-            diagonal_slots,
-            diagonal: vec![0.0; n],
-            residual: vec![0.0; n],
-            correction: vec![0.0; n],
-            phi: vec![0.0; layout.n_rows],
-            nodal_mass: nodal_mass(model),
-            b_rows: vec![crate::elements::Vec12::zeros(); layout.n_rows],
-            local: Default::default(),
-            threads: Default::default(),
-            parallel: None,
-            pattern,
-            solver,
-            layout,
-            step_jacobian: None,
-        })
-    }
-
     /// The same data assembling on `threads` (the results are the same bits).
     pub fn with_threads(mut self, threads: crate::parallel::Threads) -> Self {
         self.threads = threads;

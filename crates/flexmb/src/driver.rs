@@ -19,16 +19,16 @@
 //! results of an earlier run).
 
 use crate::data::Layout;
+use crate::error::SolveError;
 use crate::input::{Analysis, ModelFile};
-use crate::observe::{Observer, Observers, Sample};
 use crate::output::writer::{Open, Stopped, Writer, Written};
 use crate::output::{
     ErrorKind, OutputDir, OutputError, Reached, Status, StoreFormat, Summary, CHECKPOINT_FILE,
 };
 use crate::sensors::SensorEvaluator;
 use crate::solve::dynamics::Checkpoint;
+use crate::solve::observe::{Observer, Observers, Sample};
 use crate::solve::{DynamicSettings, Simulation, StaticSettings, Statics, StepInfo};
-use crate::SolveError;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
@@ -150,7 +150,7 @@ struct Ended {
 /// Work counts and notes of a run (zero for a run rejected before the first step).
 #[derive(Default)]
 struct Tally {
-    work: crate::observe::Work,
+    work: crate::solve::observe::Work,
     reached: f64,
     unknowns: usize,
     linear_solver: String,
@@ -236,7 +236,7 @@ impl Ended {
 /// evaluated and the step is handed to the writer thread, which writes the files. Keeps the
 /// time the solver's thread spends on output and the error of a checkpoint file.
 struct ResultSink<'m, 'w> {
-    model: &'m crate::Model,
+    model: &'m crate::model::Model,
     sensors: SensorEvaluator,
     writer: Writer<'w>,
     /// Wall time of the solver's thread spent on output \[s\]: evaluating the sensors,
@@ -331,7 +331,7 @@ impl Target<'_> {
 /// written ends the run there, as a result file would); returns the analysis' result, what
 /// was written (with the first write error) and the output time of the solver's thread.
 fn observed<R>(
-    model: &crate::Model,
+    model: &crate::model::Model,
     files: Opening,
     mut progress: Progress,
     run: impl FnOnce(&mut ResultSink, &mut Progress) -> Result<R, SolveError>,
@@ -381,7 +381,7 @@ fn linear_solver(data: &crate::data::Data) -> String {
 
 /// Static analysis: `sensors.csv` has the load factor in its first column.
 fn run_static(
-    model: &crate::Model,
+    model: &crate::model::Model,
     settings: &StaticSettings,
     target: Target,
     progress: &mut dyn FnMut(f64, f64),
@@ -424,7 +424,7 @@ fn run_static(
 /// The simulation and result files of a dynamic run: new, or resumed from the checkpoint
 /// in `out`.
 fn start_dynamic<'a>(
-    model: &crate::Model,
+    model: &crate::model::Model,
     settings: &DynamicSettings,
     target: Target<'a>,
     options: RunOptions,
@@ -520,7 +520,7 @@ fn write_checkpoint(out: &OutputDir, sim: &Simulation, sink: &mut ResultSink) {
 /// Dynamic analysis: `sensors.csv` has the time in its first column. The run goes in
 /// stretches between checkpoints when asked to write them.
 fn run_dynamic(
-    model: &crate::Model,
+    model: &crate::model::Model,
     settings: &DynamicSettings,
     target: Target,
     options: RunOptions,

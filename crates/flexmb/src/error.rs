@@ -1,60 +1,69 @@
-//! Typed errors with the context a user needs to fix the cause.
+//! Typed errors with the context a user needs to fix the cause: the model's
+//! ([`ModelError`], [`SettingsError`], defined with the model) and an analysis' ([`SolveError`],
+//! with the Newton solver's [`NewtonError`] and the unknown [`UnknownId`] a failure blames).
 
-use crate::model::ItemRef;
+use crate::linear::LinearError;
+use crate::model::{JointId, NodeId};
+pub use crate::model::{ModelError, SettingsError};
 
-/// An inconsistent or unphysical model.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum ModelError {
-    #[error("{item_table} '{name}' (#{index}), field '{field}': {message}", item_table = item.table, name = item.name, index = item.index + 1, field = item.field)]
-    Invalid { item: ItemRef, message: String },
+/// One unknown of the Newton vector, by what it belongs to: the typed form of an index that
+/// failures and diagnoses carry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UnknownId {
+    /// Component (0 to 5: x, y, z, rx, ry, rz) of a node's increment; its equation is that
+    /// component of the node's equilibrium.
+    Node { node: NodeId, component: u8 },
+    /// Multiplier of a joint's row (0-based within the joint); its equation is the row.
+    Multiplier { joint: JointId, row: u8 },
+    /// Stabilization unknown of a joint's row; its equation is the row at velocity level.
+    Stabilization { joint: JointId, row: u8 },
+    /// State `index` (0-based) of element `element` (index in [`crate::data::Layout::elements`]); its
+    /// equation is the element's equation for it.
+    State { element: usize, index: u16 },
 }
 
-impl ModelError {
-    /// The item and field the error is about.
-    pub fn item(&self) -> &ItemRef {
-        match self {
-            ModelError::Invalid { item, .. } => item,
-        }
-    }
+/// Why a Newton solve failed, with the unknown to blame (an index of the Newton vector;
+/// [`crate::data::Layout::unknown`] names it).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum NewtonError {
+    #[error("non-finite residual")]
+    NonFiniteResidual { unknown: usize },
+    #[error("non-finite Newton correction")]
+    NonFiniteCorrection { unknown: usize },
+    #[error("singular iteration matrix ({source})")]
+    Singular {
+        unknown: Option<usize>,
+        source: LinearError,
+    },
+    #[error("Newton diverging (weighted correction {error:.3e}, contraction rate {rate:.3})")]
+    Diverging {
+        error: f64,
+        rate: f64,
+        unknown: usize,
+    },
+    #[error("no convergence in {iterations} iterations (weighted correction {error:.3e})")]
+    MaxIterations {
+        iterations: usize,
+        error: f64,
+        unknown: usize,
+    },
+    /// A failure particular to the system (e.g. no real root of the arc-length constraint).
+    #[error("{message}")]
+    System {
+        message: String,
+        unknown: Option<usize>,
+    },
 }
 
-/// A solver setting outside its range ([`crate::solve::DynamicSettings::check`] and its
-/// siblings): the model-file keys of `[solver]` the rule is about (the first is the one to
-/// blame unless the file or a `--set` says otherwise) and why.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("solver field '{}': {message}", keys[0])]
-pub struct SettingsError {
-    pub keys: Vec<&'static str>,
-    pub message: String,
-}
-
-impl SettingsError {
-    pub(crate) fn new(keys: &[&'static str], message: impl Into<String>) -> Self {
-        Self {
-            keys: keys.to_vec(),
-            message: message.into(),
-        }
-    }
-
-    /// `Err` unless `v > 0` and `lo <= v <= hi` (`lo > 0`).
-    pub(crate) fn positive(key: &'static str, v: f64, lo: f64, hi: f64) -> Result<(), Self> {
-        if v <= 0.0 {
-            return Err(Self::new(&[key], format!("must be positive, got {v}")));
-        }
-        Self::range(key, v, lo, hi)
-    }
-
-    /// `Err` unless `lo <= v <= hi`.
-    pub(crate) fn range(key: &'static str, v: f64, lo: f64, hi: f64) -> Result<(), Self> {
-        if crate::model::limits::within(v, lo, hi) {
-            Ok(())
-        } else {
-            Err(Self::new(
-                &[key],
-                format!(
-                    "must be between {lo:e} and {hi:e} (see 'Ranges' in docs/model-format.md), got {v:e}"
-                ),
-            ))
+impl NewtonError {
+    /// The unknown to blame, if any.
+    pub fn unknown(&self) -> Option<usize> {
+        match *self {
+            NewtonError::NonFiniteResidual { unknown }
+            | NewtonError::NonFiniteCorrection { unknown }
+            | NewtonError::Diverging { unknown, .. }
+            | NewtonError::MaxIterations { unknown, .. } => Some(unknown),
+            NewtonError::Singular { unknown, .. } | NewtonError::System { unknown, .. } => unknown,
         }
     }
 }
@@ -66,13 +75,13 @@ pub enum SolveError {
     Model(#[from] ModelError),
     /// The linear solver could not be set up for the model (its pattern).
     #[error("linear solver: {0}")]
-    Linear(#[from] crate::solve::linear::LinearError),
+    Linear(#[from] crate::linear::LinearError),
     /// The consistent initial accelerations cannot be computed (e.g. `[M B^T; B 0]` is
     /// singular): the unknown blamed, if any, and the diagnosis.
     #[error("consistent initial accelerations at t = {t}: {message}")]
     InitialAccelerations {
         t: f64,
-        unknown: Option<crate::data::UnknownId>,
+        unknown: Option<UnknownId>,
         message: String,
     },
     /// The initial states of the elements cannot be computed: the equations of the control
@@ -81,8 +90,8 @@ pub enum SolveError {
     /// `worst_equation` name the output blamed.
     #[error("the initial states of the elements at t = 0 cannot be solved: {error}; worst equation: {worst_equation}")]
     InitialStates {
-        error: Box<crate::solve::NewtonError>,
-        unknown: Option<crate::data::UnknownId>,
+        error: Box<NewtonError>,
+        unknown: Option<UnknownId>,
         worst_equation: String,
     },
     #[error(transparent)]
@@ -96,9 +105,9 @@ pub enum SolveError {
         h: f64,
         reductions: usize,
         /// The failure of the last attempt.
-        error: Box<crate::solve::NewtonError>,
+        error: Box<NewtonError>,
         /// The unknown it blames.
-        unknown: Option<crate::data::UnknownId>,
+        unknown: Option<UnknownId>,
         /// `error` in words, with the count of rejected steps when reductions kept coming.
         reason: String,
         /// `unknown` in words.
@@ -111,8 +120,8 @@ pub enum SolveError {
         increment: f64,
         rejected: usize,
         /// The failure of the last attempt.
-        error: Box<crate::solve::NewtonError>,
-        unknown: Option<crate::data::UnknownId>,
+        error: Box<NewtonError>,
+        unknown: Option<UnknownId>,
         reason: String,
         worst_equation: String,
     },

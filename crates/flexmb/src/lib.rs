@@ -39,8 +39,11 @@ pub mod elements;
 pub mod error;
 pub mod input;
 pub mod joints;
+pub mod kernel;
+#[cfg(test)]
+mod layers;
+pub mod linear;
 pub mod model;
-pub mod observe;
 pub mod output;
 pub mod parallel;
 pub mod parameter_derivatives;
@@ -52,5 +55,7 @@ pub mod state;
 pub use data::Data;
 pub use error::{ModelError, SolveError};
 pub use model::Model;
+/// Observers of a run ([`solve::observe`]), kept under this path too.
+pub use solve::observe;
 pub use solve::{DynamicSettings, Simulation};
 pub use state::State;

@@ -4,7 +4,7 @@
 //! The setting is a number of threads, `threads` in `[solver]`
 //! ([`crate::DynamicSettings::threads`], [`crate::solve::StaticSettings::threads`], `--threads`
 //! on the command line): 0 for all cores (the default), 1 for the plain sequential assembly,
-//! which never touches rayon. [`Threads::for_model`] turns it into what a [`crate::Data`]
+//! which never touches rayon. [`Threads::for_model`] turns it into what a [`crate::data::Data`]
 //! assembles with: models of fewer than [`MIN_PARALLEL_ITEMS`] force elements and joints stay
 //! sequential whatever the setting (below it, waking the threads costs more than they save;
 //! BENCHMARKS.md, "Threads").
@@ -26,7 +26,7 @@ pub const MIN_PARALLEL_ITEMS: usize = 300;
 /// Largest number of threads a setting may ask for.
 pub const MAX_THREADS: usize = 1024;
 
-/// How a [`crate::Data`] assembles: sequentially (the default), or on a pool of threads.
+/// How a [`crate::data::Data`] assembles: sequentially (the default), or on a pool of threads.
 #[derive(Clone, Debug, Default)]
 pub struct Threads {
     /// `None`: sequential, rayon is not used.
@@ -88,7 +88,7 @@ impl Threads {
     }
 }
 
-/// Smallest number of nodes a thread takes in [`Threads::for_each`].
+/// Smallest number of nodes a thread takes in `Threads::for_each`.
 pub const MIN_CHUNK: usize = 256;
 
 /// The items whose contributions the assembly computes in parallel: force elements and joints.

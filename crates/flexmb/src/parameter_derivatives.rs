@@ -518,7 +518,7 @@ fn beam_section_vjp(
 }
 
 /// `dD/dp`: the derivative of the diagonal nodal masses and inertias `D`
-/// ([`crate::Data::nodal_mass`]: bodies' masses and mean inertias about their nodes, the
+/// ([`crate::data::Data::nodal_mass`]: bodies' masses and mean inertias about their nodes, the
 /// lumped halves of beam elements) with respect to one parameter, as `(node, dD_node)`
 /// pairs (none for a parameter that does not change `D`). The nodal damping `alpha D v` of
 /// pseudo-dynamic statics depends on the parameters through it.

@@ -5,25 +5,9 @@ use crate::elements::{Context, ElementItem, ElementKernel, ElementRef, LocalBuff
 use crate::joints;
 use crate::model::{JointId, Model, SensorFrame, SensorKind};
 use crate::state::State;
-use flexmb_lie::{Mat6, Vec3};
+use flexmb_lie::Vec3;
 
-/// Node kinematics of a state (tangent operators identity).
-pub fn node_states(state: &State) -> Vec<NodeState> {
-    let mut out = Vec::new();
-    node_states_into(state, &mut out);
-    out
-}
-
-/// [`node_states`] into a reused buffer.
-pub fn node_states_into(state: &State, out: &mut Vec<NodeState>) {
-    out.clear();
-    out.extend((0..state.q.len()).map(|i| NodeState {
-        q: state.q[i],
-        v: state.v[i],
-        vdot: state.vdot[i],
-        t: Mat6::identity(),
-    }));
-}
+pub use crate::state::{node_states, node_states_into};
 
 fn pair(nodes: &[NodeState], slots: [Option<crate::model::NodeId>; 2]) -> [NodeState; 2] {
     let g = NodeState::ground(Default::default());

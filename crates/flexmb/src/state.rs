@@ -2,9 +2,10 @@
 
 use crate::data::Layout;
 use crate::elements::{Context, ElementKernel, LocalBuffers};
+use crate::error::SolveError;
+use crate::kernel::NodeState;
 use crate::model::Model;
-use crate::SolveError;
-use flexmb_lie::{Frame, Group, Vec6};
+use flexmb_lie::{Frame, Group, Mat6, Vec6};
 
 /// Configuration, velocities, accelerations and multipliers at one time.
 ///
@@ -97,7 +98,7 @@ impl State {
             w: vec![0.0; layout.n_states],
         };
         if layout.n_states > 0 {
-            let nodes = crate::sensors::node_states(&state);
+            let nodes = node_states(&state);
             let ctx = Context::at(model, 0.0, 1.0);
             let mut buffers = LocalBuffers::default();
             for (e, &start) in layout.elements.iter().zip(&layout.state_start) {
@@ -132,4 +133,22 @@ impl State {
         }
         Ok(state)
     }
+}
+
+/// Node kinematics of a state (tangent operators identity).
+pub fn node_states(state: &State) -> Vec<NodeState> {
+    let mut out = Vec::new();
+    node_states_into(state, &mut out);
+    out
+}
+
+/// [`node_states`] into a reused buffer.
+pub fn node_states_into(state: &State, out: &mut Vec<NodeState>) {
+    out.clear();
+    out.extend((0..state.q.len()).map(|i| NodeState {
+        q: state.q[i],
+        v: state.v[i],
+        vdot: state.vdot[i],
+        t: Mat6::identity(),
+    }));
 }

@@ -1,5 +1,5 @@
 //! Unilateral contact with a continuous (compliant) impact law and regularized Coulomb
-//! friction ([`crate::model::Contact`]).
+//! friction ([`crate::model::contact::Contact`]).
 //!
 //! **Gap.** Shape A is fixed on node A, shape B on node B (either may be the ground). With
 //! `c_B` the centre of B (a sphere's centre, a point, or the reference point of a circle's

@@ -99,7 +99,7 @@
 //! * the pivot of `u` in the iteration matrix is `h^5` of its largest entry (the equilibrium
 //!   rows are scaled by `1/(beta' m)`, the spring enters them `h^2` below the masses, the
 //!   row weighs `h`) but `h^3` of its own column: the linear solver's singularity rule is
-//!   relative to the column ([`crate::solve::linear`]), which partial pivoting makes
+//!   relative to the column ([`crate::linear`]), which partial pivoting makes
 //!   invariant to the unit of `u`. No further scaling of the row or of `u` is needed at the
 //!   step sizes where round-off allows the problem at all (below);
 //! * `rho_inf = 0` (the error of `u` at `h = 1e-3`: 7e-5 N, against 0.1 N at `rho_inf =
@@ -157,11 +157,11 @@ use super::{
     physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters,
     InitialStates, Local, LocalMatrix, LocalVector, Mat12, StepLimit,
 };
+use crate::error::NewtonError;
+use crate::linear::LinearError;
 use crate::model::control::{BlockKind, ControlSystem, Quantity, Target};
 use crate::model::parameters::{ControlWrt, SectionParam};
 use crate::model::{Joint, JointId, JointKind, Model, NodeId};
-use crate::solve::linear::LinearError;
-use crate::solve::NewtonError;
 use flexmb_lie::Vec3;
 use nalgebra::{DMatrix, DVector, Matrix3, RealField, RowVector6, SMatrix, Vector3};
 
@@ -1202,82 +1202,39 @@ pub fn algebraic_loops(system: &ControlSystem) -> Vec<Vec<usize>> {
     loops
 }
 
-/// A located reason why the diagram of `model` cannot be solved at its initial state:
-/// an algebraic loop whose outputs' Newton iteration fails there
-/// ([`crate::SolveError::InitialStates`]: no convergence, a loop without a solution), or
-/// whose equations are singular there (e.g. a loop gain of 1), as the index of a block on
-/// it and a message. `None` when every loop can be solved.
-pub fn unsolvable_loop(model: &Model) -> Option<(usize, String)> {
-    let system = &model.control;
-    let loops = algebraic_loops(system);
-    if loops.is_empty() {
-        return None;
-    }
-    // the located reason: a loop's first block, the loop's blocks and why
-    let unsolvable = |blocks: &[usize], why: &str| {
-        let names: Vec<String> = blocks
-            .iter()
-            .map(|&b| format!("'{}'", system.blocks[b].name))
-            .collect();
-        Some((
-            blocks[0],
-            format!(
-                "the algebraic loop through blocks {} cannot be solved: {why}; break it with a block that has a state (integrator, lag)",
-                names.join(", ")
-            ),
-        ))
-    };
-    const SINGULAR: &str = "its output equations are singular at t = 0 (a loop gain of 1?)";
-    // the initial state of the model: node kinematics, the blocks' states and outputs
-    let layout = crate::data::Layout::new(model);
-    let state = match crate::state::State::initial(model, &layout) {
-        Ok(state) => state,
-        Err(crate::SolveError::InitialStates {
-            error,
-            unknown,
-            worst_equation,
-        }) => {
-            // the loop of the output blamed
-            let blamed = match unknown {
-                Some(crate::data::UnknownId::State { index, .. }) => {
-                    Some(system.owner(usize::from(index)))
-                }
-                _ => None,
-            };
-            let blocks = loops
-                .iter()
-                .find(|l| blamed.is_some_and(|b| l.contains(&b)))
-                .unwrap_or(&loops[0]);
-            return match *error {
-                NewtonError::Singular { .. } => unsolvable(blocks, SINGULAR),
-                error => unsolvable(
-                    blocks,
-                    &format!("Newton's method on the outputs at t = 0 fails: {error}; worst equation: {worst_equation}"),
-                ),
-            };
-        }
-        Err(e) => return Some((loops[0][0], e.to_string())),
-    };
-    let control = layout
-        .elements
+/// The located reason why the algebraic loop `blocks` of `system` cannot be solved: its
+/// first block, and a message naming the loop's blocks, `why`, and what breaks it.
+pub fn unsolvable(system: &ControlSystem, blocks: &[usize], why: &str) -> (usize, String) {
+    let names: Vec<String> = blocks
         .iter()
-        .position(|e| matches!(e, super::ElementRef::Control(_)))?;
-    let kernel = layout.elements[control].kernel(model);
-    let mut buffers = super::LocalBuffers::default();
-    let all = crate::sensors::node_states(&state);
-    buffers.gather(
-        &kernel,
-        &all,
-        (&state.x, &state.xdot, layout.state_start[control]),
-        &state.lambda,
-    );
-    let local = buffers.local(&all);
-    let super::Kernel::Control(element) = kernel else {
-        return None;
-    };
+        .map(|&b| format!("'{}'", system.blocks[b].name))
+        .collect();
+    (
+        blocks[0],
+        format!(
+            "the algebraic loop through blocks {} cannot be solved: {why}; break it with a block that has a state (integrator, lag)",
+            names.join(", ")
+        ),
+    )
+}
+
+/// Why a loop whose output equations are singular cannot be solved ([`unsolvable`]).
+pub const SINGULAR: &str = "its output equations are singular at t = 0 (a loop gain of 1?)";
+
+/// The first of the algebraic `loops` of `model`'s diagram whose output equations are
+/// singular at `local` (the control element's local values at the initial state), located
+/// as by [`unsolvable`]; `None` when none is. `crate::solve::initial::unsolvable_loop` builds
+/// the initial state and calls it.
+pub fn singular_loop(
+    model: &Model,
+    element: &ControlElement,
+    local: &Local,
+    loops: &[Vec<usize>],
+) -> Option<(usize, String)> {
+    let system = &model.control;
     let ctx = Context::at(model, 0.0, 1.0);
-    let reactions = element.reactions(&ctx, &local);
-    let (_, jac) = element.jacobian(&ctx, &local, Phase::Initial, &reactions);
+    let reactions = element.reactions(&ctx, local);
+    let (_, jac) = element.jacobian(&ctx, local, Phase::Initial, &reactions);
     let (rows, ns) = (6 * element.slots.len(), PER_SLOT * element.slots.len());
     for blocks in loops {
         let outputs: Vec<usize> = blocks
@@ -1293,7 +1250,7 @@ pub fn unsolvable_loop(model: &Model) -> Option<(usize, String)> {
         let (smax, smin) = (svd.max(), svd.min());
         // (a NaN singular value counts as singular)
         if smin.is_nan() || smin <= 1e-10 * smax.max(1.0) {
-            return unsolvable(&blocks, SINGULAR);
+            return Some(unsolvable(system, blocks, SINGULAR));
         }
     }
     None

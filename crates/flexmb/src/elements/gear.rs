@@ -130,113 +130,12 @@ use super::{
     central_difference, physical, spring, Coefficients, Context, DerivativeMethod, ElementKernel,
     ElementParameters, Local, LocalMatrix, LocalVector, Mat12, NodeState, StepLimit, Vec12,
 };
-use crate::joints::primitives::{dot2, Primitive};
+use crate::joints::gear::{mesh_angle, Scalar};
+use crate::joints::primitives::dot2;
 use crate::model::parameters::GearParam;
 use crate::model::{GearPair, Harmonic, Model, NodeId};
 use flexmb_lie::{Frame, Vec3};
 use std::f64::consts::PI;
-
-/// A scalar function of the two nodes' configurations with its gradient `g = df/dw_p` and
-/// the derivative of that gradient `H = dg/dw_p` (physical coordinates of both nodes).
-#[derive(Clone, Copy, Debug)]
-pub struct Scalar {
-    pub v: f64,
-    pub g: Vec12,
-    pub h: Mat12,
-}
-
-impl From<Primitive> for Scalar {
-    fn from(p: Primitive) -> Self {
-        Self {
-            v: p.phi,
-            g: p.g,
-            h: p.h,
-        }
-    }
-}
-
-impl Scalar {
-    /// The same function of the nodes in the order (b, a): its blocks swapped.
-    fn swapped(&self) -> Self {
-        let perm = |i: usize| (i + 6) % 12;
-        let g = Vec12::from_fn(|i, _| self.g[perm(i)]);
-        let h = Mat12::from_fn(|i, j| self.h[(perm(i), perm(j))]);
-        Self { v: self.v, g, h }
-    }
-
-    /// `a self + b other`.
-    fn lin(&self, a: f64, other: &Scalar, b: f64) -> Self {
-        Self {
-            v: a * self.v + b * other.v,
-            g: self.g * a + other.g * b,
-            h: self.h * a + other.h * b,
-        }
-    }
-
-    /// `a self`.
-    fn scale(&self, a: f64) -> Self {
-        Self {
-            v: a * self.v,
-            g: self.g * a,
-            h: self.h * a,
-        }
-    }
-
-    /// `f(self)` from the value `f`, first `df` and second `ddf` derivatives of `f`.
-    fn map(&self, f: f64, df: f64, ddf: f64) -> Self {
-        Self {
-            v: f,
-            g: self.g * df,
-            h: self.h * df + self.g * self.g.transpose() * ddf,
-        }
-    }
-}
-
-/// `atan2(w, u)` of two scalar functions, by the chain rule.
-fn atan2(w: &Scalar, u: &Scalar) -> Scalar {
-    let r2 = u.v * u.v + w.v * w.v;
-    let r4 = r2 * r2;
-    let (fu, fw) = (-w.v / r2, u.v / r2);
-    let (fuu, fww, fuw) = (
-        2.0 * u.v * w.v / r4,
-        -2.0 * u.v * w.v / r4,
-        (w.v * w.v - u.v * u.v) / r4,
-    );
-    let gu = &u.g;
-    let gw = &w.g;
-    Scalar {
-        v: w.v.atan2(u.v),
-        g: gu * fu + gw * fw,
-        h: u.h * fu
-            + w.h * fw
-            + gu * (gu * fuu + gw * fuw).transpose()
-            + gw * (gu * fuw + gw * fww).transpose(),
-    }
-}
-
-/// The angles `phi_a`, `phi_b` of the line of centres seen from wheels A and B (module
-/// documentation): `fa`, `fb` the node frames, `wa`, `wb` the wheel frames on them.
-pub fn centerline_angles(fa: &Frame, wa: &Frame, fb: &Frame, wb: &Frame) -> [Scalar; 2] {
-    let axis = |w: &Frame, i: usize| -> Vec3 { w.r.column(i).into_owned() };
-    let u = Scalar::from(dot2(fa, &axis(wa, 0), &wa.x, fb, &wb.x));
-    let w = Scalar::from(dot2(fa, &axis(wa, 1), &wa.x, fb, &wb.x));
-    let phi_a = atan2(&w, &u);
-    let u = Scalar::from(dot2(fb, &axis(wb, 0), &wb.x, fa, &wa.x)).swapped();
-    let w = Scalar::from(dot2(fb, &axis(wb, 1), &wb.x, fa, &wa.x)).swapped();
-    let phi_b = atan2(&w, &u);
-    [phi_a, phi_b]
-}
-
-/// The mesh angle `psi = z_a phi_a + sigma z_b phi_b` (module documentation), not wrapped.
-pub fn mesh_angle(
-    frames: [&Frame; 2],
-    wheels: [&Frame; 2],
-    (teeth_a, teeth_b, internal): (u32, u32, bool),
-) -> (Scalar, Scalar) {
-    let [pa, pb] = centerline_angles(frames[0], wheels[0], frames[1], wheels[1]);
-    let sigma = if internal { -1.0 } else { 1.0 };
-    (pa.lin(teeth_a as f64, &pb, sigma * teeth_b as f64), pa)
-}
 
 /// `x - 2 pi round(x / 2 pi)`, in `[-pi, pi]`.
 fn wrap(x: f64) -> f64 {

@@ -50,16 +50,11 @@ pub mod rotational_spring;
 pub mod spring;
 pub mod worm_gear;
 
+pub use crate::kernel::{DerivativeMethod, Mat12, NodeState, Vec12, FD_STEP};
 use crate::model::{Model, NodeId};
-use flexmb_lie::{Frame, Group, Mat6, Vec3, Vec6};
-use nalgebra::{DMatrix, DMatrixViewMut, DVector, DVectorViewMut, SMatrix, SVector};
+use flexmb_lie::{Frame, Group, Vec3};
+use nalgebra::{DMatrix, DMatrixViewMut, DVector, DVectorViewMut};
 use std::sync::Arc;
-
-/// Local vector of a two-node element: `[node a (6), node b (6)]` (joints, and the
-/// fixed-size arithmetic inside two-node elements).
-pub type Vec12 = SVector<f64, 12>;
-/// Local matrix of a two-node element, rows and columns ordered like [`Vec12`].
-pub type Mat12 = SMatrix<f64, 12, 12>;
 
 /// An element's local vector: 6 entries per node slot (Lie algebra: translation, then
 /// rotation), then one per element state ([`ElementKernel::n_states`]).
@@ -98,31 +93,6 @@ impl<'a> LocalMatrix<'a> {
     pub fn fixed<const N: usize>(&mut self) -> nalgebra::SMatrixViewMut<'_, f64, N, N> {
         assert_eq!(self.n, N, "local matrix of size {} seen as {N}", self.n);
         nalgebra::SMatrixViewMut::<f64, N, N>::from_slice(self.data)
-    }
-}
-
-/// Kinematics of one node as an element sees it.
-#[derive(Clone, Copy, Debug)]
-pub struct NodeState {
-    /// Configuration `q` (position, rotation).
-    pub q: Frame,
-    /// Velocity `v` in the group's convention (SE(3): body frame; R3xSO(3): inertial translation).
-    pub v: Vec6,
-    /// Acceleration `vdot`, same convention.
-    pub vdot: Vec6,
-    /// Tangent operator `T(h dq)` of the current increment (identity outside Newton).
-    pub t: Mat6,
-}
-
-impl NodeState {
-    /// A node fixed in space (the ground).
-    pub fn ground(frame: Frame) -> Self {
-        Self {
-            q: frame,
-            v: Vec6::zeros(),
-            vdot: Vec6::zeros(),
-            t: Mat6::identity(),
-        }
     }
 }
 
@@ -258,9 +228,9 @@ impl<'a> Local<'a> {
 }
 
 /// What [`ElementKernel::initial_states`] returns: a failure of the Newton iterations that
-/// solve for states, as [`crate::solve::NewtonError`], the unknown blamed being the index of
+/// solve for states, as [`crate::error::NewtonError`], the unknown blamed being the index of
 /// the state in the element's `x`.
-pub type InitialStates = Result<(), crate::solve::NewtonError>;
+pub type InitialStates = Result<(), crate::error::NewtonError>;
 
 /// One small capability set shared by every force element.
 ///
@@ -837,16 +807,6 @@ pub fn point_acceleration(group: Group, node: &NodeState, p: &Vec3) -> Vec3 {
     origin + node.q.r * (omd.cross(p) + om.cross(&om.cross(p)))
 }
 
-/// How a parameter derivative was obtained.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum DerivativeMethod {
-    /// From the formula (exact up to round-off).
-    Analytic,
-    /// Central difference on a perturbed copy of one element or joint
-    /// ([`central_difference`], [`crate::joints::parameters`]).
-    FiniteDifference,
-}
-
 /// The parameter-derivative capability of a force element: `dr/dp` for the element's own
 /// parameters ([`crate::model::parameters`]) and for gravity, at given node kinematics.
 /// Analytic where the element implements it, otherwise the [`central_difference`] default.
@@ -897,11 +857,6 @@ pub fn parameter_dot<E: ElementParameters + ?Sized>(
     element.parameter_derivative(ctx, p, local, &mut d.as_view_mut());
     w.iter().zip(d.iter()).map(|(a, b)| a * b).sum()
 }
-
-/// Relative step of [`central_difference`]: about the cube root of the machine epsilon,
-/// which balances the round-off error (`eps / h`) against the `O(h^2)` truncation error of a
-/// central difference.
-pub const FD_STEP: f64 = 6e-6;
 
 /// The finite-difference default of [`ElementParameters::parameter_derivative`]:
 /// `dr/dp = (r(p + h) - r(p - h)) / 2h` on two copies of `element` with the parameter set by

@@ -1,7 +1,7 @@
 //! `[[beam]]`: meshing of straight and circular beams into nodes and two-node beam elements,
 //! and the cross-section forms.
 
-use super::build::{
+use super::fields::{
     nonzero_vec3, physical, physical_or_zero, point, read_name, require_node, Origin, Origins,
 };
 use super::reader::{describe, name_list, out_of_range, suggestion, Field, Result, Table, QUOTED};

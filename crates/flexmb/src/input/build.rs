@@ -1,22 +1,24 @@
 //! Interprets the (overridden) TOML tree: builds the [`Model`] with its public API, reads the
 //! analysis settings, and maps [`Model::validate`] errors back to the file.
 
-use super::error::{InputError, ItemLabel};
-use super::reader::{name_list, suggestion, Field, Result, Source, Span, Table, Value, QUOTED};
+use super::error::InputError;
+use super::fields::{
+    item_named, nonzero_vec3, opt_point, physical, physical_or_zero, point, read_name,
+    read_orientation, read_wheels, require_joint, require_node, resolve_node, teeth, to_node_frame,
+    Origin, Origins, GROUND, SECTION_COMPONENTS,
+};
+use super::reader::{suggestion, Field, Result, Source, Table, Value, QUOTED};
+use super::time_function::read_function;
 use super::{Analysis, ModelFile};
 use crate::error::ModelError;
-use crate::model::limits::{
-    within, MAX_ANGLE, MAX_FUNCTION_DEPTH, MAX_FUNCTION_TERMS, MAX_KINEMATIC, MAX_PHYSICAL,
-    MAX_TIME, MIN_PHYSICAL, MIN_STEP,
-};
+use crate::model::limits::{within, MAX_ANGLE, MAX_KINEMATIC, MAX_PHYSICAL};
 use crate::model::{
-    box_inertia, clip, frame_from_axis, rotation_from_vector, Bushing, BushingForm, ForceCurve,
-    ForceLaw, JointKind, Load, LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint,
-    RotationalSpring, Sensor, SensorFrame, SensorKind, SpringDamper, SpringLaw, SpringSide,
-    TimeFunction,
+    box_inertia, clip, frame_from_axis, Bushing, BushingForm, ForceCurve, ForceLaw, JointKind,
+    Load, LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint, RotationalSpring, Sensor,
+    SensorFrame, SensorKind, SpringDamper, SpringLaw, SpringSide, TimeFunction,
 };
 use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
-use flexmb_lie::{so3, Frame, Group, Mat3, Mat6, Vec3};
+use flexmb_lie::{Frame, Group, Mat3, Mat6, Vec3};
 use std::collections::HashMap;
 
 const TOP_KEYS: &[&str] = &[
@@ -68,82 +70,6 @@ const NODE_STATE_KEYS: &[&str] = &[
     "angular_velocity",
     "angular_velocity_body",
 ];
-const GROUND: &str = "ground";
-
-/// Where a model item came from in the file, to place errors found by `Model::validate`.
-#[derive(Clone)]
-pub(super) struct Origin {
-    path: String,
-    item: Option<ItemLabel>,
-    span: Span,
-    fields: Vec<(String, Span)>,
-    /// Fields of the model item that have another name in the file:
-    /// `(field of Model::validate, key of the file's table)`.
-    aliases: Vec<(&'static str, &'static str)>,
-    /// Put before the message (names the element of a meshed beam), except for the fields
-    /// in `unprefixed`.
-    prefix: String,
-    unprefixed: Vec<&'static str>,
-}
-
-impl Origin {
-    pub(super) fn of(t: &Table<'_>) -> Self {
-        Self {
-            path: t.path.clone(),
-            item: t.item.clone(),
-            span: t.span.clone(),
-            fields: t.spans(),
-            aliases: Vec::new(),
-            prefix: String::new(),
-            unprefixed: Vec::new(),
-        }
-    }
-
-    /// Maps the model field `field` to the file key `key`.
-    pub(super) fn alias(mut self, field: &'static str, key: &'static str) -> Self {
-        self.aliases.push((field, key));
-        self
-    }
-
-    pub(super) fn prefixed(mut self, prefix: String) -> Self {
-        self.prefix = prefix;
-        self
-    }
-
-    /// No prefix for errors about the model field `field`.
-    pub(super) fn unprefixed(mut self, field: &'static str) -> Self {
-        self.unprefixed.push(field);
-        self
-    }
-}
-
-#[derive(Default)]
-pub(super) struct Origins {
-    /// The `[model]` table.
-    model: Option<Origin>,
-    pub nodes: Vec<Origin>,
-    bodies: Vec<Origin>,
-    joints: Vec<Origin>,
-    loads: Vec<Origin>,
-    springs: Vec<Origin>,
-    ropes: Vec<Origin>,
-    pub contacts: Vec<Origin>,
-    rotational_springs: Vec<Origin>,
-    bushings: Vec<Origin>,
-    /// One per element of `Model::beams`.
-    pub beams: Vec<Origin>,
-    sensors: Vec<Origin>,
-    gears: Vec<Origin>,
-    pub worm_gears: Vec<Origin>,
-    pub blocks: Vec<Origin>,
-    /// Node and joint of each name, as they are created (names are unique in a file): look-ups
-    /// by hash keep reading linear in the size of the model.
-    pub node_ids: HashMap<String, NodeId>,
-    joint_ids: HashMap<String, crate::model::JointId>,
-    /// The elements of each `[[beam]]` (indices in `Model::beams`), by the beam's name.
-    pub beam_elements: HashMap<String, std::ops::Range<usize>>,
-}
-
 pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     let top = Field {
         src,
@@ -208,7 +134,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     model
         .validate()
         .map_err(|e| map_model_error(src, e, &origins))?;
-    if let Some((block, message)) = crate::elements::control::unsolvable_loop(&model) {
+    if let Some((block, message)) = crate::solve::initial::unsolvable_loop(&model) {
         let e = ModelError::Invalid {
             item: crate::model::ItemRef {
                 table: "block",
@@ -283,45 +209,6 @@ fn map_model_error(src: &Source<'_>, e: ModelError, origins: &Origins) -> InputE
             message,
         ),
     }
-}
-
-/// A positive physical constant (mass, section property, ...) in
-/// `[MIN_PHYSICAL, MAX_PHYSICAL]`.
-pub(super) fn physical(f: &Field<'_>) -> Result<f64> {
-    let v = f.f64()?;
-    if v <= 0.0 {
-        return Err(f.err(format!("must be positive, got {v}")));
-    }
-    f.f64_in(MIN_PHYSICAL, MAX_PHYSICAL)
-}
-
-/// A constant that may be 0 (stiffness or damping of a spring, damping of a beam), at most
-/// `MAX_PHYSICAL`.
-pub(super) fn physical_or_zero(f: &Field<'_>) -> Result<f64> {
-    let v = f.f64()?;
-    if v < 0.0 {
-        return Err(f.err(format!("must be >= 0, got {v}")));
-    }
-    f.f64_in(0.0, MAX_PHYSICAL)
-}
-
-/// A direction: any length from 1e-12 to the coordinate range.
-pub(super) fn nonzero_vec3(f: &Field<'_>) -> Result<Vec3> {
-    let v = f.vec3_within(MAX_KINEMATIC)?;
-    if v.norm() > 1e-12 {
-        Ok(v)
-    } else {
-        Err(f.err("must be a non-zero vector (length above 1e-12)"))
-    }
-}
-
-/// A position or point in the coordinate range.
-pub(super) fn point(f: &Field<'_>) -> Result<Vec3> {
-    f.vec3_within(MAX_KINEMATIC)
-}
-
-fn opt_point(t: &Table<'_>, key: &str) -> Result<Option<Vec3>> {
-    t.field(key).map(|f| point(&f)).transpose()
 }
 
 /// The key among `keys` (in order of preference) to blame for a value derived from them: the
@@ -588,98 +475,11 @@ fn read_dynamic(t: &Table<'_>) -> Result<DynamicSettings> {
     Ok(s)
 }
 
-/// Reads `name`: a non-empty string, unique within `seen` (name -> path of its first use).
-pub(super) fn read_name(
-    t: &Table<'_>,
-    seen: &mut HashMap<String, String>,
-    what: &str,
-) -> Result<String> {
-    let f = t.req("name")?;
-    let name = f.str()?;
-    if name.trim().is_empty() {
-        return Err(f.err("must not be empty"));
-    }
-    if let Some(first) = seen.get(name) {
-        return Err(f.err(format!(
-            "duplicate {what} name '{}' (already used by {first})",
-            clip(name, QUOTED)
-        )));
-    }
-    seen.insert(name.to_string(), t.path.clone());
-    Ok(name.to_string())
-}
-
 /// Initial state of a node read from the node keys of a [[node]] or a [[body]].
 struct NodeInit {
     frame: Frame,
     velocity: Vec3,
     angular_velocity: Vec3,
-}
-
-pub(super) fn read_orientation(f: &Field<'_>) -> Result<Mat3> {
-    let t = f.table()?;
-    let forms = ["rotation_vector", "quaternion", "axis", "matrix"];
-    t.check_keys(&[
-        "rotation_vector",
-        "quaternion",
-        "axis",
-        "angle_deg",
-        "matrix",
-    ])?;
-    let given: Vec<&str> = forms.iter().copied().filter(|k| t.has(k)).collect();
-    if given.len() > 1 {
-        return Err(t.key_err(
-            given[1],
-            format!(
-                "give only one of rotation_vector, quaternion, axis (with angle_deg), matrix; found both '{}' and '{}'",
-                given[0], given[1]
-            ),
-        ));
-    }
-    match given.first().copied() {
-        None if t.has("angle_deg") => Err(t.key_err("axis", "is required with angle_deg")),
-        None => Err(f.err(
-            "give one of rotation_vector = [3], quaternion = [w, x, y, z], axis = [3] with angle_deg, matrix = [[3], [3], [3]]",
-        )),
-        Some("rotation_vector") => {
-            let f = t.req("rotation_vector")?;
-            let v = f.vec3()?;
-            // A component out of range alone is named by vec3_within below.
-            if v.amax() <= MAX_ANGLE && v.norm() > MAX_ANGLE {
-                return Err(f.err(format!(
-                    "has an angle |v| = {:e} rad beyond {MAX_ANGLE:e}: a double no longer holds the orientation to 1e-10",
-                    v.norm()
-                )));
-            }
-            Ok(rotation_from_vector(&f.vec3_within(MAX_ANGLE)?))
-        }
-        Some("quaternion") => {
-            let q = t.req("quaternion")?;
-            let v = q.numbers(4, "a quaternion [w, x, y, z] of 4 numbers")?;
-            let n = v.iter().map(|c| c * c).sum::<f64>().sqrt();
-            if (n - 1.0).abs() > 1e-6 {
-                return Err(q.err(format!("must be a unit quaternion, got |q| = {n}")));
-            }
-            Ok(so3::from_quaternion([v[0], v[1], v[2], v[3]]))
-        }
-        Some("axis") => {
-            let axis = nonzero_vec3(&t.req("axis")?)?;
-            let angle = t.req("angle_deg")?.f64_in(-MAX_ANGLE, MAX_ANGLE)?;
-            Ok(rotation_from_vector(&(axis.normalize() * angle.to_radians())))
-        }
-        _ => {
-            let m = t.req("matrix")?;
-            let r = m.mat3_rows()?;
-            let ortho = (r.transpose() * r - Mat3::identity()).norm();
-            let det = r.determinant();
-            if !(ortho <= 1e-6 && det > 0.0) {
-                return Err(m.err(format!(
-                    "is not a rotation matrix (|R^T R - I| = {ortho:.3e}, det R = {det:.6})"
-                )));
-            }
-            Ok(so3::orthonormalize(&r))
-        }
-    }
 }
 
 fn read_node_init(t: &Table<'_>) -> Result<NodeInit> {
@@ -842,258 +642,6 @@ fn read_nodes_and_bodies(
         origins.bodies.push(Origin::of(t));
     }
     Ok(())
-}
-
-/// A node name (not the ground).
-/// The joint named by `f`.
-pub(super) fn require_joint(
-    model: &Model,
-    origins: &Origins,
-    f: &Field<'_>,
-) -> Result<crate::model::JointId> {
-    let jname = f.str()?;
-    origins.joint_ids.get(jname).copied().ok_or_else(|| {
-        let names = || model.joints.iter().map(|j| j.name.as_str());
-        f.err(format!(
-            "unknown joint '{}'{} (joints: {})",
-            clip(jname, QUOTED),
-            suggestion(jname, names()),
-            name_list(names(), 12)
-        ))
-    })
-}
-
-pub(super) fn require_node(model: &Model, origins: &Origins, f: &Field<'_>) -> Result<NodeId> {
-    match resolve_node(model, origins, f, false)? {
-        Some(id) => Ok(id),
-        None => Err(f.err("must be a node, not the ground")),
-    }
-}
-
-/// A node name, or "ground" (`None`) when `ground_ok`.
-pub(super) fn resolve_node(
-    model: &Model,
-    origins: &Origins,
-    f: &Field<'_>,
-    ground_ok: bool,
-) -> Result<Option<NodeId>> {
-    let name = f.str()?;
-    if name == GROUND {
-        return if ground_ok {
-            Ok(None)
-        } else {
-            Err(f.err("must be a node, not the ground"))
-        };
-    }
-    origins
-        .node_ids
-        .get(name)
-        .copied()
-        .map(Some)
-        .ok_or_else(|| {
-            let names = || model.nodes.iter().map(|n| n.name.as_str());
-            f.err(format!(
-                "unknown node '{}'{} (nodes: {}{})",
-                clip(name, QUOTED),
-                suggestion(name, names()),
-                name_list(names(), 12),
-                if ground_ok { ", or 'ground'" } else { "" }
-            ))
-        })
-}
-
-pub(super) fn read_function(f: &Field<'_>) -> Result<TimeFunction> {
-    read_nested_function(f, 1, 1.0)
-}
-
-/// A time function at nesting level `level` (1 for the outermost), inside scaled functions
-/// whose factors multiply to `scale` (in magnitude).
-fn read_nested_function(f: &Field<'_>, level: usize, scale: f64) -> Result<TimeFunction> {
-    if level > MAX_FUNCTION_DEPTH {
-        return Err(f.err(format!(
-            "functions are nested more than {MAX_FUNCTION_DEPTH} levels deep (see 'Time functions' in docs/model-format.md)"
-        )));
-    }
-    let t = f.table()?;
-    let kind = t.req("type")?.choice(&[
-        "constant",
-        "linear",
-        "ramp",
-        "step",
-        "sine",
-        "chirp",
-        "table",
-        "spin_up",
-        "bump",
-        "smooth_step",
-        "delay",
-        "window",
-        "sum",
-        "scaled",
-    ])?;
-    let keys: &[&str] = match kind {
-        "constant" => &["type", "value"],
-        "linear" => &["type", "slope", "start", "offset"],
-        "ramp" => &["type", "t0", "t1", "value"],
-        "step" => &["type", "t0", "value"],
-        "sine" => &["type", "amplitude", "frequency", "phase", "offset"],
-        "chirp" => &["type", "amplitude", "f0", "f1", "duration", "offset"],
-        "table" => &["type", "points"],
-        "bump" => &["type", "height", "start", "duration"],
-        "smooth_step" => &["type", "value", "start", "duration"],
-        "delay" => &["type", "delay", "function"],
-        "window" => &["type", "start", "end", "function"],
-        "sum" => &["type", "functions"],
-        "scaled" => &["type", "factor", "function"],
-        _ => &["type", "omega", "duration"],
-    };
-    t.check_keys(keys)?;
-    let inner = |scale: f64| read_nested_function(&t.req("function")?, level + 1, scale);
-    // Values (a factor, or rad or m), times, rates and angles, each in its range.
-    let num = |k: &str| t.req(k)?.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL);
-    let num_or = |k: &str, d: f64| {
-        t.field(k)
-            .map_or(Ok(d), |f| f.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL))
-    };
-    let time = |k: &str| t.req(k)?.f64_in(-MAX_TIME, MAX_TIME);
-    let time_or = |k: &str, d: f64| t.field(k).map_or(Ok(d), |f| f.f64_in(-MAX_TIME, MAX_TIME));
-    Ok(match kind {
-        "constant" => TimeFunction::Constant {
-            value: num("value")?,
-        },
-        "linear" => TimeFunction::Linear {
-            slope: num("slope")?,
-            start: match t.field("start") {
-                Some(f) => f.f64_in(-MAX_TIME, MAX_TIME)?,
-                None => 0.0,
-            },
-            offset: num_or("offset", 0.0)?,
-        },
-        "ramp" => {
-            let (t0, t1) = (time("t0")?, time("t1")?);
-            if t1 - t0 < MIN_STEP {
-                return Err(t.key_err(
-                    "t1",
-                    format!("must exceed t0 = {t0} by at least {MIN_STEP:e}, got {t1}"),
-                ));
-            }
-            TimeFunction::Ramp {
-                t0,
-                t1,
-                value: num("value")?,
-            }
-        }
-        "step" => TimeFunction::Step {
-            t0: time("t0")?,
-            value: num("value")?,
-        },
-        "sine" => TimeFunction::Sine {
-            amplitude: num("amplitude")?,
-            frequency: t.req("frequency")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,
-            phase: match t.field("phase") {
-                Some(f) => f.f64_in(-MAX_ANGLE, MAX_ANGLE)?,
-                None => 0.0,
-            },
-            offset: num_or("offset", 0.0)?,
-        },
-        "chirp" => TimeFunction::Chirp {
-            amplitude: num("amplitude")?,
-            f0: t.req("f0")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,
-            f1: t.req("f1")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,
-            duration: positive_step(&t.req("duration")?)?,
-            offset: num_or("offset", 0.0)?,
-        },
-        "table" => {
-            let pf = t.req("points")?;
-            let arr = pf.array()?;
-            if arr.is_empty() {
-                return Err(pf.err("needs at least one [t, value] point"));
-            }
-            let mut points = Vec::with_capacity(arr.len());
-            for (i, v) in arr.iter().enumerate() {
-                let e = pf.elem(i, v);
-                let p = e.numbers(2, "a point [t, value]")?;
-                if let toml::de::DeValue::Array(tv) = v.get_ref() {
-                    e.elem(0, &tv[0]).f64_in(-MAX_TIME, MAX_TIME)?;
-                    e.elem(1, &tv[1]).f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?;
-                }
-                if let Some(&(prev, _)) = points.last() {
-                    if p[0] - prev < MIN_STEP {
-                        return Err(e.err(format!(
-                            "times must be strictly increasing (by at least {MIN_STEP:e}), got t = {} after t = {prev}",
-                            p[0]
-                        )));
-                    }
-                }
-                points.push((p[0], p[1]));
-            }
-            TimeFunction::Table { points }
-        }
-        "bump" => TimeFunction::Bump {
-            height: num("height")?,
-            start: time_or("start", 0.0)?,
-            duration: positive_step(&t.req("duration")?)?,
-        },
-        "smooth_step" => TimeFunction::SmoothStep {
-            value: num("value")?,
-            start: time_or("start", 0.0)?,
-            duration: positive_step(&t.req("duration")?)?,
-        },
-        "delay" => TimeFunction::Delay {
-            delay: time("delay")?,
-            function: Box::new(inner(scale)?),
-        },
-        "window" => {
-            let (start, end) = (time("start")?, time("end")?);
-            if end - start < MIN_STEP {
-                return Err(t.key_err(
-                    "end",
-                    format!("must exceed start = {start} by at least {MIN_STEP:e}, got {end}"),
-                ));
-            }
-            TimeFunction::Window {
-                start,
-                end,
-                function: Box::new(inner(scale)?),
-            }
-        }
-        "sum" => {
-            let ff = t.req("functions")?;
-            let arr = ff.array()?;
-            if arr.is_empty() || arr.len() > MAX_FUNCTION_TERMS {
-                return Err(ff.err(format!(
-                    "must hold 1 to {MAX_FUNCTION_TERMS} functions, got {}",
-                    arr.len()
-                )));
-            }
-            let functions = arr
-                .iter()
-                .enumerate()
-                .map(|(i, v)| read_nested_function(&ff.elem(i, v), level + 1, scale))
-                .collect::<Result<Vec<_>>>()?;
-            TimeFunction::Sum { functions }
-        }
-        "scaled" => {
-            let factor = num("factor")?;
-            let scale = scale * factor.abs();
-            if scale > MAX_PHYSICAL {
-                return Err(t.key_err(
-                    "factor",
-                    format!(
-                        "the factors of the nested scaled functions multiply to {scale:e}, beyond {MAX_PHYSICAL:e} (see 'Ranges' in docs/model-format.md)"
-                    ),
-                ));
-            }
-            TimeFunction::Scaled {
-                factor,
-                function: Box::new(inner(scale)?),
-            }
-        }
-        _ => TimeFunction::SpinUp {
-            omega: t.req("omega")?.f64_in(-MAX_KINEMATIC, MAX_KINEMATIC)?,
-            duration: positive_step(&t.req("duration")?)?,
-        },
-    })
 }
 
 fn read_joints(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
@@ -1277,23 +825,6 @@ fn read_loads(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
 fn opt_load(t: &Table<'_>, key: &str) -> Result<Vec3> {
     t.field(key)
         .map_or(Ok(Vec3::zeros()), |f| f.vec3_within(MAX_PHYSICAL))
-}
-
-/// A positive time (or load factor step) in `[MIN_STEP, MAX_TIME]`.
-fn positive_step(f: &Field<'_>) -> Result<f64> {
-    let v = f.f64()?;
-    if v <= 0.0 {
-        return Err(f.err(format!("must be positive, got {v}")));
-    }
-    f.f64_in(MIN_STEP, MAX_TIME)
-}
-
-/// A point given in inertial coordinates at t = 0, in the frame of `node` (inertial for ground).
-pub(super) fn to_node_frame(model: &Model, node: Option<NodeId>, p: &Vec3) -> Vec3 {
-    match node {
-        Some(id) => model.nodes[id.0].frame.inverse().point(p),
-        None => *p,
-    }
 }
 
 fn read_springs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
@@ -1649,36 +1180,6 @@ fn read_ropes(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
     Ok(())
 }
 
-/// The index of the item that `f` names among `names` (e.g. the springs), or an error with
-/// the closest name and the list.
-pub(super) fn item_named<'n, I: Iterator<Item = &'n str>>(
-    f: &Field<'_>,
-    names: impl Fn() -> I,
-    what: &str,
-    plural: &str,
-) -> Result<usize> {
-    let name = f.str()?;
-    names().position(|n| n == name).ok_or_else(|| {
-        f.err(format!(
-            "unknown {what} '{}'{} ({plural}: {})",
-            clip(name, QUOTED),
-            suggestion(name, names()),
-            name_list(names(), 12)
-        ))
-    })
-}
-
-/// The stress resultants of a beam section (the `beam_strain` and `beam_stress` sensors'
-/// and the `section_force` measurement's components).
-pub(super) const SECTION_COMPONENTS: &[&str] = &[
-    "axial",
-    "shear_2",
-    "shear_3",
-    "torsion",
-    "bending_2",
-    "bending_3",
-];
-
 fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
     const XYZ: &[&str] = &["x", "y", "z"];
     const WXYZ: &[&str] = &["w", "x", "y", "z"];
@@ -1891,55 +1392,6 @@ fn read_sensors(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Re
         origins.sensors.push(Origin::of(&t));
     }
     Ok(())
-}
-
-/// A whole number of teeth, at least 1.
-pub(super) fn teeth(f: &Field<'_>) -> Result<u32> {
-    let z = f.int()?;
-    match u32::try_from(z) {
-        Ok(z) if (1..=100_000).contains(&z) => Ok(z),
-        _ => Err(f.err(format!(
-            "must be a whole number of teeth from 1 to 100000, got {z}"
-        ))),
-    }
-}
-
-/// The name (unique among `table`), the two nodes (`node_a`, `node_b`, either may be the
-/// ground) and the centres of two meshing members: gear joints, gear pairs, worm gears.
-pub(super) fn read_wheels(
-    t: &Table<'_>,
-    names: &mut HashMap<String, String>,
-    table: &str,
-    model: &Model,
-    origins: &Origins,
-) -> Result<(String, [Option<NodeId>; 2], [Vec3; 2])> {
-    let name = read_name(t, names, table)?;
-    let node_a = resolve_node(model, origins, &t.req("node_a")?, true)?;
-    let node_b = resolve_node(model, origins, &t.req("node_b")?, true)?;
-    let centers = wheel_centers(t, model, [node_a, node_b])?;
-    Ok((name, [node_a, node_b], centers))
-}
-
-/// The centres of two wheels on `nodes` (inertial, t = 0): `center_a`, `center_b`, each by
-/// default its node's position (required for a wheel on the ground).
-fn wheel_centers(t: &Table<'_>, model: &Model, nodes: [Option<NodeId>; 2]) -> Result<[Vec3; 2]> {
-    let mut out = [Vec3::zeros(); 2];
-    for (i, key) in ["center_a", "center_b"].into_iter().enumerate() {
-        out[i] = match (opt_point(t, key)?, nodes[i]) {
-            (Some(p), _) => p,
-            (None, Some(n)) => model.nodes[n.0].frame.x,
-            (None, None) => {
-                return Err(t.key_err(
-                    key,
-                    format!(
-                        "is required for a wheel on the ground (node_{} = \"ground\")",
-                        ["a", "b"][i]
-                    ),
-                ))
-            }
-        };
-    }
-    Ok(out)
 }
 
 /// A `[[joint]]` of type "gear" (an ideal gear ratio, [`crate::joints::gear`]).

@@ -2,8 +2,8 @@
 //! Points and directions are given in the inertial frame at t = 0, like a spring's points,
 //! and stored in their node's frame.
 
-use super::build::{physical, physical_or_zero, point, read_name, resolve_node, to_node_frame};
-use super::build::{Origin, Origins};
+use super::fields::{physical, physical_or_zero, point, read_name, resolve_node, to_node_frame};
+use super::fields::{Origin, Origins};
 use super::reader::{Result, Table};
 use crate::model::contact::{Bristles, Contact, ContactLaw, ContactShape, Dissipation, Friction};
 use crate::model::limits::MAX_KINEMATIC;

@@ -4,9 +4,10 @@
 //! Points are given in the inertial frame at t = 0 and stored in their node's frame, as a
 //! sensor's.
 
-use super::build::{nonzero_vec3, physical, point, read_name, require_joint, require_node};
-use super::build::{read_function, to_node_frame, Origin, Origins};
+use super::fields::{nonzero_vec3, physical, point, read_name, require_joint, require_node};
+use super::fields::{to_node_frame, Origin, Origins};
 use super::reader::{name_list, suggestion, Field, Result, Table, QUOTED};
+use super::time_function::read_function;
 use crate::model::clip;
 use crate::model::control::{Block, BlockKind, ControlSystem, Quantity, Signal, Target};
 use crate::model::limits::MAX_PHYSICAL;
@@ -566,7 +567,7 @@ fn read_quantity(
         "contact_force" => {
             let f = t.req("contact")?;
             let names = || model.contacts.iter().map(|c| c.name.as_str());
-            let contact = super::build::item_named(&f, names, "contact", "contacts")?;
+            let contact = super::fields::item_named(&f, names, "contact", "contacts")?;
             Quantity::ContactForce {
                 contact,
                 axis: axis(t, "")?,
@@ -574,7 +575,7 @@ fn read_quantity(
         }
         "section_force" => {
             let beam = super::beam::require_element(model, origins, &t.req("beam")?)?;
-            let names = super::build::SECTION_COMPONENTS;
+            let names = super::fields::SECTION_COMPONENTS;
             let c = t.req("component")?.choice(names)?;
             let component = names.iter().position(|s| *s == c).unwrap_or(0);
             Quantity::SectionForce { beam, component }

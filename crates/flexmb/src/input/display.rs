@@ -3,7 +3,7 @@
 //! "Display geometry"). Mesh files (STL, binary or text, and OBJ) are read here, relative
 //! to the model file's folder, so that a bad mesh is an error of the model file.
 
-use super::build::{physical, point};
+use super::fields::{physical, point};
 use super::reader::{Field, Result, Table};
 use crate::model::display::{Shape, ShapeKind};
 use crate::model::limits::MAX_KINEMATIC;
@@ -86,7 +86,7 @@ fn read_shape(f: &Field<'_>, node: NodeId) -> Result<Shape> {
         None => Vec3::zeros(),
     };
     let r = match t.field("orientation") {
-        Some(o) => super::build::read_orientation(&o)?,
+        Some(o) => super::fields::read_orientation(&o)?,
         None => Mat3::identity(),
     };
     if t.has("colour") && t.has("color") {

@@ -25,7 +25,7 @@ pub struct ItemLabel {
     pub name: String,
 }
 
-/// Why a model file could not be turned into a [`crate::Model`] and its analysis settings.
+/// Why a model file could not be turned into a [`crate::model::Model`] and its analysis settings.
 ///
 /// The `Display` form is `FILE:LINE:COL: field 'body[2].mass' (body 'crank'): message`.
 #[derive(Debug, thiserror::Error)]
@@ -41,7 +41,7 @@ pub enum InputError {
     #[error("{location}: TOML syntax error: {message}")]
     Syntax { location: Location, message: String },
     /// A field is unknown, missing, of the wrong type or has an invalid value, or the model it
-    /// describes fails [`crate::Model::validate`]. When a `--set` override gave the field
+    /// describes fails [`crate::model::Model::validate`]. When a `--set` override gave the field
     /// its value, the message ends with `(value set by --set '...')`.
     #[error("{location}: field '{field}'{}: {message}", ItemSuffix(.item))]
     Field {

@@ -34,15 +34,16 @@ mod contact;
 mod control;
 mod display;
 mod error;
+mod fields;
 mod overrides;
 mod reader;
 mod sensitivity;
+mod time_function;
 mod worm_gear;
 
 pub use error::{InputError, ItemLabel, Location};
 
 use crate::model::Model;
-use crate::solve::DynamicSettings;
 use reader::{Source, Value};
 use std::path::Path;
 use toml::de::{DeTable, DeValue};
@@ -59,24 +60,7 @@ pub struct ModelFile {
     pub sensitivity: Option<crate::sensitivity::Setup>,
 }
 
-/// The analysis requested by the `[solver]` table.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Analysis {
-    /// `analysis = "dynamic"`: time integration with the Lie group generalized-alpha method.
-    Dynamic(DynamicSettings),
-    /// `analysis = "static"`: equilibrium followed in the load factor.
-    Static(crate::solve::StaticSettings),
-}
-
-impl Analysis {
-    /// The dynamic settings, if this is a dynamic analysis.
-    pub fn dynamic(&self) -> Option<&DynamicSettings> {
-        match self {
-            Analysis::Dynamic(s) => Some(s),
-            Analysis::Static(_) => None,
-        }
-    }
-}
+pub use crate::solve::Analysis;
 
 /// Largest model file read, in bytes (256 MiB): a larger file, or a device such as
 /// `/dev/zero`, is an error before it fills the memory.

@@ -141,7 +141,7 @@ pub(super) fn read_sensitivity(
     let mut names = HashMap::new();
     for t in top.items("reference")? {
         t.check_keys(&["name", "file", "time_column", "column"])?;
-        let name = super::build::read_name(&t, &mut names, "reference")?;
+        let name = super::fields::read_name(&t, &mut names, "reference")?;
         check_name(&t, &name)?;
         if model.sensors.iter().any(|s| s.name == name) {
             return Err(t.key_err("name", format!("'{name}' is already the name of a sensor")));
@@ -163,7 +163,7 @@ pub(super) fn read_sensitivity(
     let mut names = HashMap::new();
     for t in &criteria_items {
         t.check_keys(&["name", "terminal", "integral"])?;
-        let name = super::build::read_name(t, &mut names, "criterion")?;
+        let name = super::fields::read_name(t, &mut names, "criterion")?;
         check_name(t, &name)?;
         let (kind, key) = match (t.field("terminal"), t.field("integral")) {
             (Some(_), None) => (CriterionKind::Terminal, "terminal"),

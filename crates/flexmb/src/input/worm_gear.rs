@@ -1,8 +1,8 @@
 //! `[[worm_gear]]`: worm gear pairs with mesh and thrust-washer friction (documented in
 //! `docs/model-format.md`, "Worm gear"; mechanics in [`crate::elements::worm_gear`]).
 
-use super::build::{nonzero_vec3, physical, physical_or_zero, read_wheels, teeth};
-use super::build::{Origin, Origins};
+use super::fields::{nonzero_vec3, physical, physical_or_zero, read_wheels, teeth};
+use super::fields::{Origin, Origins};
 use super::reader::{Result, Table};
 use crate::model::limits::{MAX_FRICTION, MAX_KINEMATIC};
 use crate::model::Model;

@@ -25,7 +25,7 @@ pub mod gear;
 pub mod parameters;
 pub mod primitives;
 
-use crate::elements::{Mat12, NodeState, Vec12};
+use crate::kernel::{Mat12, NodeState, Vec12};
 use crate::model::{Joint, JointKind, Model, NodeId};
 use flexmb_lie::{so3::hat, Frame, Group, Vec3};
 use primitives::{dot1, dot1_into, dot2, dot2_into, Primitive};

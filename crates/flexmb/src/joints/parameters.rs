@@ -25,7 +25,7 @@
 
 use super::primitives::dot1_into;
 use super::{evaluate_joint, node_frames, Row, MAX_ROWS};
-use crate::elements::{DerivativeMethod, NodeState, Vec12, FD_STEP};
+use crate::kernel::{DerivativeMethod, NodeState, Vec12, FD_STEP};
 use crate::model::parameters::JointParam;
 use crate::model::{Joint, Model};
 use flexmb_lie::{Frame, Group};

@@ -14,7 +14,7 @@
 //!         g = ( -a, a0 x R_a^T r, a, p_b x R_b^T a )
 //! ```
 
-use crate::elements::{Mat12, Vec12};
+use crate::kernel::{Mat12, Vec12};
 use flexmb_lie::{so3::hat, Frame, Mat3, Vec3};
 
 /// Value, gradient and gradient derivative of a scalar constraint.

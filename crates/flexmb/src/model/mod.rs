@@ -2,7 +2,7 @@
 //!
 //! A [`Model`] holds what a user writes in a model file (nodes, bodies, beam elements, joints, loads, springs,
 //! sensors) and never changes during a run. Everything that changes lives in
-//! [`crate::State`]; everything derived, and all scratch memory, in [`crate::Data`].
+//! [`crate::state::State`]; everything derived, and all scratch memory, in [`crate::data::Data`].
 //! Items refer to each other through typed ids ([`NodeId`], [`JointId`]); joints, loads and
 //! sensors attach to frames fixed on nodes, never to degree-of-freedom numbers.
 //! [`Parameters`] names every numeric parameter of a model by a path and sets it.
@@ -12,12 +12,14 @@
 pub mod contact;
 pub mod control;
 pub mod display;
+pub mod error;
 pub mod limits;
 pub mod parameters;
 mod time_function;
 mod validate;
 pub mod worm_gear;
 
+pub use error::{ModelError, SettingsError};
 pub use parameters::{ParamId, ParamKind, ParamRole, Parameters};
 pub use time_function::TimeFunction;
 pub(crate) use validate::{clip, QUOTED};

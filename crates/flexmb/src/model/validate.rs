@@ -10,8 +10,8 @@ use super::limits::{
     MAX_KINEMATIC, MAX_PHYSICAL, MAX_ROPE_POINTS, MAX_TIME, MIN_PHYSICAL, MIN_RELATIVE_LENGTH,
     MIN_STEP,
 };
+use super::ModelError;
 use super::{ItemRef, JointKind, Model, NodeId, RopePoint, SensorKind, TimeFunction};
-use crate::error::ModelError;
 use flexmb_lie::{Frame, Group, Mat3, Vec3};
 use std::collections::HashMap;
 

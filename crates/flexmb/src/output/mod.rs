@@ -34,7 +34,7 @@
 pub mod snapshot;
 pub mod writer;
 
-use crate::observe::Work;
+use crate::solve::observe::Work;
 use serde::Serialize;
 pub use snapshot::Snapshot;
 use std::fmt::Write as _;
@@ -244,7 +244,7 @@ impl OutputDir {
     /// then synced too), so `summary.json` is always either the old or the new summary.
     ///
     /// A summary with status `running` is written after room is kept for the last one (a
-    /// file of at least [`SUMMARY_ROOM`] bytes and [`SUMMARY_ROOM_MARGIN`] more than this
+    /// file of at least [`SUMMARY_ROOM`] bytes and `SUMMARY_ROOM_MARGIN` more than this
     /// summary; an error if it cannot be kept, and then nothing is written). Any other
     /// summary is the last: it is written in that room when there is one, cut to fit.
     /// After [`OutputDir::end_now`] nothing is written: the run's end is recorded.
@@ -561,7 +561,7 @@ impl ResultFiles {
     pub fn create(
         dir: &OutputDir,
         first: &str,
-        model: &crate::Model,
+        model: &crate::model::Model,
         sensor_names: &[String],
     ) -> Result<Self, OutputError> {
         let mut header = first.to_string();
@@ -595,7 +595,7 @@ impl ResultFiles {
     /// [`ResultFiles::lengths`] returned when its checkpoint was written.
     pub fn reopen(
         dir: &OutputDir,
-        model: &crate::Model,
+        model: &crate::model::Model,
         lengths: &[(String, u64)],
     ) -> Result<Self, OutputError> {
         let open = |name: &str| -> Result<Option<CsvFile>, OutputError> {
@@ -716,7 +716,7 @@ pub trait StoreFormat: Sync {
     fn create(
         &self,
         dir: &OutputDir,
-        model: &crate::Model,
+        model: &crate::model::Model,
         analysis: &str,
     ) -> Result<Box<dyn Store>, OutputError>;
     /// The file of an earlier run, cut back to the `marks` its checkpoint recorded (all the
@@ -724,7 +724,7 @@ pub trait StoreFormat: Sync {
     fn reopen(
         &self,
         dir: &OutputDir,
-        model: &crate::Model,
+        model: &crate::model::Model,
         marks: &[(String, u64)],
     ) -> Result<Box<dyn Store>, OutputError>;
 }
@@ -812,7 +812,7 @@ impl Summary {
         text
     }
 
-    /// [`Summary::json`] in at most `room` bytes, when that can be done by leaving out
+    /// `Summary::json` in at most `room` bytes, when that can be done by leaving out
     /// warnings (from the last; a last warning says how many) and then cutting the error
     /// message (which ends with `...` then).
     pub fn json_within(&self, room: usize) -> String {
@@ -965,7 +965,7 @@ mod tests {
         let out = OutputDir::prepare(&dir).unwrap();
         let values = hard_values();
         let names: Vec<String> = (0..values.len()).map(|i| format!("s{i}")).collect();
-        let model = crate::Model::new(flexmb_lie::Group::SE3);
+        let model = crate::model::Model::new(flexmb_lie::Group::SE3);
         let mut files = ResultFiles::create(&out, "time", &model, &names).unwrap();
         // Each row: a time taken from the list and every value, rotated by the row number.
         for row in 0..5 {

@@ -34,8 +34,8 @@
 use super::{OutputDir, OutputError, Reached, ResultFiles, Snapshot, Store, StoreFormat};
 use crate::data::Layout;
 use crate::model::Model;
-use crate::observe::Sample;
 use crate::sensors::SensorEvaluator;
+use crate::solve::observe::Sample;
 use crate::solve::StepInfo;
 use crate::state::State;
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
@@ -86,7 +86,7 @@ struct Taken {
     state: State,
     sensors: Vec<f64>,
     /// The work done up to it, and the output time of the solver's thread \[s\].
-    work: crate::observe::Work,
+    work: crate::solve::observe::Work,
     output_seconds: f64,
 }
 

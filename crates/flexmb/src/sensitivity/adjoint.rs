@@ -5,12 +5,13 @@ use super::criteria::{weight, History};
 use super::matrix::StepMatrix;
 use super::pipeline::{self, prepare_function, Prepared, Spare};
 use super::{pick, state_bytes, Gradients, Problem, SensitivityError, Stats};
+use crate::data::Data;
 use crate::data::Layout;
-use crate::observe::Observers;
+use crate::model::Model;
+use crate::solve::observe::Observers;
 use crate::solve::step::{StateTangent, StepFunction};
 use crate::solve::trajectory::{Trajectory, TrajectoryStep};
 use crate::state::State;
-use crate::{Data, Model};
 
 /// The backward sweep's state: one cotangent of the state and of the parameters per
 /// criterion.
@@ -135,7 +136,7 @@ impl Workspace {
     /// The scratch data for `layout` of `model`: the one kept if it has that layout.
     fn data(
         &mut self,
-        model: &crate::Model,
+        model: &crate::model::Model,
         layout: &Layout,
         threads: &crate::parallel::Threads,
     ) -> Result<&mut Data, SensitivityError> {
@@ -151,7 +152,7 @@ impl Workspace {
 /// model's nodal masses: its parameters may have moved), built otherwise (then `false`).
 fn refit(
     kept: &mut Option<Data>,
-    model: &crate::Model,
+    model: &crate::model::Model,
     layout: &Layout,
 ) -> Result<bool, SensitivityError> {
     let fits = kept.as_ref().is_some_and(|d| {
@@ -161,7 +162,9 @@ fn refit(
     });
     match kept {
         Some(data) if fits => data.nodal_mass = crate::data::nodal_mass(model),
-        _ => *kept = Some(Data::new(model, layout.clone()).map_err(crate::SolveError::from)?),
+        _ => {
+            *kept = Some(Data::new(model, layout.clone()).map_err(crate::error::SolveError::from)?)
+        }
     }
     Ok(fits)
 }
@@ -285,7 +288,7 @@ pub fn adjoint_in(
         }
     }
     // The sweep through consecutive steps, from the last.
-    let mut sweep = |steps: &[TrajectoryStep]| -> Result<(), crate::SolveError> {
+    let mut sweep = |steps: &[TrajectoryStep]| -> Result<(), crate::error::SolveError> {
         if parallel {
             let scratch: Vec<&mut Data> = sweepers.iter_mut().flatten().collect();
             pipeline::run(
@@ -308,7 +311,7 @@ pub fn adjoint_in(
                 progress(step)
             })
         }
-        .map_err(crate::SolveError::Output)
+        .map_err(crate::error::SolveError::Output)
     };
     match forward.steps {
         Some(mut steps) => {

@@ -21,7 +21,7 @@
 //! ([`super::report::differences`]).
 
 use super::{adjoint, finite_differences, Gradients, Problem, SensitivityError};
-use crate::input::Analysis;
+use crate::solve::Analysis;
 use crate::solve::NewtonSettings;
 
 /// Largest relative Newton tolerance of the check's runs.

@@ -5,13 +5,14 @@ use super::criteria::{CriterionKind, History};
 use super::matrix::StepMatrix;
 use super::pipeline::{self, Prepared, Spare};
 use super::{EventWatch, Gradients, Problem, SensitivityError, Stats};
+use crate::data::Data;
 use crate::data::Layout;
-use crate::observe::{Observer, Sample, StepRecord};
+use crate::model::Model;
+use crate::solve::observe::{Observer, Sample, StepRecord};
 use crate::solve::step::{StateTangent, StepFunction};
 use crate::solve::trajectory::TrajectoryStep;
 use crate::solve::Simulation;
 use crate::state::State;
-use crate::{Data, Model};
 use std::borrow::Borrow;
 use std::sync::mpsc::{sync_channel, SyncSender};
 
@@ -199,7 +200,7 @@ pub fn direct(problem: &Problem) -> Result<Gradients, SensitivityError> {
     let mut obs = Direct {
         problem,
         data: Data::new(&problem.model, layout.clone())
-            .map_err(crate::SolveError::from)?
+            .map_err(crate::error::SolveError::from)?
             .with_threads(sim.data.threads.clone()),
         layout: &layout,
         spare: Spare::default(),
@@ -256,7 +257,7 @@ fn on_threads<'a>(
     let settings = sim.settings;
     let mut scratch = Vec::with_capacity(workers);
     for _ in 0..workers {
-        scratch.push(Data::new(&p.model, layout.clone()).map_err(crate::SolveError::from)?);
+        scratch.push(Data::new(&p.model, layout.clone()).map_err(crate::error::SolveError::from)?);
     }
     let spares: Vec<_> = (0..workers).map(|_| Default::default()).collect();
     let (tx, rx) = sync_channel::<OwnedStep>(pipeline::AHEAD);
@@ -294,7 +295,7 @@ fn on_threads<'a>(
         let run = events.outcome(run);
         let chain = chain.join().expect("the tangents' thread does not panic");
         match (run, chain) {
-            (_, Err(e)) => Err(SensitivityError::from(crate::SolveError::Output(e))),
+            (_, Err(e)) => Err(SensitivityError::from(crate::error::SolveError::Output(e))),
             (Err(e), _) => Err(e),
             (Ok(_), Ok(obs)) => Ok(obs),
         }

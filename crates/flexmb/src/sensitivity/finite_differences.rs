@@ -8,13 +8,13 @@ use super::{Gradients, Problem, SensitivityError, Stats};
 pub fn criteria_values(
     problem: &Problem,
 ) -> Result<(Vec<f64>, usize, Vec<String>), SensitivityError> {
-    if let crate::input::Analysis::Static(settings) = &problem.analysis {
+    if let crate::solve::Analysis::Static(settings) = &problem.analysis {
         let (statics, history) = super::statics::solve(problem, settings)?;
         let steps = statics.stats.steps;
         return Ok((problem.criteria.values(&history), steps, statics.warnings));
     }
     let settings = *problem.dynamic()?;
-    let mut sim = crate::Simulation::new(std::sync::Arc::clone(&problem.model), settings)?;
+    let mut sim = crate::solve::Simulation::new(std::sync::Arc::clone(&problem.model), settings)?;
     let layout = sim.data.layout.clone();
     let mut rec = super::Recorder {
         problem,

@@ -52,7 +52,7 @@ pub fn initial_tangents(
     load_factor: f64,
 ) -> Result<Vec<StateTangent>, SensitivityError> {
     let layout = Layout::with_rows(model, false, redundant);
-    let mut data = Data::new(model, layout.clone()).map_err(crate::SolveError::from)?;
+    let mut data = Data::new(model, layout.clone()).map_err(crate::error::SolveError::from)?;
     let (nd, so) = (layout.n_dofs, layout.state_offset());
     let mut sc = crate::solve::initial::acceleration_scaling(model, load_factor);
     let s = sc.row_scale;
@@ -234,7 +234,7 @@ fn initial_states_derivative(
     params: &Parameters,
     id: ParamId,
     layout: &Layout,
-) -> Result<Vec<f64>, crate::SolveError> {
+) -> Result<Vec<f64>, crate::error::SolveError> {
     let value = params.value(model, id);
     let mut copy = model.clone();
     let eps = 1e-4 * value.abs().max(1e-3);

@@ -2,7 +2,7 @@
 //! factorized once per step for the solves of a sensitivity analysis: `n_p` forward solves
 //! (direct differentiation) or one transposed solve per criterion (adjoint).
 
-use crate::solve::linear::{Backend, LinearSolver};
+use crate::linear::{Backend, LinearSolver};
 
 /// Unknowns above which the step Jacobian is factorized by the block LU.
 const BLOCK_FROM: usize = 40;
@@ -41,7 +41,7 @@ impl StepMatrix {
                 Backend::Dense
             };
             let solver = LinearSolver::build(n, &pattern.positions, backend, &pattern.groups)
-                .map_err(crate::SolveError::from)?;
+                .map_err(crate::error::SolveError::from)?;
             self.solver = Some(solver);
             self.pattern = Some(Arc::clone(pattern));
         }

@@ -104,14 +104,14 @@ pub use direct::direct;
 pub use finite_differences::{criteria_values, finite_differences};
 
 use crate::data::Layout;
-use crate::input::Analysis;
+use crate::error::SolveError;
 use crate::model::control::BlockKind;
 use crate::model::{Model, ParamId, Parameters};
-use crate::observe::{Observer, Sample, StepRecord};
+use crate::solve::observe::{Observer, Sample, StepRecord};
 use crate::solve::step::StateTangent;
 use crate::solve::trajectory::TrajectoryStep;
+use crate::solve::Analysis;
 use crate::solve::{DynamicSettings, StepEvent};
-use crate::SolveError;
 use criteria::History;
 use std::sync::Arc;
 
@@ -416,7 +416,7 @@ pub(crate) fn length_scale(model: &Model) -> f64 {
 }
 
 /// Bytes of a state (its vectors' payload).
-fn state_bytes(s: &crate::State) -> usize {
+fn state_bytes(s: &crate::state::State) -> usize {
     let n = s.q.len();
     8 * (12 * n + 18 * n + s.lambda.len() + 3 * s.x.len())
 }
@@ -431,7 +431,9 @@ fn pick(index: &[Option<usize>], full: &[f64], out: &mut [f64], sign: f64) {
 }
 
 /// The simulation of a problem and its consistent start, with the tangents `ds_0/dp_k`.
-fn start(problem: &Problem) -> Result<(crate::Simulation, Vec<StateTangent>), SensitivityError> {
+fn start(
+    problem: &Problem,
+) -> Result<(crate::solve::Simulation, Vec<StateTangent>), SensitivityError> {
     let settings = *problem.dynamic()?;
     if settings.lie_update.in_chart() {
         return Err(SensitivityError::Unsupported(
@@ -456,7 +458,7 @@ fn start(problem: &Problem) -> Result<(crate::Simulation, Vec<StateTangent>), Se
             problem.params.path(w[0])
         )));
     }
-    let sim = crate::Simulation::new(Arc::clone(&problem.model), settings)?;
+    let sim = crate::solve::Simulation::new(Arc::clone(&problem.model), settings)?;
     let redundant = sim.data.layout.redundant_rows();
     let tangents = initial::initial_tangents(
         &problem.model,

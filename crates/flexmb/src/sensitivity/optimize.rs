@@ -47,10 +47,10 @@ impl Evaluator {
     ) -> Result<(Vec<f64>, Vec<Vec<f64>>), SensitivityError> {
         let problem = self.problem.with_values(values);
         let g = match problem.analysis {
-            crate::input::Analysis::Dynamic(_) => {
+            crate::solve::Analysis::Dynamic(_) => {
                 adjoint_in(&problem, &mut self.workspace, &mut |_, _| {})?
             }
-            crate::input::Analysis::Static(_) => super::statics::gradients(&problem, false)?,
+            crate::solve::Analysis::Static(_) => super::statics::gradients(&problem, false)?,
         };
         self.runs += 1;
         Ok((g.values, g.gradients))

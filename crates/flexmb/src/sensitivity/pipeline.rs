@@ -11,12 +11,13 @@
 //! are the same, bit for bit (`tests/sensitivity/sensitivity.rs`).
 
 use super::matrix::StepMatrix;
+use crate::data::Data;
 use crate::data::Layout;
+use crate::model::Model;
 use crate::solve::step::{KeptPartials, StepFunction};
 use crate::solve::trajectory::TrajectoryStep;
 use crate::solve::DynamicSettings;
 use crate::state::State;
-use crate::{Data, Model};
 use std::borrow::Borrow;
 use std::sync::mpsc::{sync_channel, Receiver};
 use std::sync::{Mutex, MutexGuard, PoisonError};

@@ -46,7 +46,7 @@ pub(super) fn solve(
         )));
     }
     let mut statics = Statics::new(Arc::clone(&problem.model), *settings)?;
-    statics.run(&mut |_: &crate::observe::Sample| Ok(()))?;
+    statics.run(&mut |_: &crate::solve::observe::Sample| Ok(()))?;
     let mut history = History::default();
     let layout = statics.data.layout.clone();
     problem
@@ -58,7 +58,7 @@ pub(super) fn solve(
 /// The gradients of the criteria of a static `problem` at its final point, by the adjoint
 /// or, with `direct`, by direct differentiation.
 pub(super) fn gradients(problem: &Problem, direct: bool) -> Result<Gradients, SensitivityError> {
-    let crate::input::Analysis::Static(settings) = &problem.analysis else {
+    let crate::solve::Analysis::Static(settings) = &problem.analysis else {
         return Err(SensitivityError::Unsupported(
             "not a static analysis".into(),
         ));
@@ -68,7 +68,7 @@ pub(super) fn gradients(problem: &Problem, direct: bool) -> Result<Gradients, Se
     let state = &statics.state;
     let lambda = statics.load_factor;
     let layout = statics.data.layout.clone();
-    let mut data = Data::new(model, layout.clone()).map_err(crate::SolveError::from)?;
+    let mut data = Data::new(model, layout.clone()).map_err(crate::error::SolveError::from)?;
     // The equilibrium's point: no velocities or accelerations (a pseudo-dynamic run ends
     // with small ones), loads at the state's time, where the analysis evaluated them (the
     // load factor; a pseudo-dynamic run's end time, with the load factor as scale).
@@ -240,7 +240,7 @@ pub(super) fn gradients(problem: &Problem, direct: bool) -> Result<Gradients, Se
 /// has not settled) is refused.
 fn check_equilibrium(
     data: &mut Data,
-    state: &crate::State,
+    state: &crate::state::State,
     settings: &StaticSettings,
 ) -> Result<(), SensitivityError> {
     let mut dx = data.residual.clone();

@@ -52,9 +52,9 @@ use crate::elements::{
 };
 use crate::error::{SettingsError, SolveError};
 use crate::model::Model;
-use crate::observe::{Observer, Sample, StepRecord};
 use crate::parallel::Threads;
 use crate::sensors::node_states_into;
+use crate::solve::observe::{Observer, Sample, StepRecord};
 use crate::state::State;
 use flexmb_lie::Vec6;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -353,8 +353,8 @@ pub struct Stats {
 
 impl Stats {
     /// The counts of the work done.
-    pub fn work(&self) -> crate::observe::Work {
-        crate::observe::Work {
+    pub fn work(&self) -> crate::solve::observe::Work {
+        crate::solve::observe::Work {
             steps: self.steps,
             newton_iterations: self.newton_iterations,
             rejected_steps: self.rejected_steps,

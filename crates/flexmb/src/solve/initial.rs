@@ -360,3 +360,67 @@ fn worst(v: &[f64]) -> Option<(usize, f64)> {
         .enumerate()
         .max_by(|a, b| a.1.total_cmp(&b.1))
 }
+
+/// A located reason why the control diagram of `model` cannot be solved at its initial
+/// state: an algebraic loop whose outputs' Newton iteration fails there
+/// ([`crate::error::SolveError::InitialStates`]: no convergence, a loop without a
+/// solution), or whose equations are singular there (e.g. a loop gain of 1), as the index of
+/// a block on it and a message. `None` when every loop can be solved.
+pub fn unsolvable_loop(model: &Model) -> Option<(usize, String)> {
+    use crate::elements::control::{algebraic_loops, singular_loop, unsolvable, SINGULAR};
+    use crate::elements::{ElementRef, Kernel, LocalBuffers};
+    let system = &model.control;
+    let loops = algebraic_loops(system);
+    if loops.is_empty() {
+        return None;
+    }
+    // the initial state of the model: node kinematics, the blocks' states and outputs
+    let layout = Layout::new(model);
+    let state = match State::initial(model, &layout) {
+        Ok(state) => state,
+        Err(SolveError::InitialStates {
+            error,
+            unknown,
+            worst_equation,
+        }) => {
+            // the loop of the output blamed
+            let blamed = match unknown {
+                Some(crate::error::UnknownId::State { index, .. }) => {
+                    Some(system.owner(usize::from(index)))
+                }
+                _ => None,
+            };
+            let blocks = loops
+                .iter()
+                .find(|l| blamed.is_some_and(|b| l.contains(&b)))
+                .unwrap_or(&loops[0]);
+            return Some(match *error {
+                crate::error::NewtonError::Singular { .. } => unsolvable(system, blocks, SINGULAR),
+                error => unsolvable(
+                    system,
+                    blocks,
+                    &format!("Newton's method on the outputs at t = 0 fails: {error}; worst equation: {worst_equation}"),
+                ),
+            });
+        }
+        Err(e) => return Some((loops[0][0], e.to_string())),
+    };
+    let control = layout
+        .elements
+        .iter()
+        .position(|e| matches!(e, ElementRef::Control(_)))?;
+    let kernel = layout.elements[control].kernel(model);
+    let mut buffers = LocalBuffers::default();
+    let all = crate::sensors::node_states(&state);
+    buffers.gather(
+        &kernel,
+        &all,
+        (&state.x, &state.xdot, layout.state_start[control]),
+        &state.lambda,
+    );
+    let local = buffers.local(&all);
+    let Kernel::Control(element) = kernel else {
+        return None;
+    };
+    singular_loop(model, &element, &local, &loops)
+}

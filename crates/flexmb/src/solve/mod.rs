@@ -9,12 +9,14 @@
 pub mod dynamics;
 pub mod generalized_alpha;
 pub mod initial;
-pub mod linear;
 pub mod newton;
+pub mod observe;
 pub mod statics;
 pub mod step;
 pub mod trajectory;
 
+/// The sparse linear solvers, a lower layer ([`crate::linear`]); kept under this path too.
+pub use crate::linear;
 pub use dynamics::{
     DynamicSettings, Formulation, IntoShared, LieUpdate, Scheme, Simulation, Stats, StepEvent,
     StepInfo,
@@ -23,3 +25,22 @@ pub use generalized_alpha::{FirstOrderParameters, GaParameters};
 pub use initial::{initial_accelerations, prepare_layout};
 pub use newton::{NewtonError, NewtonSettings, Verification};
 pub use statics::{StaticMethod, StaticSettings, Statics};
+
+/// An analysis and its settings: what the `[solver]` table of a model file requests.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Analysis {
+    /// `analysis = "dynamic"`: time integration with the Lie group generalized-alpha method.
+    Dynamic(DynamicSettings),
+    /// `analysis = "static"`: equilibrium followed in the load factor.
+    Static(StaticSettings),
+}
+
+impl Analysis {
+    /// The dynamic settings, if this is a dynamic analysis.
+    pub fn dynamic(&self) -> Option<&DynamicSettings> {
+        match self {
+            Analysis::Dynamic(s) => Some(s),
+            Analysis::Static(_) => None,
+        }
+    }
+}

@@ -73,9 +73,10 @@
 //! in `|dx|_c` while the blocks' do has reached the round-off of the accelerations, and
 //! `|dx|_c` is then left out.
 
-use super::linear::{Backend, LinearError, LinearSolver};
 use crate::data::Data;
+pub use crate::error::NewtonError;
 use crate::error::SettingsError;
+use crate::linear::{Backend, LinearError, LinearSolver};
 
 /// Tolerances and limits of the Newton iteration.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -450,52 +451,6 @@ pub fn newton_correction(data: &mut Data) {
         *d = -r;
     }
     data.solver.solve_in_place(dx);
-}
-
-/// Why a Newton solve failed, with the unknown to blame (an index of the Newton vector;
-/// [`crate::data::Layout::unknown`] names it).
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum NewtonError {
-    #[error("non-finite residual")]
-    NonFiniteResidual { unknown: usize },
-    #[error("non-finite Newton correction")]
-    NonFiniteCorrection { unknown: usize },
-    #[error("singular iteration matrix ({source})")]
-    Singular {
-        unknown: Option<usize>,
-        source: LinearError,
-    },
-    #[error("Newton diverging (weighted correction {error:.3e}, contraction rate {rate:.3})")]
-    Diverging {
-        error: f64,
-        rate: f64,
-        unknown: usize,
-    },
-    #[error("no convergence in {iterations} iterations (weighted correction {error:.3e})")]
-    MaxIterations {
-        iterations: usize,
-        error: f64,
-        unknown: usize,
-    },
-    /// A failure particular to the system (e.g. no real root of the arc-length constraint).
-    #[error("{message}")]
-    System {
-        message: String,
-        unknown: Option<usize>,
-    },
-}
-
-impl NewtonError {
-    /// The unknown to blame, if any.
-    pub fn unknown(&self) -> Option<usize> {
-        match *self {
-            NewtonError::NonFiniteResidual { unknown }
-            | NewtonError::NonFiniteCorrection { unknown }
-            | NewtonError::Diverging { unknown, .. }
-            | NewtonError::MaxIterations { unknown, .. } => Some(unknown),
-            NewtonError::Singular { unknown, .. } | NewtonError::System { unknown, .. } => unknown,
-        }
-    }
 }
 
 /// Why a solve's multipliers could not be converged to the tolerance (its other unknowns

@@ -17,7 +17,6 @@
 
 use super::dynamics::IntoShared;
 use super::initial::prepare_layout;
-use super::linear::LinearError;
 use super::newton::{
     newton_correction, weighted_norm, NewtonError, NewtonFailure, NewtonPolicy, NewtonSettings,
     NewtonSolver, NonlinearSystem, Norms, Verification,
@@ -26,10 +25,11 @@ use crate::assembly::{assemble, ConstraintRhs, Iterate, Scaling};
 use crate::data::{Block, Data};
 use crate::elements::{Coefficients, NodeState};
 use crate::error::{SettingsError, SolveError};
+use crate::linear::LinearError;
 use crate::model::limits::within;
 use crate::model::Model;
-use crate::observe::{Observer, Sample, Work};
 use crate::sensors::node_states;
+use crate::solve::observe::{Observer, Sample, Work};
 use crate::state::State;
 use flexmb_lie::Vec6;
 use std::sync::atomic::AtomicBool;

@@ -646,7 +646,7 @@ pub type Triplets = Vec<(usize, usize, f64)>;
 /// The step residual `R(x; s_n, p, h)` as a function (see the module documentation), with
 /// its exact Jacobian `dR/dx` and the products of `dR/ds_n` with a tangent and with a
 /// transposed vector. Every evaluation takes its inputs explicitly; `data` is scratch (a
-/// [`crate::Data`] of the same layout). The partial derivatives at the last `x` asked for
+/// [`crate::data::Data`] of the same layout). The partial derivatives at the last `x` asked for
 /// are kept: `jacobian`, `start_jvp`, `start_vjp` and the parameter products at the same
 /// `x` (what an adjoint step calls) assemble them once.
 pub struct StepFunction<'a> {
@@ -724,10 +724,10 @@ fn zeroed(out: &mut Vec<f64>, n: usize) {
 }
 
 /// The positions of the exact step Jacobian of one layout, sorted by row then column
-/// without repeats: the iteration matrix's pattern ([`crate::Data::pattern`], whose repeated
+/// without repeats: the iteration matrix's pattern ([`crate::data::Data::pattern`], whose repeated
 /// positions are summed) with every node block of a row complete (six columns), plus, in
 /// the stabilized form, the columns of `zeta` that `F_q T B(q_n)^T` fills. Built once per
-/// [`crate::Data`] and kept there: the values of every step's Jacobian go on these
+/// [`crate::data::Data`] and kept there: the values of every step's Jacobian go on these
 /// positions, so a solver's symbolic analysis is done once.
 #[derive(Debug)]
 pub struct JacobianPattern {
@@ -742,7 +742,7 @@ pub struct JacobianPattern {
     /// `n` and every active row acting on `n`: where `F_q T B(q_n)^T` puts its entries.
     zeta: Vec<(usize, usize, usize, usize)>,
     /// The layout's groups of unknowns, for the block LU ([`Layout::groups`]).
-    pub groups: crate::solve::linear::Groups,
+    pub groups: crate::linear::Groups,
     /// Where each entry of the iteration matrix's pattern goes in each partial derivative
     /// ([`Selection`]): a position, or [`crate::assembly::Selected::NONE`].
     selections: [Vec<u32>; Selection::COUNT],
@@ -1049,7 +1049,7 @@ impl<'a> StepFunction<'a> {
 
     fn assemble(
         &self,
-        data: &mut crate::Data,
+        data: &mut crate::data::Data,
         nodes: &[NodeState],
         end: &State,
         sc: &Scaling,
@@ -1081,7 +1081,7 @@ impl<'a> StepFunction<'a> {
     }
 
     /// The step residual `R(x; s_n, p, h)` (`n_unknowns`).
-    pub fn residual(&self, x: &[f64], data: &mut crate::Data) -> Vec<f64> {
+    pub fn residual(&self, x: &[f64], data: &mut crate::data::Data) -> Vec<f64> {
         let (end, nodes, _) = self.end_nodes(x);
         self.assemble(data, &nodes, &end, &self.step.scaling(0.0), false);
         data.residual.clone()
@@ -1089,7 +1089,7 @@ impl<'a> StepFunction<'a> {
 
     /// The partial derivatives at the end of the step (see [`Partials`]), kept for the next
     /// call at the same `x` with the same [`StepFunction::step`].
-    fn partials(&self, x: &[f64], data: &mut crate::Data) -> Arc<Partials> {
+    fn partials(&self, x: &[f64], data: &mut crate::data::Data) -> Arc<Partials> {
         if let Some(c) = &*self.cache.borrow() {
             if c.x.as_slice() == x && c.step == self.step {
                 return Arc::clone(&c.partials);
@@ -1114,7 +1114,7 @@ impl<'a> StepFunction<'a> {
     fn compute_partials(
         &self,
         x: &[f64],
-        data: &mut crate::Data,
+        data: &mut crate::data::Data,
         spare: Option<Partials>,
     ) -> Partials {
         let [mut f_q, mut f_mu, f_v, f_vd, f_x, f_xd] = spare.map_or_else(Default::default, |p| {
@@ -1223,10 +1223,11 @@ impl<'a> StepFunction<'a> {
 
     /// The step Jacobian's positions for `data`'s layout, built on first use and kept in
     /// `data`.
-    fn pattern(&self, data: &mut crate::Data) -> Arc<JacobianPattern> {
+    fn pattern(&self, data: &mut crate::data::Data) -> Arc<JacobianPattern> {
+        let (layout, positions) = (self.layout, &data.pattern);
         Arc::clone(
-            data.step_jacobian
-                .get_or_insert_with(|| Arc::new(JacobianPattern::new(self.layout, &data.pattern))),
+            data.derived
+                .get_or_insert_with(|| Arc::new(JacobianPattern::new(layout, positions))),
         )
     }
 
@@ -1328,7 +1329,7 @@ impl<'a> StepFunction<'a> {
 
     /// The exact Jacobian `dR/dx` at `x`, built fresh (no regularization):
     /// `[F_q T + gamma' F_v + beta' F_vd | F_mu | F_q T B(q_n)^T]`.
-    pub fn jacobian(&self, x: &[f64], data: &mut crate::Data) -> Triplets {
+    pub fn jacobian(&self, x: &[f64], data: &mut crate::data::Data) -> Triplets {
         let mut values = Vec::new();
         let pattern = self.jacobian_values(x, data, &mut values);
         pattern
@@ -1345,7 +1346,7 @@ impl<'a> StepFunction<'a> {
     pub fn jacobian_values(
         &self,
         x: &[f64],
-        data: &mut crate::Data,
+        data: &mut crate::data::Data,
         out: &mut Vec<f64>,
     ) -> Arc<JacobianPattern> {
         let p = self.partials(x, data);
@@ -1445,7 +1446,7 @@ impl<'a> StepFunction<'a> {
         x: &[f64],
         params: &crate::model::parameters::Parameters,
         dp: &[f64],
-        data: &mut crate::Data,
+        data: &mut crate::data::Data,
     ) -> Vec<f64> {
         use crate::parameter_derivatives::{residual_derivative, Columns};
         let layout = self.layout;
@@ -1509,7 +1510,7 @@ impl<'a> StepFunction<'a> {
         x: &[f64],
         params: &crate::model::parameters::Parameters,
         w: &[f64],
-        data: &mut crate::Data,
+        data: &mut crate::data::Data,
     ) -> Vec<f64> {
         let ids: Vec<_> = params.ids().collect();
         self.parameter_vjp_for(x, params, &ids, w, data)
@@ -1523,7 +1524,7 @@ impl<'a> StepFunction<'a> {
         params: &crate::model::parameters::Parameters,
         ids: &[crate::model::ParamId],
         w: &[f64],
-        data: &mut crate::Data,
+        data: &mut crate::data::Data,
     ) -> Vec<f64> {
         use crate::parameter_derivatives::{
             constraint_force_derivative, residual_derivative_transpose_for, Weights,
@@ -1628,7 +1629,12 @@ impl<'a> StepFunction<'a> {
     }
 
     /// `(dR/ds_n) ds` at `x`.
-    pub fn start_jvp(&self, x: &[f64], ds: &StateTangent, data: &mut crate::Data) -> Vec<f64> {
+    pub fn start_jvp(
+        &self,
+        x: &[f64],
+        ds: &StateTangent,
+        data: &mut crate::data::Data,
+    ) -> Vec<f64> {
         self.start_jvp_many(x, std::slice::from_ref(ds), data)
             .pop()
             .expect("one product")
@@ -1640,7 +1646,7 @@ impl<'a> StepFunction<'a> {
         &self,
         x: &[f64],
         ds: &[StateTangent],
-        data: &mut crate::Data,
+        data: &mut crate::data::Data,
     ) -> Vec<Vec<f64>> {
         let p = self.partials(x, data);
         let [c1, c2, c3, c4, c5] = self.start_coefficients();
@@ -1705,7 +1711,7 @@ impl<'a> StepFunction<'a> {
     }
 
     /// `(dR/ds_n)^T w` at `x`.
-    pub fn start_vjp(&self, x: &[f64], w: &[f64], data: &mut crate::Data) -> StateTangent {
+    pub fn start_vjp(&self, x: &[f64], w: &[f64], data: &mut crate::data::Data) -> StateTangent {
         let p = self.partials(x, data);
         let [c1, c2, c3, c4, c5] = self.start_coefficients();
         let n = self.start.q.len();
@@ -1820,7 +1826,7 @@ impl<'a> StepFunction<'a> {
         dx: &[f64],
         ds: &StateTangent,
         dp: Option<(&crate::model::parameters::Parameters, &[f64])>,
-        data: &mut crate::Data,
+        data: &mut crate::data::Data,
     ) -> StateTangent {
         let p = self.partials(x, data);
         let layout = self.layout;
@@ -1889,7 +1895,7 @@ impl<'a> StepFunction<'a> {
             &crate::model::parameters::Parameters,
             &[crate::model::ParamId],
         )>,
-        data: &mut crate::Data,
+        data: &mut crate::data::Data,
     ) -> (Vec<f64>, StateTangent, Vec<f64>) {
         let p = self.partials(x, data);
         let layout = self.layout;

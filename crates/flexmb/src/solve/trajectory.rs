@@ -14,7 +14,7 @@
 use super::dynamics::{DynamicSettings, Memory, Simulation};
 use crate::error::SolveError;
 use crate::model::Model;
-use crate::observe::{Observer, Sample, StepRecord};
+use crate::solve::observe::{Observer, Sample, StepRecord};
 use crate::state::State;
 use std::sync::Arc;
 

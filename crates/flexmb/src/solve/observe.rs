@@ -55,7 +55,7 @@ pub struct StepRecord<'a> {
     pub info: &'a StepInfo,
 }
 
-/// Something a run reports to. An error stops the run ([`crate::SolveError::Output`]), with
+/// Something a run reports to. An error stops the run ([`crate::error::SolveError::Output`]), with
 /// every earlier output delivered.
 pub trait Observer {
     /// Called at every output point.
