@@ -22,6 +22,7 @@ const BEAM_KEYS: &[&str] = &[
     "orientation",
     "section",
     "damping",
+    "element",
     "velocity",
     "angular_velocity",
     "mass_matrix",
@@ -269,6 +270,8 @@ pub(super) fn read_beams(
             }
         }
 
+        let element_sections = read_element_sections(&t, &section, n)?;
+
         let mass_kind = match t.opt_choice("mass_matrix", &["lumped", "consistent"])? {
             None => BeamMass::default(),
             Some("lumped") => BeamMass::Lumped,
@@ -350,7 +353,9 @@ pub(super) fn read_beams(
             model.add_beam_with_mass(
                 &element,
                 [ids[i], ids[i + 1]],
-                section.clone(),
+                element_sections[i]
+                    .clone()
+                    .unwrap_or_else(|| section.clone()),
                 [frames[i], frames[i + 1]],
                 mass_kind,
             );
@@ -413,6 +418,106 @@ fn read_arc(f: &Field<'_>, start: Vec3, n: usize) -> Result<Axis> {
         axis,
         angle: angle_deg.to_radians(),
     })
+}
+
+/// The sections of the elements that the beam's `element.<k>` tables (`k` from 0, in the
+/// order of the elements) change from the beam's `section` and `damping`: a sectional
+/// property key (`EA`, ..., `rhoI3`) replaces that diagonal entry of `C` or `J` whatever the
+/// form of the beam's section, `stiffness.<i>.<j>` and `rotary_inertia.<i>.<j>` (`i < j`) a
+/// coupling (both symmetric entries), `damping.{mass, stiffness}` the Rayleigh
+/// coefficients. The keys are the paths of the element's parameters after
+/// `beam.<r>.element.<k>.` ([`crate::model::parameters`]), so that `--set` reaches every
+/// parameter of every element. `None` for an element the beam's section describes.
+fn read_element_sections(
+    t: &Table<'_>,
+    beam: &BeamSection,
+    n: usize,
+) -> Result<Vec<Option<BeamSection>>> {
+    let mut out = vec![None; n];
+    let Some(f) = t.field("element") else {
+        return Ok(out);
+    };
+    let elements = f.table()?;
+    for (key, _) in elements.map.iter() {
+        let key: &str = key.get_ref();
+        let k = match key.parse::<usize>() {
+            Ok(k) if k < n && key == k.to_string() => k,
+            _ => {
+                return Err(elements.key_name_err(
+                    key,
+                    format!(
+                        "must be an element number from 0 to {} (the beam has {n} element{})",
+                        n - 1,
+                        if n == 1 { "" } else { "s" }
+                    ),
+                ))
+            }
+        };
+        let e = elements.req(key)?.table()?;
+        e.check_keys(&["section", "damping"])?;
+        let mut s = beam.clone();
+        if let Some(f) = e.field("section") {
+            let st = f.table()?;
+            let mut allowed = SECTION_DIRECT.to_vec();
+            allowed.extend(["stiffness", "rotary_inertia"]);
+            st.check_keys(&allowed)?;
+            for (i, key) in SECTION_DIRECT.iter().enumerate() {
+                if let Some(v) = st.field(key) {
+                    let v = physical(&v)?;
+                    match i {
+                        0..=5 => s.stiffness[(i, i)] = v,
+                        6 => s.mass_per_length = v,
+                        _ => s.rotary_inertia[(i - 7, i - 7)] = v,
+                    }
+                }
+            }
+            for (key, dim) in [("stiffness", 6), ("rotary_inertia", 3)] {
+                let Some(f) = st.field(key) else { continue };
+                let rows = f.table()?;
+                for (i_key, _) in rows.map.iter() {
+                    let i_key: &str = i_key.get_ref();
+                    let columns = rows.req(i_key)?.table()?;
+                    for (j_key, _) in columns.map.iter() {
+                        let j_key: &str = j_key.get_ref();
+                        let index =
+                            |k: &str| k.parse::<usize>().ok().filter(|v| k == v.to_string());
+                        let (Some(i), Some(j)) = (index(i_key), index(j_key)) else {
+                            return Err(columns
+                                .key_name_err(j_key, "an entry is '<i>.<j>', two whole numbers"));
+                        };
+                        if !(i < j && j < dim) {
+                            return Err(columns.key_name_err(
+                                j_key,
+                                format!("an entry is '<i>.<j>' with i < j < {dim} (a coupling; the diagonal has its own keys)"),
+                            ));
+                        }
+                        let v = columns.req(j_key)?.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?;
+                        let m = if dim == 6 {
+                            s.stiffness.as_mut_slice()
+                        } else {
+                            s.rotary_inertia.as_mut_slice()
+                        };
+                        m[i + dim * j] = v;
+                        m[j + dim * i] = v;
+                    }
+                }
+            }
+        }
+        if let Some(f) = e.field("damping") {
+            let d = f.table()?;
+            d.check_keys(&["mass", "stiffness"])?;
+            for (key, slot) in [
+                ("mass", &mut s.damping_mass),
+                ("stiffness", &mut s.damping_stiffness),
+            ] {
+                if let Some(v) = d.field(key) {
+                    *slot = physical_or_zero(&v)?;
+                }
+            }
+        }
+        out[k] = Some(s);
+    }
+    Ok(out)
 }
 
 /// Keys of the three forms of `section`.

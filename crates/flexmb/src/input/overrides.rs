@@ -2,7 +2,8 @@
 //!
 //! A replaced value keeps the span of the value it replaces and an inserted key gets the
 //! position of its parent table, so errors about it still point at a meaningful line; the
-//! error message then names the override.
+//! error message then names the override. A table missing on the path is inserted with the
+//! rest of the path (the reader checks its keys as it checks the file's).
 
 use super::error::InputError;
 use super::reader::{describe, name_list, Source, Span, Value, MESSAGE, PATH, QUOTED};
@@ -169,24 +170,25 @@ fn apply_one<'i>(
                     }
                     return Ok(shown);
                 }
-                match t.get_mut(*seg) {
-                    Some(v) => cur = v,
-                    None => {
-                        let target = segs.join(".");
-                        let what = if path.is_empty() {
-                            "the file".to_string()
-                        } else {
-                            format!("'{path}'")
-                        };
-                        return Err(fail(
-                            &here,
-                            &shown,
-                            format!(
-                                "{what} has no '{seg}', so '{target}' cannot be set (only a key of an existing table can be added)"
-                            ),
-                        ));
+                if !t.contains_key(*seg) {
+                    // A table missing on the path is created with the rest of it (an
+                    // element's section of a beam: `beam.leg.element.3.section.EI2`); the
+                    // reader then checks its keys like any other, naming this override.
+                    let at = here.start..here.start;
+                    let mut value = respan(
+                        parse_value(raw).map_err(|m| fail(&here, key.trim(), m))?,
+                        &at,
+                    );
+                    for inner in segs[i + 1..].iter().rev() {
+                        let mut table = DeTable::new();
+                        table.insert(Spanned::new(at.clone(), Cow::Borrowed(*inner)), value);
+                        value = Spanned::new(at.clone(), DeValue::Table(table));
                     }
+                    t.insert(Spanned::new(at.clone(), Cow::Borrowed(*seg)), value);
+                    // (errors anywhere in the created table name this override)
+                    return Ok(shown);
                 }
+                cur = t.get_mut(*seg).expect("the key is there");
                 path = shown;
             }
             DeValue::Array(a) => {

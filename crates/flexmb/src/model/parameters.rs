@@ -20,6 +20,7 @@
 //! | beam | `beam.<r>.section.{rhoJ, rhoI2, rhoI3}` | diagonal of the rotary inertia per length [kg m] | same with the sectional-property form |
 //! | beam | `beam.<r>.section.rotary_inertia.<i>.<j>`, `i < j` | coupling `J_ij = J_ji` | the matrix form |
 //! | beam | `beam.<r>.damping.{mass, stiffness}` | Rayleigh `alpha` \[1/s\], `beta` \[s\] | same |
+//! | beam element | `beam.<r>.element.<k>.` then any of the beam's paths after `beam.<r>.` | the same quantity of element `k` (from 0) alone | `element.<k>` of the `[[beam]]` |
 //! | joint | `joint.<j>.position.<k>` | joint point at t = 0, inertial \[m\]; sets both joint frames' points | same |
 //! | joint | `joint.<j>.drive.<a>` | drive amplitude `a` ([`super::TimeFunction::amplitude_keys`]) | same |
 //! | load | `load.<l>.force.<k>`, `load.<l>.torque.<k>` | force \[N\], torque [N m], in the load's frame | same |
@@ -53,10 +54,11 @@
 //! (`body.3.mass`), which for items read from a file in file order is also what `--set`
 //! accepts. Beam elements named `<r>[<i>]` (how a file-level `[[beam]]` `r`, or
 //! [`Model::add_straight_beam`], names its elements) form the beam `r`, whose parameters
-//! drive all of its elements, when they all have the same section; elements with other
-//! names, or of a beam whose elements differ, are beams of their own, named by the element's
-//! name (`beam.rod[2].section.EA`), or by its index in [`Model::beams`] under the rule
-//! above. Distributed beam loads are the nodal loads the model holds (`load.snow@roof.3`).
+//! drive all of its elements while they all have the same section; each of them also has
+//! its own, `beam.<r>.element.<k>. ...` with `k` its position among them from 0, whatever
+//! the sections of the others (one design variable per element). Elements with other names
+//! are beams of their own, named by the element's name, or by its index in
+//! [`Model::beams`] under the rule above. Distributed beam loads are the nodal loads the model holds (`load.snow@roof.3`).
 //!
 //! **Roles.** Node velocities enter only the initial state ([`ParamRole::InitialState`]);
 //! every other parameter enters the residual of the equations of motion or the constraints
@@ -607,11 +609,24 @@ impl Parameters {
                 add(format!("inertia.{k}"), BodyParam::Inertia(k));
             }
         }
-        for (name, elements) in beam_items(model) {
-            let item = reg.beams.len();
-            reg.beams.push(elements);
-            for p in SectionParam::all() {
-                reg.push(format!("beam.{name}.{}", p.key()), ParamKind::Beam(item, p));
+        for beam in beam_items(model) {
+            if beam.uniform {
+                let item = reg.beams.len();
+                reg.beams.push(beam.elements.clone());
+                for p in SectionParam::all() {
+                    let path = format!("beam.{}.{}", beam.name, p.key());
+                    reg.push(path, ParamKind::Beam(item, p));
+                }
+            }
+            if beam.meshed {
+                for (k, &e) in beam.elements.iter().enumerate() {
+                    let item = reg.beams.len();
+                    reg.beams.push(vec![e]);
+                    for p in SectionParam::all() {
+                        let path = format!("beam.{}.element.{k}.{}", beam.name, p.key());
+                        reg.push(path, ParamKind::Beam(item, p));
+                    }
+                }
             }
         }
         let names = segments(model.joints.iter().map(|j| j.name.as_str()));
@@ -974,8 +989,21 @@ fn beam_key(name: &str) -> &str {
     }
 }
 
-/// The beams of the registry, `(path segment, elements)`, in order of first element.
-fn beam_items(model: &Model) -> Vec<(String, Vec<usize>)> {
+/// A beam of the registry ([`beam_items`]).
+struct BeamItem {
+    /// The path segment after `beam.`.
+    name: String,
+    /// Its elements (indices in [`Model::beams`]), in order.
+    elements: Vec<usize>,
+    /// Its elements share one section: the beam's paths drive them all.
+    uniform: bool,
+    /// Its elements are named `<r>[<i>]`: each also has the paths `beam.<r>.element.<k>. ...`
+    /// (`k` its position among them, from 0), whatever the sections of the others.
+    meshed: bool,
+}
+
+/// The beams of the registry, in order of first element.
+fn beam_items(model: &Model) -> Vec<BeamItem> {
     let mut groups: Vec<(&str, Vec<usize>)> = Vec::new();
     let mut slot: HashMap<&str, usize> = HashMap::new();
     for (e, b) in model.beams.iter().enumerate() {
@@ -986,31 +1014,28 @@ fn beam_items(model: &Model) -> Vec<(String, Vec<usize>)> {
         });
         groups[k].1.push(e);
     }
-    // A beam whose elements differ in section is one beam per element.
-    let mut items: Vec<(&str, Vec<usize>)> = Vec::new();
-    for (key, elements) in groups {
-        let first = &model.beams[elements[0]].section;
-        if elements.iter().all(|&e| model.beams[e].section == *first) {
-            items.push((key, elements));
-        } else {
-            items.extend(
-                elements
-                    .into_iter()
-                    .map(|e| (model.beams[e].name.as_str(), vec![e])),
-            );
-        }
-    }
     // A name that is not plain or not unique: one beam per element, named by its index.
     let mut count: HashMap<&str, usize> = HashMap::new();
-    for (key, _) in &items {
+    for (key, _) in &groups {
         *count.entry(key).or_default() += 1;
     }
     let mut out = Vec::new();
-    for (key, elements) in items {
+    for (key, elements) in groups {
         if plain_name(key) && count[key] == 1 {
-            out.push((key.to_string(), elements));
+            let first = &model.beams[elements[0]].section;
+            out.push(BeamItem {
+                name: key.to_string(),
+                uniform: elements.iter().all(|&e| model.beams[e].section == *first),
+                meshed: model.beams[elements[0]].name != key,
+                elements,
+            });
         } else {
-            out.extend(elements.into_iter().map(|e| (e.to_string(), vec![e])));
+            out.extend(elements.into_iter().map(|e| BeamItem {
+                name: e.to_string(),
+                elements: vec![e],
+                uniform: true,
+                meshed: false,
+            }));
         }
     }
     out

@@ -535,6 +535,28 @@ fn parameter_derivatives_match_finite_differences_on_a_two_element_beam() {
         );
         let at = point(&model, &mut rng, 0.2);
         check_model(&format!("{kind:?} beam"), &model, &at, &mut seen);
+        // Elements of other sections (one design variable per element, as topology
+        // optimization sets them): no path of the whole beam, each element's own paths.
+        let mut model = model;
+        model.beams[1].section.stiffness[(4, 4)] *= 1.7;
+        model.beams[1].section.mass_per_length *= 0.6;
+        let params = Parameters::new(&model);
+        assert!(params.id("beam.rod.section.EI2").is_err());
+        for (k, e) in [(0, 0), (1, 1)] {
+            let id = params
+                .id(&format!("beam.rod.element.{k}.section.EI2"))
+                .unwrap();
+            let ParamKind::Beam(item, _) = params.kind(id) else {
+                panic!("a beam parameter")
+            };
+            assert_eq!(params.beam_elements(item), [e]);
+        }
+        check_model(
+            &format!("{kind:?} beam, elements apart"),
+            &model,
+            &at,
+            &mut seen,
+        );
     }
     println!("worst relative error {:.2e}", seen.worst);
 }

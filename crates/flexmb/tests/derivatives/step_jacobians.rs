@@ -361,8 +361,24 @@ fn check_parameters(name: &str, sim: &Simulation, most: usize) -> Vec<String> {
         .filter(|&id| params.role(id) == ParamRole::Residual)
         .collect();
     let stride = ids.len().div_ceil(most).max(1);
+    let mut picked: Vec<ParamId> = ids.iter().step_by(stride).copied().collect();
+    // and every kind at least once: a model of many beam elements has hundreds of section
+    // parameters, among which a stride alone skips the rarer kinds
+    let mut covered = kinds(
+        &picked
+            .iter()
+            .map(|&id| params.path(id).to_string())
+            .collect::<Vec<_>>(),
+    );
+    for &id in &ids {
+        let kind = kinds(&[params.path(id).to_string()]);
+        if !kind.is_subset(&covered) {
+            covered.extend(kind);
+            picked.push(id);
+        }
+    }
     let mut checked = Vec::new();
-    for &id in ids.iter().step_by(stride) {
+    for &id in &picked {
         let mut dp = vec![0.0; params.len()];
         dp[id.0 as usize] = 1.0;
         let jv = f.parameter_jvp(&x, &params, &dp, &mut data);
@@ -484,6 +500,8 @@ fn step_parameter_derivatives_match_finite_differences() {
         "model.gravity",
         "beam.section.EA",
         "beam.section.rhoA",
+        "beam.element.section.EI2",
+        "beam.element.section.rhoA",
         "beam.damping.stiffness",
         "spring.stiffness",
         "spring.rest_length",

@@ -5,6 +5,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod beam_elements;
 mod display_geometry;
 mod fuzz_model_reader;
 mod input_limits;

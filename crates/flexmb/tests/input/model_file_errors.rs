@@ -455,11 +455,17 @@ fn malformed_overrides() {
     // Index out of range.
     let e = set("body.3.mass=2");
     assert_contains(&e, &[&format!("{f}:13:"), "field 'body.3'", "out of range"]);
-    // Unknown parent table.
+    // Unknown parent table: created by the override, then refused by the reader's key
+    // check, at the parent table, naming the override.
     let e = set("solver.newton.rtol=1e-8");
     assert_contains(
         &e,
-        &[&format!("{f}:8:"), "field 'solver.newton'", "cannot be set"],
+        &[
+            &format!("{f}:8:"),
+            "field 'solver.newton'",
+            "unknown key 'newton'",
+            "--set 'solver.newton.rtol=1e-8'",
+        ],
     );
     // A scalar has no children.
     let e = set("solver.h.x=1");
