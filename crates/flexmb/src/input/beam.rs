@@ -257,18 +257,7 @@ pub(super) fn read_beams(
         }
 
         let mut section = read_section(&t.req("section")?)?;
-        if let Some(f) = t.field("damping") {
-            let d = f.table()?;
-            d.check_keys(&["mass", "stiffness"])?;
-            for (key, slot) in [
-                ("mass", &mut section.damping_mass),
-                ("stiffness", &mut section.damping_stiffness),
-            ] {
-                if let Some(v) = d.field(key) {
-                    *slot = physical_or_zero(&v)?;
-                }
-            }
-        }
+        read_damping(&t, &mut section)?;
 
         let element_sections = read_element_sections(&t, &section, n)?;
 
@@ -503,21 +492,29 @@ fn read_element_sections(
                 }
             }
         }
-        if let Some(f) = e.field("damping") {
-            let d = f.table()?;
-            d.check_keys(&["mass", "stiffness"])?;
-            for (key, slot) in [
-                ("mass", &mut s.damping_mass),
-                ("stiffness", &mut s.damping_stiffness),
-            ] {
-                if let Some(v) = d.field(key) {
-                    *slot = physical_or_zero(&v)?;
-                }
-            }
-        }
+        read_damping(&e, &mut s)?;
         out[k] = Some(s);
     }
     Ok(out)
+}
+
+/// The Rayleigh coefficients `damping = { mass, stiffness }` of table `t` into `section`
+/// (each key that is given).
+fn read_damping(t: &Table<'_>, section: &mut BeamSection) -> Result<()> {
+    let Some(f) = t.field("damping") else {
+        return Ok(());
+    };
+    let d = f.table()?;
+    d.check_keys(&["mass", "stiffness"])?;
+    for (key, slot) in [
+        ("mass", &mut section.damping_mass),
+        ("stiffness", &mut section.damping_stiffness),
+    ] {
+        if let Some(v) = d.field(key) {
+            *slot = physical_or_zero(&v)?;
+        }
+    }
+    Ok(())
 }
 
 /// Keys of the three forms of `section`.
