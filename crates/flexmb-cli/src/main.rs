@@ -15,6 +15,10 @@
 //! outcome ([`exit`]), one message per cause on stderr, the result files of
 //! [`flexmb::output`] in the output directory.
 
+// The doc comments of the commands and options are their --help text, where
+// `[[criterion]]` names a table of the model file, not an item to link.
+#![allow(rustdoc::broken_intra_doc_links)]
+
 mod console;
 mod signals;
 

@@ -8,7 +8,7 @@
 //! # The data block
 //!
 //! The page carries one JSON object (see [`page_data`]): the model's metadata as in
-//! [`ModelInfo`](crate::ModelInfo) (display shapes, beams, joints, springs, sensors), the
+//! [`crate::ModelInfo`] (display shapes, beams, joints, springs, sensors), the
 //! snapshots' times (or load factors) and sensor values as JSON numbers, the bounding box of
 //! the whole motion, and the large per-snapshot arrays as *channels*. A channel holds
 //! `frames x items x comps` values, each quantized to an integer `q = round((v - origin[c]) /
