@@ -443,8 +443,12 @@ fn end_at_once(dir: &OutputDir, out: &Path) -> impl FnOnce(i32) -> i32 + Send + 
                 reached(summary),
                 out.display()
             )),
-            // Not started, or ended: summary.json says so.
-            Ok(None) => {}
+            // Not started, or ended (the first signal's end already recorded, its message
+            // perhaps not yet printed): summary.json says which.
+            Ok(None) => tell(format_args!(
+                "interrupted at once by a second {name}: {} says where the results stop",
+                out.join("summary.json").display()
+            )),
             Err(e) => tell(format_args!("error: {e}")),
         }
         // The run's writer stays held until the process ends (at once, on return): the run
