@@ -426,8 +426,6 @@ impl Model {
     /// [`super::limits`]); the error names the item and the field.
     pub fn validate(&self) -> Result<(), ModelError> {
         let n = self.nodes.len();
-        let check_node =
-            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         if n > MAX_ITEMS || self.beams.len() > MAX_ITEMS {
             return Err(bad(
                 "model",
@@ -443,6 +441,25 @@ impl Model {
         finite3(&self.gravity, MAX_KINEMATIC)
             .map_err(|m| bad("model", 0, &self.title, "gravity", m))?;
 
+        self.validate_nodes()?;
+        self.validate_bodies()?;
+        self.validate_joints()?;
+        self.validate_loads()?;
+        self.validate_springs()?;
+        self.validate_rotational_springs()?;
+        self.validate_bushings()?;
+        self.validate_contacts()?;
+        self.validate_ropes()?;
+        self.validate_gears()?;
+        self.validate_worm_gears()?;
+        self.validate_control()?;
+        self.validate_beams()?;
+        self.validate_sensors()?;
+        Ok(())
+    }
+
+    /// The checks of [`Self::validate`] on the nodes.
+    fn validate_nodes(&self) -> Result<(), ModelError> {
         for (i, node) in self.nodes.iter().enumerate() {
             let fail = |field, m| bad("node", i, &node.name, field, m);
             rotation(&node.frame.r).map_err(|m| fail("orientation", m))?;
@@ -460,7 +477,13 @@ impl Model {
                 format!("duplicate node name (also node #{})", first + 1),
             ));
         }
+        Ok(())
+    }
 
+    /// The checks of [`Self::validate`] on the bodies.
+    fn validate_bodies(&self) -> Result<(), ModelError> {
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         for (i, b) in self.bodies.iter().enumerate() {
             let fail = |field, m| bad("body", i, &b.name, field, m);
             check_node("body", i, &b.name, "node", Some(b.node))?;
@@ -498,7 +521,13 @@ impl Model {
                 ));
             }
         }
+        Ok(())
+    }
 
+    /// The checks of [`Self::validate`] on the joints.
+    fn validate_joints(&self) -> Result<(), ModelError> {
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         for (i, j) in self.joints.iter().enumerate() {
             let fail = |field, m| bad("joint", i, &j.name, field, m);
             check_node("joint", i, &j.name, "node_a", j.node_a)?;
@@ -545,7 +574,13 @@ impl Model {
                 format!("duplicate joint name (also joint #{})", first + 1),
             ));
         }
+        Ok(())
+    }
 
+    /// The checks of [`Self::validate`] on the loads.
+    fn validate_loads(&self) -> Result<(), ModelError> {
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         for (i, l) in self.loads.iter().enumerate() {
             let fail = |field, m| bad("load", i, &l.name, field, m);
             check_node("load", i, &l.name, "node", Some(l.node))?;
@@ -553,7 +588,13 @@ impl Model {
             finite3(&l.torque, MAX_PHYSICAL).map_err(|m| fail("torque", m))?;
             l.function.check().map_err(|m| fail("function", m))?;
         }
+        Ok(())
+    }
 
+    /// The checks of [`Self::validate`] on the spring-dampers and their force laws.
+    fn validate_springs(&self) -> Result<(), ModelError> {
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         for (i, s) in self.springs.iter().enumerate() {
             let fail = |field, m| bad("spring", i, &s.name, field, m);
             check_node("spring", i, &s.name, "node_a", s.node_a)?;
@@ -618,7 +659,11 @@ impl Model {
                 ));
             }
         }
+        Ok(())
+    }
 
+    /// The checks of [`Self::validate`] on the rotational springs.
+    fn validate_rotational_springs(&self) -> Result<(), ModelError> {
         for (i, s) in self.rotational_springs.iter().enumerate() {
             let fail = |field, m| bad("rotational_spring", i, &s.name, field, m);
             let Some(joint) = self.joints.get(s.joint.0) else {
@@ -642,7 +687,13 @@ impl Model {
             in_range(s.angle, -MAX_ANGLE, MAX_ANGLE).map_err(|m| fail("angle", m))?;
             check_force_law(&s.law).map_err(|(field, m)| fail(field, m))?;
         }
+        Ok(())
+    }
 
+    /// The checks of [`Self::validate`] on the bushings.
+    fn validate_bushings(&self) -> Result<(), ModelError> {
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         for (i, b) in self.bushings.iter().enumerate() {
             let fail = |field, m| bad("bushing", i, &b.name, field, m);
             check_node("bushing", i, &b.name, "node_a", b.node_a)?;
@@ -655,7 +706,13 @@ impl Model {
                 symmetric_psd(m).map_err(|msg| fail(field, msg))?;
             }
         }
+        Ok(())
+    }
 
+    /// The checks of [`Self::validate`] on the contacts.
+    fn validate_contacts(&self) -> Result<(), ModelError> {
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         for (i, c) in self.contacts.iter().enumerate() {
             let fail = |field, m| bad("contact", i, &c.name, field, m);
             check_node("contact", i, &c.name, "node_a", c.node_a)?;
@@ -701,7 +758,13 @@ impl Model {
                 }
             }
         }
+        Ok(())
+    }
 
+    /// The checks of [`Self::validate`] on the ropes.
+    fn validate_ropes(&self) -> Result<(), ModelError> {
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         for (i, r) in self.ropes.iter().enumerate() {
             let fail = |field, m| bad("rope", i, &r.name, field, m);
             let n_points = r.points.len();
@@ -748,11 +811,13 @@ impl Model {
                 }
             }
         }
+        Ok(())
+    }
 
-        self.validate_gears()?;
-        self.validate_worm_gears()?;
-        self.validate_control()?;
-
+    /// The checks of [`Self::validate`] on the beam elements.
+    fn validate_beams(&self) -> Result<(), ModelError> {
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         let model_extent = self.extent();
         for (i, b) in self.beams.iter().enumerate() {
             let fail = |field, m| bad("beam", i, &b.name, field, m);
@@ -830,7 +895,13 @@ impl Model {
                 ));
             }
         }
+        Ok(())
+    }
 
+    /// The checks of [`Self::validate`] on the sensors.
+    fn validate_sensors(&self) -> Result<(), ModelError> {
+        let check_node =
+            |table, i, name: &str, field, id| self.check_node(table, i, name, field, id);
         for (i, s) in self.sensors.iter().enumerate() {
             let fail = |field, m| bad("sensor", i, &s.name, field, m);
             check_sensor_name(&s.name).map_err(|m| fail("name", m))?;
