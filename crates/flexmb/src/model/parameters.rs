@@ -58,7 +58,8 @@
 //! its own, `beam.<r>.element.<k>. ...` with `k` its position among them from 0, whatever
 //! the sections of the others (one design variable per element). Elements with other names
 //! are beams of their own, named by the element's name, or by its index in
-//! [`Model::beams`] under the rule above. Distributed beam loads are the nodal loads the model holds (`load.snow@roof.3`).
+//! [`Model::beams`] under the rule above. Distributed beam loads are the nodal loads the
+//! model holds (`load.snow@roof.3`).
 //!
 //! **Roles.** Node velocities enter only the initial state ([`ParamRole::InitialState`]);
 //! every other parameter enters the residual of the equations of motion or the constraints
@@ -1014,20 +1015,19 @@ fn beam_items(model: &Model) -> Vec<BeamItem> {
         });
         groups[k].1.push(e);
     }
-    // A name that is not plain or not unique: one beam per element, named by its index.
-    let mut count: HashMap<&str, usize> = HashMap::new();
-    for (key, _) in &groups {
-        *count.entry(key).or_default() += 1;
-    }
+    // A name that is not plain, or elements of one name whose sections differ: one beam per
+    // element, named by its index.
     let mut out = Vec::new();
     for (key, elements) in groups {
-        if plain_name(key) && count[key] == 1 {
-            let first = &model.beams[elements[0]].section;
+        let first = &model.beams[elements[0]].section;
+        let uniform = elements.iter().all(|&e| model.beams[e].section == *first);
+        let meshed = model.beams[elements[0]].name != key;
+        if plain_name(key) && (uniform || meshed) {
             out.push(BeamItem {
                 name: key.to_string(),
-                uniform: elements.iter().all(|&e| model.beams[e].section == *first),
-                meshed: model.beams[elements[0]].name != key,
                 elements,
+                uniform,
+                meshed,
             });
         } else {
             out.extend(elements.into_iter().map(|e| BeamItem {

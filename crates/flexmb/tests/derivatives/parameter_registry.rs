@@ -339,3 +339,37 @@ fn parameter_set_matches_set_override_on_example_files() {
         assert_eq!(model, expected, "{file}: {path}");
     }
 }
+
+/// Beam elements of one name (not `<r>[<i>]`) whose sections differ have no common path:
+/// each is a beam of its own, named by its index in `Model::beams` (the rule of the
+/// module documentation), so that every element keeps parameters.
+#[test]
+fn beam_elements_of_one_name_and_other_sections_are_named_by_index() {
+    let mut m = Model::new(Group::SE3);
+    let a = m.add_node("a", Frame::identity());
+    let b = m.add_node("b", Frame::new(Vec3::new(1.0, 0.0, 0.0), Mat3::identity()));
+    let c = m.add_node("c", Frame::new(Vec3::new(2.0, 0.0, 0.0), Mat3::identity()));
+    let section = BeamSection::diagonal([1e3; 6], 1.0, [0.1; 3]);
+    m.add_beam("strut", [a, b], section.clone(), [Mat3::identity(); 2]);
+    m.add_beam(
+        "strut",
+        [b, c],
+        section.clone().with_damping(0.1, 0.0),
+        [Mat3::identity(); 2],
+    );
+    let params = Parameters::new(&m);
+    assert!(params.id("beam.strut.section.EA").is_err());
+    assert!(params.id("beam.strut.element.0.section.EA").is_err());
+    for e in 0..2 {
+        let id = params.id(&format!("beam.{e}.damping.mass")).unwrap();
+        assert_eq!(params.value(&m, id), [0.0, 0.1][e]);
+    }
+    // with one section they are one beam
+    m.beams[1].section = section;
+    let params = Parameters::new(&m);
+    let id = params.id("beam.strut.section.EA").unwrap();
+    let ParamKind::Beam(item, _) = params.kind(id) else {
+        panic!("a beam parameter")
+    };
+    assert_eq!(params.beam_elements(item), [0, 1]);
+}
