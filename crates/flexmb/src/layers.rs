@@ -62,6 +62,37 @@ fn code_of(source: &str) -> String {
                     i += 1;
                 }
             }
+        } else if b[i] == b'\'' {
+            // a char literal (`'"'`, `'\''`) is skipped whole; a lifetime (`'a`) is code
+            let close = if b.get(i + 1) == Some(&b'\\') {
+                i + 3
+            } else {
+                i + 2
+            };
+            if b.get(close) == Some(&b'\'') {
+                i = close + 1;
+                out.push_str("' '");
+            } else {
+                out.push('\'');
+                i += 1;
+            }
+        } else if b[i] == b'r'
+            && matches!(b.get(i + 1), Some(b'"' | b'#'))
+            && !b[..i]
+                .last()
+                .is_some_and(|c| c.is_ascii_alphanumeric() || *c == b'_')
+        {
+            // a raw string `r"..."`, `r#"..."#`: to its closing quote and as many `#`
+            let hashes = b[i + 1..].iter().take_while(|&&c| c == b'#').count();
+            let close: Vec<u8> = std::iter::once(b'"')
+                .chain(std::iter::repeat_n(b'#', hashes))
+                .collect();
+            let body = i + 2 + hashes;
+            i = b[body..]
+                .windows(close.len())
+                .position(|w| w == close.as_slice())
+                .map_or(b.len(), |k| body + k + close.len());
+            out.push_str("\"\"");
         } else if b[i] == b'"' {
             // a plain string literal (raw strings in this crate hold no `crate::`)
             i += 1;
@@ -183,6 +214,11 @@ fn the_reader_sees_grouped_imports_and_skips_comments_and_strings() {
         "use crate::{a, b::c};\n// crate::d\n/// crate::e\nlet s = \"crate::f\";\n/* crate::g */ $crate::h; x::crate::i; crate::j::k",
     );
     assert_eq!(imported_modules(&code), ["a", "b", "j"]);
+    // char literals holding a quote, raw strings and lifetimes do not hide what follows
+    let code = code_of(
+        "let q = '\"'; let e = '\\''; let r = r#\"crate::x \" y\"#; fn f<'a>(s: &'a str) { crate::m::n }",
+    );
+    assert_eq!(imported_modules(&code), ["m"]);
     let doc = "x\n## Layers\n| layer | module | what |\n|---|---|---|\n| 1 | `m` | w |\n| 2 | `n` | w |\n## Next\n| 3 | `o` | w |\n";
     let table = layer_table(doc);
     assert_eq!(table.len(), 2);

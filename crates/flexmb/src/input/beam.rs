@@ -6,6 +6,7 @@ use super::fields::{
 };
 use super::reader::{describe, name_list, out_of_range, suggestion, Field, Result, Table, QUOTED};
 use crate::model::limits::{within, MAX_ITEMS, MAX_KINEMATIC, MAX_PHYSICAL, MIN_PHYSICAL};
+use crate::model::parameters::SectionParam;
 use crate::model::{clip, BeamMass, BeamSection, Model, NodeId};
 use flexmb_lie::{so3, Frame, Mat3, Mat6, Vec3};
 use std::collections::HashMap;
@@ -415,8 +416,9 @@ fn read_arc(f: &Field<'_>, start: Vec3, n: usize) -> Result<Axis> {
 /// form of the beam's section, `stiffness.<i>.<j>` and `rotary_inertia.<i>.<j>` (`i < j`) a
 /// coupling (both symmetric entries), `damping.{mass, stiffness}` the Rayleigh
 /// coefficients. The keys are the paths of the element's parameters after
-/// `beam.<r>.element.<k>.` ([`crate::model::parameters`]), so that `--set` reaches every
-/// parameter of every element. `None` for an element the beam's section describes.
+/// `beam.<r>.element.<k>.` ([`SectionParam::key`], read and set by the registry's own
+/// [`SectionParam::set`]), so that `--set` reaches every parameter of every element. `None`
+/// for an element the beam's section describes.
 fn read_element_sections(
     t: &Table<'_>,
     beam: &BeamSection,
@@ -427,6 +429,8 @@ fn read_element_sections(
         return Ok(out);
     };
     let elements = f.table()?;
+    let params = SectionParam::all();
+    let paths: Vec<String> = params.iter().map(|p| p.key()).collect();
     for (key, _) in elements.map.iter() {
         let key: &str = key.get_ref();
         let k = match key.parse::<usize>() {
@@ -442,60 +446,58 @@ fn read_element_sections(
                 ))
             }
         };
-        let e = elements.req(key)?.table()?;
-        e.check_keys(&["section", "damping"])?;
         let mut s = beam.clone();
-        if let Some(f) = e.field("section") {
-            let st = f.table()?;
-            let mut allowed = SECTION_DIRECT.to_vec();
-            allowed.extend(["stiffness", "rotary_inertia"]);
-            st.check_keys(&allowed)?;
-            for (i, key) in SECTION_DIRECT.iter().enumerate() {
-                if let Some(v) = st.field(key) {
-                    let v = physical(&v)?;
-                    match i {
-                        0..=5 => s.stiffness[(i, i)] = v,
-                        6 => s.mass_per_length = v,
-                        _ => s.rotary_inertia[(i - 7, i - 7)] = v,
-                    }
+        let mut leaves = Vec::new();
+        parameter_fields(&elements.req(key)?.table()?, "", &paths, &mut leaves)?;
+        for (path, f) in leaves {
+            let p = params[paths
+                .iter()
+                .position(|q| *q == path)
+                .expect("a parameter's path")];
+            let v = match p {
+                SectionParam::Stiffness(i, j) | SectionParam::RotaryInertia(i, j) if i != j => {
+                    f.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?
                 }
-            }
-            for (key, dim) in [("stiffness", 6), ("rotary_inertia", 3)] {
-                let Some(f) = st.field(key) else { continue };
-                let rows = f.table()?;
-                for (i_key, _) in rows.map.iter() {
-                    let i_key: &str = i_key.get_ref();
-                    let columns = rows.req(i_key)?.table()?;
-                    for (j_key, _) in columns.map.iter() {
-                        let j_key: &str = j_key.get_ref();
-                        let index =
-                            |k: &str| k.parse::<usize>().ok().filter(|v| k == v.to_string());
-                        let (Some(i), Some(j)) = (index(i_key), index(j_key)) else {
-                            return Err(columns
-                                .key_name_err(j_key, "an entry is '<i>.<j>', two whole numbers"));
-                        };
-                        if !(i < j && j < dim) {
-                            return Err(columns.key_name_err(
-                                j_key,
-                                format!("an entry is '<i>.<j>' with i < j < {dim} (a coupling; the diagonal has its own keys)"),
-                            ));
-                        }
-                        let v = columns.req(j_key)?.f64_in(-MAX_PHYSICAL, MAX_PHYSICAL)?;
-                        let m = if dim == 6 {
-                            s.stiffness.as_mut_slice()
-                        } else {
-                            s.rotary_inertia.as_mut_slice()
-                        };
-                        m[i + dim * j] = v;
-                        m[j + dim * i] = v;
-                    }
-                }
-            }
+                SectionParam::DampingMass | SectionParam::DampingStiffness => physical_or_zero(&f)?,
+                _ => physical(&f)?,
+            };
+            p.set(&mut s, v);
         }
-        read_damping(&e, &mut s)?;
         out[k] = Some(s);
     }
     Ok(out)
+}
+
+/// The fields of `t` (at `prefix` in an element table) that are parameters of `paths`
+/// (`section.EA`, `section.stiffness.0.4`, `damping.mass`, ...), with their paths; a key
+/// on no such path is an error listing those that are.
+fn parameter_fields<'a>(
+    t: &Table<'a>,
+    prefix: &str,
+    paths: &[String],
+    out: &mut Vec<(String, Field<'a>)>,
+) -> Result<()> {
+    let mut allowed: Vec<&str> = Vec::new();
+    for segment in paths
+        .iter()
+        .filter_map(|p| p.strip_prefix(prefix))
+        .filter_map(|rest| rest.split('.').next())
+    {
+        if !allowed.contains(&segment) {
+            allowed.push(segment);
+        }
+    }
+    t.check_keys(&allowed)?;
+    for (key, _) in t.map.iter() {
+        let path = format!("{prefix}{}", key.get_ref());
+        if paths.contains(&path) {
+            out.push((path, t.req(key.get_ref())?));
+        } else {
+            let inner = t.req(key.get_ref())?.table()?;
+            parameter_fields(&inner, &format!("{path}."), paths, out)?;
+        }
+    }
+    Ok(())
 }
 
 /// The Rayleigh coefficients `damping = { mass, stiffness }` of table `t` into `section`

@@ -243,10 +243,14 @@ impl BlockLu {
         let n_super = supernode_members.len();
         // The host's own unknowns come first, then those of the groups it hosts: the saddle
         // columns are the last of the supernode (all of a cut one).
-        let saddle_start: Vec<usize> = (0..n_groups)
+        // (and whether the supernode is cut: eliminated last)
+        let (saddle_start, cut): (Vec<usize>, Vec<bool>) = (0..n_groups)
             .filter(|&g| host[g] == g)
-            .map(|g| if regular(g) { members[g].len() } else { 0 })
-            .collect();
+            .map(|g| match regular(g) {
+                true => (members[g].len(), false),
+                false => (0, true),
+            })
+            .unzip();
         let supernode_graph = graph(
             n_super,
             adjacency.iter().enumerate().flat_map(|(g, adj)| {
@@ -257,10 +261,6 @@ impl BlockLu {
 
         // Elimination order of the supernodes (the cut ones last), then the positions of the
         // unknowns.
-        let cut: Vec<bool> = (0..n_groups)
-            .filter(|&g| host[g] == g)
-            .map(|g| !regular(g))
-            .collect();
         let mut order = postorder(&supernode_graph, &amd_order(&supernode_graph));
         order.sort_by_key(|&k| cut[k]);
         let mut position = vec![0usize; n];

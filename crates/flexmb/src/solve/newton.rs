@@ -241,11 +241,7 @@ impl Convergence {
         } else {
             size
         };
-        let bound = theta.map(|t| {
-            carried_rate
-                .filter(|_| carried_counts)
-                .map_or(t, |r| t.max(r))
-        });
+        let bound = theta.map(|t| carried_rate.filter(|&r| r < 1.0).map_or(t, |r| t.max(r)));
         self.previous = Some(norms);
         if dx == 0.0 {
             return Verdict::Converged { estimate: 0.0 };

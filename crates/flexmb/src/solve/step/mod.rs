@@ -323,7 +323,7 @@ pub fn predict(
 /// `a_n - N(0, v_n)` ([`Chart::rate`]; zero for the exponential chart); `vdot_n` and `a_n`
 /// otherwise.
 #[inline]
-pub(super) fn chart_start(chart: Option<Chart>, start: &State, i: usize) -> (Vec6, Vec6) {
+fn chart_start(chart: Option<Chart>, start: &State, i: usize) -> (Vec6, Vec6) {
     let (vd0, a0) = (start.vdot[i], start.a[i]);
     match chart {
         Some(c @ Chart::TranslationRotation) => {
