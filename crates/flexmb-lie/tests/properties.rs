@@ -485,3 +485,66 @@ fn charts_read_velocities_and_accelerations_as_their_maps_say() {
         assert_eq!(chart.map(&Vec6::zeros()), Mat6::identity());
     }
 }
+
+#[test]
+fn chart_jacobians_match_central_differences_of_the_maps() {
+    // Chart::jacobians (dual numbers through the maps' series) against central differences
+    // of the closed forms Chart::map and Chart::rate: d(M y)/dtheta, dN/dtheta, dN/dx, from
+    // a step's increments to large angles; the transport G and dN(0, x)/dx likewise.
+    use flexmb_lie::Chart;
+    let mut rng = Lcg(47);
+    let eps = 1e-6;
+    let charts = [
+        (Chart::Exponential(Group::R3xSO3), Group::R3xSO3),
+        (Chart::Exponential(Group::SE3), Group::SE3),
+        (Chart::TranslationRotation, Group::SE3),
+    ];
+    for (chart, group) in charts {
+        for &angle in &[0.0, 1e-3, 0.05, 0.8, 2.0] {
+            for _ in 0..4 {
+                let theta = flexmb_lie::join(&rng.vec3(1.0), &rotation(&mut rng, angle));
+                let x = rng.vec6(3.0, 5.0);
+                let ys = [x, rng.vec6(2.0, 4.0), rng.vec6(1.0, 3.0)];
+                let j = chart.jacobians(&theta, &x, &ys);
+                assert_eq!(j.m, chart.map(&theta));
+                let d = rng.vec6(1.0, 1.0);
+                let along = |f: &dyn Fn(&Vec6) -> Vec6| {
+                    (f(&(theta + d * eps)) - f(&(theta - d * eps))) / (2.0 * eps)
+                };
+                let scale = 1.0 + x.norm_squared();
+                for (k, y) in ys.iter().enumerate() {
+                    let fd = along(&|t| chart.map(t) * y);
+                    let err = (j.m_theta[k] * d - fd).norm();
+                    assert!(
+                        err < 1e-7 * scale,
+                        "{chart:?} angle {angle}: d(M y)/dtheta {err:e}"
+                    );
+                }
+                let fd = along(&|t| chart.rate(t, &x));
+                let err = (j.n_theta * d - fd).norm();
+                assert!(
+                    err < 1e-7 * scale,
+                    "{chart:?} angle {angle}: dN/dtheta {err:e}"
+                );
+                let fd = (chart.rate(&theta, &(x + d * eps)) - chart.rate(&theta, &(x - d * eps)))
+                    / (2.0 * eps);
+                let err = (j.n_x * d - fd).norm();
+                assert!(err < 1e-7 * scale, "{chart:?} angle {angle}: dN/dx {err:e}");
+                // q_n exp(e d) o C(theta) = q_n o C(theta) exp(e G d)
+                let q_n = Frame::new(rng.vec3(2.0), so3::exp(&rng.vec3(1.5)));
+                let p = chart.point(&q_n, &theta);
+                let moved = |e: f64| {
+                    group.difference(&p, &chart.point(&group.integrate(&q_n, &(d * e)), &theta))
+                };
+                let fd = (moved(eps) - moved(-eps)) / (2.0 * eps);
+                let err = (chart.transport(group, &theta) * d - fd).norm();
+                assert!(err < 1e-7, "{chart:?} angle {angle}: transport {err:e}");
+            }
+        }
+        let x = rng.vec6(2.0, 3.0);
+        let d = rng.vec6(1.0, 1.0);
+        let n0 = |x: &Vec6| chart.rate(&Vec6::zeros(), x);
+        let fd = (n0(&(x + d * eps)) - n0(&(x - d * eps))) / (2.0 * eps);
+        assert!((chart.start_rate_derivative(&x) * d - fd).norm() < 1e-8);
+    }
+}

@@ -435,11 +435,6 @@ fn start(
     problem: &Problem,
 ) -> Result<(crate::solve::Simulation, Vec<StateTangent>), SensitivityError> {
     let settings = *problem.dynamic()?;
-    if settings.lie_update.in_chart() {
-        return Err(SensitivityError::Unsupported(
-            "the direct and adjoint methods differentiate the bruls_cardona and commutator updates; [solver] lie_update = \"lie_algebra\" or \"lie_algebra_r3xso3\" has no step Jacobian yet (the fd method works with it)".into(),
-        ));
-    }
     let holds = &problem.model.control.blocks;
     if let Some(hold) = holds
         .iter()

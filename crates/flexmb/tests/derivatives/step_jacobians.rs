@@ -544,6 +544,27 @@ fn commutator_update_step_jacobians_match_finite_differences() {
 }
 
 #[test]
+fn lie_algebra_update_step_jacobians_match_finite_differences() {
+    // q_{n+1} = q_n o C(Theta), v = M(Theta) Theta', vdot = M Theta'' + N(Theta, Theta'):
+    // the velocities and accelerations move with the configuration's unknowns, and, in
+    // R3xSO(3)'s chart on SE(3), the start in the chart with v_n.
+    for update in ["lie_algebra", "lie_algebra_r3xso3"] {
+        let set = format!("solver.lie_update={update}");
+        for file in ["heavy_top.toml", "heavy_top_r3so3.toml"] {
+            let sim = simulation(file, &[&set], 5);
+            check(&format!("{file}, {update} update"), &sim);
+        }
+        let sim = simulation("chain_10.toml", &[&set, "solver.formulation=index2"], 5);
+        check(
+            &format!("chain_10, {update} update, stabilized index 2"),
+            &sim,
+        );
+        let sim = simulation("flexible_four_bar.toml", &[&set], 3);
+        check(&format!("flexible four-bar, {update} update"), &sim);
+    }
+}
+
+#[test]
 fn chain_step_jacobians_match_finite_differences() {
     check("chain_10", &simulation("chain_10.toml", &[], 5));
 }

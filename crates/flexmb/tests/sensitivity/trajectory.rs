@@ -118,6 +118,22 @@ fn checkpointed_trajectory_replays_a_stabilized_chain_exactly() {
     );
 }
 
+/// The Lie algebra updates: the run's Newton iteration (right-trivialized corrections in the
+/// step's chart) and the step function (closed form) reach the same end from the same
+/// unknowns, and the unknowns solve the step function's residual.
+#[test]
+fn lie_algebra_updates_run_the_steps_of_the_step_function() {
+    for update in ["lie_algebra", "lie_algebra_r3xso3"] {
+        let set = format!("solver.lie_update={update}");
+        check("heavy_top.toml", &["solver.t_end=0.1", &set]);
+        check("heavy_top_r3so3.toml", &["solver.t_end=0.1", &set]);
+        check(
+            "chain_10.toml",
+            &["solver.t_end=0.1", "solver.formulation=index2", &set],
+        );
+    }
+}
+
 /// The Bricard mechanism with each rod's node at its first joint chooses its redundant rows
 /// again at t = 1.152 s: the steps around it keep the layout they were taken in.
 #[test]

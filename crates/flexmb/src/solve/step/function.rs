@@ -9,13 +9,13 @@ use crate::model::Model;
 use crate::parallel::Threads;
 use crate::solve::DynamicSettings;
 use crate::state::State;
-use flexmb_lie::{Mat6, Vec6};
+use flexmb_lie::{Chart, Mat6, Vec6};
 use std::cell::RefCell;
 use std::sync::Arc;
 
 use super::pattern::{zeroed, JacobianPattern, Selection};
 use super::updates::{commutator_correction, kinematics, total_increments};
-use super::{pack_unknowns, predict, Start, StateTangent};
+use super::{chart_start, pack_unknowns, predict, Start, StateTangent};
 
 /// Sparse matrix entries `(row, column, value)`; duplicates are summed.
 pub type Triplets = Vec<(usize, usize, f64)>;
@@ -72,8 +72,13 @@ struct Partials {
     /// `I + E`: how the total increments move with `dq` (module documentation; empty for
     /// the Brüls-Cardona update).
     e: Vec<Mat6>,
-    /// Transports `G = Ad(exp(-total))`: `q_n exp(d) exp(total) = q_{n+1} exp(G d)`.
+    /// Transports `G = Ad(exp(-total))`: `q_n exp(d) exp(total) = q_{n+1} exp(G d)` (the
+    /// Lie algebra updates: `Ad(C(total)^-1)`, [`Chart::transport`]).
     g: Vec<Mat6>,
+    /// The Lie algebra updates' derivatives of the nodes' velocities, accelerations and
+    /// algorithmic accelerations in the chart (empty for the other updates; `t` then holds
+    /// `M(total)`).
+    chart: Vec<ChartNode>,
     /// The end of the step and its node kinematics (`T = I`): where the parameter
     /// derivatives are taken.
     end: State,
@@ -82,7 +87,81 @@ struct Partials {
     k_zeta: Triplets,
 }
 
+/// One node's derivatives of the end of a step in the Lie algebra updates (module
+/// documentation, "Lie algebra updates"): with `Theta = total` and the chart's rates
+/// `X = Theta'_{n+1}`, `Y = Theta''_{n+1}`, `A` (the algorithmic acceleration in the chart),
+/// `v = M X`, `vdot = M Y + N(Theta, X)`, `a = M A + N(Theta, X)`.
+struct ChartNode {
+    /// `d v / d Theta`, `d vdot / d Theta`, `d a / d Theta` at fixed rates.
+    v_theta: Mat6,
+    vdot_theta: Mat6,
+    a_theta: Mat6,
+    /// `dN(Theta, X)/dX`.
+    n_x: Mat6,
+    /// `dN(0, v_n)/dv_n`: the start in the chart, `vdot_n - N(0, v_n)`, `a_n - N(0, v_n)`.
+    n0_x: Mat6,
+}
+
+/// Changes of one node's end of the step: the configuration (right-trivialized, without the
+/// transport of the start's) and the velocities, accelerations and algorithmic
+/// accelerations.
+type NodeMove = [Vec6; 4];
+
 impl Partials {
+    /// How node `i`'s end moves with its total increment `d_theta` and its rates in the
+    /// step's coordinates (`dv`, `dvdot`, `da`: the nodes' own outside the Lie algebra
+    /// updates, the chart's `dX`, `dY`, `dA` in them).
+    fn node_move(&self, i: usize, d_theta: &Vec6, rates: &[Vec6; 3]) -> NodeMove {
+        let q = self.t[i] * d_theta;
+        let Some(c) = self.chart.get(i) else {
+            return [q, rates[0], rates[1], rates[2]];
+        };
+        let (m, nx) = (&self.t[i], c.n_x * rates[0]);
+        [
+            q,
+            c.v_theta * d_theta + m * rates[0],
+            c.vdot_theta * d_theta + nx + m * rates[1],
+            c.a_theta * d_theta + nx + m * rates[2],
+        ]
+    }
+
+    /// The transpose of [`Partials::node_move`]: the cotangents of the total increment and
+    /// of the three rates for a cotangent of node `i`'s end.
+    fn node_move_transposed(&self, i: usize, bar: &NodeMove) -> (Vec6, [Vec6; 3]) {
+        let theta = self.t[i].tr_mul(&bar[0]);
+        let Some(c) = self.chart.get(i) else {
+            return (theta, [bar[1], bar[2], bar[3]]);
+        };
+        let m = &self.t[i];
+        let theta = theta
+            + c.v_theta.tr_mul(&bar[1])
+            + c.vdot_theta.tr_mul(&bar[2])
+            + c.a_theta.tr_mul(&bar[3]);
+        let x = m.tr_mul(&bar[1]) + c.n_x.tr_mul(&(bar[2] + bar[3]));
+        (theta, [x, m.tr_mul(&bar[2]), m.tr_mul(&bar[3])])
+    }
+
+    /// The start's velocity, acceleration and algorithmic acceleration changes in the
+    /// step's coordinates: `(dv_n, dvdot_n - N0' dv_n, da_n - N0' dv_n)` in the Lie algebra
+    /// updates, themselves otherwise.
+    fn start_in_chart(&self, i: usize, dv: &Vec6, dvdot: &Vec6, da: &Vec6) -> [Vec6; 3] {
+        match self.chart.get(i) {
+            Some(c) => {
+                let n0 = c.n0_x * dv;
+                [*dv, dvdot - n0, da - n0]
+            }
+            None => [*dv, *dvdot, *da],
+        }
+    }
+
+    /// The transpose of [`Partials::start_in_chart`]: `(vbar, vdotbar, abar)` of the start.
+    fn start_in_chart_transposed(&self, i: usize, bar: [Vec6; 3]) -> [Vec6; 3] {
+        match self.chart.get(i) {
+            Some(c) => [bar[0] - c.n0_x.tr_mul(&(bar[1] + bar[2])), bar[1], bar[2]],
+            None => bar,
+        }
+    }
+
     /// The nonzero entries `(row, column, value)` of one partial derivative.
     fn entries<'p>(&'p self, values: &'p [f64]) -> impl Iterator<Item = (usize, usize, f64)> + 'p {
         self.pattern
@@ -97,10 +176,6 @@ impl Partials {
 impl<'a> StepFunction<'a> {
     /// The step of size `h` from `start` (the state `s_n`, with its time `t_n`) of a
     /// simulation with `settings` and the unknowns of `layout`.
-    ///
-    /// # Panics
-    /// With the Lie algebra updates ([`crate::solve::LieUpdate::in_chart`]), which this function
-    /// does not implement (the sensitivity analyses refuse them with an error first).
     pub fn new(
         model: &'a Model,
         layout: &'a Layout,
@@ -108,10 +183,6 @@ impl<'a> StepFunction<'a> {
         settings: &DynamicSettings,
         h: f64,
     ) -> Self {
-        assert!(
-            !settings.lie_update.in_chart(),
-            "StepFunction implements the bruls_cardona and commutator updates only"
-        );
         let params = settings.scheme.parameters(settings.rho_inf);
         let step = Start::new(
             params,
@@ -169,7 +240,7 @@ impl<'a> StepFunction<'a> {
             self.step.h,
             self.start,
             None,
-            None,
+            self.chart(),
             &mut state,
             &mut dq,
         );
@@ -178,6 +249,11 @@ impl<'a> StepFunction<'a> {
         let states = (&self.start.x[..], &state.x[..]);
         pack_unknowns(self.layout, self.step.scale, step, states, &mut x);
         x
+    }
+
+    /// The local coordinates of the Lie algebra updates (`None` for the others).
+    fn chart(&self) -> Option<Chart> {
+        self.step.chart(self.model.group)
     }
 
     /// `dq + B(q_n)^T zeta + c_n` of the unknowns `x` (`v_1` the end velocities of `x`).
@@ -199,25 +275,47 @@ impl<'a> StepFunction<'a> {
 
     /// [`StepFunction::end_state`] and the total increments `dq + B(q_n)^T zeta`.
     fn end_state_and_total(&self, x: &[f64]) -> (State, Vec<f64>) {
+        let (end, total, _) = self.end_state_in_chart(x);
+        (end, total)
+    }
+
+    /// [`StepFunction::end_state_and_total`] and, in the Lie algebra updates, each node's
+    /// rates in the step's chart `[X, Y, A]` (`Theta'`, `Theta''` and the algorithmic
+    /// acceleration; empty for the other updates): the scheme's relations hold for them,
+    /// and the nodes' end values are `M X`, `M Y + N`, `M A + N` (module documentation).
+    fn end_state_in_chart(&self, x: &[f64]) -> (State, Vec<f64>, Vec<[Vec6; 3]>) {
         let p = &self.step.params;
         let h = self.step.h;
         let s0 = self.start;
+        let chart = self.chart();
         let mut end = s0.clone();
         end.t = s0.t + h;
         for i in 0..s0.q.len() {
             let dq = Vec6::from_column_slice(&x[6 * i..6 * i + 6]);
-            let a1 = (dq - s0.v[i] * h - s0.a[i] * ((0.5 - p.beta) * h * h)) / (p.beta * h * h);
-            end.v[i] = s0.v[i] + s0.a[i] * ((1.0 - p.gamma) * h) + a1 * (p.gamma * h);
-            end.vdot[i] = (a1 * (1.0 - p.alpha_m) + s0.a[i] * p.alpha_m - s0.vdot[i] * p.alpha_f)
-                / (1.0 - p.alpha_f);
+            let (vd0, a0) = chart_start(chart, s0, i);
+            let a1 = (dq - s0.v[i] * h - a0 * ((0.5 - p.beta) * h * h)) / (p.beta * h * h);
+            end.v[i] = s0.v[i] + a0 * ((1.0 - p.gamma) * h) + a1 * (p.gamma * h);
+            end.vdot[i] =
+                (a1 * (1.0 - p.alpha_m) + a0 * p.alpha_m - vd0 * p.alpha_f) / (1.0 - p.alpha_f);
             end.a[i] = a1;
         }
         let total = self.total(x, &end.v);
+        let inc = |i: usize| Vec6::from_column_slice(&total[6 * i..6 * i + 6]);
         for (i, q) in end.q.iter_mut().enumerate() {
-            *q = self
-                .model
-                .group
-                .integrate(&s0.q[i], &Vec6::from_column_slice(&total[6 * i..6 * i + 6]));
+            *q = match chart {
+                Some(chart) => chart.point(&s0.q[i], &inc(i)),
+                None => self.model.group.integrate(&s0.q[i], &inc(i)),
+            };
+        }
+        let mut rates = Vec::new();
+        if let Some(chart) = chart {
+            for i in 0..s0.q.len() {
+                let (m, n) = (chart.map(&inc(i)), chart.rate(&inc(i), &end.v[i]));
+                rates.push([end.v[i], end.vdot[i], end.a[i]]);
+                end.v[i] = m * end.v[i];
+                end.vdot[i] = m * end.vdot[i] + n;
+                end.a[i] = m * end.a[i] + n;
+            }
         }
         end.lambda.iter_mut().for_each(|l| *l = 0.0);
         for (k, &row) in self.layout.active_rows.iter().enumerate() {
@@ -231,25 +329,43 @@ impl<'a> StepFunction<'a> {
             end.xdot[i] = first.rate_from(s0.xdot[i], s0.w[i], w1);
             end.w[i] = w1;
         }
-        (end, total)
+        (end, total, rates)
     }
 
-    /// Node kinematics at the end of the step, with the tangent operators `T(total)`.
-    fn end_nodes(&self, x: &[f64]) -> (State, Vec<NodeState>, Vec<f64>) {
-        let (end, total) = self.end_state_and_total(x);
+    /// Node kinematics at the end of the step (the Newton iteration's, [`kinematics`]),
+    /// with the tangent operators `T(total)` (`M(total)` in the Lie algebra updates), and
+    /// the chart's rates of [`StepFunction::end_state_in_chart`].
+    fn end_nodes(&self, x: &[f64]) -> (State, Vec<NodeState>, Vec<f64>, Vec<[Vec6; 3]>) {
+        let (end, total, rates) = self.end_state_in_chart(x);
         let mut nodes = self.start_nodes.clone();
         let sequential = Threads::sequential();
+        // The Newton iterate of the Lie algebra updates holds the chart's rates.
+        let mut in_chart = None;
+        if !rates.is_empty() {
+            let mut s = end.clone();
+            for (i, [v, vdot, _]) in rates.iter().enumerate() {
+                (s.v[i], s.vdot[i]) = (*v, *vdot);
+            }
+            in_chart = Some(s);
+        }
+        let (step, group) = (&self.step, self.model.group);
+        let iterate = in_chart.as_ref().unwrap_or(&end);
         kinematics(
-            &self.step,
-            self.model.group,
+            step,
+            group,
             self.start,
-            &end,
+            iterate,
             &total,
             true,
             &mut nodes,
             &sequential,
         );
-        (end, nodes, total)
+        if let Some(chart) = self.chart() {
+            for (i, n) in nodes.iter_mut().enumerate() {
+                n.t = chart.map(&Vec6::from_column_slice(&total[6 * i..6 * i + 6]));
+            }
+        }
+        (end, nodes, total, rates)
     }
 
     fn assemble(
@@ -287,7 +403,7 @@ impl<'a> StepFunction<'a> {
 
     /// The step residual `R(x; s_n, p, h)` (`n_unknowns`).
     pub fn residual(&self, x: &[f64], data: &mut crate::data::Data) -> Vec<f64> {
-        let (end, nodes, _) = self.end_nodes(x);
+        let (end, nodes, ..) = self.end_nodes(x);
         self.assemble(data, &nodes, &end, &self.step.scaling(0.0), false);
         data.residual.clone()
     }
@@ -325,12 +441,31 @@ impl<'a> StepFunction<'a> {
         let [mut f_q, mut f_mu, f_v, f_vd, f_x, f_xd] = spare.map_or_else(Default::default, |p| {
             [p.f_q, p.f_mu, p.f_v, p.f_vd, p.f_x, p.f_xd]
         });
-        let (end, mut nodes, total) = self.end_nodes(x);
+        let (end, mut nodes, total, rates) = self.end_nodes(x);
         let group = self.model.group;
         let t: Vec<Mat6> = nodes.iter().map(|n| n.t).collect();
+        let inc = |i: usize| Vec6::from_column_slice(&total[6 * i..6 * i + 6]);
+        let chart = self.chart();
         let g: Vec<Mat6> = (0..nodes.len())
-            .map(|i| group.adjoint(&group.exp(&-Vec6::from_column_slice(&total[6 * i..6 * i + 6]))))
+            .map(|i| match chart {
+                Some(chart) => chart.transport(group, &inc(i)),
+                None => group.adjoint(&group.exp(&-inc(i))),
+            })
             .collect();
+        let chart_nodes = chart.map_or_else(Vec::new, |chart| {
+            (rates.iter().enumerate())
+                .map(|(i, r)| {
+                    let j = chart.jacobians(&inc(i), &r[0], r);
+                    ChartNode {
+                        v_theta: j.m_theta[0],
+                        vdot_theta: j.m_theta[1] + j.n_theta,
+                        a_theta: j.m_theta[2] + j.n_theta,
+                        n_x: j.n_x,
+                        n0_x: chart.start_rate_derivative(&self.start.v[i]),
+                    }
+                })
+                .collect()
+        });
         for n in &mut nodes {
             n.t = Mat6::identity();
         }
@@ -420,6 +555,7 @@ impl<'a> StepFunction<'a> {
                 .collect(),
             t,
             g,
+            chart: chart_nodes,
             end,
             nodes,
             k_zeta: self.start_constraint_stiffness(x),
@@ -558,9 +694,13 @@ impl<'a> StepFunction<'a> {
         let pattern = &p.pattern;
         let step = &self.step;
         let (gp, bp, cx) = (step.gp, step.bp, step.cx);
+        // In the Lie algebra updates the velocities and accelerations also move with the
+        // configuration (the node blocks below).
+        let in_chart = !p.chart.is_empty();
+        let (vp, ap) = if in_chart { (0.0, 0.0) } else { (gp, bp) };
         out.clear();
         out.extend(
-            (p.f_v.iter().zip(&p.f_vd).zip(&p.f_mu)).map(|((v, vd), mu)| v * gp + vd * bp + mu),
+            (p.f_v.iter().zip(&p.f_vd).zip(&p.f_mu)).map(|((v, vd), mu)| v * vp + vd * ap + mu),
         );
         if self.layout.n_states > 0 {
             for ((o, x), xd) in out.iter_mut().zip(&p.f_x).zip(&p.f_xd) {
@@ -571,10 +711,19 @@ impl<'a> StepFunction<'a> {
         // stabilized form keeps them for its zeta columns.
         let stabilized = !pattern.zeta.is_empty();
         let mut fqt = Vec::with_capacity(if stabilized { pattern.blocks.len() } else { 0 });
-        // The increments' columns take F_q T (I + E) (module documentation).
+        // The increments' columns take F_q T (I + E) (module documentation); in the Lie
+        // algebra updates F_q M + F_v dv/dTheta + F_vd dvdot/dTheta (the zeta columns'), plus
+        // the rates' gamma' (F_v M + F_vd N_X) + beta' F_vd M.
+        let at = |f: &[f64], k: usize| Vec6::from_column_slice(&f[k..k + 6]);
         for &(k, n) in &pattern.blocks {
-            let row = p.t[n].tr_mul(&Vec6::from_column_slice(&p.f_q[k..k + 6]));
-            let columns = p.e.get(n).map_or(row, |e| e.tr_mul(&row));
+            let (row, columns) = if in_chart {
+                let bar = [at(&p.f_q, k), at(&p.f_v, k), at(&p.f_vd, k), Vec6::zeros()];
+                let (theta, [x, y, _]) = p.node_move_transposed(n, &bar);
+                (theta, theta + x * gp + y * bp)
+            } else {
+                let row = p.t[n].tr_mul(&at(&p.f_q, k));
+                (row, p.e.get(n).map_or(row, |e| e.tr_mul(&row)))
+            };
             for c in 0..6 {
                 out[k + c] += columns[c];
             }
@@ -695,14 +844,24 @@ impl<'a> StepFunction<'a> {
             }
         }
         if let Some(dtotal) = self.stabilization_parameter_move(x, params, dp) {
+            // F_q T dtotal (and, in the Lie algebra updates, the velocities' and
+            // accelerations' moves with the configuration).
             let p = self.partials(x, data);
-            for (i, j, v) in p.entries(&p.f_q) {
-                let (n, c) = (j / 6, j % 6);
-                let moved = p.t[n]
-                    .row(c)
-                    .transpose()
-                    .dot(&Vec6::from_column_slice(&dtotal[6 * n..6 * n + 6]));
-                out[i] += v * moved;
+            let moves: Vec<NodeMove> = (0..layout.n_nodes)
+                .map(|n| {
+                    let d = Vec6::from_column_slice(&dtotal[6 * n..6 * n + 6]);
+                    p.node_move(n, &d, &[Vec6::zeros(); 3])
+                })
+                .collect();
+            let kinds = if p.chart.is_empty() { 1 } else { 3 };
+            for (kind, f) in [&p.f_q, &p.f_v, &p.f_vd]
+                .into_iter()
+                .enumerate()
+                .take(kinds)
+            {
+                for (i, j, v) in p.entries(f) {
+                    out[i] += v * moves[j / 6][kind][j % 6];
+                }
             }
         }
         out
@@ -771,16 +930,27 @@ impl<'a> StepFunction<'a> {
             }
         }
         if layout.stabilized {
-            // u = (F_q T)^T w, then u . d(B(q_n)^T zeta)/dp for the joint parameters.
-            let mut g = vec![0.0; nd];
-            for (i, j, v) in partials.entries(&partials.f_q) {
-                g[j] += v * w[i];
+            // u = (F_q T)^T w (in the Lie algebra updates with the velocities' and
+            // accelerations' moves), then u . d(B(q_n)^T zeta)/dp for the joint parameters.
+            let p = &partials;
+            let kinds = if p.chart.is_empty() { 1 } else { 3 };
+            let mut g = vec![[Vec6::zeros(); 4]; nd / 6];
+            for (kind, f) in [&p.f_q, &p.f_v, &p.f_vd]
+                .into_iter()
+                .enumerate()
+                .take(kinds)
+            {
+                for (i, j, v) in p.entries(f) {
+                    g[j / 6][kind][j % 6] += v * w[i];
+                }
             }
-            let u: Vec<f64> = (0..nd / 6)
-                .flat_map(|n| {
-                    let t = partials.t[n].transpose();
-                    let un = t * Vec6::from_column_slice(&g[6 * n..6 * n + 6]);
-                    un.iter().copied().collect::<Vec<_>>()
+            let u: Vec<f64> = (g.iter().enumerate())
+                .flat_map(|(n, bar)| {
+                    p.node_move_transposed(n, bar)
+                        .0
+                        .iter()
+                        .copied()
+                        .collect::<Vec<_>>()
                 })
                 .collect();
             let zeta = self.zeta_rows(x);
@@ -868,9 +1038,10 @@ impl<'a> StepFunction<'a> {
             }
             for i in 0..n {
                 let dc = self.commutator_jvp(i, &p.end.v[i], &ds.v[i], &ds.a[i]);
-                let wi = p.g[i] * ds.q[i] + p.t[i] * (kz[i] + dc);
-                let dvi = ds.v[i] * c1 + ds.a[i] * c2;
-                let dvdi = ds.v[i] * c3 + ds.a[i] * c4 + ds.vdot[i] * c5;
+                let [v, vd, a] = p.start_in_chart(i, &ds.v[i], &ds.vdot[i], &ds.a[i]);
+                let rates = [v * c1 + a * c2, v * c3 + a * c4 + vd * c5, Vec6::zeros()];
+                let [wi, dvi, dvdi, _] = p.node_move(i, &(kz[i] + dc), &rates);
+                let wi = p.g[i] * ds.q[i] + wi;
                 for c in 0..6 {
                     let at = (6 * i + c) * np + k;
                     (w[at], dv[at], dvd[at]) = (wi[c], dvi[c], dvdi[c]);
@@ -936,7 +1107,10 @@ impl<'a> StepFunction<'a> {
                 gvd[node] += at(&p.f_vd);
             }
         }
-        let tg: Vec<Vec6> = (0..n).map(|i| p.t[i].tr_mul(&gq[i])).collect();
+        // The cotangents of the total increments and of the rates in the step's coordinates.
+        let (tg, rates): (Vec<Vec6>, Vec<[Vec6; 3]>) = (0..n)
+            .map(|i| p.node_move_transposed(i, &[gq[i], gv[i], gvd[i], Vec6::zeros()]))
+            .unzip();
         let mut q: Vec<Vec6> = (0..n).map(|i| p.g[i].tr_mul(&gq[i])).collect();
         for &(i, j, v) in &p.k_zeta {
             q[j / 6][j % 6] += v * tg[i / 6][i % 6];
@@ -954,15 +1128,27 @@ impl<'a> StepFunction<'a> {
         for (i, j, v) in p.entries(&p.f_xd) {
             gxd[j - so] += v * w[i];
         }
+        let (mut v, mut vdot, mut a) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
+        for (i, [x, y, _]) in rates.iter().enumerate() {
+            let bar = [
+                x * c1 + y * c3 + commutator[i].0,
+                y * c5,
+                x * c2 + y * c4 + commutator[i].1,
+            ];
+            let [vi, vdi, ai] = p.start_in_chart_transposed(i, bar);
+            v.push(vi);
+            vdot.push(vdi);
+            a.push(ai);
+        }
         StateTangent {
             q,
-            v: (0..n)
-                .map(|i| gv[i] * c1 + gvd[i] * c3 + commutator[i].0)
-                .collect(),
-            vdot: (0..n).map(|i| gvd[i] * c5).collect(),
-            a: (0..n)
-                .map(|i| gv[i] * c2 + gvd[i] * c4 + commutator[i].1)
-                .collect(),
+            v,
+            vdot,
+            a,
             lambda: vec![0.0; self.layout.n_rows],
             x: gx,
             xdot: gxd.iter().map(|g| g * d_xd).collect(),
@@ -1067,11 +1253,15 @@ impl<'a> StepFunction<'a> {
             if let Some(e) = p.e.get(i) {
                 dt += (e - Mat6::identity()) * ddq;
             }
-            out.q[i] = p.g[i] * ds.q[i] + p.t[i] * dt;
-            out.v[i] = ds.v[i] * c1 + ds.a[i] * c2 + ddq * self.step.gp;
-            out.vdot[i] = ds.v[i] * c3 + ds.a[i] * c4 + ds.vdot[i] * c5 + ddq * self.step.bp;
-            out.a[i] =
-                (ddq - ds.v[i] * h - ds.a[i] * ((0.5 - ga.beta) * h * h)) / (ga.beta * h * h);
+            let [v, vd, a] = p.start_in_chart(i, &ds.v[i], &ds.vdot[i], &ds.a[i]);
+            let rates = [
+                v * c1 + a * c2 + ddq * self.step.gp,
+                v * c3 + a * c4 + vd * c5 + ddq * self.step.bp,
+                (ddq - v * h - a * ((0.5 - ga.beta) * h * h)) / (ga.beta * h * h),
+            ];
+            let [q, v, vdot, a] = p.node_move(i, &dt, &rates);
+            out.q[i] = p.g[i] * ds.q[i] + q;
+            (out.v[i], out.vdot[i], out.a[i]) = (v, vdot, a);
         }
         for (k, &row) in layout.active_rows.iter().enumerate() {
             out.lambda[row] = dx[layout.n_dofs + k] / self.step.scale;
@@ -1111,22 +1301,24 @@ impl<'a> StepFunction<'a> {
         let bh2 = ga.beta * h * h;
         let mut xbar = vec![0.0; layout.n_unknowns()];
         let mut start = StateTangent::zeros_of(layout);
-        // The cotangent of the total increments, T^T qbar_{n+1}.
+        // The cotangent of the total increments, T^T qbar_{n+1} (and the rates' in the Lie
+        // algebra updates).
         let mut tbar = vec![0.0; nd];
         for i in 0..n {
-            let t = p.t[i].tr_mul(&bar.q[i]);
+            let node = [bar.q[i], bar.v[i], bar.vdot[i], bar.a[i]];
+            let (t, [xb, yb, a]) = p.node_move_transposed(i, &node);
             tbar[6 * i..6 * i + 6].copy_from_slice(t.as_slice());
-            let a = bar.a[i];
             let moved = p.e.get(i).map_or(t, |e| e.tr_mul(&t));
-            let dq = moved + bar.v[i] * self.step.gp + bar.vdot[i] * self.step.bp + a / bh2;
+            let dq = moved + xb * self.step.gp + yb * self.step.bp + a / bh2;
             xbar[6 * i..6 * i + 6].copy_from_slice(dq.as_slice());
             start.q[i] = p.g[i].tr_mul(&bar.q[i]);
-            start.v[i] = bar.v[i] * c1 + bar.vdot[i] * c3 - a * (h / bh2);
-            start.a[i] = bar.v[i] * c2 + bar.vdot[i] * c4 - a * ((0.5 - ga.beta) / ga.beta);
-            start.vdot[i] = bar.vdot[i] * c5;
             let (vbar, abar) = self.commutator_vjp(i, &p.end.v[i], &t);
-            start.v[i] += vbar;
-            start.a[i] += abar;
+            let in_chart = [
+                xb * c1 + yb * c3 - a * (h / bh2) + vbar,
+                yb * c5,
+                xb * c2 + yb * c4 - a * ((0.5 - ga.beta) / ga.beta) + abar,
+            ];
+            [start.v[i], start.vdot[i], start.a[i]] = p.start_in_chart_transposed(i, in_chart);
         }
         let mut pbar = Vec::new();
         if layout.stabilized {

@@ -104,7 +104,12 @@
 //! ([`predict`], [`correct`], [`finish`]); [`StepFunction`] evaluates them from `x`
 //! directly, with the exact Jacobian `dR/dx` and the products of `dR/ds_n` and `dR/dp` with
 //! vectors and transposed vectors: what a forward sensitivity, a discrete adjoint and a
-//! transcription NLP call.
+//! transcription NLP call. For every configuration update: in the Lie algebra updates the
+//! Jacobian has, besides the iteration matrix's terms, the derivatives of `M` and `N` with
+//! respect to `Theta` (`d(M X)/dTheta`, `d(M Theta'' + N)/dTheta`, `dN/dX`), the start in
+//! the chart moves with `v_n` through `N(0, v_n)`, and a start perturbation `q_n exp(d)` is
+//! carried by `Ad(C(Theta)^-1)` ([`flexmb_lie::Chart::jacobians`],
+//! [`flexmb_lie::Chart::transport`]).
 
 //! The module's files: the scheme's relations here ([`Start`], [`predict`], [`correct`],
 //! [`finish`], [`StateTangent`]); the configuration updates in [`updates`]; the step as
