@@ -100,6 +100,9 @@ pub struct Iterate<'a> {
     /// The elements' states `x` and rates `xdot` (`n_states` each).
     pub x: &'a [f64],
     pub xdot: &'a [f64],
+    /// The input vector `u` ([`crate::model::Input`]) given to the step, or `None`: each
+    /// input from its function at `t`.
+    pub inputs: Option<&'a [f64]>,
 }
 
 /// Where the entries of the iteration matrix go. The same traversal of elements and joints
@@ -373,6 +376,7 @@ impl Iterate<'static> {
         b_start: &[],
         x: &[],
         xdot: &[],
+        inputs: None,
     };
 }
 
@@ -395,6 +399,7 @@ impl<'a> Pass<'a> {
             sc: *sc,
             ctx: Context {
                 acceleration_level: sc.constraint_rhs == ConstraintRhs::Acceleration,
+                inputs: it.inputs,
                 ..Context::at(model, it.t, sc.load_factor)
             },
             ground: [NodeState::ground(Default::default()); 2],

@@ -80,6 +80,9 @@ pub struct Point<'a> {
     pub lambda: &'a [f64],
     /// Factor on gravity and loads (1 in dynamics).
     pub load_factor: f64,
+    /// The input vector `u` given to the step, or `None` (each input from its function at
+    /// `t`; [`crate::elements::Context::inputs`]).
+    pub inputs: Option<&'a [f64]>,
 }
 
 /// A model and a point.
@@ -90,7 +93,10 @@ struct At<'a> {
 
 impl At<'_> {
     fn context(&self) -> Context<'_> {
-        Context::at(self.model, self.point.t, self.point.load_factor)
+        Context {
+            inputs: self.point.inputs,
+            ..Context::at(self.model, self.point.t, self.point.load_factor)
+        }
     }
 
     /// The kinematics of two node slots (identity frame at rest for the ground).
@@ -106,6 +112,8 @@ enum Wrt<P> {
     Own(P),
     /// Component `k` of gravity.
     Gravity(usize),
+    /// The value of the input it reads ([`ElementParameters::input_derivative`]).
+    Input,
 }
 
 /// One element's term (the element and which it is): its derivative at the kinematics of its
@@ -129,6 +137,10 @@ fn element_term<E: ElementParameters>(
         Wrt::Own(p) => e.parameter_derivative(&ctx, p, &local, &mut dv),
         Wrt::Gravity(k) => {
             e.gravity_derivative(&ctx, k, &local, &mut dv);
+            DerivativeMethod::Analytic
+        }
+        Wrt::Input => {
+            e.input_derivative(&ctx, &local, &mut dv);
             DerivativeMethod::Analytic
         }
     };
@@ -287,6 +299,23 @@ pub struct Columns<'a> {
     pub de: &'a mut [f64],
 }
 
+/// `dR/du_k` of the unscaled equilibrium rows (6 per node, into `dr`) for input `k` of the
+/// model ([`crate::model::Input`]) at `point`: the derivative of the load it scales with
+/// respect to its value (the residual is linear in it).
+pub fn input_derivative(model: &Model, point: &Point, k: usize, dr: &mut [f64]) {
+    assert_eq!(dr.len(), 6 * model.nodes.len(), "dr: 6 per node");
+    dr.fill(0.0);
+    let i = model.inputs[k].load;
+    let at = At { model, point };
+    let mut sink = |piece: Piece| {
+        if let Piece::Element(slots, _, d) = piece {
+            scatter(dr, slots, &d[..6 * slots.len()]);
+        }
+    };
+    let item = (&model.loads[i], ElementItem::Load(i));
+    element_term(&at, item, Wrt::Input, &mut sink);
+}
+
 /// `dR/dp` of the unscaled equations (module documentation) for one parameter at `point`,
 /// into `out`. Returns how the local derivatives were obtained.
 pub fn residual_derivative(
@@ -359,6 +388,7 @@ pub fn constraint_force_derivative(
         t,
         lambda: w,
         load_factor: 1.0,
+        inputs: None,
     };
     let at = At {
         model,

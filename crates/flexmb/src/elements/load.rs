@@ -12,6 +12,9 @@
 //! is `r` with `F = e_k, M = 0`, `dr/dM_k` is `r` with `F = 0, M = e_k`, and the derivative
 //! with respect to an amplitude `a` of the time function is `r` with `f` replaced by
 //! `df/da` ([`crate::model::TimeFunction::amplitude_derivative`]).
+//!
+//! **Inputs** ([`crate::model::Input`]): the load of an input takes `f = u_k`, the step's
+//! input value (its function's at `t` in a run), and `dr/du_k` is `r` with `f = 1`.
 
 use super::{
     physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,
@@ -37,6 +40,18 @@ impl Load {
     }
 }
 
+impl Load {
+    /// The scale of the load in `ctx`: its input's value (the step's, [`Context::input`]) or
+    /// its function's, times the load factor.
+    fn scale(&self, ctx: &Context) -> f64 {
+        let f = match self.input {
+            Some(k) => ctx.input(k),
+            None => self.function.value(ctx.t),
+        };
+        f * ctx.load_scale
+    }
+}
+
 impl ElementKernel for Load {
     fn n_slots(&self) -> usize {
         1
@@ -54,7 +69,7 @@ impl ElementKernel for Load {
         s: Option<(&Coefficients, &mut LocalMatrix)>,
     ) {
         let nodes = local.nodes;
-        let f = self.function.value(ctx.t) * ctx.load_scale;
+        let f = self.scale(ctx);
         let rot = nodes[0].q.r;
         let mut r_p = Vec6::zeros();
         let mut k_p = Mat6::zeros();
@@ -88,7 +103,7 @@ impl ElementParameters for Load {
         dr: &mut LocalVector,
     ) -> DerivativeMethod {
         let nodes = local.nodes;
-        let f = self.function.value(ctx.t) * ctx.load_scale;
+        let f = self.scale(ctx);
         let unit = |k: usize| {
             let mut e = Vec3::zeros();
             e[k] = 1.0;
@@ -99,11 +114,30 @@ impl ElementParameters for Load {
             LoadParam::Force(k) => self.physical_residual(&unit(k), &zero, f, &nodes[0]),
             LoadParam::Torque(k) => self.physical_residual(&zero, &unit(k), f, &nodes[0]),
             LoadParam::Amplitude(a) => {
-                let df = self.function.amplitude_derivative(a, ctx.t).0 * ctx.load_scale;
+                // An input given to the step does not move with its function.
+                let given = self.input.is_some() && ctx.inputs.is_some();
+                let d = if given {
+                    0.0
+                } else {
+                    self.function.amplitude_derivative(a, ctx.t).0
+                };
+                let df = d * ctx.load_scale;
                 self.physical_residual(&self.force, &self.torque, df, &nodes[0])
             }
         };
         physical::to_group(ctx.group, nodes, &[true], &r_p, None, None, dr, None);
         DerivativeMethod::Analytic
+    }
+
+    fn input_derivative(&self, ctx: &Context, local: &Local, dr: &mut LocalVector) {
+        // r is linear in the input: dr/du is r at u = 1.
+        let nodes = local.nodes;
+        let scale = if self.input.is_some() {
+            ctx.load_scale
+        } else {
+            0.0
+        };
+        let r_p = self.physical_residual(&self.force, &self.torque, scale, &nodes[0]);
+        physical::to_group(ctx.group, nodes, &[true], &r_p, None, None, dr, None);
     }
 }

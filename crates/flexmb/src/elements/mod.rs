@@ -149,6 +149,9 @@ pub struct Context<'a> {
     /// equations of elements (a servo constraint) are written at acceleration level there,
     /// like the joints' rows.
     pub acceleration_level: bool,
+    /// The input vector `u` at `t` given to the step ([`crate::model::Input`]); `None` reads
+    /// each input from its function at `t` (a run).
+    pub inputs: Option<&'a [f64]>,
 }
 
 impl<'a> Context<'a> {
@@ -161,6 +164,18 @@ impl<'a> Context<'a> {
             gravity_scale: load_factor,
             load_scale: load_factor,
             acceleration_level: false,
+            inputs: None,
+        }
+    }
+
+    /// The value of input `k` (index in [`Model::inputs`]): the step's, or its function's at
+    /// `t`.
+    pub fn input(&self, k: usize) -> f64 {
+        match self.inputs {
+            Some(u) => u[k],
+            None => self.model.loads[self.model.inputs[k].load]
+                .function
+                .value(self.t),
         }
     }
 }
@@ -821,6 +836,11 @@ pub trait ElementParameters: ElementKernel {
         local: &Local,
         dr: &mut LocalVector,
     ) -> DerivativeMethod;
+    /// `d[r; e]/du` of the input the element reads, if it reads one (every entry written;
+    /// zero for the others): the column of `dR/du` ([`crate::model::Input`]).
+    fn input_derivative(&self, _ctx: &Context, _local: &Local, dr: &mut LocalVector) {
+        dr.fill(0.0);
+    }
     /// `d[r; e]/dg_k`, component `k` of gravity (every entry written; zero for massless
     /// elements).
     fn gravity_derivative(&self, _ctx: &Context, _k: usize, _local: &Local, dr: &mut LocalVector) {

@@ -13,9 +13,9 @@ use super::{Analysis, ModelFile};
 use crate::error::ModelError;
 use crate::model::limits::{within, MAX_ANGLE, MAX_KINEMATIC, MAX_PHYSICAL};
 use crate::model::{
-    box_inertia, clip, frame_from_axis, Bushing, BushingForm, ForceCurve, ForceLaw, JointKind,
-    Load, LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint, RotationalSpring, Sensor,
-    SensorFrame, SensorKind, SpringDamper, SpringLaw, SpringSide, TimeFunction,
+    box_inertia, clip, frame_from_axis, Bushing, BushingForm, ForceCurve, ForceLaw, Input,
+    JointKind, Load, LoadFrame, Model, NodeId, Relaxation, Rope, RopePoint, RotationalSpring,
+    Sensor, SensorFrame, SensorKind, SpringDamper, SpringLaw, SpringSide, TimeFunction,
 };
 use crate::solve::{DynamicSettings, NewtonSettings, StaticMethod, StaticSettings};
 use flexmb_lie::{Frame, Group, Mat3, Mat6, Vec3};
@@ -31,6 +31,7 @@ const TOP_KEYS: &[&str] = &[
     "body",
     "joint",
     "load",
+    "input",
     "spring",
     "rope",
     "contact",
@@ -121,6 +122,7 @@ pub(crate) fn build(src: &Source<'_>, root: &Value<'_>) -> Result<ModelFile> {
     )?;
     read_joints(&top, &mut model, &mut origins)?;
     read_loads(&top, &mut model, &mut origins)?;
+    read_inputs(&top, &mut model, &mut origins)?;
     read_springs(&top, &mut model, &mut origins)?;
     read_ropes(&top, &mut model, &mut origins)?;
     super::contact::read_contacts(&top, &mut model, &mut origins)?;
@@ -815,6 +817,55 @@ fn read_loads(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
             torque,
             frame,
             function,
+            input: None,
+        });
+        origins.loads.push(Origin::of(&t));
+    }
+    Ok(())
+}
+
+/// `[[input]]`: an input `u_k` of the model, an actuator force and torque at a node per
+/// unit of `u` ([`crate::model::Input`]), the load it scales read like a `[[load]]`'s on a
+/// node; `function` gives `u(t)` in a run (0 without it).
+fn read_inputs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Result<()> {
+    let mut names = HashMap::new();
+    for t in top.items("input")? {
+        t.check_keys(&["name", "node", "force", "torque", "frame", "function"])?;
+        let name = read_name(&t, &mut names, "input")?;
+        if let Some(load) = model.loads.iter().find(|l| l.name == name) {
+            return Err(t.req("name")?.err(format!(
+                "'{}' names a [[load]] too: an input's name must be its own",
+                clip(&load.name, QUOTED)
+            )));
+        }
+        let frame = match t.opt_choice("frame", &["inertial", "body"])? {
+            Some("body") => LoadFrame::Body,
+            _ => LoadFrame::Inertial,
+        };
+        let function = match t.field("function") {
+            Some(f) => read_function(&f)?,
+            None => TimeFunction::Constant { value: 0.0 },
+        };
+        let node = require_node(model, origins, &t.req("node")?)?;
+        let (force, torque) = (opt_load(&t, "force")?, opt_load(&t, "torque")?);
+        if force == Vec3::zeros() && torque == Vec3::zeros() {
+            return Err(t.key_err(
+                "force",
+                "an input needs a `force` or a `torque` (per unit of the input): with neither it acts on nothing",
+            ));
+        }
+        model.inputs.push(Input {
+            name: name.clone(),
+            load: model.loads.len(),
+        });
+        model.loads.push(Load {
+            name,
+            node,
+            force,
+            torque,
+            frame,
+            function,
+            input: Some(model.inputs.len() - 1),
         });
         origins.loads.push(Origin::of(&t));
     }

@@ -135,17 +135,34 @@ pub enum LoadFrame {
     Body,
 }
 
-/// A force and torque applied at a node, scaled by a time function.
+/// A force and torque applied at a node, scaled by a time function, or by an input of the
+/// model ([`Input`]).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Load {
     pub name: String,
     pub node: NodeId,
-    /// Force at the node origin \[N\].
+    /// Force at the node origin \[N\] (per unit of the input for an input's load).
     pub force: Vec3,
-    /// Torque [N m].
+    /// Torque [N m] (likewise).
     pub torque: Vec3,
     pub frame: LoadFrame,
+    /// The scale `f(t)`; for an input's load, the input's values in a run.
     pub function: TimeFunction,
+    /// The index in [`Model::inputs`] of the input that scales this load in place of
+    /// `function` when a step is given input values ([`crate::elements::Context::inputs`]).
+    #[serde(default)]
+    pub input: Option<usize>,
+}
+
+/// An input of the model, `u_k`: one entry of the input vector `u_n` of each step (an
+/// actuator force or torque, `[[input]]`), which the step residual reads in place of a time
+/// function (`R(x; s_n, u_{n+1}, p)`, [`crate::solve::step::StepFunction::input_jacobian`]).
+/// In a run, `u(t)` is the function of its load.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Input {
+    pub name: String,
+    /// The index in [`Model::loads`] of the load it scales.
+    pub load: usize,
 }
 
 /// A linear spring-damper between two points, acting along the line joining them.
@@ -735,6 +752,9 @@ pub struct Model {
     pub bodies: Vec<RigidBody>,
     pub joints: Vec<Joint>,
     pub loads: Vec<Load>,
+    /// The model's inputs, in the order of the input vector `u`.
+    #[serde(default)]
+    pub inputs: Vec<Input>,
     pub springs: Vec<SpringDamper>,
     #[serde(default)]
     pub ropes: Vec<Rope>,
@@ -802,6 +822,7 @@ impl Model {
             bodies: Vec::new(),
             joints: Vec::new(),
             loads: Vec::new(),
+            inputs: Vec::new(),
             springs: Vec::new(),
             ropes: Vec::new(),
             contacts: Vec::new(),
@@ -893,6 +914,7 @@ impl Model {
                 torque: torque_per_length * *length,
                 frame,
                 function: function.clone(),
+                input: None,
             });
         }
         share.len()

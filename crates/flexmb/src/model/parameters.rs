@@ -653,20 +653,26 @@ impl Parameters {
                 }
             }
         }
+        // An input's load is addressed as the input (`input.NAME...`, its function the
+        // values of a run).
         let names = segments(model.loads.iter().map(|l| l.name.as_str()));
         for (i, name) in names.iter().enumerate() {
+            let table = match model.loads[i].input {
+                Some(_) => "input",
+                None => "load",
+            };
             for k in 0..3 {
                 let p = ParamKind::Load(i, LoadParam::Force(k));
-                reg.push(format!("load.{name}.force.{k}"), p);
+                reg.push(format!("{table}.{name}.force.{k}"), p);
             }
             for k in 0..3 {
                 let p = ParamKind::Load(i, LoadParam::Torque(k));
-                reg.push(format!("load.{name}.torque.{k}"), p);
+                reg.push(format!("{table}.{name}.torque.{k}"), p);
             }
             let keys = model.loads[i].function.amplitude_keys();
             for (a, key) in keys.into_iter().enumerate() {
                 let p = ParamKind::Load(i, LoadParam::Amplitude(a));
-                reg.push(format!("load.{name}.function.{key}"), p);
+                reg.push(format!("{table}.{name}.function.{key}"), p);
             }
         }
         let names = segments(model.springs.iter().map(|s| s.name.as_str()));

@@ -587,6 +587,17 @@ impl Model {
             finite3(&l.force, MAX_PHYSICAL).map_err(|m| fail("force", m))?;
             finite3(&l.torque, MAX_PHYSICAL).map_err(|m| fail("torque", m))?;
             l.function.check().map_err(|m| fail("function", m))?;
+            let owner = l.input.map(|k| self.inputs.get(k).map(|input| input.load));
+            if owner.is_some_and(|load| load != Some(i)) {
+                let m = "is not an input of the model that names this load";
+                return Err(fail("input", m.into()));
+            }
+        }
+        for (k, input) in self.inputs.iter().enumerate() {
+            if self.loads.get(input.load).and_then(|l| l.input) != Some(k) {
+                let m = "names no load that it scales";
+                return Err(bad("load", input.load, &input.name, "input", m.into()));
+            }
         }
         Ok(())
     }

@@ -65,6 +65,7 @@ pub fn initial_tangents(
         b_start: &[],
         x: &s0.x,
         xdot: &s0.xdot,
+        inputs: None,
     };
     // A = dG/dy.
     assemble(model, &mut data, &it, &sc, true);
@@ -120,6 +121,7 @@ pub fn initial_tangents(
                 t: s0.t,
                 lambda: &s0.lambda,
                 load_factor,
+                inputs: None,
             };
             let columns = Columns {
                 dr: &mut dr,

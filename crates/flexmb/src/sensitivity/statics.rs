@@ -86,6 +86,7 @@ pub(super) fn gradients(problem: &Problem, direct: bool) -> Result<Gradients, Se
         b_start: &[],
         x: &state.x,
         xdot: &rates,
+        inputs: None,
     };
     // Rows scaled as the static solver scales them, by 1 / max diag K_t (multiplier
     // unknowns s lambda), so that the pivot test sees the constraint block at the scale of
@@ -120,6 +121,7 @@ pub(super) fn gradients(problem: &Problem, direct: bool) -> Result<Gradients, Se
         t,
         lambda: &state.lambda,
         load_factor: lambda,
+        inputs: None,
     };
     let so = layout.state_offset();
     let n_c = problem.criteria.len();

@@ -1515,6 +1515,7 @@ impl NonlinearSystem for StepSystem<'_> {
             b_start: self.b_start,
             x: &self.state.x,
             xdot: &self.state.xdot,
+            inputs: None,
         };
         assemble(self.model, data, &it, &sc, matrix);
     }

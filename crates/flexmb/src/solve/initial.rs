@@ -170,6 +170,7 @@ impl NonlinearSystem for Accelerations<'_> {
             b_start: &[],
             x: self.states.0,
             xdot: self.states.1,
+            inputs: None,
         };
         assemble(self.model, data, &it, &self.sc, matrix);
     }
@@ -236,6 +237,7 @@ pub fn initial_accelerations(
         b_start: &[],
         x: &state.x,
         xdot: &no_rates,
+        inputs: None,
     };
     assemble(model, data, &it, &sc, false);
     if let Some((row, v)) = worst(&data.phi) {

@@ -364,6 +364,7 @@ impl<'a> LoadStep<'a> {
             b_start: &[],
             x: &self.x,
             xdot: &self.rates,
+            inputs: None,
         };
         assemble(
             self.model,
@@ -407,6 +408,7 @@ impl NonlinearSystem for LoadStep<'_> {
                 b_start: &[],
                 x: &self.x,
                 xdot: &self.rates,
+                inputs: None,
             };
             assemble(self.model, data, &it, &ahead, false);
             arc.load_derivative.clone_from(&data.residual);

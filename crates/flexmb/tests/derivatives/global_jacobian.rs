@@ -33,6 +33,7 @@ fn residual(
         b_start: &[],
         x: &[],
         xdot: &[],
+        inputs: None,
     };
     assemble(model, data, &it, sc, matrix);
     data.residual.clone()
@@ -70,6 +71,7 @@ fn assembled_stiffness_matches_finite_differences_of_the_residual() {
         torque: Vec3::new(0.0, -5.0, 1.0),
         frame: LoadFrame::Body,
         function: TimeFunction::Constant { value: 1.0 },
+        input: None,
     });
     let layout = Layout::new(&m);
     let n_rows = layout.n_rows;

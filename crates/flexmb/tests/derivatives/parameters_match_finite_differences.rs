@@ -47,6 +47,7 @@ impl Point {
             t: self.t,
             lambda: &self.lambda,
             load_factor: self.load_factor,
+            inputs: None,
         }
     }
 }
@@ -420,6 +421,7 @@ fn mechanism(group: Group) -> Model {
             phase: 0.3,
             offset: 0.5,
         },
+        input: None,
     });
     m.loads.push(Load {
         name: "follow".into(),
@@ -430,6 +432,7 @@ fn mechanism(group: Group) -> Model {
         function: TimeFunction::Table {
             points: vec![(0.0, 0.0), (0.5, 2.0), (1.0, -1.0)],
         },
+        input: None,
     });
     let axis = flexmb_lie::so3::exp(&Vec3::new(0.3, 0.2, -0.4));
     m.add_joint(

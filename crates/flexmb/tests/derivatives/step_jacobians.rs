@@ -678,3 +678,161 @@ fn element_state_step_jacobians_match_finite_differences() {
         }
     }
 }
+
+/// The heavy top with two inputs ([`flexmb::model::Input`]): a follower torque and a dead
+/// force at its node, `u(t)` a sine each in a run.
+fn heavy_top_with_inputs() -> Simulation {
+    use flexmb::model::{Input, Load, LoadFrame, TimeFunction};
+    let mf = flexmb::input::read_model_file(&common::example("heavy_top.toml"), &[]).unwrap();
+    let flexmb::input::Analysis::Dynamic(settings) = mf.analysis else {
+        panic!("dynamic")
+    };
+    let mut model = mf.model;
+    let node = model.bodies[0].node;
+    let sine = |amplitude| TimeFunction::Sine {
+        amplitude,
+        frequency: 3.0,
+        phase: 0.2,
+        offset: 0.1,
+    };
+    let actuators = [
+        (
+            "spin",
+            flexmb_lie::Vec3::zeros(),
+            flexmb_lie::Vec3::new(0.1, -0.2, 1.0),
+            LoadFrame::Body,
+        ),
+        (
+            "push",
+            flexmb_lie::Vec3::new(2.0, 0.5, -1.0),
+            flexmb_lie::Vec3::zeros(),
+            LoadFrame::Inertial,
+        ),
+    ];
+    for (k, (name, force, torque, frame)) in actuators.into_iter().enumerate() {
+        model.inputs.push(Input {
+            name: name.into(),
+            load: model.loads.len(),
+        });
+        model.loads.push(Load {
+            name: name.into(),
+            node,
+            force,
+            torque,
+            frame,
+            function: sine(0.5 + k as f64),
+            input: Some(k),
+        });
+    }
+    let mut sim = Simulation::new(model, settings).expect("starts");
+    for _ in 0..5 {
+        sim.step().expect("step");
+    }
+    sim
+}
+
+#[test]
+fn input_jacobian_matches_finite_differences() {
+    // R(x; s_n, u_{n+1}, p) is linear in u: dR/du against central differences of the
+    // residual with the inputs given, its products against it, and a step given its own
+    // functions' values against a step that reads them.
+    let sim = heavy_top_with_inputs();
+    let h = sim.settings.h;
+    let layout = sim.data.layout.clone();
+    let mut data = Data::new(&sim.model, layout.clone()).expect("data");
+    let reading = sim.step_function(h);
+    let u_run = reading.input_values();
+    assert_eq!(u_run.len(), 2);
+    let mut rand = noise(11);
+    let mut x = reading.predict();
+    for v in &mut x {
+        *v += 1e-3 * rand();
+    }
+    let given = sim.step_function(h).with_inputs(&u_run);
+    assert_eq!(
+        given.residual(&x, &mut data),
+        reading.residual(&x, &mut data),
+        "the functions' values given: the same residual"
+    );
+    let u = [0.7, -1.3];
+    let f = sim.step_function(h).with_inputs(&u);
+    let jacobian = f.input_jacobian(&x, &mut data);
+    let nu = layout.n_unknowns();
+    for k in 0..2 {
+        let mut column = vec![0.0; nu];
+        for &(i, j, v) in &jacobian {
+            if j == k {
+                column[i] += v;
+            }
+        }
+        // (linear: a large step has no truncation error, and less round-off)
+        let eps = 1.0;
+        let along = |sign: f64| {
+            let mut us = u;
+            us[k] += sign * eps;
+            sim.step_function(h)
+                .with_inputs(&us)
+                .residual(&x, &mut Data::new(&sim.model, layout.clone()).unwrap())
+        };
+        let (rp, rm) = (along(1.0), along(-1.0));
+        let fd: Vec<f64> = rp
+            .iter()
+            .zip(&rm)
+            .map(|(a, b)| (a - b) / (2.0 * eps))
+            .collect();
+        let d = blockwise(&column, &fd, &layout, 1e-12);
+        assert!(
+            d < 1e-9,
+            "dR/du_{k} differs from central differences by {d:e}"
+        );
+        let s = f.step.scale;
+        assert!(column.iter().any(|v| v.abs() > 0.1 * s), "input {k} acts");
+    }
+    // <w, J du> = <J^T w, du>
+    let du = [rand(), rand()];
+    let w: Vec<f64> = (0..nu).map(|_| rand()).collect();
+    let left: f64 = w
+        .iter()
+        .zip(f.input_jvp(&x, &du, &mut data))
+        .map(|(a, b)| a * b)
+        .sum();
+    let right: f64 = f
+        .input_vjp(&x, &w, &mut data)
+        .iter()
+        .zip(du)
+        .map(|(a, b)| a * b)
+        .sum();
+    assert!((left - right).abs() <= 1e-12 * left.abs().max(1e-300));
+    // The inputs' parameters at given inputs: the force per unit of input scales with u, its
+    // function's amplitude no longer enters.
+    let params = Parameters::new(&sim.model);
+    for (path, moves) in [
+        ("input.push.force.0", true),
+        ("input.push.function.amplitude", false),
+    ] {
+        let id = params.id(path).unwrap();
+        let mut dp = vec![0.0; params.len()];
+        dp[id.0 as usize] = 1.0;
+        let jp = f.parameter_jvp(&x, &params, &dp, &mut data);
+        let value = params.value(&sim.model, id);
+        let residual_at = |v: f64| {
+            let mut m = (*sim.model).clone();
+            params.set(&mut m, id, v);
+            StepFunction::new(&m, &layout, &sim.state, &sim.settings, h)
+                .with_mass_scale(f.step.mass)
+                .with_inputs(&u)
+                .residual(&x, &mut Data::new(&m, layout.clone()).unwrap())
+        };
+        let eps = 1.0; // (linear in both)
+        let (rp, rm) = (residual_at(value + eps), residual_at(value - eps));
+        let fd: Vec<f64> = rp
+            .iter()
+            .zip(&rm)
+            .map(|(a, b)| (a - b) / (2.0 * eps))
+            .collect();
+        let size = fd.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert_eq!(size > 1e-3 * f.step.scale, moves, "{path}: {size:e}");
+        let d = blockwise(&jp, &fd, &layout, 1e-12);
+        assert!(d < 1e-8, "{path}: dR/dp differs by {d:e}");
+    }
+}

@@ -284,6 +284,7 @@ fn load_tangents_match_finite_differences() {
                     phase: 0.3,
                     offset: 0.5,
                 },
+                input: None,
             };
             let nodes = [rng.node(model.group), rng.node(model.group)];
             check_element("load", &load, &model, &nodes);

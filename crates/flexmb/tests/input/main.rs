@@ -9,5 +9,6 @@ mod beam_elements;
 mod display_geometry;
 mod fuzz_model_reader;
 mod input_limits;
+mod inputs;
 mod model_file_errors;
 mod time_functions;

@@ -456,6 +456,7 @@ fn nested_amplitude_derivatives_match_differences() {
             t,
             lambda: &lambda,
             load_factor: 1.0,
+            inputs: None,
         };
         for &id in &amplitudes {
             let path = params.path(id);

@@ -201,6 +201,7 @@ fn rayleigh_damping_gives_the_modal_damping_ratio() {
         function: TimeFunction::Table {
             points: vec![(0.0, 0.0), (0.005, 1.0), (0.01, 0.0)],
         },
+        input: None,
     });
     let mut s = DynamicSettings::new(1.0, 2e-4);
     s.rho_inf = 1.0;

@@ -49,6 +49,7 @@ fn cantilever_rolls_up_into_a_full_circle() {
         torque: Vec3::new(0.0, -m, 0.0),
         frame: LoadFrame::Body,
         function: TimeFunction::Constant { value: 1.0 },
+        input: None,
     });
     let mut settings = StaticSettings::new();
     settings.initial_increment = 0.25;
@@ -141,6 +142,7 @@ fn bathe_bolourchi_bend_matches_continuum_reference() {
         torque: Vec3::zeros(),
         frame: LoadFrame::Inertial,
         function: TimeFunction::Constant { value: 1.0 },
+        input: None,
     });
     let mut settings = StaticSettings::new();
     settings.initial_increment = 0.1;
@@ -204,6 +206,7 @@ fn arc_length_follows_the_von_mises_truss_through_its_limit_points() {
         torque: Vec3::zeros(),
         frame: LoadFrame::Inertial,
         function: TimeFunction::Constant { value: 1.0 },
+        input: None,
     });
     let mut settings = StaticSettings::new();
     settings.method = StaticMethod::ArcLength;

@@ -54,6 +54,7 @@ fn mounted_on(
         torque,
         frame,
         function: TimeFunction::Constant { value: 1.0 },
+        input: None,
     });
     m
 }

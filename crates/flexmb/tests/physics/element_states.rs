@@ -188,6 +188,7 @@ fn pulled(group: Group, force: f64) -> Model {
         torque: Vec3::zeros(),
         frame: LoadFrame::Inertial,
         function: TimeFunction::Constant { value: 1.0 },
+        input: None,
     });
     m
 }

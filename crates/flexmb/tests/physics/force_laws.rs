@@ -125,6 +125,7 @@ fn static_elongation(law: SpringLaw, force: f64) -> f64 {
         torque: Vec3::zeros(),
         frame: LoadFrame::Inertial,
         function: TimeFunction::Constant { value: 1.0 },
+        input: None,
     });
     let mut settings = StaticSettings::new();
     settings.initial_increment = 0.25;

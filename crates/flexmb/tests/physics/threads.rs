@@ -220,6 +220,7 @@ fn assembly_bits(
         b_start: &b_start,
         x: &x,
         xdot: &x,
+        inputs: None,
     };
     assemble(model, &mut data, &it, sc, matrix);
     let mut out: Vec<u64> = data.residual.iter().map(|v| v.to_bits()).collect();

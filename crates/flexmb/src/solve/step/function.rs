@@ -36,6 +36,9 @@ pub struct StepFunction<'a> {
     b_start: Vec<Vec12>,
     /// Node kinematics of `s_n` (`T = I`).
     start_nodes: Vec<NodeState>,
+    /// The input vector `u_{n+1}` given to the step ([`crate::model::Input`]), or `None`:
+    /// each input's function at `t_{n+1}`, as in a run.
+    inputs: Option<Vec<f64>>,
     /// The partial derivatives at the last `x` (see [`StepFunction::partials`]).
     cache: RefCell<Option<Cached>>,
 }
@@ -51,6 +54,7 @@ pub struct KeptPartials(Option<Cached>);
 struct Cached {
     x: Vec<f64>,
     step: Start,
+    inputs: Option<Vec<f64>>,
     partials: Arc<Partials>,
 }
 
@@ -203,6 +207,7 @@ impl<'a> StepFunction<'a> {
             step,
             b_start,
             start_nodes,
+            inputs: None,
             cache: RefCell::new(None),
         }
     }
@@ -214,6 +219,62 @@ impl<'a> StepFunction<'a> {
     pub fn with_mass_scale(mut self, mass: f64) -> Self {
         self.step = self.step.with_mass(mass);
         self
+    }
+
+    /// The same step with the input vector `u_{n+1}` given (one value per
+    /// [`crate::model::Input`] of the model, in its order) in place of the inputs'
+    /// functions: what a transcription sets at each step.
+    ///
+    /// # Panics
+    /// If `u` does not have one value per input.
+    pub fn with_inputs(mut self, u: &[f64]) -> Self {
+        assert_eq!(u.len(), self.model.inputs.len(), "one value per input");
+        self.inputs = Some(u.to_vec());
+        self
+    }
+
+    /// The input vector of the step: the given one, or each input's function at `t_{n+1}`.
+    pub fn input_values(&self) -> Vec<f64> {
+        match &self.inputs {
+            Some(u) => u.clone(),
+            None => {
+                let ctx = crate::elements::Context::at(self.model, self.start.t + self.step.h, 1.0);
+                (0..self.model.inputs.len()).map(|k| ctx.input(k)).collect()
+            }
+        }
+    }
+
+    /// `dR/du` at `x`: the sparse columns `s dr/du_k` of the equilibrium rows, one per input
+    /// (the residual is linear in the inputs; [`crate::parameter_derivatives::input_derivative`]).
+    pub fn input_jacobian(&self, x: &[f64], data: &mut crate::data::Data) -> Triplets {
+        let p = self.partials(x, data);
+        let point = self.derivative_point(&p.end, &p.nodes);
+        let mut dr = vec![0.0; self.layout.n_dofs];
+        let mut out = Triplets::new();
+        for k in 0..self.model.inputs.len() {
+            crate::parameter_derivatives::input_derivative(self.model, &point, k, &mut dr);
+            let column = dr.iter().enumerate().filter(|(_, v)| **v != 0.0);
+            out.extend(column.map(|(i, v)| (i, k, self.step.scale * v)));
+        }
+        out
+    }
+
+    /// `(dR/du) du` at `x`.
+    pub fn input_jvp(&self, x: &[f64], du: &[f64], data: &mut crate::data::Data) -> Vec<f64> {
+        let mut out = vec![0.0; self.layout.n_unknowns()];
+        for (i, k, v) in self.input_jacobian(x, data) {
+            out[i] += v * du[k];
+        }
+        out
+    }
+
+    /// `(dR/du)^T w` at `x`: one entry per input.
+    pub fn input_vjp(&self, x: &[f64], w: &[f64], data: &mut crate::data::Data) -> Vec<f64> {
+        let mut out = vec![0.0; self.model.inputs.len()];
+        for (i, k, v) in self.input_jacobian(x, data) {
+            out[k] += v * w[i];
+        }
+        out
     }
 
     /// The partial derivatives kept at the last unknowns asked for, taken out.
@@ -398,6 +459,7 @@ impl<'a> StepFunction<'a> {
             b_start: &self.b_start,
             x: &end.x,
             xdot: &end.xdot,
+            inputs: self.inputs.as_deref(),
         }
     }
 
@@ -412,7 +474,7 @@ impl<'a> StepFunction<'a> {
     /// call at the same `x` with the same [`StepFunction::step`].
     fn partials(&self, x: &[f64], data: &mut crate::data::Data) -> Arc<Partials> {
         if let Some(c) = &*self.cache.borrow() {
-            if c.x.as_slice() == x && c.step == self.step {
+            if c.x.as_slice() == x && c.step == self.step && c.inputs == self.inputs {
                 return Arc::clone(&c.partials);
             }
         }
@@ -423,6 +485,7 @@ impl<'a> StepFunction<'a> {
         *self.cache.borrow_mut() = Some(Cached {
             x: x.to_vec(),
             step: self.step,
+            inputs: self.inputs.clone(),
             partials: Arc::clone(&partials),
         });
         partials
@@ -761,7 +824,7 @@ impl<'a> StepFunction<'a> {
 
     /// The [`crate::parameter_derivatives::Point`] of the end of the step.
     fn derivative_point<'p>(
-        &self,
+        &'p self,
         end: &'p State,
         nodes: &'p [NodeState],
     ) -> crate::parameter_derivatives::Point<'p> {
@@ -772,6 +835,7 @@ impl<'a> StepFunction<'a> {
             t: end.t,
             lambda: &end.lambda,
             load_factor: self.step.load_factor,
+            inputs: self.inputs.as_deref(),
         }
     }
 
