@@ -1140,6 +1140,54 @@ impl<'a> StepFunction<'a> {
             .collect()
     }
 
+    /// `dR/ds_n` at `x` as sparse triplets, the columns in the flat order of a
+    /// [`StateTangent`] ([`StateTangent::flat_mut`], [`StateTangent::flat_len`] of them):
+    /// the products [`StepFunction::start_jvp_many`] with the unit tangents, in blocks (the
+    /// same code path as the products, so the matrix and the products cannot differ).
+    pub fn start_jacobian(&self, x: &[f64], data: &mut crate::data::Data) -> Triplets {
+        const BLOCK: usize = 64;
+        let n = StateTangent::flat_len(self.layout);
+        let mut out = Triplets::new();
+        for first in (0..n).step_by(BLOCK) {
+            let columns = first..(first + BLOCK).min(n);
+            let units: Vec<StateTangent> = columns
+                .clone()
+                .map(|j| {
+                    let mut t = StateTangent::zeros_of(self.layout);
+                    *t.flat_mut(j) = 1.0;
+                    t
+                })
+                .collect();
+            let products = self.start_jvp_many(x, &units, data);
+            for (j, column) in columns.zip(products) {
+                let nonzero = column.into_iter().enumerate().filter(|(_, v)| *v != 0.0);
+                out.extend(nonzero.map(|(i, v)| (i, j, v)));
+            }
+        }
+        out
+    }
+
+    /// `dR/dp` at `x` for the parameters `ids` of `params` as sparse triplets, column `k`
+    /// for `ids[k]` ([`StepFunction::parameter_jvp`] with each unit vector).
+    pub fn parameter_jacobian(
+        &self,
+        x: &[f64],
+        params: &crate::model::parameters::Parameters,
+        ids: &[crate::model::ParamId],
+        data: &mut crate::data::Data,
+    ) -> Triplets {
+        let mut out = Triplets::new();
+        let mut dp = vec![0.0; params.len()];
+        for (k, id) in ids.iter().enumerate() {
+            dp[id.0 as usize] = 1.0;
+            let column = self.parameter_jvp(x, params, &dp, data);
+            dp[id.0 as usize] = 0.0;
+            let nonzero = column.into_iter().enumerate().filter(|(_, v)| *v != 0.0);
+            out.extend(nonzero.map(|(i, v)| (i, k, v)));
+        }
+        out
+    }
+
     /// Coefficients of `xdot_{n+1}` in `w_n` and `xdot_n` at fixed `dx = x_{n+1} - x_n`:
     /// `w_{n+1} = (dx - h (1 - gamma) w_n) / (h gamma)` into
     /// [`FirstOrderParameters::rate_from`].

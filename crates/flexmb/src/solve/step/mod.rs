@@ -110,6 +110,13 @@
 //! the chart moves with `v_n` through `N(0, v_n)`, and a start perturbation `q_n exp(d)` is
 //! carried by `Ad(C(Theta)^-1)` ([`flexmb_lie::Chart::jacobians`],
 //! [`flexmb_lie::Chart::transport`]).
+//!
+//! As sparse matrices (triplets): `dR/dx` on the positions of a pattern built once per
+//! layout ([`StepFunction::jacobian_values`]), `dR/du` of the model's inputs
+//! ([`StepFunction::input_jacobian`]), `dR/ds_n` ([`StepFunction::start_jacobian`], columns in
+//! the flat order of a [`StateTangent`]) and `dR/dp` ([`StepFunction::parameter_jacobian`]);
+//! the last two from the products with unit vectors, so that matrices and products are one
+//! computation.
 
 //! The module's files: the scheme's relations here ([`Start`], [`predict`], [`correct`],
 //! [`finish`], [`StateTangent`]); the configuration updates in [`updates`]; the step as
@@ -535,6 +542,40 @@ impl StateTangent {
     /// The zero tangent of the states of `layout`.
     pub fn zeros_of(layout: &Layout) -> Self {
         Self::zeros(layout.n_nodes, layout.n_rows, layout.n_states)
+    }
+
+    /// The number of components of a tangent of the states of `layout`: the columns of
+    /// `dR/ds_n` ([`StateTangent::flat_mut`] gives their order).
+    pub fn flat_len(layout: &Layout) -> usize {
+        24 * layout.n_nodes + layout.n_rows + 3 * layout.n_states
+    }
+
+    /// Component `j` of the flat order: `q`, `v`, `vdot`, `a` (6 per node each, node after
+    /// node), then `lambda`, `x`, `xdot`, `w`.
+    pub fn flat_mut(&mut self, j: usize) -> &mut f64 {
+        let n6 = 6 * self.q.len();
+        if j < 4 * n6 {
+            let v = match j / n6 {
+                0 => &mut self.q,
+                1 => &mut self.v,
+                2 => &mut self.vdot,
+                _ => &mut self.a,
+            };
+            let i = j % n6;
+            return &mut v[i / 6][i % 6];
+        }
+        let (nr, ns) = (self.lambda.len(), self.x.len());
+        let j = j - 4 * n6;
+        if j < nr {
+            return &mut self.lambda[j];
+        }
+        let j = j - nr;
+        let v = match j / ns {
+            0 => &mut self.x,
+            1 => &mut self.xdot,
+            _ => &mut self.w,
+        };
+        &mut v[j % ns]
     }
 
     /// Euclidean inner product of the components.
