@@ -246,9 +246,11 @@ impl<'a> StepFunction<'a> {
 
     /// `dR/du` at `x`: the sparse columns `s dr/du_k` of the equilibrium rows, one per input
     /// (the residual is linear in the inputs; [`crate::parameter_derivatives::input_derivative`]).
-    pub fn input_jacobian(&self, x: &[f64], data: &mut crate::data::Data) -> Triplets {
-        let p = self.partials(x, data);
-        let point = self.derivative_point(&p.end, &p.nodes);
+    pub fn input_jacobian(&self, x: &[f64]) -> Triplets {
+        // at the end of the step, tangent operators identity (a parameter derivative's point)
+        let (end, mut nodes, ..) = self.end_nodes(x);
+        nodes.iter_mut().for_each(|n| n.t = Mat6::identity());
+        let point = self.derivative_point(&end, &nodes);
         let mut dr = vec![0.0; self.layout.n_dofs];
         let mut out = Triplets::new();
         for k in 0..self.model.inputs.len() {
@@ -260,18 +262,18 @@ impl<'a> StepFunction<'a> {
     }
 
     /// `(dR/du) du` at `x`.
-    pub fn input_jvp(&self, x: &[f64], du: &[f64], data: &mut crate::data::Data) -> Vec<f64> {
+    pub fn input_jvp(&self, x: &[f64], du: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; self.layout.n_unknowns()];
-        for (i, k, v) in self.input_jacobian(x, data) {
+        for (i, k, v) in self.input_jacobian(x) {
             out[i] += v * du[k];
         }
         out
     }
 
     /// `(dR/du)^T w` at `x`: one entry per input.
-    pub fn input_vjp(&self, x: &[f64], w: &[f64], data: &mut crate::data::Data) -> Vec<f64> {
+    pub fn input_vjp(&self, x: &[f64], w: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; self.model.inputs.len()];
-        for (i, k, v) in self.input_jacobian(x, data) {
+        for (i, k, v) in self.input_jacobian(x) {
             out[k] += v * w[i];
         }
         out
