@@ -617,9 +617,8 @@ fn lie_algebra_updates() {
     }
     // The half car of the talk (ride comfort against the suspension): rigid bodies on
     // driven, prismatic and planar joints, with the exponential chart on both groups.
-    // (R3xSO(3)'s chart on SE(3) gives it the same exact gradients, but its runs converge
-    // only to about 1e-9 below rtol = 1e-10, and central differences of them scatter by
-    // percents: measured in the closing note of this change.)
+    // (R3xSO(3)'s chart on SE(3) gives it the same exact gradients, but central differences
+    // of its runs scatter by percents: BENCHMARKS.md, "The Lie algebra update".)
     for group in ["SE3", "R3xSO3"] {
         let g = format!("model.group={group}");
         let p = problem(
