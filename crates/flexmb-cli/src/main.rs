@@ -124,8 +124,8 @@ enum Command {
     },
     /// Gradients of the model's [[criterion]] items with respect to its [[design_parameter]]
     /// items, exact for the computed solution; write gradients.json and gradients.csv into
-    /// DIR. A run with an event (a contact or gear flank that closes or opens), and a model
-    /// with a zero-order hold, are refused (exit 2): their gradients would not be exact.
+    /// DIR. A run with an event (a contact or gear flank that closes or opens) is refused
+    /// (exit 2): its gradients would not be exact (a hold's samples are followed).
     Sensitivity {
         model: PathBuf,
         #[arg(long, default_value = "out")]

@@ -103,9 +103,9 @@
 //! dx`), `C_p = dr/dv`, those with respect to the states and their rates, and those of the
 //! bristles' equations, are computed by forward automatic differentiation (`num-dual`) of
 //! the same function, exact to round-off (one-sided at the kinks: the onset `delta = 0`,
-//! `F_n = 0`, `|v_t| = v_s`); so are the parameter derivatives. Without a rate term in the
-//! iteration matrix (statics, where the rates are absent) the states are held: their rows
-//! read `x = x_start` (friction acts in dynamics only).
+//! `F_n = 0`, `|v_t| = v_s`); so are the parameter derivatives. In the iteration matrix of
+//! statics (stiffness without a rate term: the rates are absent) the states are held: their
+//! rows read `x = x_start` (friction acts in dynamics only).
 //!
 //! **Step control around impacts** ([`ElementKernel::step_limit`]): the contact's gap `g`,
 //! its rate, the law's `K` and `n`, the effective mass `m*` of the two nodes' bodies and the
@@ -466,7 +466,9 @@ impl ElementKernel for ContactElement<'_> {
             r.rows_mut(0, 12).fill(0.0);
             let mut s = s.view();
             s.fill(0.0);
-            s[(12, 12)] = if coef.xdot != 0.0 { coef.xdot } else { coef.x };
+            // (the impact velocity's equation `xdot = 0`; held in statics, below)
+            let statics = coef.xdot == 0.0 && coef.k != 0.0;
+            s[(12, 12)] = if statics { coef.x } else { coef.xdot };
             return;
         }
         let (out, jac) = if ns == 1 {
@@ -529,18 +531,17 @@ impl ElementKernel for ContactElement<'_> {
                 s[(12 + i, 12 + k)] = jac[(row, 24 + k)] * coef.x + jac[(row, 27 + k)] * coef.xdot;
             }
         }
-        // Without a rate term (statics, where the rates are absent) the states are held:
-        // their equations read x = x_start.
+        // In statics (stiffness without a rate term: the rates are absent) the states are
+        // held: their equations read x = x_start. Not in a partial derivative taken one
+        // coefficient at a time (the step function's dE/dx, no stiffness with it). The
+        // impact velocity's equation is `xdot = 0` (its rate's column).
+        let statics = coef.xdot == 0.0 && coef.k != 0.0;
         for k in 0..ns {
-            s[(12 + k, 12 + k)] = if coef.xdot != 0.0 {
-                if k == 0 {
-                    coef.xdot
-                } else {
-                    s[(12 + k, 12 + k)]
-                }
-            } else {
-                coef.x
-            };
+            if statics {
+                s[(12 + k, 12 + k)] = coef.x;
+            } else if k == 0 && coef.xdot != 0.0 {
+                s[(12, 12)] = coef.xdot;
+            }
         }
     }
 

@@ -155,7 +155,7 @@
 use super::pose::{c, pose, Pose};
 use super::{
     physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters,
-    InitialStates, Local, LocalMatrix, LocalVector, Mat12, StepLimit,
+    HeldStates, InitialStates, Local, LocalMatrix, LocalVector, Mat12, StepLimit,
 };
 use crate::error::NewtonError;
 use crate::linear::LinearError;
@@ -1414,8 +1414,11 @@ impl ElementKernel for ControlElement<'_> {
             let mut out = s.row_mut(rows + i);
             out -= d.transpose();
         }
-        // A hold without a rate term (statics) keeps its value: its row reads x = x_start.
-        if coef.xdot == 0.0 {
+        // A hold in statics (a matrix with stiffness but no rate term) keeps its value: its
+        // row reads x = x_start. Not in a partial derivative taken one coefficient at a time
+        // (the step function's dE/dx, the initial tangents' dG/dx_0: no stiffness there),
+        // where the hold's row has no term in x.
+        if coef.xdot == 0.0 && coef.k != 0.0 {
             for (b, block) in self.system.blocks.iter().enumerate() {
                 if matches!(block.kind, BlockKind::Hold { .. }) {
                     let i = rows + self.system.state_start[b];
@@ -1437,6 +1440,22 @@ impl ElementKernel for ControlElement<'_> {
                 }
             }
         }
+    }
+
+    fn event_map(&self, ctx: &Context, _start: &Local, _end: &Local) -> Option<HeldStates> {
+        // A hold's sample (its only event, at fixed times): the held value and the output
+        // that equals it take the input's ([`ElementKernel::update_states`]).
+        let sys = self.system;
+        let mut map = HeldStates::new();
+        for (b, block) in sys.blocks.iter().enumerate() {
+            if let BlockKind::Hold { period } = block.kind {
+                if on_sample(ctx.t, period) {
+                    let u = sys.unknown(block.inputs[0]);
+                    map.extend([(sys.state_start[b], u), (sys.output_start[b], u)]);
+                }
+            }
+        }
+        Some(map)
     }
 
     fn event(&self, ctx: &Context, _start: &Local, _end: &Local) -> Option<String> {

@@ -253,6 +253,10 @@ pub type InitialStates = Result<(), crate::error::NewtonError>;
 /// own `n_states` first-order states `x` with as many equations `e(q, v, vdot, x, xdot, t) =
 /// 0` of its own (an internal variable: a damper's elongation, a friction model's bristle
 /// deflection). Its local vector is `[r (6 per slot); e (one per state)]`.
+/// Copies `(target, source)` among an element's states (local indices) that an event sets
+/// ([`ElementKernel::event_map`]); global state indices in [`crate::solve::StepEvent`].
+pub type HeldStates = Vec<(usize, usize)>;
+
 pub trait ElementKernel {
     /// Number of node slots.
     fn n_slots(&self) -> usize;
@@ -340,6 +344,17 @@ pub trait ElementKernel {
     /// [`ElementRef::can_switch`]; a run's derivatives are not followed through it
     /// ([`crate::sensitivity`], "Events").
     fn event(&self, _ctx: &Context, _start: &Local, _end: &Local) -> Option<String> {
+        None
+    }
+    /// The held states an accepted step with an event ([`ElementKernel::event`]) sets, as
+    /// copies among the element's own states, `(target, source)` in local indices (the
+    /// sources read before any target is set), when the event's time does not depend on the
+    /// motion (a hold's sample, at fixed times): the derivative of the step's end through
+    /// the event is then the same copies ([`crate::sensitivity`], "Events"). `None`, the
+    /// default: the event is placed by the motion, or its held values come from the
+    /// kinematics (a contact's impact velocity, a gear flank), and a run's derivatives are
+    /// not followed through it.
+    fn event_map(&self, _ctx: &Context, _start: &Local, _end: &Local) -> Option<HeldStates> {
         None
     }
 }
@@ -796,6 +811,9 @@ impl ElementKernel for Kernel<'_> {
     }
     fn event(&self, ctx: &Context, start: &Local, end: &Local) -> Option<String> {
         dispatch!(self, k => k.event(ctx, start, end))
+    }
+    fn event_map(&self, ctx: &Context, start: &Local, end: &Local) -> Option<HeldStates> {
+        dispatch!(self, k => k.event_map(ctx, start, end))
     }
 }
 

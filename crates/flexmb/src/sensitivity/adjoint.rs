@@ -102,6 +102,8 @@ impl Backward<'_> {
         let p = self.problem;
         let x = &step.unknowns;
         for c in 0..self.bars.len() {
+            // from the state after the step's held states are set to the step's end
+            self.bars[c].hold_transposed(&step.held);
             let (mut mu, mut start, pe) =
                 f.end_vjp(x, &self.bars[c], Some((&p.params, &p.design)), self.data);
             matrix.solve_transpose(&mut mu);

@@ -95,7 +95,7 @@ impl Direct<'_> {
     /// Step `n` on the run's thread: its Jacobian prepared here, then [`Direct::advance`].
     fn step(&mut self, record: &StepRecord) -> Result<(), String> {
         self.check(record.redundant_rows, record.start.t)?;
-        self.events.step(record)?;
+        let held = self.events.step(record)?;
         let p = self.problem;
         let spare = std::mem::take(&mut self.spare);
         let at = (record.index, record.start, record.info.h, record.unknowns);
@@ -103,7 +103,7 @@ impl Direct<'_> {
         let (data, values) = (&mut self.data, &mut self.values);
         let (f, mut matrix) =
             pipeline::prepare_function(&p.model, self.layout, settings, at, data, spare, values)?;
-        self.advance(&f, record.unknowns, &mut matrix, record.end);
+        self.advance(&f, record.unknowns, &mut matrix, record.end, &held);
         self.spare = Spare::after(matrix, &f);
         Ok(())
     }
@@ -118,7 +118,14 @@ impl Direct<'_> {
 
     /// The tangents carried through step `f` with its Jacobian factorized in `matrix`, and
     /// the criteria's derivatives at its `end`.
-    fn advance(&mut self, f: &StepFunction, x: &[f64], matrix: &mut StepMatrix, end: &State) {
+    fn advance(
+        &mut self,
+        f: &StepFunction,
+        x: &[f64],
+        matrix: &mut StepMatrix,
+        end: &State,
+        held: &[(usize, usize)],
+    ) {
         let p = self.problem;
         let starts = f.start_jvp_many(x, &self.tangents, &mut self.data);
         for ((k, &id), mut rhs) in p.design.iter().enumerate().zip(starts) {
@@ -129,8 +136,9 @@ impl Direct<'_> {
                 *a = -(*a + b);
             }
             matrix.solve(&mut rhs);
-            let next = f.end_jvp(x, &rhs, ds, Some((&p.params, &self.dp)), &mut self.data);
+            let mut next = f.end_jvp(x, &rhs, ds, Some((&p.params, &self.dp)), &mut self.data);
             self.dp[id.0 as usize] = 0.0;
+            next.hold(held);
             self.tangents[k] = next;
         }
         self.steps += 1;
@@ -162,7 +170,7 @@ impl Observer for Handover {
         true
     }
     fn step(&mut self, record: &StepRecord) -> Result<(), String> {
-        self.1.step(record)?;
+        let held = self.1.step(record)?;
         let step = OwnedStep {
             step: TrajectoryStep {
                 index: record.index,
@@ -170,6 +178,7 @@ impl Observer for Handover {
                 start: record.start.clone(),
                 unknowns: record.unknowns.to_vec(),
                 redundant_rows: record.redundant_rows.to_vec(),
+                held,
             },
             end: record.end.clone(),
         };
@@ -281,7 +290,7 @@ fn on_threads<'a>(
                     obs.check(&s.redundant_rows, s.start.t)?;
                     let f = StepFunction::new(&p.model, layout, &s.start, &settings, s.h)
                         .with_partials(partials);
-                    obs.advance(&f, &s.unknowns, &mut matrix, &step.end);
+                    obs.advance(&f, &s.unknowns, &mut matrix, &step.end, &s.held);
                     Ok(Spare::after(matrix, &f))
                 },
             );

@@ -70,12 +70,17 @@
 //! kinks that have no event (force tables, one-sided springs, slack ropes, limiters): the
 //! derivative of the side a step ends on (one-sided at a kink a step ends on; a damped
 //! one-sided spring's force jumps where it engages, and its gradients across that are not
-//! meaningful either). A model with a hold is refused before its run: the derivative of the
-//! held value is not followed from its start either (with a hold of period 0.1 s between
-//! the controller and the motor of `examples/pid_mass_spring.toml`, the held value's
-//! derivative was 0.1 % off at t = 0 and the position's 2.6 % at t = 0.08 s, before the
-//! first sample). The finite differences ([`finite_differences`]) run through events: with
-//! a step larger than the events' noise they estimate the gradient.
+//! meaningful either). Followed exactly: the samples of a hold, at fixed times, whose map is a
+//! copy of states ([`crate::elements::ElementKernel::event_map`],
+//! [`crate::solve::StepEvent::held`]): the direct method's tangents take it after the step
+//! ([`StateTangent::hold`]), the adjoint's cotangents its transpose before it. (Before, a
+//! model with a hold was refused: with a hold of period 0.1 s between the controller and the
+//! motor of `examples/pid_mass_spring.toml`, the held value's derivative decayed like e^-t
+//! from its start, 2.6 % off on the position at t = 0.08 s. The statics' diagonal of the
+//! hold's row, `x = x_start`, leaked into the step's `dE/dx` and the initial tangents'
+//! `dG/dx_0`, which take their coefficients one at a time.) The finite differences
+//! ([`finite_differences`]) run through events: with a step larger than the events' noise
+//! they estimate the gradient.
 //!
 //! # References
 //! - O. Brüls, P. Eberhard, Sensitivity analysis for dynamic mechanical systems with finite
@@ -105,7 +110,6 @@ pub use finite_differences::{criteria_values, finite_differences};
 
 use crate::data::Layout;
 use crate::error::SolveError;
-use crate::model::control::BlockKind;
 use crate::model::{Model, ParamId, Parameters};
 use crate::solve::observe::{Observer, Sample, StepRecord};
 use crate::solve::step::StateTangent;
@@ -435,16 +439,6 @@ fn start(
     problem: &Problem,
 ) -> Result<(crate::solve::Simulation, Vec<StateTangent>), SensitivityError> {
     let settings = *problem.dynamic()?;
-    let holds = &problem.model.control.blocks;
-    if let Some(hold) = holds
-        .iter()
-        .find(|b| matches!(b.kind, BlockKind::Hold { .. }))
-    {
-        return Err(SensitivityError::Unsupported(format!(
-            "block '{}' is a zero-order hold: the direct and adjoint methods do not follow a held value yet (its start from the input at t = 0, and each sample, an event, that resets it), so the gradients of a model with a hold are not computed (the fd method works with it)",
-            hold.name
-        )));
-    }
     let mut ids = problem.design.clone();
     ids.sort_unstable();
     if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
@@ -472,23 +466,27 @@ fn start(
 struct EventWatch(Option<StepEvent>);
 
 impl EventWatch {
-    /// An observer's answer to an accepted step: an error (which stops the run) if the step
-    /// has an event.
-    fn step(&mut self, record: &StepRecord) -> Result<(), String> {
+    /// An observer's answer to an accepted step: the held states its end sets (copies of
+    /// states, [`StepEvent::held`]; empty without an event), or an error (which stops the
+    /// run) if the step has an event the derivatives do not go through.
+    fn step(&mut self, record: &StepRecord) -> Result<Vec<(usize, usize)>, String> {
         match record.simulation.last_step_event() {
+            Some(StepEvent {
+                held: Some(held), ..
+            }) => Ok(held),
             Some(event) => {
                 let stopped = format!("stopped at an event: {}", event.what);
                 self.0 = Some(event);
                 Err(stopped)
             }
-            None => Ok(()),
+            None => Ok(Vec::new()),
         }
     }
 
     /// The outcome of the run watched: the event that stopped it, if any, else `run`'s.
     fn outcome<T>(self, run: Result<T, SolveError>) -> Result<T, SensitivityError> {
         match self.0 {
-            Some(StepEvent { t, what }) => Err(SensitivityError::Event { what, t }),
+            Some(StepEvent { t, what, .. }) => Err(SensitivityError::Event { what, t }),
             None => Ok(run?),
         }
     }
@@ -527,9 +525,10 @@ impl Observer for Recorder<'_> {
         if record.redundant_rows != self.redundant.as_slice() {
             return Err(reselected(record.start.t));
         }
-        if let Some(events) = &mut self.events {
-            events.step(record)?;
-        }
+        let held = match &mut self.events {
+            Some(events) => events.step(record)?,
+            None => Vec::new(),
+        };
         p.criteria
             .record(&p.model, self.layout, record.end, &mut self.history);
         if self.count >= self.most_steps {
@@ -547,6 +546,7 @@ impl Observer for Recorder<'_> {
             step.unknowns.extend_from_slice(record.unknowns);
             step.redundant_rows.clear();
             step.redundant_rows.extend_from_slice(record.redundant_rows);
+            step.held = held;
         }
         self.count += 1;
         Ok(())

@@ -388,6 +388,11 @@ pub struct StepEvent {
     pub t: f64,
     /// What happened, naming the item: `contact 'floor' closes`, `hold 'zoh' samples`.
     pub what: String,
+    /// The held states the step's end sets, as copies `(target, source)` of states (indices
+    /// in the state vector, sources read before targets are set), when every event of the
+    /// step is at a time the motion does not move ([`crate::elements::ElementKernel::event_map`]):
+    /// a run's derivatives then go through it. `None`: not followed.
+    pub held: Option<Vec<(usize, usize)>>,
 }
 
 /// A model that a simulation can hold: the simulation shares it, so a binding or another
@@ -1159,9 +1164,10 @@ impl Simulation {
 
     /// The event of the last accepted step, if an element that can switch
     /// ([`crate::elements::ElementRef::can_switch`]) had one in it
-    /// ([`crate::elements::ElementKernel::event`]): the first such element's, in the layout's
-    /// order, at the step's end. Evaluated when asked (by an observer's
-    /// [`Observer::step`]); `None` before the first step.
+    /// ([`crate::elements::ElementKernel::event`]): the first such element's whose event
+    /// a run's derivatives do not go through (`held: None`), else the first one's with the
+    /// held states of them all ([`StepEvent::held`]), at the step's end. Evaluated when
+    /// asked (by an observer's [`Observer::step`]); `None` before the first step.
     pub fn last_step_event(&self) -> Option<StepEvent> {
         let (start, end) = (&self.integrator.saved, &self.state);
         if self.switching.is_empty() || start.t == end.t {
@@ -1170,13 +1176,33 @@ impl Simulation {
         let mut nodes: [Vec<NodeState>; 2] = Default::default();
         node_states_into(start, &mut nodes[0]);
         node_states_into(end, &mut nodes[1]);
-        let mut what = None;
-        self.visit(&self.switching, &nodes, |kernel, ctx, start, end, _| {
-            if what.is_none() {
-                what = kernel.event(ctx, start, end);
+        let (mut first, mut uncovered) = (None, None);
+        let mut held = Vec::new();
+        self.visit(&self.switching, &nodes, |kernel, ctx, start, end, x0| {
+            let Some(what) = kernel.event(ctx, start, end) else {
+                return;
+            };
+            match kernel.event_map(ctx, start, end) {
+                Some(map) => held.extend(map.into_iter().map(|(a, b)| (x0 + a, x0 + b))),
+                None => {
+                    uncovered.get_or_insert(what.clone());
+                }
             }
+            first.get_or_insert(what);
         });
-        what.map(|what| StepEvent { t: end.t, what })
+        let t = end.t;
+        match uncovered {
+            Some(what) => Some(StepEvent {
+                t,
+                what,
+                held: None,
+            }),
+            None => first.map(|what| StepEvent {
+                t,
+                what,
+                held: Some(held),
+            }),
+        }
     }
 
     /// Calls `visit` with each element with events, the context at the end of the step, the

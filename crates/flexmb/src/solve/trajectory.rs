@@ -32,6 +32,9 @@ pub struct TrajectoryStep {
     /// The constraint rows left out as redundant in the step (with the model, they give
     /// the layout of `unknowns`).
     pub redundant_rows: Vec<usize>,
+    /// The held states its end sets, copies `(target, source)` of states
+    /// ([`crate::solve::StepEvent::held`]; empty without such an event).
+    pub held: Vec<(usize, usize)>,
 }
 
 impl TrajectoryStep {
@@ -98,12 +101,14 @@ impl Trajectory {
             let start = sim.state.clone();
             let info = sim.step()?;
             let (unknowns, redundant_rows) = sim.last_step();
+            let held = sim.last_step_event().and_then(|e| e.held);
             out.push(TrajectoryStep {
                 index: index0 + i,
                 h: info.h,
                 start,
                 unknowns: unknowns.to_vec(),
                 redundant_rows: redundant_rows.to_vec(),
+                held: held.unwrap_or_default(),
             });
         }
         Ok(out)

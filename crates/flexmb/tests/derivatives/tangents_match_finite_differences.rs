@@ -126,9 +126,9 @@ impl Reads {
 }
 
 /// [`check_element_with_states`] for an element with states `held` (local state indices)
-/// that are held values (equation `xdot = 0`): without a rate term (statics), the iteration
-/// matrix reads their equations as `x = x_start` (diagonal 1) while the residual stays
-/// `xdot`, so those diagonal entries are checked against 1 instead of a difference. The
+/// that are held values (equation `xdot = 0`): each coefficient's matrix against central
+/// differences of the residual, and in statics (stiffness without a rate term) the matrix
+/// reads their equations as `x = x_start` (diagonal 1) while the residual stays `xdot`. The
 /// element reads the multipliers `reads.lambda` ([`ElementKernel::multiplier_rows`]; their
 /// columns carry no coefficient and are checked with every coefficient) and other elements'
 /// states `reads.x`, `reads.xdot` ([`ElementKernel::state_reads`]; checked like its own).
@@ -223,17 +223,19 @@ fn check_states(
             };
             fd.set_column(k, &((rp - rm) / (2.0 * eps)));
         }
-        if what == 'x' {
-            for &i in held {
-                fd[(n6 + i, n6 + i)] = 1.0;
-            }
-        }
         assert_close(
             &s,
             &fd,
             &format!("{name} on {group:?}, derivative wrt {what}"),
             &active,
         );
+    }
+    // The statics' matrix (stiffness and states, no rate term) reads the held values'
+    // equations as x = x_start.
+    let statics = coefficients(0.0, 0.0, 1.0, 1.0, 0.0);
+    let (_, s) = evaluate_owned(kernel, &ctx, &reads.local(nodes, x, xdot), Some(&statics));
+    for &i in held {
+        assert_eq!(s[(n6 + i, n6 + i)], 1.0, "{name}: a held value in statics");
     }
 }
 

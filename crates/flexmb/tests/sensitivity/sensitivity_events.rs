@@ -3,8 +3,8 @@
 //! methods and by the optimizer, naming the element and the time of the run's first event;
 //! the same elements in runs where the event does not happen, and steps cut for output
 //! times, keep gradients that agree with the analytic ones and with central differences; the
-//! finite differences run through events; a model with a hold is refused before its run,
-//! and the engine reports its samples, and a bounce's closing and opening, as events.
+//! finite differences run through events; a hold's samples, at fixed times, are followed
+//! exactly, and the engine reports them, and a bounce's closing and opening, as events.
 
 use flexmb::input::parse_model_str;
 use flexmb::sensitivity::optimize::{optimize, Evaluator};
@@ -296,27 +296,49 @@ terminal = "x"
 }
 
 #[test]
-fn a_model_with_a_hold_is_refused_and_its_samples_are_events() {
-    // The held value's derivative is not followed from its start (before: 2.6 % off at
-    // t = 0.08 s, before the first sample), and each sample resets it: refused before the
-    // run, by both methods.
-    let (p, _) = problem(&held(), &["solver.t_end=0.08"]);
-    for e in [
-        sensitivity::adjoint(&p, &mut |_, _| {}).expect_err("refused"),
-        sensitivity::direct(&p).expect_err("refused"),
-    ] {
-        assert!(e.is_refusal(), "{e}");
-        assert!(
-            e.to_string().contains("block 'zoh' is a zero-order hold"),
-            "{e}"
-        );
+fn gradients_go_through_the_samples_of_a_hold() {
+    // A sample at fixed times sets the held value and the hold's output to the input's: the
+    // step's end through it is that copy (ElementKernel::event_map), so the direct and
+    // adjoint methods follow it. Before: refused, and without the refusal the held value's
+    // derivative decayed like e^-t from the start (0.0951 against 0.1 at t = 0.05 s: the
+    // statics' diagonal of a hold leaked into the step's dE/dx).
+    let text = held().replace(
+        "terminal = \"x\"\n",
+        "terminal = \"x\"\n\n[[sensor]]\nname = \"held\"\ntype = \"block\"\nblock = \"zoh\"\n\n[[criterion]]\nname = \"held_end\"\nterminal = \"held\"\n\n[[design_parameter]]\npath = \"control.pid.kd\"\n\n[[design_parameter]]\npath = \"spring.spring.stiffness\"\n",
+    );
+    for t_end in ["0.05", "0.35"] {
+        let (p, _) = problem(&text, &[&format!("solver.t_end={t_end}")]);
+        let a = agree(&format!("hold to {t_end} s"), &p, 1e-6);
+        if t_end == "0.05" {
+            // before the first sample: the value held from t = 0, kp e(0) + ..., e(0) = 0.1
+            let kp = p.params.id("control.pid.kp").unwrap();
+            let k = p.design.iter().position(|&d| d == kp).unwrap();
+            assert!(
+                (a.gradients[1][k] - 0.1).abs() < 1e-9,
+                "{:?}",
+                a.gradients[1]
+            );
+        }
     }
+    // and with the adjoint's steps recomputed from checkpoints
+    let (mut p, _) = problem(&text, &["solver.t_end=0.35"]);
+    let full = sensitivity::adjoint(&p, &mut |_, _| {}).expect("adjoint");
+    p.memory_budget = 120_000;
+    let checkpointed = sensitivity::adjoint(&p, &mut |_, _| {}).expect("adjoint");
+    assert_eq!(full.gradients, checkpointed.gradients);
+    assert!(
+        checkpointed.stats.recomputed_steps > 0,
+        "{:?}",
+        checkpointed.stats
+    );
     // The engine reports the samples as events, and nothing between them.
     let (p, _) = problem(&held(), &["solver.t_end=0.25"]);
     let events = events(&p);
     let times: Vec<f64> = events.iter().map(|e| e.t).collect();
     assert!(
-        events.iter().all(|e| e.what == "hold 'zoh' samples"),
+        events
+            .iter()
+            .all(|e| e.what == "hold 'zoh' samples" && e.held.is_some()),
         "{events:?}"
     );
     assert_eq!(times.len(), 2, "{times:?}");

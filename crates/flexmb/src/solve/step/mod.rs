@@ -592,6 +592,28 @@ impl StateTangent {
             + s(&self.w, &other.w)
     }
 
+    /// The tangent after an event sets held states, copies `(target, source)` of element
+    /// states ([`crate::solve::StepEvent::held`]): each target takes its source's component
+    /// as it was before any was set.
+    pub fn hold(&mut self, held: &[(usize, usize)]) {
+        let sources: Vec<f64> = held.iter().map(|&(_, s)| self.x[s]).collect();
+        for (&(target, _), v) in held.iter().zip(sources) {
+            self.x[target] = v;
+        }
+    }
+
+    /// The transpose of [`StateTangent::hold`]: a cotangent of the states after the held
+    /// states are set, to the one before.
+    pub fn hold_transposed(&mut self, held: &[(usize, usize)]) {
+        let targets: Vec<f64> = held.iter().map(|&(t, _)| self.x[t]).collect();
+        for &(target, _) in held {
+            self.x[target] = 0.0;
+        }
+        for (&(_, source), v) in held.iter().zip(targets) {
+            self.x[source] += v;
+        }
+    }
+
     /// `self += c other`.
     pub fn add_scaled(&mut self, c: f64, other: &Self) {
         let d = |a: &mut [Vec6], b: &[Vec6]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y * c);
