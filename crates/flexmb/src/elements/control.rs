@@ -1428,17 +1428,10 @@ impl ElementKernel for ControlElement<'_> {
         }
     }
 
-    fn update_states(&self, ctx: &Context, _start: &Local, end: &Local, x: &mut [f64]) {
-        let sys = self.system;
-        for (b, block) in sys.blocks.iter().enumerate() {
-            if let BlockKind::Hold { period } = block.kind {
-                if on_sample(ctx.t, period) {
-                    // the held value and the output that equals it
-                    let u = end.x[sys.unknown(block.inputs[0])];
-                    x[sys.state_start[b]] = u;
-                    x[sys.output_start[b]] = u;
-                }
-            }
+    fn update_states(&self, ctx: &Context, start: &Local, end: &Local, x: &mut [f64]) {
+        // the copies whose derivatives the sensitivities follow, from the end's values
+        for (target, source) in self.event_map(ctx, start, end).unwrap_or_default() {
+            x[target] = end.x[source];
         }
     }
 

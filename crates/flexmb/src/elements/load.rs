@@ -14,7 +14,8 @@
 //! `df/da` ([`crate::model::TimeFunction::amplitude_derivative`]).
 //!
 //! **Inputs** ([`crate::model::Input`]): the load of an input takes `f = u_k`, the step's
-//! input value (its function's at `t` in a run), and `dr/du_k` is `r` with `f = 1`.
+//! input value (its function's at `t` in a run), and `dr/du_k` is `r` with `f` the load
+//! factor alone (1 in dynamics).
 
 use super::{
     physical, Coefficients, Context, DerivativeMethod, ElementKernel, ElementParameters, Local,

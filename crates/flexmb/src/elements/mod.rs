@@ -247,16 +247,16 @@ impl<'a> Local<'a> {
 /// the state in the element's `x`.
 pub type InitialStates = Result<(), crate::error::NewtonError>;
 
+/// Copies `(target, source)` among an element's states (local indices) that an event sets
+/// ([`ElementKernel::event_map`]); global state indices in [`crate::solve::StepEvent`].
+pub type HeldStates = Vec<(usize, usize)>;
+
 /// One small capability set shared by every force element.
 ///
 /// An element connects `n_slots` node slots (any number; a slot may be the ground) and may
 /// own `n_states` first-order states `x` with as many equations `e(q, v, vdot, x, xdot, t) =
 /// 0` of its own (an internal variable: a damper's elongation, a friction model's bristle
 /// deflection). Its local vector is `[r (6 per slot); e (one per state)]`.
-/// Copies `(target, source)` among an element's states (local indices) that an event sets
-/// ([`ElementKernel::event_map`]); global state indices in [`crate::solve::StepEvent`].
-pub type HeldStates = Vec<(usize, usize)>;
-
 pub trait ElementKernel {
     /// Number of node slots.
     fn n_slots(&self) -> usize;

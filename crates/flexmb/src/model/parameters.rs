@@ -25,6 +25,7 @@
 //! | joint | `joint.<j>.drive.<a>` | drive amplitude `a` ([`super::TimeFunction::amplitude_keys`]) | same |
 //! | load | `load.<l>.force.<k>`, `load.<l>.torque.<k>` | force \[N\], torque [N m], in the load's frame | same |
 //! | load | `load.<l>.function.<a>` | amplitude `a` of the load's time function | same |
+//! | input | `input.<i>.force.<k>`, `input.<i>.torque.<k>`, `input.<i>.function.<a>` | per unit of the input, and the amplitudes of its values in a run ([`super::Input`]) | same |
 //! | spring | `spring.<s>.stiffness`, `.damping`, `.rest_length` | `k` [N/m], `c` [N s/m], `l0` \[m\] | same |
 //! | spring | `spring.<s>.point_a.<k>`, `spring.<s>.point_b.<k>` | attachment point at t = 0, inertial \[m\] | same |
 //! | spring | `spring.<s>.relaxation_stiffness`, `.relaxation_damping` | Maxwell branch `k_m` [N/m], `c_m` [N s/m] (springs that have one) | same |
@@ -656,10 +657,12 @@ impl Parameters {
         // An input's load is addressed as the input (`input.NAME...`, its function the
         // values of a run).
         let names = segments(model.loads.iter().map(|l| l.name.as_str()));
+        let input_names = segments(model.inputs.iter().map(|u| u.name.as_str()));
         for (i, name) in names.iter().enumerate() {
-            let table = match model.loads[i].input {
-                Some(_) => "input",
-                None => "load",
+            // (a name that is not a path segment falls back to the index among its own kind)
+            let (table, name) = match model.loads[i].input {
+                Some(k) => ("input", &input_names[k]),
+                None => ("load", name),
             };
             for k in 0..3 {
                 let p = ParamKind::Load(i, LoadParam::Force(k));

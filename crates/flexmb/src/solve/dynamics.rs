@@ -88,7 +88,7 @@ pub enum LieUpdate {
     /// `q(t) = q_n exp(Theta(t))`, with `v = T(Theta) Theta'` and the algorithmic
     /// accelerations carried from one step's chart to the next (the Lie algebra approach of
     /// Arnold, Cardona & Brüls 2016; step module documentation, "Lie algebra update").
-    /// Dynamics only: sensitivities are not available for it.
+    /// Dynamics only; the step function differentiates it like the other updates.
     LieAlgebra,
     /// The same with the local coordinates of R3xSO(3) on either group:
     /// `q(t) = q_n o (Theta_u, exp(Theta_w))`, on SE(3) the translation in the frame of

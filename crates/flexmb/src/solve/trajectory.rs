@@ -33,7 +33,10 @@ pub struct TrajectoryStep {
     /// the layout of `unknowns`).
     pub redundant_rows: Vec<usize>,
     /// The held states its end sets, copies `(target, source)` of states
-    /// ([`crate::solve::StepEvent::held`]; empty without such an event).
+    /// ([`crate::solve::StepEvent::held`]). Empty without an event, and also for an event
+    /// the derivatives do not go through (`StepEvent::held` is `None`: the sensitivity
+    /// drivers refuse such a run; [`crate::solve::Simulation::last_step_event`] tells them
+    /// apart).
     pub held: Vec<(usize, usize)>,
 }
 

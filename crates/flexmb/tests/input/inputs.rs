@@ -107,3 +107,16 @@ fn input_errors_name_the_file_line_and_field() {
         .to_string();
     assert!(e.contains("input[0].name") && e.contains("[[load]]"), "{e}");
 }
+
+#[test]
+fn an_input_whose_name_is_not_a_path_segment_takes_its_index_among_the_inputs() {
+    // a [[load]] before it: the fallback is the input's own index, not the load's
+    let text = std::fs::read_to_string(pendulum_with("load", "")).unwrap()
+        + "\n[[input]]\nname = \"7\"\nnode = \"pendulum\"\nforce = [1.0, 0.0, 0.0]\n";
+    let path = pendulum_with("input", "# numeric name\n");
+    std::fs::write(&path, text).unwrap();
+    let model = read_model_file(&path, &[]).unwrap().model;
+    let params = Parameters::new(&model);
+    assert!(params.id("input.0.force.0").is_ok());
+    assert!(params.id("load.motor.torque.2").is_ok());
+}

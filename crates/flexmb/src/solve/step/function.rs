@@ -71,7 +71,8 @@ struct Partials {
     /// The element states `x_{n+1}` and their rates `xdot_{n+1}` (all rows, state columns).
     f_x: Vec<f64>,
     f_xd: Vec<f64>,
-    /// Tangent operators `T(total)` of the nodes' increments.
+    /// Tangent operators `T(total)` of the nodes' increments (`M(total)` of the chart in
+    /// the Lie algebra updates).
     t: Vec<Mat6>,
     /// `I + E`: how the total increments move with `dq` (module documentation; empty for
     /// the Brüls-Cardona update).
@@ -80,8 +81,7 @@ struct Partials {
     /// Lie algebra updates: `Ad(C(total)^-1)`, [`Chart::transport`]).
     g: Vec<Mat6>,
     /// The Lie algebra updates' derivatives of the nodes' velocities, accelerations and
-    /// algorithmic accelerations in the chart (empty for the other updates; `t` then holds
-    /// `M(total)`).
+    /// algorithmic accelerations in the chart (empty for the other updates).
     chart: Vec<ChartNode>,
     /// The end of the step and its node kinematics (`T = I`): where the parameter
     /// derivatives are taken.
@@ -223,7 +223,9 @@ impl<'a> StepFunction<'a> {
 
     /// The same step with the input vector `u_{n+1}` given (one value per
     /// [`crate::model::Input`] of the model, in its order) in place of the inputs'
-    /// functions: what a transcription sets at each step.
+    /// functions: what a transcription sets at each step. (The initial state `s_0`, its
+    /// consistent accelerations, takes the inputs' functions at `t_0`: `u_0` is not an
+    /// argument yet.)
     ///
     /// # Panics
     /// If `u` does not have one value per input.
@@ -263,6 +265,7 @@ impl<'a> StepFunction<'a> {
 
     /// `(dR/du) du` at `x`.
     pub fn input_jvp(&self, x: &[f64], du: &[f64]) -> Vec<f64> {
+        assert_eq!(du.len(), self.model.inputs.len(), "one value per input");
         let mut out = vec![0.0; self.layout.n_unknowns()];
         for (i, k, v) in self.input_jacobian(x) {
             out[i] += v * du[k];
@@ -272,6 +275,7 @@ impl<'a> StepFunction<'a> {
 
     /// `(dR/du)^T w` at `x`: one entry per input.
     pub fn input_vjp(&self, x: &[f64], w: &[f64]) -> Vec<f64> {
+        assert_eq!(w.len(), self.layout.n_unknowns(), "one weight per unknown");
         let mut out = vec![0.0; self.model.inputs.len()];
         for (i, k, v) in self.input_jacobian(x) {
             out[k] += v * w[i];
