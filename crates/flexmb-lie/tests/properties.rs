@@ -1,7 +1,7 @@
 //! Property tests of the Lie group operators: exp/log round trips (including near 0 and pi),
 //! the tangent operator against central differences of exp, group axioms, adjoint identities.
 
-use flexmb_lie::{se3, so3, Frame, Group, Mat3, Mat6, Vec3, Vec6};
+use flexmb_lie::{se3, so3, Chart, Frame, Group, Mat3, Mat6, Vec3, Vec6};
 
 /// Deterministic pseudo-random numbers in [-1, 1) (no external crate needed).
 struct Lcg(u64);
@@ -443,21 +443,22 @@ fn tangent_rate_matches_central_differences_of_the_tangent() {
     }
 }
 
+/// Every chart with the group it is used on.
+const CHARTS: [(Chart, Group); 3] = [
+    (Chart::Exponential(Group::R3xSO3), Group::R3xSO3),
+    (Chart::Exponential(Group::SE3), Group::SE3),
+    (Chart::TranslationRotation, Group::SE3),
+];
+
 #[test]
 fn charts_read_velocities_and_accelerations_as_their_maps_say() {
     // For each chart C around q_n: M(theta) is the right-trivialized differential of
     // q_n o C (central differences of log((q_n o C(theta))^-1 q_n o C(theta + e d)) / e),
     // inverse_map inverts it, and along the straight line theta + s x (Theta'' = 0) the
     // body velocity M x changes at the rate N(theta, x).
-    use flexmb_lie::Chart;
     let mut rng = Lcg(43);
     let eps = 1e-6;
-    let charts = [
-        (Chart::Exponential(Group::R3xSO3), Group::R3xSO3),
-        (Chart::Exponential(Group::SE3), Group::SE3),
-        (Chart::TranslationRotation, Group::SE3),
-    ];
-    for (chart, group) in charts {
+    for (chart, group) in CHARTS {
         for &angle in &[0.0, 1e-3, 0.05, 0.8, 2.0] {
             for _ in 0..5 {
                 let q_n = Frame::new(rng.vec3(2.0), so3::exp(&rng.vec3(1.5)));
@@ -491,15 +492,9 @@ fn chart_jacobians_match_central_differences_of_the_maps() {
     // Chart::jacobians (dual numbers through the maps' series) against central differences
     // of the closed forms Chart::map and Chart::rate: d(M y)/dtheta, dN/dtheta, dN/dx, from
     // a step's increments to large angles; the transport G and dN(0, x)/dx likewise.
-    use flexmb_lie::Chart;
     let mut rng = Lcg(47);
     let eps = 1e-6;
-    let charts = [
-        (Chart::Exponential(Group::R3xSO3), Group::R3xSO3),
-        (Chart::Exponential(Group::SE3), Group::SE3),
-        (Chart::TranslationRotation, Group::SE3),
-    ];
-    for (chart, group) in charts {
+    for (chart, group) in CHARTS {
         for &angle in &[0.0, 1e-3, 0.05, 0.8, 2.0] {
             for _ in 0..4 {
                 let theta = flexmb_lie::join(&rng.vec3(1.0), &rotation(&mut rng, angle));

@@ -759,14 +759,7 @@ fn read_loads(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Resu
             "function",
         ])?;
         let name = read_name(&t, &mut names, "load")?;
-        let frame = match t.opt_choice("frame", &["inertial", "body"])? {
-            Some("body") => LoadFrame::Body,
-            _ => LoadFrame::Inertial,
-        };
-        let function = match t.field("function") {
-            Some(f) => read_function(&f)?,
-            None => TimeFunction::Constant { value: 1.0 },
-        };
+        let (frame, function) = frame_and_function(&t, 1.0)?;
         if let Some(beam) = t.field("beam") {
             // A load distributed along every element of a [[beam]], lumped to its nodes.
             t.forbid(
@@ -838,14 +831,7 @@ fn read_inputs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Res
                 clip(&load.name, QUOTED)
             )));
         }
-        let frame = match t.opt_choice("frame", &["inertial", "body"])? {
-            Some("body") => LoadFrame::Body,
-            _ => LoadFrame::Inertial,
-        };
-        let function = match t.field("function") {
-            Some(f) => read_function(&f)?,
-            None => TimeFunction::Constant { value: 0.0 },
-        };
+        let (frame, function) = frame_and_function(&t, 0.0)?;
         let node = require_node(model, origins, &t.req("node")?)?;
         let (force, torque) = (opt_load(&t, "force")?, opt_load(&t, "torque")?);
         if force == Vec3::zeros() && torque == Vec3::zeros() {
@@ -870,6 +856,20 @@ fn read_inputs(top: &Table<'_>, model: &mut Model, origins: &mut Origins) -> Res
         origins.loads.push(Origin::of(&t));
     }
     Ok(())
+}
+
+/// The `frame` (default inertial) and `function` (default the constant `default`) of a
+/// `[[load]]` or an `[[input]]`.
+fn frame_and_function(t: &Table<'_>, default: f64) -> Result<(LoadFrame, TimeFunction)> {
+    let frame = match t.opt_choice("frame", &["inertial", "body"])? {
+        Some("body") => LoadFrame::Body,
+        _ => LoadFrame::Inertial,
+    };
+    let function = match t.field("function") {
+        Some(f) => read_function(&f)?,
+        None => TimeFunction::Constant { value: default },
+    };
+    Ok((frame, function))
 }
 
 /// A force or torque (also per length), zero when absent.

@@ -39,6 +39,14 @@ fn blockwise(a: &[f64], b: &[f64], layout: &Layout, floor: f64) -> f64 {
         .fold(0.0f64, f64::max)
 }
 
+/// The central difference `(plus - minus) / (2 eps)`, entry by entry.
+fn central(plus: &[f64], minus: &[f64], eps: f64) -> Vec<f64> {
+    plus.iter()
+        .zip(minus)
+        .map(|(a, b)| (a - b) / (2.0 * eps))
+        .collect()
+}
+
 /// Largest entry of `a - b` relative to the largest entry of `b` (and at least `floor`).
 fn relative_difference(a: &[f64], b: &[f64], floor: f64) -> f64 {
     let scale = b.iter().fold(floor, |m, v| m.max(v.abs()));
@@ -125,11 +133,7 @@ fn check(name: &str, sim: &Simulation) {
                 )
             };
             let (rp, rm) = (along(1.0), along(-1.0));
-            let fd: Vec<f64> = rp
-                .iter()
-                .zip(&rm)
-                .map(|(a, b)| (a - b) / (2.0 * eps))
-                .collect();
+            let fd = central(&rp, &rm, eps);
             let d = blockwise(&ju, &fd, &layout, 1e-12);
             assert!(
                 d < 1e-6,
@@ -161,11 +165,7 @@ fn check(name: &str, sim: &Simulation) {
             StepFunction::new(&sim.model, &layout, &sp, &sim.settings, h).residual(&x, &mut data);
         let rm =
             StepFunction::new(&sim.model, &layout, &sm, &sim.settings, h).residual(&x, &mut data);
-        let fd: Vec<f64> = rp
-            .iter()
-            .zip(&rm)
-            .map(|(a, b)| (a - b) / (2.0 * eps))
-            .collect();
+        let fd = central(&rp, &rm, eps);
         let d = blockwise(&jv, &fd, &layout, 1e-6);
         assert!(d < 1e-5, "{name}: dR/ds_n (trial {trial}) differs by {d:e}");
         // <w, J ds> = <J^T w, ds>
@@ -255,12 +255,7 @@ fn check_end_state(name: &str, sim: &Simulation) {
         fd.vdot[i] = (ep.vdot[i] - em.vdot[i]) / (2.0 * eps);
         fd.a[i] = (ep.a[i] - em.a[i]) / (2.0 * eps);
     }
-    let diff = |a: &[f64], b: &[f64]| -> Vec<f64> {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y) / (2.0 * eps))
-            .collect()
-    };
+    let diff = |a: &[f64], b: &[f64]| central(a, b, eps);
     fd.lambda = diff(&ep.lambda, &em.lambda);
     fd.x = diff(&ep.x, &em.x);
     fd.xdot = diff(&ep.xdot, &em.xdot);
@@ -775,11 +770,7 @@ fn input_jacobian_matches_finite_differences() {
                 .residual(&x, &mut Data::new(&sim.model, layout.clone()).unwrap())
         };
         let (rp, rm) = (along(1.0), along(-1.0));
-        let fd: Vec<f64> = rp
-            .iter()
-            .zip(&rm)
-            .map(|(a, b)| (a - b) / (2.0 * eps))
-            .collect();
+        let fd = central(&rp, &rm, eps);
         let d = blockwise(&column, &fd, &layout, 1e-12);
         assert!(
             d < 1e-9,
@@ -816,11 +807,7 @@ fn input_jacobian_matches_finite_differences() {
         };
         let eps = 1.0; // (linear in both)
         let (rp, rm) = (residual_at(value + eps), residual_at(value - eps));
-        let fd: Vec<f64> = rp
-            .iter()
-            .zip(&rm)
-            .map(|(a, b)| (a - b) / (2.0 * eps))
-            .collect();
+        let fd = central(&rp, &rm, eps);
         let size = fd.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         assert_eq!(size > 1e-3 * f.step.scale, moves, "{path}: {size:e}");
         let d = blockwise(&jp, &fd, &layout, 1e-12);

@@ -69,6 +69,33 @@ fn agree(name: &str, p: &Problem, exact: f64, fd: f64) -> Gradients {
 
 const TIGHT: [&str; 2] = ["solver.rtol=1e-12", "solver.atol=1e-14"];
 
+/// The heavy top of `heavy_top_sensitivity.toml` to 0.1 s at rtol 1e-10 on `group`, with
+/// the settings `set`: its mass, first inertia, initial spin and (`com`) its centre of
+/// mass against a terminal criterion on the centre of mass and the integral of the squared
+/// vertical reaction.
+fn top(group: &str, set: &[&str], com: bool) -> Problem {
+    let g = format!("model.group={group}");
+    let mut set = set.to_vec();
+    set.extend(["solver.rtol=1e-10", "solver.t_end=0.1", &g]);
+    let mut design = vec![
+        "body.top.mass",
+        "body.top.inertia.0",
+        "node.top.angular_velocity_body.1",
+    ];
+    if com {
+        design.push("body.top.com.1");
+    }
+    problem(
+        "heavy_top_sensitivity.toml",
+        &set,
+        &design,
+        &[
+            ("x", CriterionKind::Terminal, "com_x + 0.3 * com_z"),
+            ("reaction", CriterionKind::Integral, "sq(reaction_z)"),
+        ],
+    )
+}
+
 #[test]
 fn stabilized_index_2_step() {
     // rho_inf = 1 selects the stabilized index-2 form: the configuration update
@@ -76,26 +103,7 @@ fn stabilized_index_2_step() {
     // is checked step by step in step_jacobians.rs: moving a joint makes the initial
     // conditions of a run inconsistent, so a run cannot be differenced along it.)
     for group in ["SE3", "R3xSO3"] {
-        let g = format!("model.group={group}");
-        let p = problem(
-            "heavy_top_sensitivity.toml",
-            &[
-                "solver.rtol=1e-10",
-                "solver.t_end=0.1",
-                "solver.rho_inf=1.0",
-                &g,
-            ],
-            &[
-                "body.top.mass",
-                "body.top.inertia.0",
-                "node.top.angular_velocity_body.1",
-                "body.top.com.1",
-            ],
-            &[
-                ("x", CriterionKind::Terminal, "com_x + 0.3 * com_z"),
-                ("reaction", CriterionKind::Integral, "sq(reaction_z)"),
-            ],
-        );
+        let p = top(group, &["solver.rho_inf=1.0"], true);
         assert!(
             p.dynamic().unwrap().stabilized(),
             "rho_inf = 1 is the stabilized form"
@@ -108,27 +116,12 @@ fn stabilized_index_2_step() {
 fn commutator_configuration_update() {
     // q_{n+1} = q_n exp(dq + sigma h^3 [v_n, a_n]): the update depends on v_n and a_n.
     for group in ["SE3", "R3xSO3"] {
-        let g = format!("model.group={group}");
-        let p = problem(
-            "heavy_top_sensitivity.toml",
-            &[
-                "solver.rtol=1e-10",
-                "solver.t_end=0.1",
-                "solver.lie_update=commutator",
-                "solver.lie_update_sigma=0.5",
-                "solver.rho_inf=0.6",
-                &g,
-            ],
-            &[
-                "body.top.mass",
-                "body.top.inertia.0",
-                "node.top.angular_velocity_body.1",
-            ],
-            &[
-                ("x", CriterionKind::Terminal, "com_x + 0.3 * com_z"),
-                ("reaction", CriterionKind::Integral, "sq(reaction_z)"),
-            ],
-        );
+        let set = [
+            "solver.lie_update=commutator",
+            "solver.lie_update_sigma=0.5",
+            "solver.rho_inf=0.6",
+        ];
+        let p = top(group, &set, false);
         agree(&format!("commutator update {group}"), &p, 1e-9, 1e-5);
     }
 }
@@ -590,28 +583,8 @@ fn lie_algebra_updates() {
     // the heavy top of both groups with each chart.
     for update in ["lie_algebra", "lie_algebra_r3xso3"] {
         for group in ["SE3", "R3xSO3"] {
-            let g = format!("model.group={group}");
             let u = format!("solver.lie_update={update}");
-            let p = problem(
-                "heavy_top_sensitivity.toml",
-                &[
-                    "solver.rtol=1e-10",
-                    "solver.t_end=0.1",
-                    "solver.rho_inf=0.6",
-                    &g,
-                    &u,
-                ],
-                &[
-                    "body.top.mass",
-                    "body.top.inertia.0",
-                    "node.top.angular_velocity_body.1",
-                    "body.top.com.1",
-                ],
-                &[
-                    ("x", CriterionKind::Terminal, "com_x + 0.3 * com_z"),
-                    ("reaction", CriterionKind::Integral, "sq(reaction_z)"),
-                ],
-            );
+            let p = top(group, &["solver.rho_inf=0.6", &u], true);
             agree(&format!("{update} update, {group}"), &p, 1e-8, 1e-5);
         }
     }

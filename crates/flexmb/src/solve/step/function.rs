@@ -20,6 +20,12 @@ use super::{chart_start, pack_unknowns, predict, Start, StateTangent};
 /// Sparse matrix entries `(row, column, value)`; duplicates are summed.
 pub type Triplets = Vec<(usize, usize, f64)>;
 
+/// The nonzero entries of the dense column `values` as column `j` of `out`.
+fn push_column(out: &mut Triplets, j: usize, values: &[f64]) {
+    let nonzero = values.iter().enumerate().filter(|(_, v)| **v != 0.0);
+    out.extend(nonzero.map(|(i, &v)| (i, j, v)));
+}
+
 /// The step residual `R(x; s_n, p, h)` as a function (see the module documentation), with
 /// its exact Jacobian `dR/dx` and the products of `dR/ds_n` with a tangent and with a
 /// transposed vector. Every evaluation takes its inputs explicitly; `data` is scratch (a
@@ -111,6 +117,43 @@ struct ChartNode {
 /// accelerations.
 type NodeMove = [Vec6; 4];
 
+/// The scheme's relations of one node at fixed start (module documentation): the end's
+/// rates `[v, vdot, a]` (in the step's coordinates: the chart's `X`, `Y`, `A` in the Lie
+/// algebra updates) from the start's `(v_n, vdot_n, a_n)` and the increment `dq`, all linear.
+struct Relations {
+    /// `[c1, c2, c3, c4, c5]` of [`StepFunction::start_coefficients`].
+    c: [f64; 5],
+    gp: f64,
+    bp: f64,
+    h: f64,
+    beta: f64,
+}
+
+impl Relations {
+    /// The end's rates for changes `[dv_n, dvdot_n, da_n]` of the start and `ddq`.
+    fn forward(&self, [v, vd, a]: [Vec6; 3], ddq: &Vec6) -> [Vec6; 3] {
+        let ([c1, c2, c3, c4, c5], h, beta) = (self.c, self.h, self.beta);
+        [
+            v * c1 + a * c2 + ddq * self.gp,
+            v * c3 + a * c4 + vd * c5 + ddq * self.bp,
+            (ddq - v * h - a * ((0.5 - beta) * h * h)) / (beta * h * h),
+        ]
+    }
+
+    /// The transpose of [`Relations::forward`]: the cotangents of the start
+    /// `[v_n, vdot_n, a_n]` and of `dq` for those of the end's rates.
+    fn transposed(&self, [x, y, a]: [Vec6; 3]) -> ([Vec6; 3], Vec6) {
+        let ([c1, c2, c3, c4, c5], h, beta) = (self.c, self.h, self.beta);
+        let bh2 = beta * h * h;
+        let start = [
+            x * c1 + y * c3 - a * (h / bh2),
+            y * c5,
+            x * c2 + y * c4 - a * ((0.5 - beta) / beta),
+        ];
+        (start, x * self.gp + y * self.bp + a / bh2)
+    }
+}
+
 impl Partials {
     /// How node `i`'s end moves with its total increment `d_theta` and its rates in the
     /// step's coordinates (`dv`, `dvdot`, `da`: the nodes' own outside the Lie algebra
@@ -164,6 +207,16 @@ impl Partials {
             Some(c) => [bar[0] - c.n0_x.tr_mul(&(bar[1] + bar[2])), bar[1], bar[2]],
             None => bar,
         }
+    }
+
+    /// The partial derivatives that a move of the total increments reaches, with their
+    /// index in a [`NodeMove`]: `F_q`, and in the Lie algebra updates `F_v` and `F_vd` too.
+    fn configuration_partials(&self) -> impl Iterator<Item = (usize, &Vec<f64>)> {
+        let kinds = if self.chart.is_empty() { 1 } else { 3 };
+        [&self.f_q, &self.f_v, &self.f_vd]
+            .into_iter()
+            .enumerate()
+            .take(kinds)
     }
 
     /// The nonzero entries `(row, column, value)` of one partial derivative.
@@ -257,8 +310,8 @@ impl<'a> StepFunction<'a> {
         let mut out = Triplets::new();
         for k in 0..self.model.inputs.len() {
             crate::parameter_derivatives::input_derivative(self.model, &point, k, &mut dr);
-            let column = dr.iter().enumerate().filter(|(_, v)| **v != 0.0);
-            out.extend(column.map(|(i, v)| (i, k, self.step.scale * v)));
+            dr.iter_mut().for_each(|v| *v *= self.step.scale);
+            push_column(&mut out, k, &dr);
         }
         out
     }
@@ -923,12 +976,7 @@ impl<'a> StepFunction<'a> {
                     p.node_move(n, &d, &[Vec6::zeros(); 3])
                 })
                 .collect();
-            let kinds = if p.chart.is_empty() { 1 } else { 3 };
-            for (kind, f) in [&p.f_q, &p.f_v, &p.f_vd]
-                .into_iter()
-                .enumerate()
-                .take(kinds)
-            {
+            for (kind, f) in p.configuration_partials() {
                 for (i, j, v) in p.entries(f) {
                     out[i] += v * moves[j / 6][kind][j % 6];
                 }
@@ -1003,13 +1051,8 @@ impl<'a> StepFunction<'a> {
             // u = (F_q T)^T w (in the Lie algebra updates with the velocities' and
             // accelerations' moves), then u . d(B(q_n)^T zeta)/dp for the joint parameters.
             let p = &partials;
-            let kinds = if p.chart.is_empty() { 1 } else { 3 };
             let mut g = vec![[Vec6::zeros(); 4]; nd / 6];
-            for (kind, f) in [&p.f_q, &p.f_v, &p.f_vd]
-                .into_iter()
-                .enumerate()
-                .take(kinds)
-            {
+            for (kind, f) in p.configuration_partials() {
                 for (i, j, v) in p.entries(f) {
                     g[j / 6][kind][j % 6] += v * w[i];
                 }
@@ -1061,6 +1104,17 @@ impl<'a> StepFunction<'a> {
         ((u * c1 - g.ad(v_1).transpose() * cbar) * w, u * (c2 * w))
     }
 
+    /// The scheme's relations of the step ([`Relations`]).
+    fn relations(&self) -> Relations {
+        Relations {
+            c: self.start_coefficients(),
+            gp: self.step.gp,
+            bp: self.step.bp,
+            h: self.step.h,
+            beta: self.step.params.beta,
+        }
+    }
+
     /// Coefficients of `v_{n+1}` and `vdot_{n+1}` in `(v_n, a_n, vdot_n)` at fixed `dq`.
     fn start_coefficients(&self) -> [f64; 5] {
         let p = &self.step.params;
@@ -1094,7 +1148,7 @@ impl<'a> StepFunction<'a> {
         data: &mut crate::data::Data,
     ) -> Vec<Vec<f64>> {
         let p = self.partials(x, data);
-        let [c1, c2, c3, c4, c5] = self.start_coefficients();
+        let relations = self.relations();
         let (n, np, nd) = (self.start.q.len(), ds.len(), self.layout.n_dofs);
         // The moves of the end of the step, unknown by unknown with the tangents contiguous
         // (`w[j np + k]`): the configuration G dq_n + T (d(B_n^T zeta)/dq_n dq_n + dc_n),
@@ -1108,8 +1162,8 @@ impl<'a> StepFunction<'a> {
             }
             for i in 0..n {
                 let dc = self.commutator_jvp(i, &p.end.v[i], &ds.v[i], &ds.a[i]);
-                let [v, vd, a] = p.start_in_chart(i, &ds.v[i], &ds.vdot[i], &ds.a[i]);
-                let rates = [v * c1 + a * c2, v * c3 + a * c4 + vd * c5, Vec6::zeros()];
+                let start = p.start_in_chart(i, &ds.v[i], &ds.vdot[i], &ds.a[i]);
+                let rates = relations.forward(start, &Vec6::zeros());
                 let [wi, dvi, dvdi, _] = p.node_move(i, &(kz[i] + dc), &rates);
                 let wi = p.g[i] * ds.q[i] + wi;
                 for c in 0..6 {
@@ -1166,8 +1220,7 @@ impl<'a> StepFunction<'a> {
                 .collect();
             let products = self.start_jvp_many(x, &units, data);
             for (j, column) in columns.zip(products) {
-                let nonzero = column.into_iter().enumerate().filter(|(_, v)| *v != 0.0);
-                out.extend(nonzero.map(|(i, v)| (i, j, v)));
+                push_column(&mut out, j, &column);
             }
         }
         out
@@ -1186,10 +1239,8 @@ impl<'a> StepFunction<'a> {
         let mut dp = vec![0.0; params.len()];
         for (k, id) in ids.iter().enumerate() {
             dp[id.0 as usize] = 1.0;
-            let column = self.parameter_jvp(x, params, &dp, data);
+            push_column(&mut out, k, &self.parameter_jvp(x, params, &dp, data));
             dp[id.0 as usize] = 0.0;
-            let nonzero = column.into_iter().enumerate().filter(|(_, v)| *v != 0.0);
-            out.extend(nonzero.map(|(i, v)| (i, k, v)));
         }
         out
     }
@@ -1207,7 +1258,6 @@ impl<'a> StepFunction<'a> {
     /// `(dR/ds_n)^T w` at `x`.
     pub fn start_vjp(&self, x: &[f64], w: &[f64], data: &mut crate::data::Data) -> StateTangent {
         let p = self.partials(x, data);
-        let [c1, c2, c3, c4, c5] = self.start_coefficients();
         let n = self.start.q.len();
         // F_q^T w, F_v^T w and F_vd^T w in one pass (the three share the node columns)
         let (mut gq, mut gv, mut gvd) = (
@@ -1251,12 +1301,10 @@ impl<'a> StepFunction<'a> {
             Vec::with_capacity(n),
             Vec::with_capacity(n),
         );
-        for (i, [x, y, _]) in rates.iter().enumerate() {
-            let bar = [
-                x * c1 + y * c3 + commutator[i].0,
-                y * c5,
-                x * c2 + y * c4 + commutator[i].1,
-            ];
+        let relations = self.relations();
+        for (i, &[x, y, _]) in rates.iter().enumerate() {
+            let ([v_n, vd_n, a_n], _) = relations.transposed([x, y, Vec6::zeros()]);
+            let bar = [v_n + commutator[i].0, vd_n, a_n + commutator[i].1];
             let [vi, vdi, ai] = p.start_in_chart_transposed(i, bar);
             v.push(vi);
             vdot.push(vdi);
@@ -1360,8 +1408,7 @@ impl<'a> StepFunction<'a> {
                 dtotal.iter_mut().zip(&moved).for_each(|(a, b)| *a += b);
             }
         }
-        let [c1, c2, c3, c4, c5] = self.start_coefficients();
-        let ga = &self.step.params;
+        let relations = self.relations();
         let h = self.step.h;
         let mut out = StateTangent::zeros_of(layout);
         for i in 0..n {
@@ -1371,12 +1418,8 @@ impl<'a> StepFunction<'a> {
             if let Some(e) = p.e.get(i) {
                 dt += (e - Mat6::identity()) * ddq;
             }
-            let [v, vd, a] = p.start_in_chart(i, &ds.v[i], &ds.vdot[i], &ds.a[i]);
-            let rates = [
-                v * c1 + a * c2 + ddq * self.step.gp,
-                v * c3 + a * c4 + vd * c5 + ddq * self.step.bp,
-                (ddq - v * h - a * ((0.5 - ga.beta) * h * h)) / (ga.beta * h * h),
-            ];
+            let start = p.start_in_chart(i, &ds.v[i], &ds.vdot[i], &ds.a[i]);
+            let rates = relations.forward(start, &ddq);
             let [q, v, vdot, a] = p.node_move(i, &dt, &rates);
             out.q[i] = p.g[i] * ds.q[i] + q;
             (out.v[i], out.vdot[i], out.a[i]) = (v, vdot, a);
@@ -1413,10 +1456,7 @@ impl<'a> StepFunction<'a> {
         let p = self.partials(x, data);
         let layout = self.layout;
         let (n, nd) = (layout.n_nodes, layout.n_dofs);
-        let [c1, c2, c3, c4, c5] = self.start_coefficients();
-        let ga = &self.step.params;
-        let h = self.step.h;
-        let bh2 = ga.beta * h * h;
+        let relations = self.relations();
         let mut xbar = vec![0.0; layout.n_unknowns()];
         let mut start = StateTangent::zeros_of(layout);
         // The cotangent of the total increments, T^T qbar_{n+1} (and the rates' in the Lie
@@ -1427,15 +1467,11 @@ impl<'a> StepFunction<'a> {
             let (t, [xb, yb, a]) = p.node_move_transposed(i, &node);
             tbar[6 * i..6 * i + 6].copy_from_slice(t.as_slice());
             let moved = p.e.get(i).map_or(t, |e| e.tr_mul(&t));
-            let dq = moved + xb * self.step.gp + yb * self.step.bp + a / bh2;
-            xbar[6 * i..6 * i + 6].copy_from_slice(dq.as_slice());
+            let ([v_n, vd_n, a_n], dq) = relations.transposed([xb, yb, a]);
+            xbar[6 * i..6 * i + 6].copy_from_slice((moved + dq).as_slice());
             start.q[i] = p.g[i].tr_mul(&bar.q[i]);
             let (vbar, abar) = self.commutator_vjp(i, &p.end.v[i], &t);
-            let in_chart = [
-                xb * c1 + yb * c3 - a * (h / bh2) + vbar,
-                yb * c5,
-                xb * c2 + yb * c4 - a * ((0.5 - ga.beta) / ga.beta) + abar,
-            ];
+            let in_chart = [v_n + vbar, vd_n, a_n + abar];
             [start.v[i], start.vdot[i], start.a[i]] = p.start_in_chart_transposed(i, in_chart);
         }
         let mut pbar = Vec::new();
@@ -1475,7 +1511,7 @@ impl<'a> StepFunction<'a> {
         let so = layout.state_offset();
         for i in 0..layout.n_states {
             let (bx, bw, bxd) = (bar.x[i], bar.w[i], bar.xdot[i]);
-            xbar[so + i] = bx + bw / (h * f.gamma) + self.step.cx * bxd;
+            xbar[so + i] = bx + bw / (self.step.h * f.gamma) + self.step.cx * bxd;
             start.x[i] = bx;
             start.w[i] = -bw * (1.0 - f.gamma) / f.gamma + d_w * bxd;
             start.xdot[i] = d_xd * bxd;
