@@ -452,7 +452,13 @@ impl Figure {
         })?;
         let size = self.size();
         let drawn = match format {
-            Format::Png => self.draw(BitMapBackend::new(path, size).into_drawing_area()),
+            Format::Png => {
+                // Drawn into memory, then encoded by `png` (plotters' own encoder would bring
+                // in the `image` crate for this one call).
+                let mut rgb = vec![0u8; 3 * size.0 as usize * size.1 as usize];
+                self.draw(BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area())
+                    .and_then(|()| write_png(path, size, &rgb))
+            }
             Format::Svg => self.draw(SVGBackend::new(path, size).into_drawing_area()),
         };
         drawn.map_err(|message| PlotError::Draw {
@@ -832,6 +838,17 @@ fn register_bundled_font() -> Result<(), String> {
     } else {
         Err("the bundled font DejaVu Sans could not be read".into())
     }
+}
+
+/// Writes 8-bit RGB pixels, row after row, as a PNG file.
+fn write_png(path: &Path, (width, height): (u32, u32), rgb: &[u8]) -> Result<(), String> {
+    let file = std::fs::File::create(path).map_err(|e| e.to_string())?;
+    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
+    writer.write_image_data(rgb).map_err(|e| e.to_string())?;
+    writer.finish().map_err(|e| e.to_string())
 }
 
 #[cfg(test)]
