@@ -328,9 +328,8 @@ pub enum Block {
 /// Everything derived from a model plus the solver workspaces.
 pub struct Data {
     pub layout: Layout,
-    /// Triplet positions of the iteration matrix (fixed for the run).
-    pub pattern: Vec<(usize, usize)>,
-    /// Values aligned with `pattern`.
+    /// Values of the iteration matrix at its triplet positions ([`Data::pattern`], fixed
+    /// for the run).
     pub values: Vec<f64>,
     /// `(unknown, index in values)` of every pattern entry on the diagonal.
     pub diagonal_slots: Vec<(usize, usize)>,
@@ -385,6 +384,13 @@ impl Derived {
 }
 
 impl Data {
+    /// The triplet positions of the iteration matrix, one per entry of `values` (recovered
+    /// from the solver, [`LinearSolver::pattern`]: on a 100 000-link chain a second copy
+    /// was a quarter of the memory).
+    pub fn pattern(&self) -> Vec<(usize, usize)> {
+        self.solver.pattern()
+    }
+
     /// The same data assembling on `threads` (the results are the same bits).
     pub fn with_threads(mut self, threads: crate::parallel::Threads) -> Self {
         self.threads = threads;

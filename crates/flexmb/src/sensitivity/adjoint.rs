@@ -199,7 +199,7 @@ pub fn adjoint_in(
     let step_bytes = state + 8 * layout.n_unknowns() + 64;
     let expected = ((settings.t_end / settings.h).ceil() as usize).max(1) + 1;
     let budget = problem.memory_budget;
-    let memory_bytes = state + 8 * (sim.data.pattern.len() + 6 * layout.n_unknowns()) + 256;
+    let memory_bytes = state + 8 * (sim.data.values.len() + 6 * layout.n_unknowns()) + 256;
     let checkpoints_of = |k: usize| (2 * expected / k + 1) * memory_bytes;
     let total = |k: usize| k * step_bytes + checkpoints_of(k);
     let best = ((2 * expected * memory_bytes) as f64 / step_bytes as f64).sqrt() as usize;

@@ -83,11 +83,11 @@ pub fn initial_tangents(
     assemble(model, &mut data, &it, &sc, true);
     let element_rows = |i: usize| i < nd || i >= so;
     let rate_columns: Vec<(usize, usize, f64)> = data
-        .pattern
-        .iter()
+        .pattern()
+        .into_iter()
         .zip(&data.values)
-        .filter(|(&(i, j), &v)| v != 0.0 && element_rows(i) && element_rows(j))
-        .map(|(&(i, j), &v)| (i, j, v))
+        .filter(|((i, j), v)| **v != 0.0 && element_rows(*i) && element_rows(*j))
+        .map(|((i, j), &v)| (i, j, v))
         .collect();
     data.solver.factorize(&a_values).map_err(|e| {
         SensitivityError::Singular(format!(

@@ -857,7 +857,7 @@ impl NewtonSolver {
         std::mem::swap(&mut data.values, &mut self.verify_values);
         sys.assemble(data, true, regularization);
         if self.verify_solver.is_none() {
-            self.verify_solver = LinearSolver::new(data.residual.len(), &data.pattern).ok();
+            self.verify_solver = LinearSolver::new(data.residual.len(), &data.pattern()).ok();
         }
         let factorized = self
             .verify_solver

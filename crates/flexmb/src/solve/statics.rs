@@ -286,11 +286,10 @@ struct ArcLength {
 pub(crate) fn stiffness_row_scale(data: &Data) -> Option<f64> {
     let nd = data.layout.n_dofs;
     let kmax = data
-        .pattern
+        .diagonal_slots
         .iter()
-        .zip(&data.values)
-        .filter(|((i, j), _)| i == j && *i < nd)
-        .fold(0.0f64, |m, (_, v)| m.max(v.abs()));
+        .filter(|&&(i, _)| i < nd)
+        .fold(0.0f64, |m, &(_, slot)| m.max(data.values[slot].abs()));
     (kmax > 0.0).then(|| 1.0 / kmax)
 }
 

@@ -97,8 +97,8 @@ fn assembled_stiffness_matches_finite_differences_of_the_residual() {
     };
     residual(&m, &mut data, &q0, &dq, &lambda, &sc, true);
     let mut dense = vec![vec![0.0; nu]; nu];
-    for ((i, j), v) in data.pattern.iter().zip(&data.values) {
-        dense[*i][*j] += v;
+    for ((i, j), v) in data.pattern().into_iter().zip(&data.values) {
+        dense[i][j] += v;
     }
     let eps = 1e-6;
     let mut worst: f64 = 0.0;
@@ -234,8 +234,8 @@ fn assembled_stiffness_with_gears_on_flexible_shafts_matches_finite_differences(
     };
     residual(&m, &mut data, &q0, &dq, &lambda, &sc, true);
     let mut dense = vec![vec![0.0; nu]; nu];
-    for ((i, j), v) in data.pattern.iter().zip(&data.values) {
-        dense[*i][*j] += v;
+    for ((i, j), v) in data.pattern().into_iter().zip(&data.values) {
+        dense[i][j] += v;
     }
     let eps = 1e-7;
     let mut worst: f64 = 0.0;

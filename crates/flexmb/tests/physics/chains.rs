@@ -78,7 +78,7 @@ fn chain_set_up_grows_linearly_with_its_links() {
         let sim = Simulation::new(chain(n), DynamicSettings::new(1.0, 1e-3)).expect("starts");
         let solver = &sim.data.solver;
         (
-            sim.data.pattern.len() as f64,
+            sim.data.values.len() as f64,
             solver.nnz() as f64,
             solver.pivot_margin().expect("factorized"),
         )

@@ -687,10 +687,10 @@ impl<'a> StepFunction<'a> {
     /// The step Jacobian's positions for `data`'s layout, built on first use and kept in
     /// `data`.
     fn pattern(&self, data: &mut crate::data::Data) -> Arc<JacobianPattern> {
-        let (layout, positions) = (self.layout, &data.pattern);
+        let (layout, solver) = (self.layout, &data.solver);
         Arc::clone(
             data.derived
-                .get_or_insert_with(|| Arc::new(JacobianPattern::new(layout, positions))),
+                .get_or_insert_with(|| Arc::new(JacobianPattern::new(layout, &solver.pattern()))),
         )
     }
 
