@@ -253,7 +253,7 @@ fn intermediate_axis_flips_converge_at_order_two_on_both_groups() {
 /// 1e-2 to 1e-1 where SE(3)'s converges at 1e-9, and its iterates, accepted at a hundredth
 /// of the tolerance, keep errors of one sign that drift the motion's invariants step after
 /// step; so close to the intermediate axis that drift moves the flips. Accepting them at
-/// 1e-4 of the tolerance would close the gap (1.7e-5 s) at 24 to 105 % more instructions
+/// 1e-4 of the tolerance would close the gap (1.7e-5 s) at 5 to 105 % more instructions
 /// on the examples (BENCHMARKS.md).
 #[test]
 fn intermediate_axis_flips_of_a_reused_matrix_at_the_default_tolerance() {
