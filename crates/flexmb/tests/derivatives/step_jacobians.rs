@@ -818,9 +818,26 @@ fn input_jacobian_matches_finite_differences() {
 #[test]
 fn sparse_step_matrices_are_the_products() {
     // dR/ds_n and dR/dp as triplets (what a transcription assembles) against the products
-    // checked against central differences above, along random directions.
+    // checked against central differences above, along random directions. (dR/ds_n is built
+    // from the partials directly, not from the products.)
     let sims = [
         ("heavy top with inputs", heavy_top_with_inputs()),
+        (
+            "heavy top R3xSO(3), Lie algebra update",
+            simulation(
+                "heavy_top_r3so3.toml",
+                &["solver.lie_update=lie_algebra"],
+                3,
+            ),
+        ),
+        (
+            "flexible four-bar, commutator",
+            simulation(
+                "flexible_four_bar.toml",
+                &["solver.lie_update=commutator"],
+                3,
+            ),
+        ),
         (
             "chain_10, stabilized",
             simulation("chain_10.toml", &["solver.formulation=index2"], 3),

@@ -20,6 +20,21 @@ use super::{chart_start, pack_unknowns, predict, Start, StateTangent};
 /// Sparse matrix entries `(row, column, value)`; duplicates are summed.
 pub type Triplets = Vec<(usize, usize, f64)>;
 
+/// The triplets `t` with each position once (by column, then row), their values summed,
+/// without the zeros.
+fn merge_triplets(mut t: Triplets) -> Triplets {
+    t.sort_unstable_by_key(|&(i, j, _)| (j, i));
+    let mut out: Triplets = Vec::with_capacity(t.len());
+    for (i, j, v) in t {
+        match out.last_mut() {
+            Some(last) if (last.0, last.1) == (i, j) => last.2 += v,
+            _ => out.push((i, j, v)),
+        }
+    }
+    out.retain(|e| e.2 != 0.0);
+    out
+}
+
 /// The nonzero entries of the dense column `values` as column `j` of `out`.
 fn push_column(out: &mut Triplets, j: usize, values: &[f64]) {
     let nonzero = values.iter().enumerate().filter(|(_, v)| **v != 0.0);
@@ -1200,30 +1215,69 @@ impl<'a> StepFunction<'a> {
             .collect()
     }
 
-    /// `dR/ds_n` at `x` as sparse triplets, the columns in the flat order of a
-    /// [`StateTangent`] ([`StateTangent::flat_mut`], [`StateTangent::flat_len`] of them):
-    /// the products [`StepFunction::start_jvp_many`] with the unit tangents, in blocks (the
-    /// same code path as the products, so the matrix and the products cannot differ).
+    /// `dR/ds_n` at `x` as sparse triplets (each position once), the columns in the flat
+    /// order of a [`StateTangent`] ([`StateTangent::flat_mut`], [`StateTangent::flat_len`]
+    /// of them). Built from the partial derivatives directly, in time linear in the size of
+    /// the model: a start component of node `i` moves only the end of node `i` (and, through
+    /// `K_zeta` of the stabilized form, the nodes whose rows it shares), so its column is
+    /// `F_q w + F_v dv + F_vd dvd` over node `i`'s columns of the partials, with the move
+    /// `(w, dv, dvd)` that [`StepFunction::start_jvp_many`] makes of a unit tangent; the
+    /// states' columns are those of `F_x` and `F_xd`. The start multipliers do not enter.
+    /// (`tests/derivatives`: against the products, which are against central differences.)
     pub fn start_jacobian(&self, x: &[f64], data: &mut crate::data::Data) -> Triplets {
-        const BLOCK: usize = 64;
-        let n = StateTangent::flat_len(self.layout);
-        let mut out = Triplets::new();
-        for first in (0..n).step_by(BLOCK) {
-            let columns = first..(first + BLOCK).min(n);
-            let units: Vec<StateTangent> = columns
-                .clone()
-                .map(|j| {
-                    let mut t = StateTangent::zeros_of(self.layout);
-                    *t.flat_mut(j) = 1.0;
-                    t
-                })
-                .collect();
-            let products = self.start_jvp_many(x, &units, data);
-            for (j, column) in columns.zip(products) {
-                push_column(&mut out, j, &column);
+        let p = self.partials(x, data);
+        let relations = self.relations();
+        let (n, nd) = (self.start.q.len(), self.layout.n_dofs);
+        let n6 = 6 * n;
+        // The end's moves per unit start component: (column, node moved, (w, dv, dvd)).
+        let mut moves = Vec::with_capacity(24 * n + p.k_zeta.len());
+        for i in 0..n {
+            for (kind, c) in (0..4).flat_map(|kind| (0..6).map(move |c| (kind, c))) {
+                let mut unit = [Vec6::zeros(); 4];
+                unit[kind][c] = 1.0;
+                let [dq, dv, dvdot, da] = unit;
+                let dc = self.commutator_jvp(i, &p.end.v[i], &dv, &da);
+                let start = p.start_in_chart(i, &dv, &dvdot, &da);
+                let rates = relations.forward(start, &Vec6::zeros());
+                let [w, dv, dvd, _] = p.node_move(i, &dc, &rates);
+                moves.push((kind * n6 + 6 * i + c, i, [p.g[i] * dq + w, dv, dvd]));
             }
         }
-        out
+        for &(a, b, v) in &p.k_zeta {
+            // `q_n` of the node of `b` moves the configuration increment of the node of `a`
+            let mut theta = Vec6::zeros();
+            theta[a % 6] = v;
+            let [w, dv, dvd, _] = p.node_move(a / 6, &theta, &[Vec6::zeros(); 3]);
+            moves.push((b, a / 6, [w, dv, dvd]));
+        }
+        // The partials' entries in each node's columns.
+        let mut by_node = vec![Vec::new(); n];
+        for (k, &(_, j)) in p.pattern.positions.iter().enumerate() {
+            if j < nd {
+                by_node[j / 6].push(k);
+            }
+        }
+        let mut out = Triplets::new();
+        for (column, i, [w, dv, dvd]) in moves {
+            for &k in &by_node[i] {
+                let (r, c) = (p.pattern.positions[k].0, p.pattern.positions[k].1 % 6);
+                out.push((
+                    r,
+                    column,
+                    p.f_q[k] * w[c] + p.f_v[k] * dv[c] + p.f_vd[k] * dvd[c],
+                ));
+            }
+        }
+        // States: x_{n+1} = x_n + dx; xdot_{n+1} = d_w w_n + d_xd xdot_n at fixed dx.
+        let (d_w, d_xd) = self.state_start_coefficients();
+        let (so, ns) = (self.layout.state_offset(), self.layout.n_states);
+        let x0 = 4 * n6 + self.layout.n_rows;
+        out.extend(p.entries(&p.f_x).map(|(i, j, v)| (i, x0 + j - so, v)));
+        for (i, j, v) in p.entries(&p.f_xd) {
+            out.push((i, x0 + ns + j - so, d_xd * v));
+            out.push((i, x0 + 2 * ns + j - so, d_w * v));
+        }
+        merge_triplets(out)
     }
 
     /// `dR/dp` at `x` for the parameters `ids` of `params` as sparse triplets, column `k`
