@@ -114,9 +114,11 @@
 //! As sparse matrices (triplets): `dR/dx` on the positions of a pattern built once per
 //! layout ([`StepFunction::jacobian_values`]), `dR/du` of the model's inputs
 //! ([`StepFunction::input_jacobian`]), `dR/ds_n` ([`StepFunction::start_jacobian`], columns in
-//! the flat order of a [`StateTangent`]) and `dR/dp` ([`StepFunction::parameter_jacobian`]);
-//! the last two from the products with unit vectors, so that matrices and products are one
-//! computation.
+//! the flat order of a [`StateTangent`]) and `dR/dp` ([`StepFunction::parameter_jacobian`]).
+//! `dR/ds_n` is built from the partial derivatives directly, in time linear in the size of
+//! the model (a start component moves the end of its own node alone, and through `K_zeta`
+//! those it shares constraint rows with), and tested against the products; `dR/dp` is the
+//! products with unit vectors (one per parameter asked for).
 
 //! The module's files: the scheme's relations here ([`Start`], [`predict`], [`correct`],
 //! [`finish`], [`StateTangent`]); the configuration updates in [`updates`]; the step as
