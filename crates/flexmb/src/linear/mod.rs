@@ -1289,8 +1289,9 @@ mod tests {
         assert_eq!(solver.pattern(), sys.pattern);
     }
 
-    /// Every backend gives back the pattern it was built on, duplicates and order kept
-    /// ([`LinearSolver::pattern`]).
+    /// The dense and sparse backends give back the pattern they were built on, duplicates
+    /// and order kept ([`LinearSolver::pattern`]; the block backend in
+    /// `block_lu_of_closed_loops_and_branches`).
     #[test]
     fn solvers_recover_their_pattern() {
         let mut sys = saddle_system(300, 100, 6);

@@ -243,7 +243,8 @@ fn intermediate_axis_flips_converge_at_order_two_on_both_groups() {
     }
 }
 
-/// The same 20 s at the default settings (`rtol = 1e-6`, h = 2.5e-3): the reused matrix flips
+/// The same 20 s at the default settings (`rtol = 1e-6`, h = 2.5e-3; verify on, which only
+/// checks): the reused matrix flips
 /// the body at the times of fresh matrices (within 1.2 times their error) wherever the
 /// iteration matrix does not turn with the body: on SE(3), and on R3xSO(3) with the centre
 /// of mass at the node. (Measured: 1.447e-5 s for both, either way.) Not yet on R3xSO(3)
