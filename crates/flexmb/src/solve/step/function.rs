@@ -1093,6 +1093,25 @@ impl<'a> StepFunction<'a> {
         grad
     }
 
+    /// How the end of node `i` moves, `(w, dv, dvd)`, with its start `[dq, dv, dvdot, da]`
+    /// (a tangent of `s_n`) and the move `kz` of its configuration increment by the others'
+    /// start (`K_zeta dq_n` of the stabilized form), at fixed unknowns: what
+    /// [`StepFunction::start_jvp_many`] and [`StepFunction::start_jacobian`] apply.
+    fn start_move(
+        &self,
+        p: &Partials,
+        relations: &Relations,
+        i: usize,
+        kz: &Vec6,
+        [dq, dv, dvdot, da]: [&Vec6; 4],
+    ) -> [Vec6; 3] {
+        let dc = self.commutator_jvp(i, &p.end.v[i], dv, da);
+        let start = p.start_in_chart(i, dv, dvdot, da);
+        let rates = relations.forward(start, &Vec6::zeros());
+        let [w, dv, dvd, _] = p.node_move(i, &(kz + dc), &rates);
+        [p.g[i] * dq + w, dv, dvd]
+    }
+
     /// `dc_n = sigma h^2 (ad(v_n) dv_{n+1} - ad(v_{n+1}) dv_n)` of node `i` at fixed `dq`,
     /// `dv_{n+1} = c1 dv_n + c2 da_n`: how the bracket term of the configuration update
     /// moves with the start (module documentation); `v_1` is `v_{n+1}`.
@@ -1176,11 +1195,8 @@ impl<'a> StepFunction<'a> {
                 kz[i / 6][i % 6] += v * ds.q[j / 6][j % 6];
             }
             for i in 0..n {
-                let dc = self.commutator_jvp(i, &p.end.v[i], &ds.v[i], &ds.a[i]);
-                let start = p.start_in_chart(i, &ds.v[i], &ds.vdot[i], &ds.a[i]);
-                let rates = relations.forward(start, &Vec6::zeros());
-                let [wi, dvi, dvdi, _] = p.node_move(i, &(kz[i] + dc), &rates);
-                let wi = p.g[i] * ds.q[i] + wi;
+                let tangent = [&ds.q[i], &ds.v[i], &ds.vdot[i], &ds.a[i]];
+                let [wi, dvi, dvdi] = self.start_move(&p, &relations, i, &kz[i], tangent);
                 for c in 0..6 {
                     let at = (6 * i + c) * np + k;
                     (w[at], dv[at], dvd[at]) = (wi[c], dvi[c], dvdi[c]);
@@ -1235,20 +1251,17 @@ impl<'a> StepFunction<'a> {
             for (kind, c) in (0..4).flat_map(|kind| (0..6).map(move |c| (kind, c))) {
                 let mut unit = [Vec6::zeros(); 4];
                 unit[kind][c] = 1.0;
-                let [dq, dv, dvdot, da] = unit;
-                let dc = self.commutator_jvp(i, &p.end.v[i], &dv, &da);
-                let start = p.start_in_chart(i, &dv, &dvdot, &da);
-                let rates = relations.forward(start, &Vec6::zeros());
-                let [w, dv, dvd, _] = p.node_move(i, &dc, &rates);
-                moves.push((kind * n6 + 6 * i + c, i, [p.g[i] * dq + w, dv, dvd]));
+                let [dq, dv, dvdot, da] = &unit;
+                let end = self.start_move(&p, &relations, i, &Vec6::zeros(), [dq, dv, dvdot, da]);
+                moves.push((kind * n6 + 6 * i + c, i, end));
             }
         }
         for &(a, b, v) in &p.k_zeta {
             // `q_n` of the node of `b` moves the configuration increment of the node of `a`
-            let mut theta = Vec6::zeros();
+            let (mut theta, zero) = (Vec6::zeros(), Vec6::zeros());
             theta[a % 6] = v;
-            let [w, dv, dvd, _] = p.node_move(a / 6, &theta, &[Vec6::zeros(); 3]);
-            moves.push((b, a / 6, [w, dv, dvd]));
+            let end = self.start_move(&p, &relations, a / 6, &theta, [&zero; 4]);
+            moves.push((b, a / 6, end));
         }
         // The partials' entries in each node's columns.
         let mut by_node = vec![Vec::new(); n];
