@@ -467,8 +467,11 @@ impl ElementKernel for ContactElement<'_> {
             let mut s = s.view();
             s.fill(0.0);
             // (the impact velocity's equation `xdot = 0`; held in statics, below)
-            let statics = coef.xdot == 0.0 && coef.k != 0.0;
-            s[(12, 12)] = if statics { coef.x } else { coef.xdot };
+            s[(12, 12)] = if coef.holds_states() {
+                coef.x
+            } else {
+                coef.xdot
+            };
             return;
         }
         let (out, jac) = if ns == 1 {
@@ -531,11 +534,9 @@ impl ElementKernel for ContactElement<'_> {
                 s[(12 + i, 12 + k)] = jac[(row, 24 + k)] * coef.x + jac[(row, 27 + k)] * coef.xdot;
             }
         }
-        // In statics (stiffness without a rate term: the rates are absent) the states are
-        // held: their equations read x = x_start. Not in a partial derivative taken one
-        // coefficient at a time (the step function's dE/dx, no stiffness with it). The
+        // The states are held in statics ([`Coefficients::holds_states`]); elsewhere the
         // impact velocity's equation is `xdot = 0` (its rate's column).
-        let statics = coef.xdot == 0.0 && coef.k != 0.0;
+        let statics = coef.holds_states();
         for k in 0..ns {
             if statics {
                 s[(12 + k, 12 + k)] = coef.x;

@@ -1414,11 +1414,8 @@ impl ElementKernel for ControlElement<'_> {
             let mut out = s.row_mut(rows + i);
             out -= d.transpose();
         }
-        // A hold in statics (a matrix with stiffness but no rate term) keeps its value: its
-        // row reads x = x_start. Not in a partial derivative taken one coefficient at a time
-        // (the step function's dE/dx, the initial tangents' dG/dx_0: no stiffness there),
-        // where the hold's row has no term in x.
-        if coef.xdot == 0.0 && coef.k != 0.0 {
+        // A hold keeps its value in statics ([`Coefficients::holds_states`]).
+        if coef.holds_states() {
             for (b, block) in self.system.blocks.iter().enumerate() {
                 if matches!(block.kind, BlockKind::Hold { .. }) {
                     let i = rows + self.system.state_start[b];

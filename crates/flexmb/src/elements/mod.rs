@@ -133,6 +133,16 @@ impl Coefficients {
         xdot: 0.0,
         y: 1.0,
     };
+
+    /// Whether these are the coefficients of statics (stiffness without a rate term: the
+    /// rates are absent), where states that only an event changes (a hold's value, a
+    /// contact's impact velocity, friction's bristles) are held, their equations reading
+    /// `x = x_start`. Not a partial derivative taken one coefficient at a time (the step
+    /// function's `dE/dx`, the initial tangents' `dG/dx_0`: no stiffness with it), where
+    /// such rows have no term in `x`.
+    pub fn holds_states(&self) -> bool {
+        self.xdot == 0.0 && self.k != 0.0
+    }
 }
 
 /// Everything an element evaluation reads besides its own data.

@@ -469,7 +469,7 @@ impl EventWatch {
     /// An observer's answer to an accepted step: the held states its end sets (copies of
     /// states, [`StepEvent::held`]; empty without an event), or an error (which stops the
     /// run) if the step has an event the derivatives do not go through.
-    fn step(&mut self, record: &StepRecord) -> Result<Vec<(usize, usize)>, String> {
+    fn step(&mut self, record: &StepRecord) -> Result<crate::elements::HeldStates, String> {
         match record.simulation.last_step_event() {
             Some(StepEvent {
                 held: Some(held), ..

@@ -392,7 +392,7 @@ pub struct StepEvent {
     /// in the state vector, sources read before targets are set), when every event of the
     /// step is at a time the motion does not move ([`crate::elements::ElementKernel::event_map`]):
     /// a run's derivatives then go through it. `None`: not followed.
-    pub held: Option<Vec<(usize, usize)>>,
+    pub held: Option<crate::elements::HeldStates>,
 }
 
 /// A model that a simulation can hold: the simulation shares it, so a binding or another

@@ -37,7 +37,7 @@ pub struct TrajectoryStep {
     /// the derivatives do not go through (`StepEvent::held` is `None`: the sensitivity
     /// drivers refuse such a run; [`crate::solve::Simulation::last_step_event`] tells them
     /// apart).
-    pub held: Vec<(usize, usize)>,
+    pub held: crate::elements::HeldStates,
 }
 
 impl TrajectoryStep {
